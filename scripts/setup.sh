@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Installs what Sylva needs on a fresh Debian machine: a C toolchain and
+# certificates for cargo, GDAL's command-line tools (the tests check our
+# GeoTIFFs with gdalinfo), and Rust through rustup when cargo is missing.
+# Safe to run again: it installs only what is absent.
+set -euo pipefail
+sudo=""
+[ "$(id -u)" = 0 ] || sudo=sudo
+need=()
+command -v cc >/dev/null || need+=(gcc libc6-dev)
+command -v curl >/dev/null || need+=(curl ca-certificates)
+command -v gdalinfo >/dev/null || need+=(gdal-bin)
+if [ ${#need[@]} -gt 0 ]; then
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}"
+fi
+if ! command -v cargo >/dev/null; then
+  [ -x "$HOME/.cargo/bin/cargo" ] || curl -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal
+  echo "Rust installed in ~/.cargo; run: source ~/.cargo/env" >&2
+fi

@@ -1,0 +1,63 @@
+//! `sylva bench …`: benchmarks that print tables (speed targets live here,
+//! never in tests). Numbers from one run are comparable with each other;
+//! compare across runs only as ratios.
+
+pub mod pipeline;
+pub mod quality;
+
+use std::time::Duration;
+
+/// Median of durations, in milliseconds.
+pub fn median_ms(samples: &mut [Duration]) -> f64 {
+    if samples.is_empty() {
+        return f64::NAN;
+    }
+    samples.sort();
+    samples[samples.len() / 2].as_secs_f64() * 1e3
+}
+
+/// A plain-text table with a header row, columns padded to their widest cell.
+pub fn table(header: &[&str], rows: &[Vec<String>]) -> String {
+    let widths: Vec<usize> = (0..header.len())
+        .map(|i| {
+            rows.iter()
+                .map(|r| r.get(i).map_or(0, |c| c.chars().count()))
+                .max()
+                .unwrap_or(0)
+                .max(header[i].chars().count())
+        })
+        .collect();
+    let line = |cells: Vec<String>| {
+        let padded: Vec<String> = cells.iter().zip(&widths).map(|(c, w)| format!("{c:>w$}")).collect();
+        format!("| {} |", padded.join(" | "))
+    };
+    let mut out = vec![line(header.iter().map(|s| s.to_string()).collect())];
+    out.push(format!("|{}|", widths.iter().map(|w| format!("{}:", "-".repeat(w + 1))).collect::<Vec<_>>().join("|")));
+    out.extend(rows.iter().map(|r| line(r.clone())));
+    out.join("\n")
+}
+
+/// `sylva bench pipeline`: the tables for the demo and, when its data is
+/// there, the region of `rmnp_config`; `labels` scores the close sequences.
+pub fn pipeline_report(
+    rmnp_config: &std::path::Path,
+    labels: &std::path::Path,
+    build_side: usize,
+) -> Result<String, crate::config::ConfigError> {
+    let mut out = Vec::new();
+    let demo = crate::config::load(None)?;
+    let mut regions = vec![(demo, None)];
+    match crate::config::load(Some(rmnp_config)) {
+        Ok(rmnp) => regions.push((rmnp, Some(rmnp_config))),
+        Err(e) => out.push(format!("(skipping the real-data region: {e})\n")),
+    }
+    for (region, path) in &regions {
+        let reload = || crate::config::load(*path).unwrap_or_else(|_| region.clone());
+        let result = pipeline::run(region, &reload, build_side);
+        out.push(pipeline::report(&result, build_side));
+        out.extend(quality::resampling(region));
+        out.push(quality::quantization(region));
+    }
+    out.extend(quality::morphology(rmnp_config, labels));
+    Ok(out.join("\n"))
+}

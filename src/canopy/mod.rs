@@ -1,0 +1,29 @@
+//! Canopy proxies: generic canopy height (metres above ground) anchored to the
+//! world, multiplied by the cover map and added to the ground (dissertation
+//! 6.3, "Canopy Proxy Models and Height Map Texture Creation").
+//!
+//! A proxy is evaluated on a whole sample grid at once so that it can choose
+//! its own traversal; the value at a sample must depend only on the sample's
+//! lattice coordinate and the grid's spacing (never on the grid's extent), so
+//! tiles stay seamless.
+
+pub mod procedural;
+
+pub use procedural::{ProceduralProxy, ProxyParams};
+
+use crate::grid::SampleGrid;
+use crate::raster::Raster;
+
+/// A canopy height field over the globe.
+pub trait CanopyProxy: Send + Sync {
+    /// Canopy height above ground (m) at every sample of `grid` where `wanted`
+    /// is true; other samples are left at 0. The proxy is filtered to the
+    /// grid's sample spacing.
+    fn heights(&self, grid: &SampleGrid, wanted: &(dyn Fn(usize, usize) -> bool + Sync)) -> Raster<f32>;
+
+    /// The largest height the proxy can return (m).
+    fn max_height_m(&self) -> f32;
+
+    /// A one-line description for `sylva info` and logs.
+    fn describe(&self) -> String;
+}

@@ -1,0 +1,19 @@
+//! Stage c: the canopy (proxy × cover) and the combined elevation map
+//! (ground + canopy), "the tileable canopy proxy model is multiplied with the
+//! vegetation cover map, and the resulting vegetation height added to the
+//! local terrain height" (dissertation 6.3).
+
+use crate::canopy::CanopyProxy;
+use crate::grid::SampleGrid;
+use crate::raster::Raster;
+
+/// Vegetation height above ground: the proxy where the cover is positive,
+/// times the cover.
+pub fn canopy(proxy: &dyn CanopyProxy, grid: &SampleGrid, cover: &Raster<f32>) -> Raster<f32> {
+    proxy.heights(grid, &|x, y| cover.get(x, y) > 0.0).zip_map(cover, |h, c| h * c.max(0.0))
+}
+
+/// Ground plus canopy; nodata ground stays nodata.
+pub fn cem(ground: &Raster<f32>, canopy: &Raster<f32>) -> Raster<f32> {
+    ground.zip_map(canopy, |g, c| g + c)
+}

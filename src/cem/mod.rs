@@ -1,0 +1,243 @@
+//! The CEM pipeline: one function, [`compute`], that reads like Figure 6.1 of
+//! the dissertation — (a) vegetation cover, (b) elevation resampling, (c) the
+//! combined elevation map, (d) ray-casting acceleration data — plus the
+//! surface-type channel.
+//!
+//! Invariants:
+//! - **Seamless.** Every layer at a sample is a function of the sample's
+//!   lattice coordinate and the grid spacing only, or (safety zones) of such
+//!   values within a fixed radius, computed with that margin. A tile therefore
+//!   equals the same window of a whole-area build, and neighbours agree on
+//!   shared samples.
+//! - **Conservative.** Safety zones and the mipmap never lie below the surface
+//!   they cover ([`accel`]).
+//! - **Lazy.** Only the stages the requested layers need run; a grid without
+//!   ground data stops after the elevation stage, and a grid without forest
+//!   skips cover resampling and the canopy ([`Stats`] counts the runs).
+//! - No I/O beyond the sources, no async, no GPU.
+
+pub mod accel;
+pub mod colorkey;
+pub mod combine;
+pub mod landcover;
+pub mod stats;
+pub mod surface;
+
+pub use stats::{Stage, Stats};
+
+use crate::grid::SampleGrid;
+use crate::raster::resample::Resampling;
+use crate::raster::{Raster, Window};
+use crate::region::Region;
+use crate::source::SourceError;
+
+/// The layers a tile can carry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Layer {
+    /// Ground elevation, metres.
+    Dem,
+    /// Vegetation cover in [0, 1].
+    Cover,
+    /// Vegetation height above ground (proxy × cover), metres.
+    Canopy,
+    /// Combined elevation map: ground + canopy, metres.
+    Cem,
+    /// Surface class ids.
+    Surface,
+    /// Near safety zone: max CEM within 4 samples.
+    Max4,
+    /// Far safety zone: max CEM within 32 samples.
+    Max32,
+}
+
+impl Layer {
+    /// Every layer.
+    pub const ALL: [Layer; 7] =
+        [Layer::Dem, Layer::Cover, Layer::Canopy, Layer::Cem, Layer::Surface, Layer::Max4, Layer::Max32];
+
+    /// The layer's name in requests and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Layer::Dem => "dem",
+            Layer::Cover => "cover",
+            Layer::Canopy => "canopy",
+            Layer::Cem => "cem",
+            Layer::Surface => "surface",
+            Layer::Max4 => "max4",
+            Layer::Max32 => "max32",
+        }
+    }
+
+    /// The layer with this name.
+    pub fn parse(text: &str) -> Option<Layer> {
+        Layer::ALL.into_iter().find(|l| l.name().eq_ignore_ascii_case(text))
+    }
+}
+
+/// The pipeline's output over one grid. Layers that were not asked for are
+/// `None`.
+#[derive(Clone, Debug, Default)]
+pub struct Products {
+    /// Ground elevation.
+    pub dem: Option<Raster<f32>>,
+    /// Cover.
+    pub cover: Option<Raster<f32>>,
+    /// Canopy height above ground.
+    pub canopy: Option<Raster<f32>>,
+    /// Ground + canopy.
+    pub cem: Option<Raster<f32>>,
+    /// Surface classes.
+    pub surface: Option<Raster<u8>>,
+    /// Near safety zone.
+    pub max4: Option<Raster<f32>>,
+    /// Far safety zone.
+    pub max32: Option<Raster<f32>>,
+    /// What ran and how long it took.
+    pub stats: Stats,
+}
+
+impl Products {
+    /// The samples of one layer, if computed.
+    pub fn samples(&self, layer: Layer) -> Option<crate::encode::Samples<'_>> {
+        use crate::encode::Samples::{Class, Float};
+        match layer {
+            Layer::Dem => self.dem.as_ref().map(Float),
+            Layer::Cover => self.cover.as_ref().map(Float),
+            Layer::Canopy => self.canopy.as_ref().map(Float),
+            Layer::Cem => self.cem.as_ref().map(Float),
+            Layer::Surface => self.surface.as_ref().map(Class),
+            Layer::Max4 => self.max4.as_ref().map(Float),
+            Layer::Max32 => self.max32.as_ref().map(Float),
+        }
+    }
+}
+
+/// Which stages the requested layers need.
+#[derive(Clone, Copy, Debug)]
+struct Needs {
+    ground: bool,
+    cover: bool,
+    canopy: bool,
+    cem: bool,
+    surface: bool,
+    zones: bool,
+}
+
+impl Needs {
+    fn of(layers: &[Layer]) -> Needs {
+        let has = |l: Layer| layers.contains(&l);
+        let zones = has(Layer::Max4) || has(Layer::Max32);
+        let cem = zones || has(Layer::Cem);
+        let canopy = cem || has(Layer::Canopy);
+        let surface = has(Layer::Surface);
+        Needs {
+            ground: cem || surface || has(Layer::Dem),
+            cover: canopy || surface || has(Layer::Cover),
+            canopy,
+            cem,
+            surface,
+            zones,
+        }
+    }
+}
+
+/// Runs the pipeline for `layers` on `grid`.
+pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<Products, SourceError> {
+    let need = Needs::of(layers);
+    let mut stats = Stats::default();
+    // The safety zones look 32 samples beyond the grid.
+    let margin = if need.zones { accel::ZONE_FAR } else { 0 };
+    let work = grid.grown(margin);
+    let nodata = || Raster::filled(work.width(), work.height(), f32::NAN);
+
+    // (b) Elevation data resampling.
+    let ground = match need.ground {
+        true => stats.time(Stage::Elevation, || region.dem.sample(&work, 0, region.dem_resampling))?,
+        false => nodata(),
+    };
+    let no_ground = need.ground && ground.all_nodata();
+
+    // (a) Identification of arboreous regions: the cover map on the grid.
+    let landcover = match (need.cover && !no_ground, &region.landcover) {
+        (true, Some(lc)) => stats.time(Stage::Landcover, || lc.read(&work, Resampling::Bilinear))?,
+        _ => None,
+    };
+    let has_forest = landcover.as_ref().is_some_and(|f| f.bands[0].data().iter().any(|&c| c > 0.0));
+    let cover = match &landcover {
+        Some(f) if has_forest => Some(stats.time(Stage::Cover, || f.resample(0, Resampling::Bilinear))),
+        _ => None,
+    };
+
+    // (c) Height map texture: canopy proxy × cover, added to the ground.
+    let canopy = match &cover {
+        Some(c) if need.canopy => Some(stats.time(Stage::Canopy, || combine::canopy(region.proxy.as_ref(), &work, c))),
+        _ => None,
+    };
+    let cem = match (&canopy, need.cem) {
+        (Some(c), true) => Some(stats.time(Stage::Combine, || combine::cem(&ground, c))),
+        (None, true) => Some(ground.clone()),
+        _ => None,
+    };
+
+    let surface = (need.surface && !no_ground).then(|| {
+        stats.time(Stage::Surface, || {
+            let classes = landcover.as_ref().map(|f| f.resample(1, Resampling::Nearest));
+            Raster::par_from_fn(work.width(), work.height(), |x, y| {
+                let class = classes.as_ref().map_or(f32::NAN, |c| c.get(x, y));
+                let c = cover.as_ref().map_or(0.0, |c| c.get(x, y));
+                surface::classify(class, c, !ground.get(x, y).is_nan())
+            })
+        })
+    });
+
+    // (d) Ray casting acceleration data.
+    let zones = match (&cem, need.zones && !no_ground) {
+        (Some(cem), true) => Some(stats.time(Stage::Zones, || accel::safety_zones(cem))),
+        _ => None,
+    };
+
+    let inner = Window::new(margin as i64, margin as i64, grid.width(), grid.height());
+    let crop = |r: &Raster<f32>| r.crop(inner, f32::NAN);
+    let zeros = || Raster::filled(grid.width(), grid.height(), 0.0f32);
+    let nodata_out = || Raster::filled(grid.width(), grid.height(), f32::NAN);
+    let wants = |l: Layer| layers.contains(&l);
+    Ok(Products {
+        dem: wants(Layer::Dem).then(|| crop(&ground)),
+        cover: wants(Layer::Cover).then(|| cover.as_ref().map_or_else(zeros, crop)),
+        canopy: wants(Layer::Canopy).then(|| canopy.as_ref().map_or_else(zeros, crop)),
+        cem: cem.as_ref().filter(|_| wants(Layer::Cem)).map(crop),
+        surface: wants(Layer::Surface).then(|| {
+            surface.map_or_else(
+                || Raster::filled(grid.width(), grid.height(), surface::NODATA),
+                |s| s.crop(inner, surface::NODATA),
+            )
+        }),
+        max4: wants(Layer::Max4).then(|| zones.as_ref().map_or_else(nodata_out, |z| z.0.clone())),
+        max32: wants(Layer::Max32).then(|| zones.as_ref().map_or_else(nodata_out, |z| z.1.clone())),
+        stats,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn layer_names_round_trip() {
+        for l in Layer::ALL {
+            assert_eq!(Layer::parse(l.name()), Some(l));
+        }
+        assert_eq!(Layer::parse("CEM"), Some(Layer::Cem));
+        assert_eq!(Layer::parse("relief"), None);
+    }
+
+    #[test]
+    fn needs_follow_layer_dependencies() {
+        let n = Needs::of(&[Layer::Max32]);
+        assert!(n.ground && n.cover && n.canopy && n.cem && n.zones && !n.surface);
+        let d = Needs::of(&[Layer::Dem]);
+        assert!(d.ground && !d.cover && !d.canopy && !d.cem);
+        let c = Needs::of(&[Layer::Cover]);
+        assert!(!c.ground && c.cover && !c.canopy);
+    }
+}

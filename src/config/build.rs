@@ -1,0 +1,234 @@
+//! Stage two of the configuration: checks every value and opens every source,
+//! producing a [`Region`]. Errors name the file and the problem.
+
+use super::{Config, LandcoverConfig, LandcoverKind};
+use crate::canopy::ProceduralProxy;
+use crate::cem::colorkey::{ColorKey, LabKey};
+use crate::cem::landcover::{Landcover, Rule};
+use crate::cem::surface::SurfaceType;
+use crate::demo;
+use crate::encode::Quantization;
+use crate::grid::{BBox, TileGrid};
+use crate::raster::morphology::MorphOp;
+use crate::region::Region;
+use crate::source::{
+    self, BlockCache, Blocks, GeoRaster, Georef, NodataPolicy, OpenOptions, PixelSource, Reducer, SourceError,
+};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use thiserror::Error;
+
+/// A configuration that cannot be used.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    /// The configuration file cannot be read.
+    #[error("{path}: cannot read: {source}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is not valid TOML for a Sylva configuration.
+    #[error("{path}: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong and where.
+        message: String,
+    },
+    /// A source named by the configuration cannot be opened.
+    #[error(transparent)]
+    Source(#[from] SourceError),
+}
+
+/// Loads the region of a configuration file, or the demo region without one.
+pub fn load(path: Option<&Path>) -> Result<Region, ConfigError> {
+    let Some(path) = path else {
+        return region_from(&Config::default(), Path::new("."), Path::new("<built-in defaults>"));
+    };
+    region_from(&parse_file(path)?, path.parent().unwrap_or(Path::new(".")), path)
+}
+
+/// Reads and parses a configuration file (stage one only).
+pub fn parse_file(path: &Path) -> Result<Config, ConfigError> {
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.into(), source })?;
+    toml::from_str(&text).map_err(|e| ConfigError::Invalid { path: path.into(), message: e.to_string() })
+}
+
+/// Checks `config` (read from `label`, relative paths from `base`) and opens
+/// its sources.
+pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region, ConfigError> {
+    let invalid = |message: String| ConfigError::Invalid { path: label.into(), message };
+    let tiles = TileGrid::new(config.grid.level0_delta_deg, config.grid.tile_samples)
+        .map_err(|e| invalid(format!("[grid] {e}")))?;
+    let cache = BlockCache::new(config.cache.memory_mb.max(1) * 1024 * 1024);
+    let enc = &config.encoding;
+    if !(enc.png16_scale_m > 0.0 && enc.png16_scale_m.is_finite() && enc.png16_offset_m.is_finite()) {
+        return Err(invalid(format!("[encoding] png16_scale_m must be positive, got {}", enc.png16_scale_m)));
+    }
+    // Check every value before opening any file.
+    let landcover_rule =
+        config.landcover.as_ref().map(rule).transpose().map_err(|m| invalid(format!("[landcover] {m}")))?;
+    let resolve = |p: &PathBuf| if p.is_absolute() { p.clone() } else { base.join(p) };
+    let (dem, bounds, name) = match &config.dem.path {
+        Some(path) => {
+            let crs = parse_crs(&config.dem.crs).map_err(|m| invalid(format!("[dem] {m}")))?;
+            let options = OpenOptions { crs, nodata: config.dem.nodata.clone(), classes: false };
+            let dem = source::open_file(&resolve(path), &options, &cache)?;
+            let s = dem.bounds();
+            let bounds = BBox { west: s.min_lon, south: s.min_lat, east: s.max_lon, north: s.max_lat };
+            let name = path.file_stem().map_or_else(|| "dem".into(), |s| s.to_string_lossy().into_owned());
+            (dem, bounds, name)
+        }
+        None => {
+            let d = demo::sources()?;
+            let pixels = source::nodata::apply(d.dem, &config.dem.nodata, &cache);
+            (GeoRaster::new(pixels, d.dem_georef, &[Reducer::Mean], &cache), demo::BBOX, demo::NAME.to_string())
+        }
+    };
+    let landcover = match (&config.landcover, landcover_rule, &config.dem.path) {
+        (Some(lc), Some(rule), _) => {
+            Some(landcover(lc, rule, &resolve, &cache, &|m| invalid(format!("[landcover] {m}")))?)
+        }
+        (None, _, None) => Some(demo_landcover(&cache)?),
+        _ => None,
+    };
+    Ok(Region {
+        name: config.name.clone().unwrap_or(name),
+        tiles,
+        bounds,
+        dem,
+        dem_resampling: config.dem.resampling,
+        landcover,
+        proxy: Arc::new(ProceduralProxy::new(config.canopy.clone())),
+        heights_16: Quantization { offset: enc.png16_offset_m, scale: enc.png16_scale_m },
+        cache,
+    })
+}
+
+/// `"EPSG:26910"` → 26910.
+fn parse_crs(text: &Option<String>) -> Result<Option<u32>, String> {
+    let Some(t) = text else { return Ok(None) };
+    let code = t.trim().strip_prefix("EPSG:").or_else(|| t.trim().strip_prefix("epsg:"));
+    code.and_then(|c| c.parse().ok()).map(Some).ok_or_else(|| format!("crs {t:?} is not of the form \"EPSG:code\""))
+}
+
+/// The land-cover raster; `invalid` turns a message into a configuration error.
+fn landcover(
+    lc: &LandcoverConfig,
+    rule: Rule,
+    resolve: &impl Fn(&PathBuf) -> PathBuf,
+    cache: &Arc<BlockCache>,
+    invalid: &dyn Fn(String) -> ConfigError,
+) -> Result<GeoRaster, ConfigError> {
+    let (input, georef) = match &lc.path {
+        Some(path) => {
+            let crs = parse_crs(&lc.crs).map_err(invalid)?;
+            let options =
+                OpenOptions { crs, nodata: NodataPolicy::Propagate, classes: lc.kind == LandcoverKind::Classes };
+            let raster = source::open_file(&resolve(path), &options, cache)?;
+            (raster.base().clone(), raster.georef().clone())
+        }
+        None if lc.kind == LandcoverKind::Map => {
+            let d = demo::sources()?;
+            (Blocks::new(d.map, cache), d.map_georef)
+        }
+        None => return Err(invalid(format!("kind {:?} needs a path", lc.kind))),
+    };
+    let bands = input.source().bands();
+    if lc.kind == LandcoverKind::Map && bands < 3 {
+        return Err(invalid(format!(
+            "a map needs three bands (R, G, B); {} has {bands}",
+            input.source().name().display()
+        )));
+    }
+    Ok(derived(input, georef, rule, cache))
+}
+
+fn derived(input: Blocks, georef: Georef, rule: Rule, cache: &Arc<BlockCache>) -> GeoRaster {
+    let pixels: Arc<dyn PixelSource> = Arc::new(Landcover::new(input, rule));
+    GeoRaster::new(Blocks::new(pixels, cache), georef, &[Reducer::Mean, Reducer::Decimate], cache)
+}
+
+/// The demo's map with the demo's keys and the dissertation's close.
+fn demo_landcover(cache: &Arc<BlockCache>) -> Result<GeoRaster, ConfigError> {
+    let d = demo::sources()?;
+    let keys =
+        compile(&demo_keys()).map_err(|message| ConfigError::Invalid { path: "<demo palette>".into(), message })?;
+    let rule = Rule::Map {
+        keys,
+        ops: vec![MorphOp::Dilate, MorphOp::Dilate, MorphOp::Erode, MorphOp::Erode],
+        radius_px: 1,
+        blur_px: 1,
+    };
+    Ok(derived(Blocks::new(d.map, cache), d.map_georef, rule, cache))
+}
+
+/// Colour keys of the demo map's palette.
+pub fn demo_keys() -> Vec<ColorKey> {
+    use demo::palette as p;
+    let key = |rgb: [u8; 3], surface| ColorKey {
+        color: format!("#{:02x}{:02x}{:02x}", rgb[0], rgb[1], rgb[2]),
+        tolerance: 10.0,
+        surface,
+    };
+    vec![
+        key(p::FOREST, SurfaceType::Forest),
+        key(p::WATER, SurfaceType::Water),
+        key(p::SHORE, SurfaceType::Water),
+        key(p::ROCK, SurfaceType::Rock),
+        key(p::SCREE, SurfaceType::Rock),
+    ]
+}
+
+fn compile(keys: &[ColorKey]) -> Result<Vec<LabKey>, String> {
+    keys.iter().map(ColorKey::compile).collect()
+}
+
+fn rule(lc: &LandcoverConfig) -> Result<Rule, String> {
+    match lc.kind {
+        LandcoverKind::Map => {
+            let keys = compile(lc.keys.as_deref().unwrap_or(&demo_keys()))?;
+            if !keys.iter().any(|k| k.surface == SurfaceType::Forest) {
+                return Err("no colour key marks forest".into());
+            }
+            let ops = MorphOp::parse_sequence(&lc.close)
+                .ok_or_else(|| format!("close {:?} must be a sequence of D and E", lc.close))?;
+            Ok(Rule::Map { keys, ops, radius_px: lc.close_radius_px, blur_px: lc.blur_radius_px })
+        }
+        LandcoverKind::Classes => class_table(lc).map(Rule::Classes),
+        LandcoverKind::Percent => linear(lc, 0.0, 100.0),
+        // Canopy height models: below 1 m is ground or shrubs; trees from 3 m.
+        LandcoverKind::CanopyHeight => linear(lc, 1.0, 3.0),
+    }
+}
+
+fn linear(lc: &LandcoverConfig, zero_at: f32, full_at: f32) -> Result<Rule, String> {
+    let (zero_at, full_at) = (lc.zero_at.unwrap_or(zero_at), lc.full_at.unwrap_or(full_at));
+    if !(zero_at.is_finite() && full_at.is_finite() && zero_at != full_at) {
+        return Err(format!("zero_at {zero_at} and full_at {full_at} must be finite and different"));
+    }
+    Ok(Rule::Linear { zero_at, full_at })
+}
+
+fn class_table(lc: &LandcoverConfig) -> Result<HashMap<i64, (SurfaceType, f32)>, String> {
+    if lc.classes.is_empty() {
+        return Err("kind \"classes\" needs [[landcover.classes]] entries".into());
+    }
+    let mut table = HashMap::new();
+    for entry in &lc.classes {
+        let cover = entry.cover.unwrap_or(if entry.surface == SurfaceType::Forest { 1.0 } else { 0.0 });
+        if !(0.0..=1.0).contains(&cover) {
+            return Err(format!("cover {cover} of {} classes is outside [0, 1]", entry.surface.name()));
+        }
+        let ranged = entry.ranges.iter().flat_map(|&[a, b]| a..=b);
+        for value in entry.values.iter().copied().chain(ranged) {
+            if table.insert(value, (entry.surface, cover)).is_some() {
+                return Err(format!("class {value} appears twice"));
+            }
+        }
+    }
+    Ok(table)
+}

@@ -1,0 +1,179 @@
+//! Configuration, in two stages: serde structs with one `Default` each (this
+//! file; `config/default.toml` shows every option at its default), then
+//! validation into a checked [`Region`] ([`build`]).
+//!
+//! With no file, or a file that names no DEM, the region is the embedded demo.
+//! Relative paths are relative to the configuration file.
+
+mod build;
+
+pub use build::{ConfigError, load, parse_file, region_from};
+
+use crate::canopy::ProxyParams;
+use crate::cem::colorkey::ColorKey;
+use crate::cem::surface::SurfaceType;
+use crate::raster::resample::Resampling;
+use crate::source::NodataPolicy;
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+/// The whole configuration file.
+#[derive(Clone, Debug, Default, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct Config {
+    /// Region name (default: the demo's, or the DEM file's name).
+    pub name: Option<String>,
+    /// The tile grid.
+    pub grid: GridConfig,
+    /// The in-memory block cache.
+    pub cache: CacheConfig,
+    /// The elevation model.
+    pub dem: DemConfig,
+    /// Where forest and surface classes come from.
+    pub landcover: Option<LandcoverConfig>,
+    /// The procedural canopy proxy.
+    pub canopy: ProxyParams,
+    /// 16-bit encodings.
+    pub encoding: EncodingConfig,
+}
+
+/// World Wind tiling.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GridConfig {
+    /// Level-0 tile delta D0, degrees (must divide 180).
+    pub level0_delta_deg: f64,
+    /// Samples per tile side N (tiles share edge samples: spacing = delta / (N − 1)).
+    pub tile_samples: u32,
+}
+
+impl Default for GridConfig {
+    fn default() -> Self {
+        // 36° level-0 tiles as World Wind's elevation models; 513 = 2⁹ + 1
+        // samples so that a tile has 512 cells and mipmaps halve evenly.
+        GridConfig { level0_delta_deg: 36.0, tile_samples: 513 }
+    }
+}
+
+/// Block cache budget.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CacheConfig {
+    /// Decoded and derived source blocks kept in memory, MiB.
+    pub memory_mb: u64,
+}
+
+impl Default for CacheConfig {
+    fn default() -> Self {
+        CacheConfig { memory_mb: 256 }
+    }
+}
+
+/// The DEM.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DemConfig {
+    /// GeoTIFF or SRTM `.hgt` file; none = the embedded demo region.
+    pub path: Option<PathBuf>,
+    /// `EPSG:code` overriding the file's own CRS.
+    pub crs: Option<String>,
+    /// nearest, bilinear or bicubic.
+    pub resampling: Resampling,
+    /// Voids: fill, constant or propagate.
+    pub nodata: NodataPolicy,
+}
+
+impl Default for DemConfig {
+    fn default() -> Self {
+        DemConfig { path: None, crs: None, resampling: Resampling::Bilinear, nodata: NodataPolicy::default() }
+    }
+}
+
+/// Land cover: one of three kinds of raster.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LandcoverConfig {
+    /// `map`, `classes`, `percent` or `canopy_height`.
+    pub kind: LandcoverKind,
+    /// The raster; none = the demo's topographic map (kind `map` only).
+    pub path: Option<PathBuf>,
+    /// `EPSG:code` overriding the file's own CRS.
+    pub crs: Option<String>,
+    /// map: colour keys (default: the demo map's palette).
+    #[serde(default)]
+    pub keys: Option<Vec<ColorKey>>,
+    /// map: the close, as a sequence of D (dilate) and E (erode) passes.
+    #[serde(default = "default_close")]
+    pub close: String,
+    /// map: kernel radius of each pass, pixels (1 = 3×3).
+    #[serde(default = "one")]
+    pub close_radius_px: usize,
+    /// map: Gaussian blur radius after the close, pixels (0 = none).
+    #[serde(default = "one")]
+    pub blur_radius_px: usize,
+    /// classes: the class table.
+    #[serde(default)]
+    pub classes: Vec<ClassEntry>,
+    /// percent / canopy_height: input value with cover 0.
+    #[serde(default)]
+    pub zero_at: Option<f32>,
+    /// percent / canopy_height: input value with cover 1.
+    #[serde(default)]
+    pub full_at: Option<f32>,
+}
+
+fn default_close() -> String {
+    // Figure 6.3: "2 passes of 3x3 filter kernels were used for the dilate and erode stages".
+    "DDEE".into()
+}
+
+fn one() -> usize {
+    1
+}
+
+/// Land-cover raster kinds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LandcoverKind {
+    /// RGB topographic map or orthophoto with colour keys.
+    Map,
+    /// Classified raster with a class table.
+    Classes,
+    /// Tree canopy cover in percent (0–100 by default).
+    Percent,
+    /// Canopy height model in metres (cover 0 below 1 m, 1 from 3 m by default).
+    CanopyHeight,
+}
+
+/// One row of a class table: classes that share a surface and cover.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClassEntry {
+    /// Class values.
+    #[serde(default)]
+    pub values: Vec<i64>,
+    /// Inclusive ranges of class values.
+    #[serde(default)]
+    pub ranges: Vec<[i64; 2]>,
+    /// Their surface type.
+    pub surface: SurfaceType,
+    /// Their vegetation cover in [0, 1] (default 1 for forest, else 0).
+    pub cover: Option<f32>,
+}
+
+/// 16-bit encodings of heights.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EncodingConfig {
+    /// PNG16 height of code 0 (code 0 itself means nodata), metres.
+    pub png16_offset_m: f64,
+    /// PNG16 height step per code, metres.
+    pub png16_scale_m: f64,
+}
+
+impl Default for EncodingConfig {
+    fn default() -> Self {
+        let q = crate::encode::Quantization::PNG16_HEIGHTS;
+        EncodingConfig { png16_offset_m: q.offset, png16_scale_m: q.scale }
+    }
+}

@@ -1,0 +1,243 @@
+//! Tile encodings: raw BIL (16-bit integer, 32-bit float; little-endian,
+//! exactly width × height samples, row 0 north, as World Wind expects),
+//! 16-bit greyscale PNG, and float32 GeoTIFF.
+//!
+//! Heights are `f32` metres inside Sylva. 16-bit encodings state how to read
+//! them back: `h = offset + scale · v` (see [`Quantization`]); values outside
+//! the encodable range are clamped and counted in [`Encoded::clamped`], so the
+//! error is stated, not hidden. Nodata (NaN) never reaches a file as NaN: it
+//! becomes the format's nodata value.
+
+pub mod geotiff;
+
+use crate::cem::Layer;
+use crate::grid::SampleGrid;
+use crate::raster::Raster;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// Nodata of BIL16 heights and of float outputs (World Wind's missing-data value).
+pub const NODATA_HEIGHT: f32 = -32768.0;
+
+/// Tile formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Format {
+    /// Little-endian `i16`.
+    Bil16,
+    /// Little-endian `f32`.
+    Bil32,
+    /// 16-bit greyscale PNG.
+    Png16,
+    /// Float32 (or 8-bit for surface classes) GeoTIFF, EPSG:4326.
+    Tiff,
+}
+
+impl Format {
+    /// Parses `bil16`, `bil32`, `png16` or `tiff`.
+    pub fn parse(text: &str) -> Option<Format> {
+        match text.to_ascii_lowercase().as_str() {
+            "bil16" => Some(Format::Bil16),
+            "bil32" => Some(Format::Bil32),
+            "png16" => Some(Format::Png16),
+            "tiff" | "tif" => Some(Format::Tiff),
+            _ => None,
+        }
+    }
+
+    /// MIME type.
+    pub fn mime(self) -> &'static str {
+        match self {
+            Format::Bil16 => "application/bil16",
+            Format::Bil32 => "application/bil32",
+            Format::Png16 => "image/png",
+            Format::Tiff => "image/tiff",
+        }
+    }
+}
+
+/// A 16-bit code `v` stands for `offset + scale · v`; `nodata` is the code of
+/// missing samples.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Quantization {
+    /// Value of code 0.
+    pub offset: f64,
+    /// Value step per code.
+    pub scale: f64,
+}
+
+impl Quantization {
+    /// Heights in PNG16 by default: −500 m to 9,330 m in 15 cm steps (the
+    /// Dead Sea to above Everest; half a step is 7.5 cm), code 0 is nodata.
+    pub const PNG16_HEIGHTS: Quantization = Quantization { offset: -500.15, scale: 0.15 };
+    /// BIL16 heights: whole metres, as World Wind reads them.
+    pub const BIL16_HEIGHTS: Quantization = Quantization { offset: 0.0, scale: 1.0 };
+    /// Cover fractions in PNG16.
+    pub const PNG16_COVER: Quantization = Quantization { offset: 0.0, scale: 1.0 / 65535.0 };
+    /// Cover fractions in BIL16: basis points.
+    pub const BIL16_COVER: Quantization = Quantization { offset: 0.0, scale: 1.0 / 10000.0 };
+    /// Class ids as they are.
+    pub const IDS: Quantization = Quantization { offset: 0.0, scale: 1.0 };
+
+    /// The code for `value`, clamped into `lo..=hi`; the flag says it was clamped.
+    fn code(&self, value: f32, lo: i32, hi: i32) -> (i32, bool) {
+        let v = ((value as f64 - self.offset) / self.scale).round();
+        let c = v.clamp(lo as f64, hi as f64);
+        (c as i32, c != v)
+    }
+}
+
+/// A tile's samples: heights/cover as `f32`, or surface class ids.
+#[derive(Clone, Copy, Debug)]
+pub enum Samples<'a> {
+    /// Continuous values, NaN = nodata.
+    Float(&'a Raster<f32>),
+    /// Class ids, 255 = nodata.
+    Class(&'a Raster<u8>),
+}
+
+impl Samples<'_> {
+    fn width(&self) -> usize {
+        match self {
+            Samples::Float(r) => r.width(),
+            Samples::Class(r) => r.width(),
+        }
+    }
+
+    fn values(&self) -> Box<dyn Iterator<Item = f32> + '_> {
+        match self {
+            Samples::Float(r) => Box::new(r.data().iter().copied()),
+            Samples::Class(r) => Box::new(r.data().iter().map(|&v| f32::from(v))),
+        }
+    }
+}
+
+/// An encoded tile.
+#[derive(Clone, Debug)]
+pub struct Encoded {
+    /// The file's bytes.
+    pub bytes: Vec<u8>,
+    /// Samples that did not fit the 16-bit range and were clamped.
+    pub clamped: usize,
+    /// How to read 16-bit codes back, for 16-bit formats.
+    pub quantization: Option<Quantization>,
+}
+
+/// The encoding failed (only I/O inside the encoders can fail).
+#[derive(Debug, Error)]
+#[error("encoding failed: {0}")]
+pub struct EncodeError(pub String);
+
+/// The 16-bit quantizations of a layer: (BIL16, PNG16).
+pub fn quantizations(layer: Layer, png16_heights: Quantization) -> (Quantization, Quantization) {
+    match layer {
+        Layer::Cover => (Quantization::BIL16_COVER, Quantization::PNG16_COVER),
+        Layer::Surface => (Quantization::IDS, Quantization::IDS),
+        _ => (Quantization::BIL16_HEIGHTS, png16_heights),
+    }
+}
+
+/// Encodes one layer of a tile.
+pub fn encode(
+    layer: Layer,
+    samples: Samples,
+    grid: &SampleGrid,
+    format: Format,
+    png16_heights: Quantization,
+) -> Result<Encoded, EncodeError> {
+    let (bil16_q, png16_q) = quantizations(layer, png16_heights);
+    match format {
+        Format::Bil16 => Ok(bil16(samples, bil16_q)),
+        Format::Bil32 => Ok(Encoded { bytes: bil32(samples), clamped: 0, quantization: None }),
+        Format::Png16 => png16(samples, png16_q, layer != Layer::Cover),
+        Format::Tiff => Ok(Encoded { bytes: geotiff::write(samples, grid)?, clamped: 0, quantization: None }),
+    }
+}
+
+fn bil16(samples: Samples, q: Quantization) -> Encoded {
+    let mut bytes = Vec::new();
+    let mut clamped = 0;
+    for v in samples.values() {
+        let code = if v.is_nan() {
+            NODATA_HEIGHT as i32
+        } else {
+            let (c, was) = q.code(v, i16::MIN as i32 + 1, i16::MAX as i32);
+            clamped += usize::from(was);
+            c
+        };
+        bytes.extend_from_slice(&(code as i16).to_le_bytes());
+    }
+    Encoded { bytes, clamped, quantization: Some(q) }
+}
+
+fn bil32(samples: Samples) -> Vec<u8> {
+    samples.values().flat_map(|v| (if v.is_nan() { NODATA_HEIGHT } else { v }).to_le_bytes()).collect()
+}
+
+/// PNG16: when `zero_is_nodata`, valid samples use codes 1..=65535.
+fn png16(samples: Samples, q: Quantization, zero_is_nodata: bool) -> Result<Encoded, EncodeError> {
+    let lo = i32::from(zero_is_nodata);
+    let mut clamped = 0;
+    let codes: Vec<u16> = samples
+        .values()
+        .map(|v| {
+            if v.is_nan() {
+                return 0;
+            }
+            let (c, was) = q.code(v, lo, 65535);
+            clamped += usize::from(was);
+            c as u16
+        })
+        .collect();
+    let (w, h) = (samples.width(), codes.len() / samples.width().max(1));
+    // The image crate takes 16-bit samples in native byte order.
+    let bytes: Vec<u8> = codes.iter().flat_map(|c| c.to_ne_bytes()).collect();
+    let mut out = Vec::new();
+    let encoder = image::codecs::png::PngEncoder::new_with_quality(
+        &mut out,
+        image::codecs::png::CompressionType::Fast,
+        image::codecs::png::FilterType::Adaptive,
+    );
+    image::ImageEncoder::write_image(encoder, &bytes, w as u32, h as u32, image::ExtendedColorType::L16)
+        .map_err(|e| EncodeError(e.to_string()))?;
+    Ok(Encoded { bytes: out, clamped, quantization: Some(q) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::{BBox, TileGrid};
+
+    fn grid(w: usize, h: usize) -> SampleGrid {
+        BBox::parse("10,46,10.1,46.1").unwrap().point_grid(w, h, &TileGrid::new(36.0, 513).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn bil_has_exactly_one_sample_per_grid_point_and_states_clamping() {
+        let r = Raster::from_vec(3, 2, vec![-430.4, 8850.6, f32::NAN, 40000.0, 0.0, -1.0]).unwrap();
+        let e =
+            encode(Layer::Cem, Samples::Float(&r), &grid(3, 2), Format::Bil16, Quantization::PNG16_HEIGHTS).unwrap();
+        assert_eq!(e.bytes.len(), 3 * 2 * 2);
+        let v: Vec<i16> = e.bytes.chunks(2).map(|b| i16::from_le_bytes([b[0], b[1]])).collect();
+        assert_eq!(v, vec![-430, 8851, -32768, 32767, 0, -1]);
+        assert_eq!(e.clamped, 1);
+        let f =
+            encode(Layer::Cem, Samples::Float(&r), &grid(3, 2), Format::Bil32, Quantization::PNG16_HEIGHTS).unwrap();
+        assert_eq!(f.bytes.len(), 3 * 2 * 4);
+        assert_eq!(f32::from_le_bytes(f.bytes[8..12].try_into().unwrap()), NODATA_HEIGHT);
+    }
+
+    #[test]
+    fn png16_round_trips_within_half_a_step() {
+        let heights = [-430.0f32, 0.0, 1234.567, 8850.0];
+        let r = Raster::from_vec(2, 2, heights.to_vec()).unwrap();
+        let q = Quantization::PNG16_HEIGHTS;
+        let e = encode(Layer::Dem, Samples::Float(&r), &grid(2, 2), Format::Png16, q).unwrap();
+        let img = image::load_from_memory(&e.bytes).unwrap().into_luma16();
+        for (code, h) in img.pixels().zip(heights) {
+            let back = q.offset + q.scale * code.0[0] as f64;
+            assert!((back - h as f64).abs() <= q.scale / 2.0 + 1e-9, "{h} -> {back}");
+        }
+        assert_eq!(e.clamped, 0);
+    }
+}

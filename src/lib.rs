@@ -1,0 +1,28 @@
+//! Sylva builds combined elevation maps (CEM: terrain plus forest canopy) on
+//! demand from real elevation and land-cover data.
+//!
+//! The pipeline follows Figure 6.1 of the dissertation in
+//! `shared/seeds/002_…`: a vegetation cover map from a map, classes or canopy
+//! percentages ([`cem::cover`]); the DEM resampled onto the tile's sample grid
+//! ([`cem::elevation`]); a world-anchored canopy proxy scaled by the cover and
+//! added to the ground ([`canopy`], [`cem::combine`]); a surface-type channel
+//! ([`cem::surface`]); and conservative ray-casting acceleration data
+//! ([`cem::accel`]). [`grid`] holds the World Wind tile math, [`source`] the
+//! raster readers, [`encode`] the tile formats and [`demo`] the embedded
+//! procedural region used when no configuration is given.
+//!
+//! See `ARCHITECTURE.md` for the code map and the invariants.
+
+pub mod bench;
+pub mod canopy;
+pub mod cem;
+pub mod config;
+pub mod demo;
+pub mod encode;
+pub mod geo;
+pub mod grid;
+pub mod noise;
+pub mod produce;
+pub mod raster;
+pub mod region;
+pub mod source;

@@ -1,0 +1,183 @@
+//! The `sylva` command line: parses arguments, calls the library, writes
+//! files, and maps errors to messages and exit codes (1: bad input or data,
+//! 2: bad usage, from clap).
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use std::path::{Path, PathBuf};
+use sylva::cem::Layer;
+use sylva::encode::Format;
+use sylva::grid::{BBox, TileId};
+use sylva::produce::{self, Product};
+
+#[derive(Parser)]
+#[command(
+    name = "sylva",
+    version,
+    about = "Combined elevation maps (terrain + forest canopy): tiles, builds and benchmarks"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Compute one World Wind tile.
+    Tile {
+        /// Region configuration (default: the embedded demo region).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// dem, cover, canopy, cem, surface, max4 or max32.
+        #[arg(long)]
+        layer: String,
+        /// Tile level (0 = coarsest).
+        #[arg(long)]
+        level: u32,
+        /// Tile row, counted from the south pole.
+        #[arg(long)]
+        row: u64,
+        /// Tile column, counted from −180°.
+        #[arg(long)]
+        col: u64,
+        /// Extra samples per side taken from the neighbours.
+        #[arg(long, default_value_t = 0)]
+        halo: usize,
+        /// bil16, bil32, png16 or tiff.
+        #[arg(long, default_value = "tiff")]
+        format: String,
+        /// Output file.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Compute a layer over a whole box in one go (the reference tiles match).
+    Build {
+        /// Region configuration (default: the embedded demo region).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// dem, cover, canopy, cem, surface, max4 or max32.
+        #[arg(long)]
+        layer: String,
+        /// W,S,E,N in degrees (default: the region's bounds).
+        #[arg(long, allow_hyphen_values = true)]
+        bbox: Option<String>,
+        /// Samples per row; the outer samples lie on the box edges.
+        #[arg(long)]
+        width: usize,
+        /// Samples per column.
+        #[arg(long)]
+        height: usize,
+        /// bil16, bil32, png16 or tiff.
+        #[arg(long, default_value = "tiff")]
+        format: String,
+        /// Output file.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
+    /// Print benchmark tables.
+    Bench {
+        #[command(subcommand)]
+        what: Bench,
+    },
+    /// Describe the region a configuration makes.
+    Info {
+        /// Region configuration (default: the embedded demo region).
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
+}
+
+#[derive(Subcommand)]
+enum Bench {
+    /// Per-stage tile times, a whole-area build, and error against run time
+    /// for resampling, 16-bit encodings and the close.
+    Pipeline {
+        /// A real-data region with a map-based land cover.
+        #[arg(long, default_value = "config/examples/rmnp.toml")]
+        rmnp: PathBuf,
+        /// Forest labels for scoring the close.
+        #[arg(long, default_value = "tests/fixtures/rmnp_forest_labels.csv")]
+        labels: PathBuf,
+        /// Side of the whole-area build.
+        #[arg(long, default_value_t = 4096)]
+        build_side: usize,
+    },
+}
+
+fn main() {
+    let cli = Cli::parse();
+    if let Err(e) = run(cli.command) {
+        eprintln!("sylva: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(command: Command) -> Result<()> {
+    match command {
+        Command::Tile { config, layer, level, row, col, halo, format, output } => {
+            let region = sylva::config::load(config.as_deref())?;
+            let product = produce::tile(
+                &region,
+                TileId::new(level, row, col),
+                halo,
+                parse_layer(&layer)?,
+                parse_format(&format)?,
+            )?;
+            write(&output, &product)
+        }
+        Command::Build { config, layer, bbox, width, height, format, output } => {
+            let region = sylva::config::load(config.as_deref())?;
+            let bbox = match bbox {
+                Some(text) => BBox::parse(&text)?,
+                None => region.bounds,
+            };
+            let product = produce::area(&region, bbox, width, height, parse_layer(&layer)?, parse_format(&format)?)?;
+            write(&output, &product)
+        }
+        Command::Bench { what: Bench::Pipeline { rmnp, labels, build_side } } => {
+            println!("{}", sylva::bench::pipeline_report(&rmnp, &labels, build_side)?);
+            Ok(())
+        }
+        Command::Info { config } => {
+            println!("{}", sylva::config::load(config.as_deref())?.describe());
+            Ok(())
+        }
+    }
+}
+
+fn parse_layer(text: &str) -> Result<Layer> {
+    match Layer::parse(text) {
+        Some(l) => Ok(l),
+        None => bail!("unknown layer {text:?}; expected one of dem, cover, canopy, cem, surface, max4, max32"),
+    }
+}
+
+fn parse_format(text: &str) -> Result<Format> {
+    match Format::parse(text) {
+        Some(f) => Ok(f),
+        None => bail!("unknown format {text:?}; expected bil16, bil32, png16 or tiff"),
+    }
+}
+
+/// Writes the product atomically (temporary file, then rename) and reports it.
+fn write(path: &Path, product: &Product) -> Result<()> {
+    let tmp = path.with_extension("partial");
+    std::fs::write(&tmp, &product.encoded.bytes).with_context(|| format!("{}: cannot write", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot rename into place", path.display()))?;
+    let g = &product.grid;
+    eprintln!(
+        "{}: {}×{} samples, {} bytes, {:.1} ms",
+        path.display(),
+        g.width(),
+        g.height(),
+        product.encoded.bytes.len(),
+        product.stats.total().as_secs_f64() * 1e3
+    );
+    if let Some(q) = product.encoded.quantization {
+        eprintln!("  16-bit codes: value = {} + {} · code", q.offset, q.scale);
+    }
+    if product.encoded.clamped > 0 {
+        eprintln!("  warning: {} samples were outside the 16-bit range and were clamped", product.encoded.clamped);
+    }
+    Ok(())
+}

@@ -1,0 +1,227 @@
+//! Grey-scale morphology with square kernels of any radius: dilation (running
+//! maximum), erosion (running minimum), and sequences of them such as the
+//! dissertation's close (section 6.3, Figure 6.3: "dilation followed by erosion").
+//!
+//! Each pass is separable (a `1×(2r+1)` then a `(2r+1)×1` kernel) and uses the
+//! van Herk / Gil–Werman scheme, so its cost per sample does not depend on the
+//! radius. The same kernel is the safety-zone maximum of section 6.4 (the
+//! "maximum over 4- and 32-sample neighbourhoods").
+//!
+//! NaN is the identity of `f32::max` and `f32::min`, so nodata samples are
+//! ignored and the buffer is padded with NaN: a window that holds only nodata
+//! stays nodata. Samples closer than the radius to the buffer edge see only the
+//! buffer; callers give the input a margin of the radius and crop it away.
+
+use super::Raster;
+use rayon::prelude::*;
+
+/// One morphological pass.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+pub enum MorphOp {
+    /// Running maximum over the square kernel.
+    Dilate,
+    /// Running minimum over the square kernel.
+    Erode,
+}
+
+impl MorphOp {
+    /// Parses a sequence such as `"DDEE"` (footnote 6 of the dissertation: the
+    /// order matters, `DDEE` ≠ `DEDE`).
+    pub fn parse_sequence(text: &str) -> Option<Vec<MorphOp>> {
+        text.chars()
+            .map(|c| match c.to_ascii_uppercase() {
+                'D' => Some(MorphOp::Dilate),
+                'E' => Some(MorphOp::Erode),
+                _ => None,
+            })
+            .collect()
+    }
+}
+
+/// Maximum over the `(2r+1)²` square around each sample.
+pub fn dilate(src: &Raster<f32>, radius: usize) -> Raster<f32> {
+    separable(src, radius, f32::max)
+}
+
+/// Minimum over the `(2r+1)²` square around each sample.
+pub fn erode(src: &Raster<f32>, radius: usize) -> Raster<f32> {
+    separable(src, radius, f32::min)
+}
+
+/// Applies `ops` in order, each with a square kernel of `radius`.
+pub fn apply_sequence(src: &Raster<f32>, ops: &[MorphOp], radius: usize) -> Raster<f32> {
+    let mut out = src.clone();
+    for op in ops {
+        out = match op {
+            MorphOp::Dilate => dilate(&out, radius),
+            MorphOp::Erode => erode(&out, radius),
+        };
+    }
+    out
+}
+
+/// The margin a sequence needs so that cropped output is exact.
+pub fn sequence_margin(ops: &[MorphOp], radius: usize) -> usize {
+    ops.len() * radius
+}
+
+fn separable(src: &Raster<f32>, radius: usize, op: fn(f32, f32) -> f32) -> Raster<f32> {
+    if radius == 0 {
+        return src.clone();
+    }
+    let mut horizontal = Raster::filled(src.width(), src.height(), f32::NAN);
+    let w = src.width().max(1);
+    horizontal
+        .data_mut()
+        .par_chunks_mut(w)
+        .enumerate()
+        .for_each_init(|| Lines::new(src.width(), radius), |line, (y, row)| line.run(src.row(y), row, op));
+    vertical(&horizontal, radius, op)
+}
+
+/// Scratch space for the van Herk / Gil–Werman running extreme along one line.
+struct Lines {
+    padded: Vec<f32>,
+    forward: Vec<f32>,
+    backward: Vec<f32>,
+    radius: usize,
+}
+
+impl Lines {
+    fn new(len: usize, radius: usize) -> Self {
+        let k = 2 * radius + 1;
+        let padded_len = (len + 2 * radius).div_ceil(k) * k;
+        Lines {
+            padded: vec![f32::NAN; padded_len],
+            forward: vec![f32::NAN; padded_len],
+            backward: vec![f32::NAN; padded_len],
+            radius,
+        }
+    }
+
+    /// `dst[i] = op` over `src[i - r ..= i + r]` (clipped to the line).
+    fn run(&mut self, src: &[f32], dst: &mut [f32], op: fn(f32, f32) -> f32) {
+        let (r, k) = (self.radius, 2 * self.radius + 1);
+        self.padded.fill(f32::NAN);
+        self.padded[r..r + src.len()].copy_from_slice(src);
+        for block in 0..self.padded.len() / k {
+            let s = block * k;
+            self.forward[s] = self.padded[s];
+            for i in s + 1..s + k {
+                self.forward[i] = op(self.forward[i - 1], self.padded[i]);
+            }
+            self.backward[s + k - 1] = self.padded[s + k - 1];
+            for i in (s..s + k - 1).rev() {
+                self.backward[i] = op(self.backward[i + 1], self.padded[i]);
+            }
+        }
+        // Output i covers padded[i ..= i + 2r]: the suffix of one block and the
+        // prefix of the next.
+        for (i, out) in dst.iter_mut().enumerate() {
+            *out = op(self.backward[i], self.forward[i + 2 * r]);
+        }
+    }
+}
+
+/// The vertical pass, done on whole rows so that the inner loops are contiguous.
+fn vertical(src: &Raster<f32>, radius: usize, op: fn(f32, f32) -> f32) -> Raster<f32> {
+    let (w, h, k) = (src.width(), src.height(), 2 * radius + 1);
+    let rows = (h + 2 * radius).div_ceil(k) * k;
+    // Padded row p holds source row p - radius (NaN outside).
+    let padded_row = |p: usize| -> Option<&[f32]> { p.checked_sub(radius).filter(|&y| y < h).map(|y| src.row(y)) };
+    let mut forward = vec![f32::NAN; rows * w];
+    let mut backward = vec![f32::NAN; rows * w];
+    // Blocks of k rows are independent.
+    forward.par_chunks_mut(k * w).zip(backward.par_chunks_mut(k * w)).enumerate().for_each(|(block, (fwd, bwd))| {
+        let s = block * k;
+        for i in 0..k {
+            let (done, rest) = fwd.split_at_mut(i * w);
+            combine_row(&mut rest[..w], (i > 0).then(|| &done[(i - 1) * w..]), padded_row(s + i), op);
+        }
+        for i in (0..k).rev() {
+            let (head, tail) = bwd.split_at_mut((i + 1) * w);
+            combine_row(&mut head[i * w..], (i + 1 < k).then(|| &tail[..w]), padded_row(s + i), op);
+        }
+    });
+    let mut out = Raster::filled(w, h, f32::NAN);
+    out.data_mut().par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
+        let b = &backward[y * w..(y + 1) * w];
+        let f = &forward[(y + 2 * radius) * w..(y + 2 * radius + 1) * w];
+        for ((o, &bv), &fv) in row.iter_mut().zip(b).zip(f) {
+            *o = op(bv, fv);
+        }
+    });
+    out
+}
+
+/// `cur = op(previous, row)` elementwise, where a missing side is the identity (NaN).
+fn combine_row(cur: &mut [f32], previous: Option<&[f32]>, row: Option<&[f32]>, op: fn(f32, f32) -> f32) {
+    match (previous, row) {
+        (Some(p), Some(r)) => {
+            for ((c, &pv), &rv) in cur.iter_mut().zip(p).zip(r) {
+                *c = op(pv, rv);
+            }
+        }
+        (Some(p), None) => cur.copy_from_slice(&p[..cur.len()]),
+        (None, Some(r)) => cur.copy_from_slice(r),
+        (None, None) => cur.fill(f32::NAN),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn brute(src: &Raster<f32>, radius: usize, op: fn(f32, f32) -> f32) -> Raster<f32> {
+        let r = radius as i64;
+        Raster::from_fn(src.width(), src.height(), |x, y| {
+            let mut acc = f32::NAN;
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    let (sx, sy) = (x as i64 + dx, y as i64 + dy);
+                    if sx >= 0 && sy >= 0 && (sx as usize) < src.width() && (sy as usize) < src.height() {
+                        acc = op(acc, src.get(sx as usize, sy as usize));
+                    }
+                }
+            }
+            acc
+        })
+    }
+
+    fn same(a: &Raster<f32>, b: &Raster<f32>) -> bool {
+        a.data().iter().zip(b.data()).all(|(x, y)| x == y || (x.is_nan() && y.is_nan()))
+    }
+
+    proptest! {
+        #[test]
+        fn dilate_and_erode_match_brute_force(
+            w in 1usize..20, h in 1usize..20, radius in 0usize..6, seed in any::<u64>(), holes in 0u32..4,
+        ) {
+            let mut state = seed | 1;
+            let src = Raster::from_fn(w, h, |_, _| {
+                state ^= state << 13; state ^= state >> 7; state ^= state << 17;
+                if (state % 10) < holes as u64 { f32::NAN } else { (state % 1000) as f32 }
+            });
+            prop_assert!(same(&dilate(&src, radius), &brute(&src, radius, f32::max)));
+            prop_assert!(same(&erode(&src, radius), &brute(&src, radius, f32::min)));
+        }
+    }
+
+    #[test]
+    fn close_bridges_a_line_narrower_than_the_kernel() {
+        // A forest (1) crossed by a one-pixel contour line (0).
+        let src = Raster::from_fn(9, 9, |x, _| if x == 4 { 0.0 } else { 1.0 });
+        let closed = apply_sequence(&src, &MorphOp::parse_sequence("DE").unwrap(), 1);
+        assert!(closed.data().iter().all(|&v| v == 1.0));
+    }
+
+    #[test]
+    fn sequence_order_matters_as_footnote_6_says() {
+        let src = Raster::from_fn(12, 1, |x, _| [0., 1., 0., 0., 0., 1., 1., 0., 0., 0., 0., 1.][x]);
+        let ddee = apply_sequence(&src, &MorphOp::parse_sequence("DDEE").unwrap(), 1);
+        let dede = apply_sequence(&src, &MorphOp::parse_sequence("DEDE").unwrap(), 1);
+        assert_ne!(ddee, dede);
+        assert_eq!(MorphOp::parse_sequence("DX"), None);
+    }
+}

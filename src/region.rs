@@ -1,0 +1,74 @@
+//! A region: everything the pipeline reads, assembled and checked — the tile
+//! grid, the DEM, the land-cover raster, the canopy proxy and the encodings.
+//! Built from a configuration file ([`crate::config`]) or, with none, from the
+//! embedded demo ([`crate::demo`]).
+
+use crate::canopy::CanopyProxy;
+use crate::encode::Quantization;
+use crate::grid::{BBox, TileGrid};
+use crate::raster::resample::Resampling;
+use crate::source::{BlockCache, GeoRaster};
+use std::sync::Arc;
+
+/// The sources and settings of one region.
+#[derive(Clone)]
+pub struct Region {
+    /// Human-readable name.
+    pub name: String,
+    /// The World Wind tiling.
+    pub tiles: TileGrid,
+    /// The area with data (the default box of whole-area builds).
+    pub bounds: BBox,
+    /// Ground elevation, metres.
+    pub dem: GeoRaster,
+    /// How the DEM is resampled.
+    pub dem_resampling: Resampling,
+    /// Derived land cover (band 0 cover, band 1 class), if any.
+    pub landcover: Option<GeoRaster>,
+    /// The canopy proxy.
+    pub proxy: Arc<dyn CanopyProxy>,
+    /// 16-bit encodings of heights.
+    pub heights_16: Quantization,
+    /// The block cache every source of the region reads through.
+    pub cache: Arc<BlockCache>,
+}
+
+impl Region {
+    /// A multi-line summary for `sylva info`.
+    pub fn describe(&self) -> String {
+        let b = &self.bounds;
+        let mut lines = vec![
+            format!("region     {}", self.name),
+            format!("bounds     W {:.6} S {:.6} E {:.6} N {:.6}", b.west, b.south, b.east, b.north),
+            format!(
+                "tiles      level-0 delta {}°, {} samples per side",
+                self.tiles.level0_delta_deg(),
+                self.tiles.samples()
+            ),
+            describe_raster("dem", &self.dem),
+        ];
+        if let Some(lc) = &self.landcover {
+            lines.push(describe_raster("landcover", lc));
+        } else {
+            lines.push("landcover  none (no forest anywhere)".into());
+        }
+        lines.push(format!("canopy     {}", self.proxy.describe()));
+        lines.push(format!(
+            "png16      h = {} + {} · v (v = 0 is nodata)",
+            self.heights_16.offset, self.heights_16.scale
+        ));
+        lines.join("\n")
+    }
+}
+
+fn describe_raster(label: &str, r: &GeoRaster) -> String {
+    let (w, h) = r.size();
+    let g = r.georef();
+    format!("{label:<10} {} — {w}×{h} px, {:?}, pixel {:.3} m", r.name().display(), g.crs, g.pixel_m())
+}
+
+impl std::fmt::Debug for Region {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Region({:?})", self.name)
+    }
+}

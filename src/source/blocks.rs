@@ -1,0 +1,185 @@
+//! The bounded block cache shared by every source, and the reader that
+//! assembles windows from cached blocks.
+//!
+//! The cache is weighted by bytes and evicts least-recently-used blocks beyond
+//! its budget. Concurrent requests for one missing block compute it once (the
+//! cache's own single-flight insertion).
+
+use super::{PixelSource, SourceError};
+use crate::raster::{Raster, Window};
+use quick_cache::Weighter;
+use quick_cache::sync::Cache;
+use rayon::prelude::*;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+type Block = Arc<Vec<Raster<f32>>>;
+
+#[derive(Clone)]
+struct ByteWeight;
+
+impl Weighter<(u64, usize, usize), Block> for ByteWeight {
+    fn weight(&self, _key: &(u64, usize, usize), block: &Block) -> u64 {
+        block.iter().map(|r| (r.data().len() * 4) as u64).sum::<u64>().max(1)
+    }
+}
+
+/// Decoded and derived blocks of every source, bounded by bytes.
+pub struct BlockCache {
+    blocks: Cache<(u64, usize, usize), Block, ByteWeight>,
+    next_id: AtomicU64,
+    computed: AtomicU64,
+}
+
+impl BlockCache {
+    /// A cache holding at most `budget_bytes` of pixels.
+    pub fn new(budget_bytes: u64) -> Arc<BlockCache> {
+        // One 256² single-band block is 256 KiB: size the table for that.
+        let estimated = (budget_bytes / (256 * 1024)).clamp(16, 1 << 20) as usize;
+        Arc::new(BlockCache {
+            blocks: Cache::with_weighter(estimated, budget_bytes.max(1), ByteWeight),
+            next_id: AtomicU64::new(1),
+            computed: AtomicU64::new(0),
+        })
+    }
+
+    /// Bytes currently held.
+    pub fn bytes(&self) -> u64 {
+        self.blocks.weight()
+    }
+
+    /// Blocks computed (cache misses) since the cache was made.
+    pub fn blocks_computed(&self) -> u64 {
+        self.computed.load(Ordering::Relaxed)
+    }
+
+    fn fresh_id(&self) -> u64 {
+        self.next_id.fetch_add(1, Ordering::Relaxed)
+    }
+}
+
+/// A [`PixelSource`] behind the cache: reads any window, block by block.
+#[derive(Clone)]
+pub struct Blocks {
+    source: Arc<dyn PixelSource>,
+    cache: Arc<BlockCache>,
+    id: u64,
+}
+
+impl Blocks {
+    /// Puts `source` behind `cache`.
+    pub fn new(source: Arc<dyn PixelSource>, cache: &Arc<BlockCache>) -> Blocks {
+        Blocks { id: cache.fresh_id(), source, cache: cache.clone() }
+    }
+
+    /// The underlying source.
+    pub fn source(&self) -> &Arc<dyn PixelSource> {
+        &self.source
+    }
+
+    /// Width and height in pixels.
+    pub fn size(&self) -> (usize, usize) {
+        self.source.size()
+    }
+
+    /// The pixels of `window`, one raster per band; pixels outside the source
+    /// are NaN.
+    pub fn read(&self, window: Window) -> Result<Vec<Raster<f32>>, SourceError> {
+        let bands = self.source.bands();
+        let mut out = vec![Raster::filled(window.width, window.height, f32::NAN); bands];
+        let (w, h) = self.source.size();
+        let Some(inside) = window.intersect(&Window::new(0, 0, w, h)) else {
+            return Ok(out);
+        };
+        let (bw, bh) = self.source.block_size();
+        let (x0, y0) = (inside.x as usize, inside.y as usize);
+        let (x1, y1) = (inside.x_end() as usize, inside.y_end() as usize);
+        let indices: Vec<(usize, usize)> =
+            (y0 / bh..y1.div_ceil(bh)).flat_map(|by| (x0 / bw..x1.div_ceil(bw)).map(move |bx| (bx, by))).collect();
+        // Blocks are independent: compute missing ones in parallel.
+        let blocks: Vec<Block> = indices.par_iter().map(|&(bx, by)| self.block(bx, by)).collect::<Result<_, _>>()?;
+        for (&(bx, by), block) in indices.iter().zip(&blocks) {
+            let origin = ((bx * bw) as i64, (by * bh) as i64);
+            let extent = Window::new(origin.0, origin.1, block[0].width(), block[0].height());
+            let Some(common) = extent.intersect(&inside) else { continue };
+            let local = Window::new(common.x - origin.0, common.y - origin.1, common.width, common.height);
+            let (dx, dy) = ((common.x - window.x) as usize, (common.y - window.y) as usize);
+            for (dst, src) in out.iter_mut().zip(block.iter()) {
+                dst.paste(src, local, dx, dy);
+            }
+        }
+        Ok(out)
+    }
+
+    /// One band of `window`.
+    pub fn read_band(&self, window: Window, band: usize) -> Result<Raster<f32>, SourceError> {
+        Ok(self.read(window)?.swap_remove(band))
+    }
+
+    fn block(&self, bx: usize, by: usize) -> Result<Block, SourceError> {
+        self.cache.blocks.get_or_insert_with(&(self.id, bx, by), || {
+            self.cache.computed.fetch_add(1, Ordering::Relaxed);
+            self.source.read_block(bx, by).map(Arc::new)
+        })
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use std::path::Path;
+    use std::sync::atomic::AtomicUsize;
+
+    /// A source whose pixel `(x, y)` is `x + 1000 y`, counting block reads.
+    pub(crate) struct Counting {
+        pub size: (usize, usize),
+        pub block: (usize, usize),
+        pub reads: AtomicUsize,
+    }
+
+    impl PixelSource for Counting {
+        fn name(&self) -> &Path {
+            Path::new("<counting>")
+        }
+        fn size(&self) -> (usize, usize) {
+            self.size
+        }
+        fn bands(&self) -> usize {
+            1
+        }
+        fn block_size(&self) -> (usize, usize) {
+            self.block
+        }
+        fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError> {
+            self.reads.fetch_add(1, Ordering::Relaxed);
+            let (x0, y0) = (bx * self.block.0, by * self.block.1);
+            let w = self.block.0.min(self.size.0 - x0);
+            let h = self.block.1.min(self.size.1 - y0);
+            Ok(vec![Raster::from_fn(w, h, |x, y| ((x0 + x) + 1000 * (y0 + y)) as f32)])
+        }
+    }
+
+    #[test]
+    fn windows_assemble_from_blocks_and_blocks_are_read_once() {
+        let src = Arc::new(Counting { size: (50, 40), block: (16, 16), reads: AtomicUsize::new(0) });
+        let blocks = Blocks::new(src.clone(), &BlockCache::new(1 << 20));
+        let win = blocks.read_band(Window::new(-2, 10, 30, 35), 0).unwrap();
+        assert!(win.get(0, 0).is_nan() && win.get(1, 34).is_nan());
+        assert_eq!(win.get(2, 0), 10_000.0);
+        assert_eq!(win.get(29, 29), 27.0 + 39_000.0);
+        assert!(win.get(29, 30).is_nan());
+        let first = src.reads.load(Ordering::Relaxed);
+        assert_eq!(first, 2 * 3);
+        blocks.read(Window::new(0, 10, 10, 10)).unwrap();
+        assert_eq!(src.reads.load(Ordering::Relaxed), first);
+    }
+
+    #[test]
+    fn the_cache_stays_within_its_budget() {
+        let src = Arc::new(Counting { size: (512, 512), block: (64, 64), reads: AtomicUsize::new(0) });
+        let cache = BlockCache::new(4 * 64 * 64 * 4);
+        let blocks = Blocks::new(src, &cache);
+        blocks.read(Window::new(0, 0, 512, 512)).unwrap();
+        assert!(cache.bytes() <= 4 * 64 * 64 * 4, "{}", cache.bytes());
+    }
+}

@@ -1,0 +1,252 @@
+//! GeoTIFF reading with the `tiff` crate: integer and float bands, one band or
+//! several (RGB), strips or tiles, chunky or planar; georeferencing from the
+//! ModelPixelScale/ModelTiepoint or ModelTransformation tags and the CRS from
+//! the GeoKey directory (EPSG codes, geographic or projected).
+//!
+//! Blocks are the file's own strips or tiles, decoded once into the block
+//! cache. The decoder sits behind a mutex; decoding is short next to what is
+//! done with the pixels, and cached blocks need no lock.
+
+use super::{Crs, Georef, PixelSource, SourceError, palette};
+use crate::raster::Raster;
+use std::fs::File;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+use tiff::decoder::{Decoder, DecodingResult};
+use tiff::tags::Tag;
+
+/// GeoKey ids (GeoTIFF 1.1, section 7).
+const GT_MODEL_TYPE: u16 = 1024;
+const GT_RASTER_TYPE: u16 = 1025;
+const GEOGRAPHIC_TYPE: u16 = 2048;
+const PROJECTED_CS_TYPE: u16 = 3072;
+const USER_DEFINED: u16 = 32767;
+const RASTER_PIXEL_IS_POINT: u16 = 2;
+
+/// Opens a GeoTIFF with its own CRS, or `crs_override` (an EPSG code) when
+/// given. The file's nodata value reads as NaN.
+pub fn open(path: &Path, crs_override: Option<u32>) -> Result<(Arc<dyn PixelSource>, Georef), SourceError> {
+    let (file, georef) = TiffFile::open(path, crs_override)?;
+    Ok((Arc::new(file), georef))
+}
+
+struct TiffFile {
+    path: PathBuf,
+    decoder: Mutex<Decoder<BufReader<File>>>,
+    size: (usize, usize),
+    bands: usize,
+    planar: bool,
+    chunk: (usize, usize),
+    nodata: Option<f64>,
+    /// Palette (indexed-colour) image: the indices are the data.
+    palette: bool,
+}
+
+impl TiffFile {
+    fn open(path: &Path, crs_override: Option<u32>) -> Result<(TiffFile, Georef), SourceError> {
+        let file = File::open(path).map_err(|source| SourceError::Open { path: path.into(), source })?;
+        let bad = |problem: String| SourceError::Malformed { path: path.into(), problem };
+        let mut dec = Decoder::new(BufReader::new(file)).map_err(|e| bad(format!("not a readable TIFF: {e}")))?;
+        let (w, h) = dec.dimensions().map_err(|e| bad(e.to_string()))?;
+        let bands = dec.find_tag_unsigned::<u16>(Tag::SamplesPerPixel).map_err(|e| bad(e.to_string()))?.unwrap_or(1);
+        let planar = dec.find_tag_unsigned::<u16>(Tag::PlanarConfiguration).map_err(|e| bad(e.to_string()))? == Some(2);
+        let nodata = read_nodata(&mut dec);
+        let palette =
+            dec.find_tag_unsigned::<u16>(Tag::PhotometricInterpretation).map_err(|e| bad(e.to_string()))? == Some(3);
+        let georef = read_georef(&mut dec, path, crs_override)?;
+        let (cw, ch) = dec.chunk_dimensions();
+        if w == 0 || h == 0 || cw == 0 || ch == 0 || bands == 0 {
+            return Err(bad(format!("empty image ({w}×{h}, {bands} bands, chunks {cw}×{ch})")));
+        }
+        let tf = TiffFile {
+            path: path.into(),
+            decoder: Mutex::new(dec),
+            size: (w as usize, h as usize),
+            bands: bands as usize,
+            planar,
+            chunk: (cw as usize, ch as usize),
+            nodata,
+            palette,
+        };
+        Ok((tf, georef))
+    }
+
+    fn bad(&self, problem: String) -> SourceError {
+        SourceError::Malformed { path: self.path.clone(), problem }
+    }
+
+    /// Decodes one chunk into `bands` f32 planes (nodata → NaN).
+    /// Returns the row-major samples (bands interleaved) and the chunk width.
+    fn decode(
+        &self,
+        dec: &mut Decoder<BufReader<File>>,
+        index: u32,
+        planes: usize,
+    ) -> Result<(Vec<f32>, usize), SourceError> {
+        let (w, h) = dec.chunk_data_dimensions(index);
+        let data = if self.palette {
+            palette::read_indices(dec, index, self.chunk).map_err(|e| self.bad(format!("chunk {index}: {e}")))?
+        } else {
+            dec.read_chunk(index).map_err(|e| self.bad(format!("chunk {index}: {e}")))?
+        };
+        let values = to_f32(data, self.nodata).ok_or_else(|| self.bad("unsupported sample type".into()))?;
+        if values.len() < (w * h) as usize * planes {
+            return Err(self.bad(format!("chunk {index} is truncated")));
+        }
+        Ok((values, w as usize))
+    }
+}
+
+impl PixelSource for TiffFile {
+    fn name(&self) -> &Path {
+        &self.path
+    }
+
+    fn size(&self) -> (usize, usize) {
+        self.size
+    }
+
+    fn bands(&self) -> usize {
+        self.bands
+    }
+
+    fn block_size(&self) -> (usize, usize) {
+        self.chunk
+    }
+
+    fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError> {
+        let across = self.size.0.div_ceil(self.chunk.0);
+        let per_plane = across * self.size.1.div_ceil(self.chunk.1);
+        let index = by * across + bx;
+        let mut dec = self.decoder.lock().map_err(|_| self.bad("decoder poisoned by an earlier panic".into()))?;
+        let (h, w) =
+            (self.chunk.1.min(self.size.1 - by * self.chunk.1), self.chunk.0.min(self.size.0 - bx * self.chunk.0));
+        if self.planar {
+            (0..self.bands)
+                .map(|b| {
+                    let (v, row_len) = self.decode(&mut dec, (b * per_plane + index) as u32, 1)?;
+                    Ok(Raster::from_fn(w, h, |x, y| v[y * row_len + x]))
+                })
+                .collect()
+        } else {
+            let (v, row_len) = self.decode(&mut dec, index as u32, self.bands)?;
+            let n = self.bands;
+            Ok((0..n).map(|b| Raster::from_fn(w, h, |x, y| v[(y * row_len + x) * n + b])).collect())
+        }
+    }
+}
+
+fn to_f32(data: DecodingResult, nodata: Option<f64>) -> Option<Vec<f32>> {
+    fn conv<T: Copy + Into<f64>>(v: Vec<T>, nodata: Option<f64>) -> Vec<f32> {
+        v.into_iter()
+            .map(|x| {
+                let x: f64 = x.into();
+                if Some(x) == nodata || x.is_nan() { f32::NAN } else { x as f32 }
+            })
+            .collect()
+    }
+    Some(match data {
+        DecodingResult::U8(v) => conv(v, nodata),
+        DecodingResult::I8(v) => conv(v, nodata),
+        DecodingResult::U16(v) => conv(v, nodata),
+        DecodingResult::I16(v) => conv(v, nodata),
+        DecodingResult::U32(v) => conv(v, nodata),
+        DecodingResult::I32(v) => conv(v, nodata),
+        DecodingResult::F32(v) => conv(v, nodata),
+        DecodingResult::F64(v) => conv(v, nodata),
+        _ => return None,
+    })
+}
+
+/// GDAL's nodata tag (ASCII, e.g. "-32768" or "nan").
+fn read_nodata(dec: &mut Decoder<BufReader<File>>) -> Option<f64> {
+    let text = dec.get_tag_ascii_string(Tag::GdalNodata).ok()?;
+    text.trim_matches(char::from(0)).trim().parse().ok()
+}
+
+fn read_georef(
+    dec: &mut Decoder<BufReader<File>>,
+    path: &Path,
+    crs_override: Option<u32>,
+) -> Result<Georef, SourceError> {
+    let bad = |problem: &str| SourceError::Malformed { path: path.into(), problem: problem.into() };
+    let keys = dec.get_tag_u16_vec(Tag::GeoKeyDirectoryTag).ok();
+    let key = |id: u16| keys.as_deref().and_then(|k| geokey(k, id));
+    let crs = match crs_override.or_else(|| crs_code(key(GT_MODEL_TYPE), key(GEOGRAPHIC_TYPE), key(PROJECTED_CS_TYPE)))
+    {
+        Some(code) => Crs::from_epsg(code).map_err(|source| SourceError::Crs { path: path.into(), source })?,
+        None => {
+            return Err(SourceError::Unsupported {
+                path: path.into(),
+                what:
+                    "no EPSG code in its GeoKeys (user-defined or missing CRS); set `crs = \"EPSG:…\"` for this source"
+                        .into(),
+            });
+        }
+    };
+    let point = key(GT_RASTER_TYPE) == Some(RASTER_PIXEL_IS_POINT);
+    // Corner of pixel (0, 0) and pixel size, from either georeferencing form.
+    let (corner_x, corner_y, dx, dy) = if let Ok(m) = dec.get_tag_f64_vec(Tag::ModelTransformationTag) {
+        if m.len() < 8 || m[1] != 0.0 || m[4] != 0.0 {
+            return Err(SourceError::Unsupported {
+                path: path.into(),
+                what: "rotated or sheared ModelTransformation".into(),
+            });
+        }
+        (m[3], m[7], m[0], m[5])
+    } else {
+        let scale = dec
+            .get_tag_f64_vec(Tag::ModelPixelScaleTag)
+            .map_err(|_| bad("no ModelPixelScale or ModelTransformation tag: not georeferenced"))?;
+        let tie =
+            dec.get_tag_f64_vec(Tag::ModelTiepointTag).map_err(|_| bad("no ModelTiepoint tag: not georeferenced"))?;
+        if scale.len() < 2 || tie.len() < 6 {
+            return Err(bad("short ModelPixelScale or ModelTiepoint tag"));
+        }
+        (tie[3] - tie[0] * scale[0], tie[4] + tie[1] * scale[1], scale[0], -scale[1])
+    };
+    if !(dx.is_finite() && dy.is_finite() && dx != 0.0 && dy != 0.0 && corner_x.is_finite() && corner_y.is_finite()) {
+        return Err(bad("degenerate georeferencing (zero or non-finite pixel size)"));
+    }
+    // PixelIsArea: the tiepoint is the pixel's corner; PixelIsPoint: its centre.
+    let half = if point { 0.0 } else { 0.5 };
+    Ok(Georef {
+        crs: Arc::new(crs),
+        x0: corner_x + half * dx,
+        y0: corner_y + half * dy,
+        dx,
+        dy,
+        overhang: if point { 0.0 } else { 0.5 },
+    })
+}
+
+/// The value of a GeoKey stored inline in the directory.
+fn geokey(dir: &[u16], id: u16) -> Option<u16> {
+    let count = *dir.get(3)? as usize;
+    dir.get(4..4 + 4 * count)?.chunks_exact(4).find(|e| e[0] == id && e[1] == 0).map(|e| e[3])
+}
+
+fn crs_code(model: Option<u16>, geographic: Option<u16>, projected: Option<u16>) -> Option<u32> {
+    let usable = |c: Option<u16>| c.filter(|&c| c != 0 && c != USER_DEFINED).map(u32::from);
+    match model {
+        Some(1) => usable(projected),
+        Some(2) => usable(geographic),
+        _ => usable(projected).or(usable(geographic)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn geokeys_are_looked_up_inline_only() {
+        let dir = [1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, 26910];
+        assert_eq!(geokey(&dir, PROJECTED_CS_TYPE), Some(26910));
+        assert_eq!(geokey(&dir, GEOGRAPHIC_TYPE), None);
+        assert_eq!(crs_code(Some(1), None, Some(26910)), Some(26910));
+        assert_eq!(crs_code(Some(1), Some(4269), Some(USER_DEFINED)), None);
+        assert_eq!(geokey(&[1, 1, 0, 9], 1024), None);
+    }
+}

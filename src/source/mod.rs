@@ -1,0 +1,116 @@
+//! Raster sources: files (GeoTIFF, SRTM `.hgt`), procedural rasters and rasters
+//! derived from others (nodata fill, vegetation cover, overviews), all read by
+//! block through one bounded in-memory cache.
+//!
+//! A [`PixelSource`] knows only pixels: it computes one block at a time. A
+//! [`Blocks`] reader puts it behind the shared [`BlockCache`] and assembles any
+//! window from cached blocks, so no request re-reads a whole file and a block is
+//! computed once however many tiles need it. A [`GeoRaster`] adds
+//! georeferencing and an overview pyramid and evaluates the source on a sample
+//! grid.
+//!
+//! Invariant: a block's content depends only on the source and the block
+//! index, never on who asked first, so windows assembled from blocks are
+//! seamless.
+
+pub mod blocks;
+pub mod crs;
+pub mod georaster;
+pub mod geotiff;
+pub mod hgt;
+pub mod memory;
+pub mod nodata;
+mod palette;
+pub mod pyramid;
+
+pub use blocks::{BlockCache, Blocks};
+pub use crs::{Crs, CrsError};
+pub use georaster::{Footprint, GeoRaster, Georef};
+pub use nodata::NodataPolicy;
+pub use pyramid::Reducer;
+
+use crate::raster::Raster;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use thiserror::Error;
+
+/// Why a source cannot be opened or read. Every variant names the source.
+#[derive(Debug, Error)]
+pub enum SourceError {
+    /// The file is missing or unreadable.
+    #[error("{path}: cannot open: {source}")]
+    Open {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The file is readable but malformed or truncated.
+    #[error("{path}: {problem}")]
+    Malformed {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        problem: String,
+    },
+    /// A valid file that uses a feature Sylva does not read.
+    #[error("{path}: unsupported: {what}")]
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// Which feature.
+        what: String,
+    },
+    /// The file's coordinate reference system is unusable.
+    #[error("{path}: {source}")]
+    Crs {
+        /// The file.
+        path: PathBuf,
+        /// The CRS problem.
+        source: CrsError,
+    },
+}
+
+/// A raster that can compute any of its blocks (all bands at once).
+pub trait PixelSource: Send + Sync {
+    /// A name for messages: the file path or a description.
+    fn name(&self) -> &Path;
+    /// Width and height in pixels.
+    fn size(&self) -> (usize, usize);
+    /// Number of bands.
+    fn bands(&self) -> usize;
+    /// Width and height of a block (blocks at the right and bottom edges may be
+    /// smaller).
+    fn block_size(&self) -> (usize, usize);
+    /// The pixels of block `(bx, by)`, one raster per band; nodata is NaN.
+    fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError>;
+}
+
+/// How to open a raster file.
+#[derive(Clone, Debug, Default)]
+pub struct OpenOptions {
+    /// EPSG code to use instead of the file's own CRS.
+    pub crs: Option<u32>,
+    /// What to do with the file's nodata samples.
+    pub nodata: NodataPolicy,
+    /// How overviews combine pixels (classes must decimate).
+    pub classes: bool,
+}
+
+/// Opens a raster file by its extension: `.tif`/`.tiff` (GeoTIFF) or `.hgt`
+/// (SRTM), applies the nodata policy and adds overviews.
+pub fn open_file(path: &Path, options: &OpenOptions, cache: &Arc<BlockCache>) -> Result<GeoRaster, SourceError> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    let (pixels, georef) = match ext.as_deref() {
+        Some("tif" | "tiff") => geotiff::open(path, options.crs)?,
+        Some("hgt") => hgt::open(path)?,
+        _ => {
+            return Err(SourceError::Unsupported {
+                path: path.to_path_buf(),
+                what: "file type (expected .tif, .tiff or .hgt)".into(),
+            });
+        }
+    };
+    let reducer = if options.classes { Reducer::Decimate } else { Reducer::Mean };
+    Ok(GeoRaster::new(nodata::apply(pixels, &options.nodata, cache), georef, &[reducer], cache))
+}

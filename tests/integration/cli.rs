@@ -1,0 +1,120 @@
+//! The `sylva` binary as a user runs it.
+
+use crate::common::{self, TempDir};
+use std::process::Command;
+
+fn sylva(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_sylva")).args(args).output().expect("run sylva")
+}
+
+#[test]
+fn tile_and_build_write_files_that_agree() {
+    let dir = TempDir::new("cli");
+    let demo = common::demo();
+    let b = demo.bounds;
+    let t = demo.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), 10);
+    let tile_path = dir.join("tile.bil");
+    let (level, row, col) = (t.level.to_string(), t.row.to_string(), t.col.to_string());
+    let out = sylva(&[
+        "tile",
+        "--layer",
+        "cem",
+        "--level",
+        &level,
+        "--row",
+        &row,
+        "--col",
+        &col,
+        "--format",
+        "bil32",
+        "-o",
+        tile_path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s = demo.tiles.sector(t);
+    let bbox = format!("{},{},{},{}", s.min_lon, s.min_lat, s.max_lon, s.max_lat);
+    let build_path = dir.join("build.bil");
+    let out = sylva(&[
+        "build",
+        "--layer",
+        "cem",
+        "--bbox",
+        &bbox,
+        "--width",
+        "513",
+        "--height",
+        "513",
+        "--format",
+        "bil32",
+        "-o",
+        build_path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let (a, b) = (std::fs::read(tile_path).unwrap(), std::fs::read(build_path).unwrap());
+    assert_eq!(a.len(), 513 * 513 * 4);
+    assert!(a == b, "the tile and the build of its sector differ");
+}
+
+#[test]
+fn a_missing_data_file_is_named_and_nothing_is_written() {
+    let dir = TempDir::new("cli-missing");
+    let config = dir.join("c.toml");
+    std::fs::write(&config, "[dem]\npath = \"no/such/dem.tif\"\n").unwrap();
+    let out_path = dir.join("x.tif");
+    let out = sylva(&[
+        "tile",
+        "--config",
+        config.to_str().unwrap(),
+        "--layer",
+        "dem",
+        "--level",
+        "3",
+        "--row",
+        "1",
+        "--col",
+        "1",
+        "-o",
+        out_path.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no/such/dem.tif") && err.contains("cannot open"), "{err}");
+    assert!(!out_path.exists());
+}
+
+#[test]
+fn bad_arguments_are_explained() {
+    let out = sylva(&["tile", "--layer", "relief", "--level", "3", "--row", "1", "--col", "1", "-o", "/tmp/x"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown layer \"relief\""));
+    let out = sylva(&["build", "--layer", "cem", "--bbox", "1,2,3", "--width", "4", "--height", "4", "-o", "/tmp/x"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("four numbers"));
+    let out = sylva(&["info"]);
+    assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("canopy"));
+}
+
+#[test]
+fn geotiff_output_has_the_geotransform_gdal_reads() {
+    let dir = TempDir::new("cli-gdal");
+    let path = dir.join("t.tif");
+    let out = sylva(&[
+        "build",
+        "--layer",
+        "dem",
+        "--bbox",
+        "10.1,46.35,10.15,46.4",
+        "--width",
+        "101",
+        "--height",
+        "51",
+        "-o",
+        path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let info = Command::new("gdalinfo").arg(&path).output().expect("gdalinfo (apt-get install gdal-bin)");
+    let text = String::from_utf8_lossy(&info.stdout);
+    // Pixel centres on the samples: origin half a step outside the box.
+    assert!(text.contains("Size is 101, 51"), "{text}");
+    assert!(text.contains("Origin = (10.099750000000000,46.400500000000001)"), "{text}");
+    assert!(text.contains("Pixel Size = (0.000500000000000,-0.001000000000000)"), "{text}");
+    assert!(text.contains("NoData Value=-32768"), "{text}");
+}

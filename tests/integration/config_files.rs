@@ -1,0 +1,58 @@
+//! Every configuration file shipped in `config/` parses, validates and opens
+//! its sources; bad configurations are refused with the file and the problem.
+
+use crate::common::{self, TempDir};
+use std::path::Path;
+
+fn toml_files(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).expect("config dir").flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            out.extend(toml_files(&path));
+        } else if path.extension().is_some_and(|e| e == "toml") {
+            out.push(path);
+        }
+    }
+    out
+}
+
+#[test]
+fn every_shipped_config_builds_its_region() {
+    let files = toml_files(&common::repo().join("config"));
+    assert!(files.len() >= 5, "{files:?}");
+    for file in files {
+        let region = sylva::config::load(Some(&file)).unwrap_or_else(|e| panic!("{e}"));
+        assert!(!region.describe().is_empty());
+    }
+}
+
+#[test]
+fn the_default_file_is_the_built_in_default() {
+    let from_file = sylva::config::load(Some(&common::repo().join("config/default.toml"))).expect("default.toml");
+    let built_in = common::demo();
+    assert_eq!(from_file.describe(), built_in.describe());
+}
+
+#[test]
+fn bad_configs_name_the_file_and_the_problem() {
+    let dir = TempDir::new("bad-config");
+    let cases = [
+        ("missing.toml", "[dem]\npath = \"nowhere.tif\"\n", "nowhere.tif"),
+        ("typo.toml", "[dem]\npaht = \"x.tif\"\n", "unknown field `paht`"),
+        ("delta.toml", "[grid]\nlevel0_delta_deg = 7.0\n", "must divide 180"),
+        ("close.toml", "[landcover]\nkind = \"map\"\nclose = \"DXE\"\n", "sequence of D and E"),
+        (
+            "classes.toml",
+            "[dem]\npath = \"x.hgt\"\n[landcover]\nkind = \"classes\"\npath = \"c.tif\"\n",
+            "[[landcover.classes]]",
+        ),
+    ];
+    for (name, text, needle) in cases {
+        let path = dir.join(name);
+        std::fs::write(&path, text).expect("write");
+        let err = sylva::config::load(Some(&path)).expect_err(name).to_string();
+        assert!(err.contains(needle), "{name}: {err}");
+        assert!(err.contains(name) || err.contains(needle), "{name}: {err}");
+    }
+}

@@ -1,0 +1,15 @@
+//! Sylva's integration tests, one binary, by topic.
+//!
+//! Tests on real data read `../shared/data` beside the repository (CI has it);
+//! they fail with a clear message when it is missing.
+
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+mod cli; // the `sylva` binary: tile, build, info, errors that name the file
+mod common; // shared helpers: data paths, regions, comparisons
+mod config_files; // every file in config/ parses and builds its region
+mod conservative; // acceleration bounds never below the surface, exhaustively
+mod extreme; // stiff and extreme inputs: huge ranges, cliffs, nodata, poles, sizes
+mod real_data; // rmnp, mt_hood, storm_lake, nz_forest against their sources
+mod seamless; // tiles equal windows of whole-area builds; neighbours agree
+mod skipped_work; // stages nobody needs do not run (counted)

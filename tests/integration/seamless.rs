@@ -1,0 +1,93 @@
+//! Seamlessness: a tile, with any halo, equals the same window of a whole-area
+//! build, bitwise, for every layer — through the close, the blur, the canopy
+//! and the 32-sample maximum — and neighbouring tiles agree on shared samples.
+
+use crate::common::{self, Rng, assert_same};
+use sylva::cem::{self, Layer, Products};
+use sylva::grid::{BBox, TileId};
+use sylva::raster::{Raster, Window};
+use sylva::region::Region;
+
+const FLOAT_LAYERS: [Layer; 6] = [Layer::Dem, Layer::Cover, Layer::Canopy, Layer::Cem, Layer::Max4, Layer::Max32];
+
+fn float(p: &Products, layer: Layer) -> &Raster<f32> {
+    match p.samples(layer) {
+        Some(sylva::encode::Samples::Float(r)) => r,
+        _ => panic!("{} missing", layer.name()),
+    }
+}
+
+/// The 3 × 3 block of tiles around `centre`, built in one computation.
+fn build_around(region: &Region, centre: TileId) -> Products {
+    let t = &region.tiles;
+    let sw = t.sector(TileId::new(centre.level, centre.row - 1, centre.col - 1));
+    let ne = t.sector(TileId::new(centre.level, centre.row + 1, centre.col + 1));
+    let n = 3 * (t.samples() as usize - 1) + 1;
+    let bbox = BBox { west: sw.min_lon, south: sw.min_lat, east: ne.max_lon, north: ne.max_lat };
+    let grid = bbox.point_grid(n, n, t).expect("grid");
+    assert_eq!(grid.lon.first, (centre.col as i64 - 1) * (t.samples() as i64 - 1), "the build is on the tile lattice");
+    cem::compute(region, &grid, &Layer::ALL).expect("build")
+}
+
+/// Random tiles near the region's centre on `level`, each checked against
+/// the build around it with a random halo.
+fn check(region: &Region, level: u32, cases: usize, seed: u64) {
+    let mut rng = Rng(seed);
+    let b = region.bounds;
+    let n = region.tiles.samples() as usize;
+    for _ in 0..cases {
+        let lon = b.west + (b.east - b.west) * (0.3 + 0.4 * rng.below(1000) as f64 / 1000.0);
+        let lat = b.south + (b.north - b.south) * (0.3 + 0.4 * rng.below(1000) as f64 / 1000.0);
+        let centre = region.tiles.tile_containing(lon, lat, level);
+        let halo = [0usize, 1, 7, 32, 100][rng.below(5) as usize];
+        let build = build_around(region, centre);
+        let tile = cem::compute(region, &region.tiles.tile_samples(centre, halo), &Layer::ALL).expect("tile");
+        let window = Window::new((n - 1 - halo) as i64, (n - 1 - halo) as i64, n + 2 * halo, n + 2 * halo);
+        for layer in FLOAT_LAYERS {
+            let what = format!("{} tile {centre} halo {halo} layer {}", region.name, layer.name());
+            assert_same(float(&tile, layer), &float(&build, layer).crop(window, f32::NAN), &what);
+        }
+        let surface = build.surface.as_ref().expect("surface").crop(window, 0);
+        assert_eq!(tile.surface.as_ref(), Some(&surface), "{} tile {centre} surface", region.name);
+        assert!(float(&tile, Layer::Cover).data().iter().any(|&c| c > 0.0), "{}: pick tiles with forest", region.name);
+    }
+}
+
+#[test]
+fn demo_tiles_equal_windows_of_a_build() {
+    let demo = common::demo();
+    check(&demo, 9, 2, 11);
+    check(&demo, 12, 2, 12);
+}
+
+#[test]
+fn rmnp_tiles_equal_windows_of_a_build() {
+    let rmnp = common::region("examples/rmnp.toml");
+    check(&rmnp, 6, 1, 21);
+    check(&rmnp, 9, 2, 22);
+}
+
+#[test]
+fn neighbours_share_edge_samples_exactly() {
+    let demo = common::demo();
+    let b = demo.bounds;
+    let t = demo.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), 11);
+    let n = demo.tiles.samples() as usize;
+    let get = |row, col| {
+        cem::compute(&demo, &demo.tiles.tile_samples(TileId::new(11, row, col), 0), &Layer::ALL).expect("tile")
+    };
+    let (sw, se, nw) = (get(t.row, t.col), get(t.row, t.col + 1), get(t.row + 1, t.col));
+    for layer in FLOAT_LAYERS {
+        let (a, east, north) = (float(&sw, layer), float(&se, layer), float(&nw, layer));
+        assert_same(
+            &a.crop(Window::new(n as i64 - 1, 0, 1, n), 0.0),
+            &east.crop(Window::new(0, 0, 1, n), 0.0),
+            layer.name(),
+        );
+        assert_same(
+            &a.crop(Window::new(0, 0, n, 1), 0.0),
+            &north.crop(Window::new(0, n as i64 - 1, n, 1), 0.0),
+            layer.name(),
+        );
+    }
+}
