@@ -3,6 +3,12 @@
 //! 2: bad usage, from clap).
 
 use anyhow::{Context, Result, bail};
+
+/// Tiles allocate and free megabyte rasters at a high rate; glibc returns
+/// them to the kernel each time and pays a page fault per 4 KiB on reuse
+/// (22 % of a warm tile's time, measured with perf). mimalloc keeps them.
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use sylva::cem::Layer;

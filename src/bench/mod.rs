@@ -46,15 +46,18 @@ pub fn pipeline_report(
 ) -> Result<String, crate::config::ConfigError> {
     let mut out = Vec::new();
     let demo = crate::config::load(None)?;
-    let mut regions = vec![(demo, None)];
+    let mut regions = vec![(demo, None, "demo".to_string())];
     match crate::config::load(Some(rmnp_config)) {
-        Ok(rmnp) => regions.push((rmnp, Some(rmnp_config))),
+        Ok(rmnp) => {
+            let key = rmnp_config.file_stem().map_or("real".into(), |s| s.to_string_lossy().into_owned());
+            regions.push((rmnp, Some(rmnp_config), key));
+        }
         Err(e) => out.push(format!("(skipping the real-data region: {e})\n")),
     }
-    for (region, path) in &regions {
+    for (region, path, key) in &regions {
         let reload = || crate::config::load(*path).unwrap_or_else(|_| region.clone());
         let result = pipeline::run(region, &reload, build_side);
-        out.push(pipeline::report(&result, build_side));
+        out.push(pipeline::report(&result, key, build_side));
         out.extend(quality::resampling(region));
         out.push(quality::quantization(region));
     }

@@ -10,8 +10,9 @@
 //! the 3 × 3 neighbouring cells can reach a sample.
 //!
 //! Filtering to the sample spacing `s`: below `cell/2` the crowns are sampled
-//! as they are; above `2·cell` single crowns alias, and the proxy is its mean
-//! height; in between the two are blended (smoothstep). This is the
+//! as they are (a crown spans at least three samples); from `1.5·cell` on
+//! single crowns would alias, and the proxy is its mean height; in between
+//! the two are blended (smoothstep). This is the
 //! "filtered to the tile's sample spacing" of DESIGN.md stage 3.
 //!
 //! Each crown value is computed from the sample's normalised coordinates and
@@ -110,7 +111,7 @@ impl ProceduralProxy {
     /// Weight of the mean in the blend at sample spacing `spacing_m`.
     fn blend(&self, spacing_m: f64) -> f32 {
         let c = self.params.cell_m;
-        let t = ((spacing_m - 0.5 * c) / (1.5 * c)).clamp(0.0, 1.0);
+        let t = ((spacing_m - 0.5 * c) / c).clamp(0.0, 1.0);
         (t * t * (3.0 - 2.0 * t)) as f32
     }
 
@@ -136,55 +137,73 @@ impl ProceduralProxy {
         })
     }
 
-    /// Crown height of `tree` at normalised `(lon, lat)` radians.
+    /// Crown height of `tree` (whose latitude has cosine `cos_lat`) at
+    /// normalised `(lon, lat)` radians.
     #[inline]
-    fn crown(&self, tree: &Tree, lon: f64, lat: f64) -> f32 {
+    fn crown(&self, tree: &Tree, cos_lat: f64, lon: f64, lat: f64) -> f32 {
         let mut dlon = lon - tree.lon;
         if dlon > PI {
             dlon -= TAU;
         } else if dlon < -PI {
             dlon += TAU;
         }
-        let dx = dlon * EARTH_RADIUS_M * tree.lat.cos();
+        let dx = dlon * EARTH_RADIUS_M * cos_lat;
         let dy = (lat - tree.lat) * EARTH_RADIUS_M;
-        let d = (dx * dx + dy * dy).sqrt() / self.radius_m;
-        if d >= 1.0 { 0.0 } else { tree.height * (1.0 - (d as f32).powf(self.params.crown_exponent)) }
+        let d = ((dx * dx + dy * dy).sqrt() / self.radius_m) as f32;
+        if d >= 1.0 { 0.0 } else { tree.height * (1.0 - self.profile(d)) }
     }
 
-    /// Full-detail crowns of grid row `r` into `out` (samples where `wanted`).
-    fn splat_row(&self, grid: &SampleGrid, r: usize, out: &mut [f32], wanted: &dyn Fn(usize) -> bool) {
+    /// `d^p`, without `powf` for the usual exponents.
+    #[inline]
+    fn profile(&self, d: f32) -> f32 {
+        match self.params.crown_exponent {
+            1.0 => d,
+            1.5 => d * d.sqrt(),
+            2.0 => d * d,
+            p => d.powf(p),
+        }
+    }
+
+    /// Full-detail crowns of grid row `r` into `out`, over the column ranges
+    /// `runs` (the wanted samples).
+    fn splat_row(&self, grid: &SampleGrid, r: usize, out: &mut [f32], runs: &[(usize, usize)]) {
         let lat = grid.on_globe(0, r as i64).1.to_radians();
         let lon_of = |c: usize| grid.on_globe(c as i64, r as i64).0.to_radians();
-        for (start, end) in monotone_segments(out.len(), &lon_of) {
-            let (la, lb) = (lon_of(start), lon_of(end - 1));
-            let step = if end - start > 1 { (lb - la) / (end - start - 1) as f64 } else { 1.0 };
-            let j0 = (lat / self.row_rad).floor() as i64;
-            for j in j0 - 1..=j0 + 1 {
-                let n = self.columns(j);
-                let col = |lon: f64| ((lon + PI) / TAU * n as f64).floor() as i64;
-                for i in col(la) - 1..=col(lb) + 1 {
-                    let Some(tree) = self.tree(j, i.rem_euclid(n), n) else { continue };
-                    let dy = (lat - tree.lat) * EARTH_RADIUS_M;
-                    if dy.abs() >= self.radius_m {
-                        continue;
-                    }
-                    // Candidate columns (one sample of slack); the crown test is exact.
-                    let half =
-                        (self.radius_m * self.radius_m - dy * dy).sqrt() / (EARTH_RADIUS_M * tree.lat.cos().max(1e-9));
-                    let mut centre = tree.lon;
-                    // The tree may sit on the other side of the antimeridian from the row.
-                    if centre - la > PI {
-                        centre -= TAU;
-                    } else if la - centre > PI {
-                        centre += TAU;
-                    }
-                    let column = |lon: f64| start as f64 + (lon - la) / step;
-                    let first = (column(centre - half).floor() as i64 - 1).max(start as i64);
-                    let last = (column(centre + half).ceil() as i64 + 1).min(end as i64 - 1);
-                    for c in first..=last {
-                        let c = c as usize;
-                        if wanted(c) {
-                            let z = self.crown(&tree, lon_of(c), lat);
+        // Rows of cells whose trees (centres 0.15–0.85 into the cell) can
+        // reach this latitude: about 2.3 of the 3 around it.
+        let reach = self.radius_m / EARTH_RADIUS_M;
+        let j_lo = ((lat - reach) / self.row_rad - 0.85).floor() as i64;
+        let j_hi = ((lat + reach) / self.row_rad - 0.15).floor() as i64;
+        for &(start, end) in runs {
+            for (start, end) in monotone_segments(start, end, &lon_of) {
+                let (la, lb) = (lon_of(start), lon_of(end - 1));
+                let step = if end - start > 1 { (lb - la) / (end - start - 1) as f64 } else { 1.0 };
+                let column = |lon: f64| start as f64 + (lon - la) / step;
+                for j in j_lo..=j_hi {
+                    let n = self.columns(j);
+                    let col = |lon: f64| ((lon + PI) / TAU * n as f64).floor() as i64;
+                    for i in col(la) - 1..=col(lb) + 1 {
+                        let Some(tree) = self.tree(j, i.rem_euclid(n), n) else { continue };
+                        let dy = (lat - tree.lat) * EARTH_RADIUS_M;
+                        if dy.abs() >= self.radius_m {
+                            continue;
+                        }
+                        let cos_lat = tree.lat.cos();
+                        // Candidate columns (one sample of slack); the crown test is exact.
+                        let half =
+                            (self.radius_m * self.radius_m - dy * dy).sqrt() / (EARTH_RADIUS_M * cos_lat.max(1e-9));
+                        let mut centre = tree.lon;
+                        // The tree may sit on the other side of the antimeridian from the row.
+                        if centre - la > PI {
+                            centre -= TAU;
+                        } else if la - centre > PI {
+                            centre += TAU;
+                        }
+                        let first = (column(centre - half).floor() as i64 - 1).max(start as i64);
+                        let last = (column(centre + half).ceil() as i64 + 1).min(end as i64 - 1);
+                        for c in first..=last {
+                            let c = c as usize;
+                            let z = self.crown(&tree, cos_lat, lon_of(c), lat);
                             if z > out[c] {
                                 out[c] = z;
                             }
@@ -207,28 +226,40 @@ impl ProceduralProxy {
         let mut sum = 0.0f64;
         for r in 0..n {
             row.fill(0.0);
-            self.splat_row(&grid, r, &mut row, &|_| true);
+            self.splat_row(&grid, r, &mut row, &[(0, n)]);
             sum += row.iter().map(|&v| v as f64).sum::<f64>();
         }
         (sum / (n * n) as f64) as f32
     }
 }
 
-/// Index ranges over which `lon_of` increases (a row crossing the
-/// antimeridian has two).
-fn monotone_segments(len: usize, lon_of: &impl Fn(usize) -> f64) -> Vec<(usize, usize)> {
+/// Index ranges within `start..end` over which `lon_of` increases (a row
+/// crossing the antimeridian has two).
+fn monotone_segments(start: usize, end: usize, lon_of: &impl Fn(usize) -> f64) -> Vec<(usize, usize)> {
     let mut segments = Vec::new();
-    let mut start = 0;
-    for c in 1..len {
+    let mut from = start;
+    for c in start + 1..end {
         if lon_of(c) < lon_of(c - 1) {
-            segments.push((start, c));
-            start = c;
+            segments.push((from, c));
+            from = c;
         }
     }
-    if len > 0 {
-        segments.push((start, len));
+    if end > start {
+        segments.push((from, end));
     }
     segments
+}
+
+/// Maximal runs of consecutive columns where `wanted` holds.
+fn runs(len: usize, wanted: impl Fn(usize) -> bool) -> Vec<(usize, usize)> {
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    for c in (0..len).filter(|&c| wanted(c)) {
+        match out.last_mut() {
+            Some(last) if last.1 == c => last.1 = c + 1,
+            _ => out.push((c, c + 1)),
+        }
+    }
+    out
 }
 
 impl CanopyProxy for ProceduralProxy {
@@ -238,16 +269,13 @@ impl CanopyProxy for ProceduralProxy {
         let blend = self.blend(grid.lat.step.abs() * crate::geo::METRES_PER_DEGREE);
         let width = grid.width().max(1);
         out.data_mut().par_chunks_mut(width).enumerate().for_each(|(r, row)| {
-            let row_wanted = |c: usize| wanted(c, r);
-            if !(0..row.len()).any(row_wanted) {
-                return;
-            }
+            let spans = runs(row.len(), |c| wanted(c, r));
             if blend < 1.0 {
-                self.splat_row(grid, r, row, &row_wanted);
+                self.splat_row(grid, r, row, &spans);
             }
             if blend > 0.0 {
-                for (c, v) in row.iter_mut().enumerate() {
-                    if row_wanted(c) {
+                for &(start, end) in &spans {
+                    for v in &mut row[start..end] {
                         *v += blend * (self.mean_m - *v);
                     }
                 }
@@ -293,7 +321,7 @@ mod tests {
             let i0 = ((lon + PI) / TAU * n as f64).floor() as i64;
             for i in i0 - 1..=i0 + 1 {
                 if let Some(t) = p.tree(j, i.rem_euclid(n), n) {
-                    best = best.max(p.crown(&t, lon, lat));
+                    best = best.max(p.crown(&t, t.lat.cos(), lon, lat));
                 }
             }
         }

@@ -116,9 +116,12 @@ fn from_map(
 ) -> (Raster<f32>, Raster<f32>) {
     let band = |b: usize, x: usize, y: usize| rgb.get(b).map_or(f32::NAN, |r| r.get(x, y));
     let (w, h) = (rgb[0].width(), rgb[0].height());
+    // Maps and 8-bit images repeat colours: classify each distinct colour once.
+    let mut seen: HashMap<[u32; 3], f32> = HashMap::new();
     let classes = Raster::from_fn(w, h, |x, y| {
-        let class = colorkey::classify([band(0, x, y), band(1, x, y), band(2, x, y)], keys);
-        class.map_or(SurfaceType::Plain as u8 as f32, |s| s as u8 as f32)
+        let rgb = [band(0, x, y), band(1, x, y), band(2, x, y)];
+        let class = || colorkey::classify(rgb, keys).map_or(SurfaceType::Plain as u8 as f32, |s| s as u8 as f32);
+        *seen.entry(rgb.map(f32::to_bits)).or_insert_with(class)
     });
     let mask = classes.map(|c| if c == SurfaceType::Forest as u8 as f32 { 1.0 } else { 0.0 });
     let closed = morphology::apply_sequence(&mask, ops, radius);

@@ -159,7 +159,11 @@ pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<P
 
     // (a) Identification of arboreous regions: the cover map on the grid.
     let landcover = match (need.cover && !no_ground, &region.landcover) {
-        (true, Some(lc)) => stats.time(Stage::Landcover, || lc.read(&work, Resampling::Bilinear))?,
+        (true, Some(lc)) => {
+            // Band 1 (classes) only for the surface layer.
+            let bands = if need.surface { 2 } else { 1 };
+            stats.time(Stage::Landcover, || lc.read(&work, Resampling::Bilinear, bands))?
+        }
         _ => None,
     };
     let has_forest = landcover.as_ref().is_some_and(|f| f.bands[0].data().iter().any(|&c| c > 0.0));

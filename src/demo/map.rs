@@ -305,6 +305,85 @@ fn scan_noise(rgb: [u8; 3], col: usize, row: usize) -> [u8; 3] {
 mod tests {
     use super::*;
 
+    /// The whole sheet as colour classes (index into `palette_order`).
+    fn sheet() -> Vec<Raster<f32>> {
+        let map = MapSource::new().unwrap();
+        let blocks = crate::source::Blocks::new(Arc::new(map), &crate::source::BlockCache::new(1 << 30));
+        blocks.read(crate::raster::Window::new(0, 0, COLS, ROWS)).unwrap()
+    }
+
+    fn nearest_colour(rgb: [f32; 3]) -> usize {
+        let all = all_colours();
+        let d = |c: [u8; 3]| (0..3).map(|k| (rgb[k] - f32::from(c[k])).abs()).fold(0.0, f32::max);
+        (0..all.len()).min_by(|&a, &b| d(all[a]).total_cmp(&d(all[b]))).unwrap()
+    }
+
+    fn all_colours() -> [[u8; 3]; 9] {
+        use palette::*;
+        [FOREST, OPEN, WATER, SHORE, CONTOUR, PATH, ROCK, SCREE, GRID]
+    }
+
+    #[test]
+    fn the_sheet_reads_like_a_topographic_map() {
+        let px = sheet();
+        let classes: Vec<usize> =
+            (0..COLS * ROWS).map(|i| nearest_colour([0, 1, 2].map(|b| px[b].data()[i]))).collect();
+        let share = |k: usize| classes.iter().filter(|&&c| c == k).count() as f64 / classes.len() as f64;
+        // Every colour is within the ±3 scanner noise of its palette entry.
+        for (i, &c) in classes.iter().enumerate() {
+            let want = all_colours()[c];
+            assert!((0..3).all(|b| (px[b].data()[i] - f32::from(want[b])).abs() <= 3.0));
+        }
+        let (forest, water, rock, contour, path) =
+            (share(0), share(2) + share(3), share(6) + share(7), share(4), share(5));
+        println!("forest {forest:.3} water {water:.3} rock {rock:.3} contours {contour:.3} paths {path:.4}");
+        // Green pixels only: contours and paths crossing the forest are counted apart.
+        assert!((0.15..0.50).contains(&forest), "forest {forest}");
+        assert!((0.01..0.10).contains(&water) && rock > 0.05 && contour > 0.10 && path > 0.001);
+    }
+
+    #[test]
+    fn the_close_bridges_the_lines_that_cross_forest() {
+        use crate::raster::morphology::{MorphOp, apply_sequence};
+        let px = sheet();
+        let forest = Raster::from_fn(COLS, ROWS, |x, y| {
+            if nearest_colour([0, 1, 2].map(|b| px[b].get(x, y))) == 0 { 1.0 } else { 0.0 }
+        });
+        let closed = apply_sequence(&forest, &MorphOp::parse_sequence("DDEE").unwrap(), 1);
+        // Line pixels (contours, paths) with forest on both sides, two pixels away.
+        let (mut lines, mut bridged) = (0, 0);
+        for y in 2..ROWS - 2 {
+            for x in 2..COLS - 2 {
+                let class = nearest_colour([0, 1, 2].map(|b| px[b].get(x, y)));
+                let across = (forest.get(x - 2, y) == 1.0 && forest.get(x + 2, y) == 1.0)
+                    || (forest.get(x, y - 2) == 1.0 && forest.get(x, y + 2) == 1.0);
+                if (class == 4 || class == 5) && across {
+                    lines += 1;
+                    bridged += usize::from(closed.get(x, y) == 1.0);
+                }
+            }
+        }
+        let area = closed.data().iter().filter(|&&v| v == 1.0).count() as f64 / (COLS * ROWS) as f64;
+        println!("{bridged} of {lines} line pixels inside forest bridged; forest after the close {area:.3}");
+        assert!(lines > 10_000 && bridged as f64 / lines as f64 > 0.95, "{bridged}/{lines}");
+        assert!((0.25..0.50).contains(&area), "{area}");
+    }
+
+    #[test]
+    fn blocks_are_deterministic_and_independent() {
+        let map = MapSource::new().unwrap();
+        let a = map.read_block(3, 2).unwrap();
+        assert_eq!(a, map.read_block(3, 2).unwrap());
+        // The block's first row equals the same row read as part of the block above's window.
+        let blocks =
+            crate::source::Blocks::new(Arc::new(MapSource::new().unwrap()), &crate::source::BlockCache::new(1 << 26));
+        let window = blocks.read(crate::raster::Window::new(3 * 256 - 7, 2 * 256 - 5, 20, 10)).unwrap();
+        for b in 0..3 {
+            assert_eq!(window[b].get(7, 5), a[b].get(0, 0));
+            assert_eq!(window[b].get(19, 9), a[b].get(12, 4));
+        }
+    }
+
     #[test]
     fn the_sheet_covers_the_dem() {
         let g = MapSource::new().unwrap().georef();

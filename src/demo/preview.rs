@@ -72,23 +72,3 @@ fn write_map_preview() {
     println!("whole sheet (every 2nd pixel) in {:?}", start.elapsed());
     map_image(900, 700, 400, 300, 1).save(std::env::temp_dir().join("demo_map_crop.png")).unwrap();
 }
-
-#[test]
-#[ignore = "timing for eyes"]
-fn time_map_block() {
-    let map = super::map::MapSource::new().unwrap();
-    let start = std::time::Instant::now();
-    for _ in 0..5 {
-        map.read_block(3, 3).unwrap();
-    }
-    println!("map block: {:?} each", start.elapsed() / 5);
-}
-
-#[test]
-#[ignore = "statistics for eyes"]
-fn dem_height_quantiles() {
-    let mut h = dem_heights();
-    h.sort_by(f32::total_cmp);
-    let q = |p: f64| h[((h.len() - 1) as f64 * p) as usize];
-    println!("DEM quantiles 10/25/50/75/90 %: {} {} {} {} {}", q(0.1), q(0.25), q(0.5), q(0.75), q(0.9));
-}

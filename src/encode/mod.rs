@@ -104,10 +104,11 @@ impl Samples<'_> {
         }
     }
 
-    fn values(&self) -> Box<dyn Iterator<Item = f32> + '_> {
+    /// The samples as `f32` (class ids converted as they are, 255 included).
+    fn floats(&self) -> std::borrow::Cow<'_, [f32]> {
         match self {
-            Samples::Float(r) => Box::new(r.data().iter().copied()),
-            Samples::Class(r) => Box::new(r.data().iter().map(|&v| f32::from(v))),
+            Samples::Float(r) => std::borrow::Cow::Borrowed(r.data()),
+            Samples::Class(r) => r.data().iter().map(|&v| f32::from(v)).collect(),
         }
     }
 }
@@ -149,54 +150,62 @@ pub fn encode(
     match format {
         Format::Bil16 => Ok(bil16(samples, bil16_q)),
         Format::Bil32 => Ok(Encoded { bytes: bil32(samples), clamped: 0, quantization: None }),
-        Format::Png16 => png16(samples, png16_q, layer != Layer::Cover),
+        // Code 0 is nodata for heights; cover and classes use every code.
+        Format::Png16 => png16(samples, png16_q, !matches!(layer, Layer::Cover | Layer::Surface)),
         Format::Tiff => Ok(Encoded { bytes: geotiff::write(samples, grid)?, clamped: 0, quantization: None }),
     }
 }
 
 fn bil16(samples: Samples, q: Quantization) -> Encoded {
-    let mut bytes = Vec::new();
-    let mut clamped = 0;
-    for v in samples.values() {
-        let code = if v.is_nan() {
-            NODATA_HEIGHT as i32
-        } else {
-            let (c, was) = q.code(v, i16::MIN as i32 + 1, i16::MAX as i32);
-            clamped += usize::from(was);
-            c
-        };
-        bytes.extend_from_slice(&(code as i16).to_le_bytes());
+    let (codes, clamped) = quantize(&samples.floats(), q, NODATA_HEIGHT as i32, i16::MIN as i32 + 1, i16::MAX as i32);
+    let mut bytes = Vec::with_capacity(2 * codes.len());
+    for c in codes {
+        bytes.extend_from_slice(&(c as i16).to_le_bytes());
     }
     Encoded { bytes, clamped, quantization: Some(q) }
 }
 
 fn bil32(samples: Samples) -> Vec<u8> {
-    samples.values().flat_map(|v| (if v.is_nan() { NODATA_HEIGHT } else { v }).to_le_bytes()).collect()
+    let floats = samples.floats();
+    let mut bytes = Vec::with_capacity(4 * floats.len());
+    for &v in floats.iter() {
+        bytes.extend_from_slice(&(if v.is_nan() { NODATA_HEIGHT } else { v }).to_le_bytes());
+    }
+    bytes
+}
+
+/// Codes of `values` clamped to `lo..=hi`, `nodata` for NaN; and how many
+/// were clamped.
+fn quantize(values: &[f32], q: Quantization, nodata: i32, lo: i32, hi: i32) -> (Vec<i32>, usize) {
+    let mut clamped = 0;
+    let codes = values
+        .iter()
+        .map(|&v| {
+            if v.is_nan() {
+                return nodata;
+            }
+            let (c, was) = q.code(v, lo, hi);
+            clamped += usize::from(was);
+            c
+        })
+        .collect();
+    (codes, clamped)
 }
 
 /// PNG16: when `zero_is_nodata`, valid samples use codes 1..=65535.
 fn png16(samples: Samples, q: Quantization, zero_is_nodata: bool) -> Result<Encoded, EncodeError> {
-    let lo = i32::from(zero_is_nodata);
-    let mut clamped = 0;
-    let codes: Vec<u16> = samples
-        .values()
-        .map(|v| {
-            if v.is_nan() {
-                return 0;
-            }
-            let (c, was) = q.code(v, lo, 65535);
-            clamped += usize::from(was);
-            c as u16
-        })
-        .collect();
+    let (codes, clamped) = quantize(&samples.floats(), q, 0, i32::from(zero_is_nodata), 65535);
     let (w, h) = (samples.width(), codes.len() / samples.width().max(1));
     // The image crate takes 16-bit samples in native byte order.
-    let bytes: Vec<u8> = codes.iter().flat_map(|c| c.to_ne_bytes()).collect();
+    let mut bytes = Vec::with_capacity(2 * codes.len());
+    for c in codes {
+        bytes.extend_from_slice(&(c as u16).to_ne_bytes());
+    }
     let mut out = Vec::new();
     let encoder = image::codecs::png::PngEncoder::new_with_quality(
         &mut out,
         image::codecs::png::CompressionType::Fast,
-        image::codecs::png::FilterType::Adaptive,
+        image::codecs::png::FilterType::Paeth,
     );
     image::ImageEncoder::write_image(encoder, &bytes, w as u32, h as u32, image::ExtendedColorType::L16)
         .map_err(|e| EncodeError(e.to_string()))?;

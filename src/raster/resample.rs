@@ -9,6 +9,7 @@
 //! make the sample NaN (nodata propagates).
 
 use super::{Raster, Window};
+use rayon::prelude::*;
 
 /// How to interpolate between source pixels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Deserialize, serde::Serialize)]
@@ -128,10 +129,14 @@ impl PixelCoords {
                 (x0, y0, x1, y1)
             }
             PixelCoords::Dense { xy, .. } => {
-                let inside = || xy.iter().filter(|&&(px, py)| extent.contains(px, py));
-                let (x0, x1) = min_max(inside().map(|p| p.0))?;
-                let (y0, y1) = min_max(inside().map(|p| p.1))?;
-                (x0, y0, x1, y1)
+                let mut b = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+                for &(px, py) in xy.iter().filter(|&&(px, py)| extent.contains(px, py)) {
+                    b = (b.0.min(px), b.1.min(py), b.2.max(px), b.3.max(py));
+                }
+                if b.0 > b.2 {
+                    return None;
+                }
+                b
             }
         };
         let s = kind.support();
@@ -158,10 +163,11 @@ pub fn resample(
 ) -> Raster<f32> {
     let view = View { src, window, extent };
     let (w, h) = coords.shape();
-    match kind {
-        Resampling::Nearest => run(w, h, coords, extent, |px, py| view.nearest(px, py)),
-        Resampling::Bilinear => run(w, h, coords, extent, |px, py| view.bilinear(px, py)),
-        Resampling::Bicubic => run(w, h, coords, extent, |px, py| view.bicubic(px, py)),
+    match (kind, coords) {
+        (Resampling::Bilinear, PixelCoords::Separable { x, y }) => view.bilinear_separable(x, y),
+        (Resampling::Bilinear, PixelCoords::Dense { width, xy }) => view.bilinear_dense(*width, xy),
+        (Resampling::Nearest, _) => run(w, h, coords, extent, |px, py| view.nearest(px, py)),
+        (Resampling::Bicubic, _) => run(w, h, coords, extent, |px, py| view.bicubic(px, py)),
     }
 }
 
@@ -176,6 +182,30 @@ fn run(
         let (px, py) = coords.at(c, r);
         if extent.contains(px, py) { kernel(px, py) } else { f32::NAN }
     })
+}
+
+/// `x.floor()` without a libm call (baseline x86-64 has no rounding
+/// instruction); exact for |x| < 2⁶³.
+#[inline]
+fn floor(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t > x { t - 1.0 } else { t }
+}
+
+/// Bilinear taps along one axis: the two clamped window indices and the
+/// weight of the second, or `None` outside the extent.
+fn taps(
+    coords: &[f64],
+    inside: impl Fn(f64) -> bool,
+    clamp: impl Fn(i64) -> usize,
+) -> Vec<Option<(usize, usize, f32)>> {
+    coords
+        .iter()
+        .map(|&p| {
+            let p0 = floor(p);
+            inside(p).then(|| (clamp(p0 as i64), clamp(p0 as i64 + 1), (p - p0) as f32))
+        })
+        .collect()
 }
 
 /// A source window seen in full-source pixel coordinates, with edge clamping.
@@ -194,20 +224,57 @@ impl View<'_> {
     }
 
     fn nearest(&self, px: f64, py: f64) -> f32 {
-        self.tap((px + 0.5).floor() as i64, (py + 0.5).floor() as i64)
+        self.tap(floor(px + 0.5) as i64, floor(py + 0.5) as i64)
     }
 
-    fn bilinear(&self, px: f64, py: f64) -> f32 {
-        let (x0, y0) = (px.floor(), py.floor());
-        let (fx, fy) = ((px - x0) as f32, (py - y0) as f32);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let top = lerp(self.tap(x0, y0), || self.tap(x0 + 1, y0), fx);
-        let bottom = || lerp(self.tap(x0, y0 + 1), || self.tap(x0 + 1, y0 + 1), fx);
-        lerp(top, bottom, fy)
+    /// Bilinear over a separable grid: taps computed once per row and
+    /// column, the same arithmetic as [`View::bilinear`] (so both paths agree
+    /// bitwise).
+    fn bilinear_separable(&self, x: &[f64], y: &[f64]) -> Raster<f32> {
+        let clamp_x = |i: i64| (i.clamp(0, self.extent.width as i64 - 1) - self.window.x) as usize;
+        let clamp_y = |i: i64| (i.clamp(0, self.extent.height as i64 - 1) - self.window.y) as usize;
+        let cols = taps(x, |p| self.extent.contains_x(p), clamp_x);
+        let rows = taps(y, |p| self.extent.contains_y(p), clamp_y);
+        let mut out = Raster::filled(x.len(), y.len(), f32::NAN);
+        out.data_mut().par_chunks_mut(x.len().max(1)).zip(rows.par_iter()).for_each(|(line, row)| {
+            let Some((y0, y1, fy)) = *row else { return };
+            let (r0, r1) = (self.src.row(y0), self.src.row(y1));
+            for (o, col) in line.iter_mut().zip(&cols) {
+                if let Some((x0, x1, fx)) = *col {
+                    let top = lerp(r0[x0], || r0[x1], fx);
+                    *o = lerp(top, || lerp(r1[x0], || r1[x1], fx), fy);
+                }
+            }
+        });
+        out
+    }
+
+    /// Bilinear at scattered coordinates, rows in parallel; the same
+    /// arithmetic as the separable path.
+    fn bilinear_dense(&self, width: usize, xy: &[(f64, f64)]) -> Raster<f32> {
+        let (w, h) = (self.extent.width as i64 - 1, self.extent.height as i64 - 1);
+        let (ox, oy) = (self.window.x, self.window.y);
+        let mut out = Raster::filled(width, xy.len() / width.max(1), f32::NAN);
+        out.data_mut().par_chunks_mut(width.max(1)).zip(xy.par_chunks(width.max(1))).for_each(|(line, coords)| {
+            for (o, &(px, py)) in line.iter_mut().zip(coords) {
+                if !self.extent.contains(px, py) {
+                    continue;
+                }
+                let (x0, y0) = (floor(px), floor(py));
+                let (fx, fy) = ((px - x0) as f32, (py - y0) as f32);
+                let (x0, y0) = (x0 as i64, y0 as i64);
+                let (xa, xb) = ((x0.clamp(0, w) - ox) as usize, ((x0 + 1).clamp(0, w) - ox) as usize);
+                let (r0, r1) =
+                    (self.src.row((y0.clamp(0, h) - oy) as usize), self.src.row(((y0 + 1).clamp(0, h) - oy) as usize));
+                let top = lerp(r0[xa], || r0[xb], fx);
+                *o = lerp(top, || lerp(r1[xa], || r1[xb], fx), fy);
+            }
+        });
+        out
     }
 
     fn bicubic(&self, px: f64, py: f64) -> f32 {
-        let (x0, y0) = (px.floor(), py.floor());
+        let (x0, y0) = (floor(px), floor(py));
         let wx = catmull_rom((px - x0) as f32);
         let wy = catmull_rom((py - y0) as f32);
         let (x0, y0) = (x0 as i64, y0 as i64);

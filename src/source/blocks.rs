@@ -85,7 +85,12 @@ impl Blocks {
     /// The pixels of `window`, one raster per band; pixels outside the source
     /// are NaN.
     pub fn read(&self, window: Window) -> Result<Vec<Raster<f32>>, SourceError> {
-        let bands = self.source.bands();
+        self.read_bands(window, self.source.bands())
+    }
+
+    /// Like [`Blocks::read`], only the first `bands` bands.
+    pub fn read_bands(&self, window: Window, bands: usize) -> Result<Vec<Raster<f32>>, SourceError> {
+        let bands = bands.min(self.source.bands());
         let mut out = vec![Raster::filled(window.width, window.height, f32::NAN); bands];
         let (w, h) = self.source.size();
         let Some(inside) = window.intersect(&Window::new(0, 0, w, h)) else {
@@ -113,7 +118,7 @@ impl Blocks {
 
     /// One band of `window`.
     pub fn read_band(&self, window: Window, band: usize) -> Result<Raster<f32>, SourceError> {
-        Ok(self.read(window)?.swap_remove(band))
+        Ok(self.read_bands(window, band + 1)?.swap_remove(band))
     }
 
     fn block(&self, bx: usize, by: usize) -> Result<Block, SourceError> {

@@ -108,16 +108,16 @@ impl GeoRaster {
     /// Evaluates band `band` at every sample of `grid`; NaN where the source
     /// has no data.
     pub fn sample(&self, grid: &SampleGrid, band: usize, kind: Resampling) -> Result<Raster<f32>, SourceError> {
-        Ok(match self.read(grid, kind)? {
+        Ok(match self.read(grid, kind, band + 1)? {
             Some(footprint) => footprint.resample(band, kind),
             None => Raster::filled(grid.width(), grid.height(), f32::NAN),
         })
     }
 
-    /// Reads the source pixels (all bands, from the overview that suits the
-    /// grid) that `kind` needs to evaluate the grid; `None` when the grid
-    /// misses the data.
-    pub fn read(&self, grid: &SampleGrid, kind: Resampling) -> Result<Option<Footprint>, SourceError> {
+    /// Reads the source pixels (the first `bands` bands, from the overview
+    /// that suits the grid) that `kind` needs to evaluate the grid; `None`
+    /// when the grid misses the data.
+    pub fn read(&self, grid: &SampleGrid, kind: Resampling, bands: usize) -> Result<Option<Footprint>, SourceError> {
         if !self.may_cover(grid) {
             return Ok(None);
         }
@@ -127,7 +127,7 @@ impl GeoRaster {
         let Some(window) = coords.footprint(&extent, kind) else {
             return Ok(None);
         };
-        let bands = self.levels[level].read(window)?;
+        let bands = self.levels[level].read_bands(window, bands)?;
         Ok(Some(Footprint { bands, window, extent, coords }))
     }
 
@@ -178,9 +178,11 @@ impl GeoRaster {
         let mesh = Mesh::new(grid, m, &pixel);
         let mut xy = vec![(0.0, 0.0); grid.width() * grid.height()];
         xy.par_chunks_mut(grid.width().max(1)).enumerate().for_each(|(r, row)| {
+            mesh.row(r, row);
             for (c, out) in row.iter_mut().enumerate() {
-                let p = mesh.at(c, r);
-                *out = if p.0.is_nan() { pixel(grid.on_globe(c as i64, r as i64)) } else { p };
+                if out.0.is_nan() {
+                    *out = pixel(grid.on_globe(c as i64, r as i64));
+                }
             }
         });
         PixelCoords::Dense { width: grid.width(), xy }
@@ -213,6 +215,13 @@ impl Footprint {
     /// must not exceed the one the footprint was read for).
     pub fn resample(&self, band: usize, kind: Resampling) -> Raster<f32> {
         resample::resample(&self.bands[band], self.window, &self.extent, &self.coords, kind)
+    }
+}
+
+impl std::fmt::Debug for GeoRaster {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (w, h) = self.size();
+        write!(f, "GeoRaster({}, {w}×{h}, {:?})", self.name().display(), self.georef.crs)
     }
 }
 
@@ -265,17 +274,31 @@ impl Mesh {
         Mesh { m, lon, lat, kx0, ky0, cols, points }
     }
 
-    /// Interpolated position of sample `(c, r)`; NaN if a corner failed.
-    fn at(&self, c: usize, r: usize) -> (f64, f64) {
-        let (gx, gy) = (self.lon.first + c as i64, self.lat.first + r as i64);
-        let (kx, ky) = (gx.div_euclid(self.m), gy.div_euclid(self.m));
-        let t = (gx - kx * self.m) as f64 / self.m as f64;
-        let u = (gy - ky * self.m) as f64 / self.m as f64;
-        let i = (ky - self.ky0) as usize * self.cols + (kx - self.kx0) as usize;
-        let (a, b, cc, d) =
-            (self.points[i], self.points[i + 1], self.points[i + self.cols], self.points[i + self.cols + 1]);
-        let mix = |a: f64, b: f64, c: f64, d: f64| (1.0 - u) * ((1.0 - t) * a + t * b) + u * ((1.0 - t) * c + t * d);
-        (mix(a.0, b.0, cc.0, d.0), mix(a.1, b.1, cc.1, d.1))
+    /// Interpolated positions of row `r`'s samples (NaN where a corner
+    /// failed): first between the control rows above and below, then along
+    /// the row. Depends only on global lattice indices, so every grid that
+    /// holds a sample gives it the same position.
+    fn row(&self, r: usize, out: &mut [(f64, f64)]) {
+        // m is a power of two: shifts and masks are floor division and
+        // remainder, and k / m is exact as k · (1/m).
+        let shift = self.m.trailing_zeros();
+        let inv = 1.0 / self.m as f64;
+        let gy = self.lat.first + r as i64;
+        let u = (gy & (self.m - 1)) as f64 * inv;
+        let top = ((gy >> shift) - self.ky0) as usize * self.cols;
+        let lerp = |a: f64, b: f64, t: f64| (1.0 - t) * a + t * b;
+        let column: Vec<(f64, f64)> = (0..self.cols)
+            .map(|k| {
+                let (a, c) = (self.points[top + k], self.points[top + self.cols + k]);
+                (lerp(a.0, c.0, u), lerp(a.1, c.1, u))
+            })
+            .collect();
+        for (c, o) in out.iter_mut().enumerate() {
+            let gx = self.lon.first + c as i64;
+            let k = ((gx >> shift) - self.kx0) as usize;
+            let t = (gx & (self.m - 1)) as f64 * inv;
+            *o = (lerp(column[k].0, column[k + 1].0, t), lerp(column[k].1, column[k + 1].1, t));
+        }
     }
 }
 

@@ -43,9 +43,9 @@ struct HgtFile {
 impl HgtFile {
     fn open(path: &Path) -> Result<HgtFile, SourceError> {
         let bad = |problem: String| SourceError::Malformed { path: path.into(), problem };
+        let file = File::open(path).map_err(|source| SourceError::Open { path: path.into(), source })?;
         let (lat, lon) =
             parse_name(path).ok_or_else(|| bad("name must be like N46E011.hgt (the south-west corner)".into()))?;
-        let file = File::open(path).map_err(|source| SourceError::Open { path: path.into(), source })?;
         let len = file.metadata().map_err(|source| SourceError::Open { path: path.into(), source })?.len();
         let side = match len {
             2_884_802 => 1201,

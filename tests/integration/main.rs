@@ -13,3 +13,4 @@ mod extreme; // stiff and extreme inputs: huge ranges, cliffs, nodata, poles, si
 mod real_data; // rmnp, mt_hood, storm_lake, nz_forest against their sources
 mod seamless; // tiles equal windows of whole-area builds; neighbours agree
 mod skipped_work; // stages nobody needs do not run (counted)
+mod sources; // broken and hostile files give errors that name them
