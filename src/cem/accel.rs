@@ -22,18 +22,40 @@ pub const ZONE_NEAR: usize = 4;
 /// The far safety zone's radius, in samples.
 pub const ZONE_FAR: usize = 32;
 
-/// Safety zones of the centre of `cem`, which carries [`ZONE_FAR`] extra
-/// samples on every side: `(near, far)`, each the size of the centre.
-pub fn safety_zones(cem: &Raster<f32>) -> (Raster<f32>, Raster<f32>) {
-    let near = dilate(cem, ZONE_NEAR);
-    let far = dilate(&near, ZONE_FAR - ZONE_NEAR);
+/// The margin the zones need: [`ZONE_FAR`] for the far zone, else
+/// [`ZONE_NEAR`] for the near one.
+pub fn margin(near: bool, far: bool) -> usize {
+    if far {
+        ZONE_FAR
+    } else if near {
+        ZONE_NEAR
+    } else {
+        0
+    }
+}
+
+/// The requested safety zones of the centre of `cem`, which carries
+/// [`margin`] extra samples on every side: `(near, far)`, each the size of the
+/// centre. With both, the far zone is the near one dilated further.
+pub fn safety_zones(cem: &Raster<f32>, near: bool, far: bool) -> (Option<Raster<f32>>, Option<Raster<f32>>) {
+    let m = margin(near, far);
     let inner = crate::raster::Window::new(
-        ZONE_FAR as i64,
-        ZONE_FAR as i64,
-        cem.width().saturating_sub(2 * ZONE_FAR),
-        cem.height().saturating_sub(2 * ZONE_FAR),
+        m as i64,
+        m as i64,
+        cem.width().saturating_sub(2 * m),
+        cem.height().saturating_sub(2 * m),
     );
-    (near.crop(inner, f32::NAN), far.crop(inner, f32::NAN))
+    let crop = |r: &Raster<f32>| r.crop(inner, f32::NAN);
+    match (near, far) {
+        (true, true) => {
+            let n = dilate(cem, ZONE_NEAR);
+            let f = dilate(&n, ZONE_FAR - ZONE_NEAR);
+            (Some(crop(&n)), Some(crop(&f)))
+        }
+        (false, true) => (None, Some(crop(&dilate(cem, ZONE_FAR)))),
+        (true, false) => (Some(crop(&dilate(cem, ZONE_NEAR))), None),
+        (false, false) => (None, None),
+    }
 }
 
 /// A maximum mipmap over the cells of a height grid.
@@ -114,7 +136,8 @@ mod tests {
     #[test]
     fn zones_bound_their_squares_and_the_far_zone_equals_a_direct_dilation() {
         let cem = terrain(100, 90);
-        let (near, far) = safety_zones(&cem);
+        let (Some(near), Some(far)) = safety_zones(&cem, true, true) else { panic!("both zones") };
+        assert_eq!(safety_zones(&cem, false, true).1.as_ref(), Some(&far));
         assert_eq!((near.width(), near.height()), (36, 26));
         let direct = dilate(&cem, ZONE_FAR);
         for y in 0..26 {

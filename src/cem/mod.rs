@@ -120,14 +120,15 @@ struct Needs {
     canopy: bool,
     cem: bool,
     surface: bool,
-    zones: bool,
+    near: bool,
+    far: bool,
 }
 
 impl Needs {
     fn of(layers: &[Layer]) -> Needs {
         let has = |l: Layer| layers.contains(&l);
-        let zones = has(Layer::Max4) || has(Layer::Max32);
-        let cem = zones || has(Layer::Cem);
+        let (near, far) = (has(Layer::Max4), has(Layer::Max32));
+        let cem = near || far || has(Layer::Cem);
         let canopy = cem || has(Layer::Canopy);
         let surface = has(Layer::Surface);
         Needs {
@@ -136,7 +137,8 @@ impl Needs {
             canopy,
             cem,
             surface,
-            zones,
+            near,
+            far,
         }
     }
 }
@@ -145,8 +147,8 @@ impl Needs {
 pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<Products, SourceError> {
     let need = Needs::of(layers);
     let mut stats = Stats::default();
-    // The safety zones look 32 samples beyond the grid.
-    let margin = if need.zones { accel::ZONE_FAR } else { 0 };
+    // The safety zones look up to 32 samples beyond the grid.
+    let margin = accel::margin(need.near, need.far);
     let work = grid.grown(margin);
     let nodata = || Raster::filled(work.width(), work.height(), f32::NAN);
 
@@ -195,9 +197,11 @@ pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<P
     });
 
     // (d) Ray casting acceleration data.
-    let zones = match (&cem, need.zones && !no_ground) {
-        (Some(cem), true) => Some(stats.time(Stage::Zones, || accel::safety_zones(cem))),
-        _ => None,
+    let (near, far) = match &cem {
+        Some(cem) if (need.near || need.far) && !no_ground => {
+            stats.time(Stage::Zones, || accel::safety_zones(cem, need.near, need.far))
+        }
+        _ => (None, None),
     };
 
     let inner = Window::new(margin as i64, margin as i64, grid.width(), grid.height());
@@ -216,8 +220,8 @@ pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<P
                 |s| s.crop(inner, surface::NODATA),
             )
         }),
-        max4: wants(Layer::Max4).then(|| zones.as_ref().map_or_else(nodata_out, |z| z.0.clone())),
-        max32: wants(Layer::Max32).then(|| zones.as_ref().map_or_else(nodata_out, |z| z.1.clone())),
+        max4: wants(Layer::Max4).then(|| near.unwrap_or_else(nodata_out)),
+        max32: wants(Layer::Max32).then(|| far.unwrap_or_else(nodata_out)),
         stats,
     })
 }
@@ -238,7 +242,7 @@ mod tests {
     #[test]
     fn needs_follow_layer_dependencies() {
         let n = Needs::of(&[Layer::Max32]);
-        assert!(n.ground && n.cover && n.canopy && n.cem && n.zones && !n.surface);
+        assert!(n.ground && n.cover && n.canopy && n.cem && n.far && !n.near && !n.surface);
         let d = Needs::of(&[Layer::Dem]);
         assert!(d.ground && !d.cover && !d.canopy && !d.cem);
         let c = Needs::of(&[Layer::Cover]);
