@@ -20,7 +20,7 @@ use super::colorkey::{self, LabKey};
 use super::surface::SurfaceType;
 use crate::raster::morphology::{self, MorphOp};
 use crate::raster::{Raster, Window, blur};
-use crate::source::{Blocks, PixelSource, SourceError};
+use crate::source::{BLOCK, Blocks, PixelSource, SourceError};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -89,12 +89,11 @@ impl PixelSource for Landcover {
     }
 
     fn block_size(&self) -> (usize, usize) {
-        (256, 256)
+        (BLOCK, BLOCK)
     }
 
     fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError> {
-        let (w, h) = self.size();
-        let block = Window::new((bx * 256) as i64, (by * 256) as i64, 256.min(w - bx * 256), 256.min(h - by * 256));
+        let block = self.block_window(bx, by)?;
         let margin = self.rule.margin();
         let input = self.input.read(block.grown(margin))?;
         let (cover, classes) = match &self.rule {

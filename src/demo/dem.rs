@@ -9,7 +9,7 @@
 
 use super::terrain;
 use crate::raster::Raster;
-use crate::source::{Crs, Georef, PixelSource, SourceError};
+use crate::source::{BLOCK, Crs, Georef, PixelSource, SourceError};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -25,8 +25,6 @@ const NORTH_ARCSEC: i64 = 167_220 + MARGIN_ARCSEC;
 pub const COLS: usize = 900 + 2 * MARGIN_ARCSEC as usize;
 /// Rows: 0.15° (540″) plus both margins.
 pub const ROWS: usize = 540 + 2 * MARGIN_ARCSEC as usize;
-/// Block side, pixels.
-const BLOCK_PX: usize = 256;
 
 /// Where the DEM's pixels are.
 pub fn georef() -> Georef {
@@ -73,18 +71,12 @@ impl PixelSource for DemSource {
     }
 
     fn block_size(&self) -> (usize, usize) {
-        (BLOCK_PX, BLOCK_PX)
+        (BLOCK, BLOCK)
     }
 
     fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError> {
-        let (c0, r0) = (bx * BLOCK_PX, by * BLOCK_PX);
-        if c0 >= COLS || r0 >= ROWS {
-            return Err(SourceError::Malformed {
-                path: self.name.clone(),
-                problem: format!("block ({bx}, {by}) is outside the {COLS}×{ROWS} DEM"),
-            });
-        }
-        let (w, h) = (BLOCK_PX.min(COLS - c0), BLOCK_PX.min(ROWS - r0));
+        let b = self.block_window(bx, by)?;
+        let (c0, r0, w, h) = (b.x as usize, b.y as usize, b.width, b.height);
         let g = &self.georef;
         // The local frame is linear in lon and lat: convert columns and rows once.
         let xs: Vec<f64> = (0..w).map(|c| terrain::local_m(g.x0 + (c0 + c) as f64 * g.dx, 0.0).0).collect();

@@ -18,7 +18,7 @@
 use super::terrain::{self, Ground};
 use crate::noise::{hash2, unit};
 use crate::raster::Raster;
-use crate::source::{Crs, Georef, PixelSource, SourceError};
+use crate::source::{BLOCK, Crs, Georef, PixelSource, SourceError};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -54,7 +54,6 @@ const PIXEL_M: f64 = 10.0;
 pub const COLS: usize = 2100;
 /// Rows.
 pub const ROWS: usize = 1900;
-const BLOCK_PX: usize = 256;
 /// Pixels per kilometre; the sheet's corner is on the kilometre grid, so
 /// pixels whose west or north edge is on a grid line draw it.
 const KM_PX: usize = 100;
@@ -187,18 +186,12 @@ impl PixelSource for MapSource {
     }
 
     fn block_size(&self) -> (usize, usize) {
-        (BLOCK_PX, BLOCK_PX)
+        (BLOCK, BLOCK)
     }
 
     fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError> {
-        let (c0, r0) = (bx * BLOCK_PX, by * BLOCK_PX);
-        if c0 >= COLS || r0 >= ROWS {
-            return Err(SourceError::Malformed {
-                path: self.name.clone(),
-                problem: format!("block ({bx}, {by}) is outside the map"),
-            });
-        }
-        let (w, h) = (BLOCK_PX.min(COLS - c0), BLOCK_PX.min(ROWS - r0));
+        let b = self.block_window(bx, by)?;
+        let (c0, r0, w, h) = (b.x as usize, b.y as usize, b.width, b.height);
         let corners = self.corners(c0, r0, w, h);
         let colours = Raster::from_fn(w, h, |c, r| draw(&corners, c + 1, r + 1, c0 + c, r0 + r));
         Ok((0..3).map(|b| colours.map(|rgb| f32::from(rgb[b]))).collect())

@@ -1,12 +1,9 @@
 //! A source held in memory: for rasters made by code (synthetic test scenes,
 //! the extreme cases) and for callers that already have pixels.
 
-use super::{PixelSource, SourceError};
-use crate::raster::{Raster, Window};
+use super::{BLOCK, PixelSource, SourceError};
+use crate::raster::Raster;
 use std::path::{Path, PathBuf};
-
-/// Block size of in-memory sources.
-const BLOCK: usize = 256;
 
 /// Bands of equal size in memory.
 pub struct MemorySource {
@@ -42,9 +39,7 @@ impl PixelSource for MemorySource {
     }
 
     fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError> {
-        let (w, h) = self.size();
-        let window =
-            Window::new((bx * BLOCK) as i64, (by * BLOCK) as i64, BLOCK.min(w - bx * BLOCK), BLOCK.min(h - by * BLOCK));
+        let window = self.block_window(bx, by)?;
         Ok(self.bands.iter().map(|b| b.crop(window, f32::NAN)).collect())
     }
 }

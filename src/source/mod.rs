@@ -29,7 +29,7 @@ pub use georaster::{Footprint, GeoRaster, Georef};
 pub use nodata::NodataPolicy;
 pub use pyramid::Reducer;
 
-use crate::raster::Raster;
+use crate::raster::{Raster, Window};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use thiserror::Error;
@@ -84,7 +84,25 @@ pub trait PixelSource: Send + Sync {
     fn block_size(&self) -> (usize, usize);
     /// The pixels of block `(bx, by)`, one raster per band; nodata is NaN.
     fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError>;
+
+    /// The pixels block `(bx, by)` covers: a full block, or what is left of
+    /// one at the right and bottom edges. An error for a block past the end.
+    fn block_window(&self, bx: usize, by: usize) -> Result<Window, SourceError> {
+        let ((w, h), (bw, bh)) = (self.size(), self.block_size());
+        let (x0, y0) = (bx * bw, by * bh);
+        if x0 >= w || y0 >= h {
+            return Err(SourceError::Malformed {
+                path: self.name().to_path_buf(),
+                problem: format!("block ({bx}, {by}) is outside the {w}×{h} raster"),
+            });
+        }
+        Ok(Window::new(x0 as i64, y0 as i64, bw.min(w - x0), bh.min(h - y0)))
+    }
 }
+
+/// Side of the blocks of derived and in-memory sources: 256² f32 is 256 KiB a
+/// band, small enough that a tile touches few more pixels than it needs.
+pub const BLOCK: usize = 256;
 
 /// How to open a raster file.
 #[derive(Clone, Debug, Default)]

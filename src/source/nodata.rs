@@ -11,7 +11,7 @@
 //! stay nodata.
 
 use super::{BlockCache, Blocks, PixelSource, SourceError};
-use crate::raster::{Raster, Window};
+use crate::raster::Raster;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::sync::Arc;
@@ -77,9 +77,7 @@ impl PixelSource for Policy {
     }
 
     fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError> {
-        let (w, h) = self.size();
-        let (bw, bh) = self.block_size();
-        let block = Window::new((bx * bw) as i64, (by * bh) as i64, bw.min(w - bx * bw), bh.min(h - by * bh));
+        let block = self.block_window(bx, by)?;
         match self.policy {
             NodataPolicy::Constant { value } => {
                 Ok(self.raw.read(block)?.into_iter().map(|b| b.map(|v| if v.is_nan() { value } else { v })).collect())

@@ -6,7 +6,7 @@
 //! ("at coarse tile levels the proxy is filtered to the tile's sample spacing",
 //! DESIGN.md; the same holds for the DEM and the cover).
 
-use super::{Blocks, PixelSource, SourceError};
+use super::{BLOCK, Blocks, PixelSource, SourceError};
 use crate::raster::{Raster, Window};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -19,9 +19,6 @@ pub enum Reducer {
     /// The north-west pixel (classes, which must never be interpolated).
     Decimate,
 }
-
-/// Overview block size; 256² f32 = 256 KiB per band.
-const BLOCK: usize = 256;
 
 /// One overview level over a finer level.
 pub struct Overview {
@@ -58,10 +55,9 @@ impl PixelSource for Overview {
     }
 
     fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError> {
-        let (w, h) = self.size();
-        let (x0, y0) = (bx * BLOCK, by * BLOCK);
-        let (bw, bh) = (BLOCK.min(w - x0), BLOCK.min(h - y0));
-        let fine = self.finer.read(Window::new(2 * x0 as i64, 2 * y0 as i64, 2 * bw, 2 * bh))?;
+        let b = self.block_window(bx, by)?;
+        let (bw, bh) = (b.width, b.height);
+        let fine = self.finer.read(Window::new(2 * b.x, 2 * b.y, 2 * bw, 2 * bh))?;
         let reducer = |b: usize| self.reducers.get(b).or(self.reducers.last()).copied().unwrap_or(Reducer::Mean);
         Ok(fine.iter().enumerate().map(|(b, band)| reduce(band, bw, bh, reducer(b))).collect())
     }
