@@ -1,6 +1,10 @@
-//! The demo DEM: [`terrain::ground`] sampled like a 1″ global DEM
+//! The demo DEM: the terrain ([`terrain`]) sampled like a 1″ global DEM
 //! (Copernicus GLO-30 or SRTM-1): EPSG:4326, one arc-second area pixels,
 //! float heights, north up.
+//!
+//! Pixel centres go to the terrain's UTM frame through the projection exactly
+//! every [`MESH_PX`] pixels (global indices, so blocks agree) and bilinearly
+//! between: over 16″ the projection is linear to far below a millimetre.
 //!
 //! It covers [`super::BBOX`] plus 18″ (≈ 550 m east–west, 390 m north–south)
 //! on every side, so tiles at the region's edge have data under their halos.
@@ -38,22 +42,31 @@ pub fn georef() -> Georef {
     }
 }
 
+/// Projection mesh spacing, pixels.
+const MESH_PX: usize = 16;
+
 /// The DEM as a pixel source (one band, metres).
 pub struct DemSource {
     name: PathBuf,
     georef: Georef,
+    utm: Crs,
 }
 
 impl DemSource {
-    /// The demo DEM.
-    pub fn new() -> DemSource {
-        DemSource { name: PathBuf::from("demo: Val Selva DEM, 1″"), georef: georef() }
+    /// The demo DEM; fails only if the terrain frame's projection cannot be
+    /// set up.
+    pub fn new() -> Result<DemSource, SourceError> {
+        let name = PathBuf::from("demo: Val Selva DEM, 1″");
+        let utm = Crs::from_epsg(terrain::FRAME_EPSG).map_err(|source| SourceError::Crs { path: name.clone(), source })?;
+        Ok(DemSource { name, georef: georef(), utm })
     }
-}
 
-impl Default for DemSource {
-    fn default() -> Self {
-        DemSource::new()
+    /// Terrain frame position of the centre of pixel `(col, row)`, for
+    /// `col` and `row` multiples of [`MESH_PX`] (NaN if the projection fails).
+    fn mesh_point(&self, col: usize, row: usize) -> (f64, f64) {
+        let g = &self.georef;
+        let (lon, lat) = (g.x0 + col as f64 * g.dx, g.y0 + row as f64 * g.dy);
+        self.utm.from_lon_lat(lon, lat).map_or((f64::NAN, f64::NAN), |(e, n)| terrain::local_from_utm(e, n))
     }
 }
 
@@ -77,11 +90,25 @@ impl PixelSource for DemSource {
     fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError> {
         let b = self.block_window(bx, by)?;
         let (c0, r0, w, h) = (b.x as usize, b.y as usize, b.width, b.height);
-        let g = &self.georef;
-        // The local frame is linear in lon and lat: convert columns and rows once.
-        let xs: Vec<f64> = (0..w).map(|c| terrain::local_m(g.x0 + (c0 + c) as f64 * g.dx, 0.0).0).collect();
-        let ys: Vec<f64> = (0..h).map(|r| terrain::local_m(0.0, g.y0 + (r0 + r) as f64 * g.dy).1).collect();
-        Ok(vec![Raster::from_fn(w, h, |c, r| terrain::ground(xs[c], ys[r]).height_m as f32)])
+        // Mesh points from the one at or before the block to the one at or after its end.
+        let (m0x, m0y) = (c0 / MESH_PX, r0 / MESH_PX);
+        let (mw, mh) = ((c0 + w - 1) / MESH_PX - m0x + 2, (r0 + h - 1) / MESH_PX - m0y + 2);
+        let mesh = Raster::from_fn(mw, mh, |i, j| self.mesh_point((m0x + i) * MESH_PX, (m0y + j) * MESH_PX));
+        let (mut lo, mut hi) = ((f64::MAX, f64::MAX), (f64::MIN, f64::MIN));
+        for &(x, y) in mesh.data() {
+            (lo, hi) = ((lo.0.min(x), lo.1.min(y)), (hi.0.max(x), hi.1.max(y)));
+        }
+        let patch = terrain::Patch::covering(lo.0, lo.1, hi.0, hi.1);
+        let heights = Raster::from_fn(w, h, |c, r| {
+            let (col, row) = (c0 + c, r0 + r);
+            let (i, j) = (col / MESH_PX - m0x, row / MESH_PX - m0y);
+            let t = (col % MESH_PX) as f64 / MESH_PX as f64;
+            let u = (row % MESH_PX) as f64 / MESH_PX as f64;
+            let (a, b, c, d) = (mesh.get(i, j), mesh.get(i + 1, j), mesh.get(i, j + 1), mesh.get(i + 1, j + 1));
+            let mix = |p: f64, q: f64, r: f64, s: f64| (1.0 - u) * ((1.0 - t) * p + t * q) + u * ((1.0 - t) * r + t * s);
+            patch.height_m(mix(a.0, b.0, c.0, d.0), mix(a.1, b.1, c.1, d.1)) as f32
+        });
+        Ok(vec![heights])
     }
 }
 
@@ -102,12 +129,12 @@ mod tests {
             let arcsec = edge * ARCSEC_PER_DEG;
             assert!((arcsec - arcsec.round()).abs() < 1e-6, "{edge}");
         }
-        assert_eq!(DemSource::new().size(), (936, 576));
+        assert_eq!(DemSource::new().unwrap().size(), (936, 576));
     }
 
     #[test]
     fn edge_blocks_are_smaller_and_heights_plausible() {
-        let dem = DemSource::new();
+        let dem = DemSource::new().unwrap();
         let last = dem.read_block(3, 2).unwrap();
         assert_eq!((last[0].width(), last[0].height()), (936 - 768, 576 - 512));
         assert!(dem.read_block(4, 0).is_err());

@@ -5,7 +5,7 @@ use super::dem::{COLS, DemSource, ROWS};
 use crate::source::PixelSource;
 
 fn dem_heights() -> Vec<f32> {
-    let dem = DemSource::new();
+    let dem = DemSource::new().unwrap();
     let mut out = vec![0f32; COLS * ROWS];
     for by in 0..ROWS.div_ceil(256) {
         for bx in 0..COLS.div_ceil(256) {
@@ -32,7 +32,7 @@ fn hillshade(h: &[f32], w: usize, ht: usize, dx_m: f64, dy_m: f64) -> image::Rgb
             let n = (gx * gx + gy * gy + 1.0).sqrt();
             let shade = ((-gx * lx - gy * ly + lz) / n).clamp(0.0, 1.0);
             let e = ((at(x, y) - 850.0) / 2100.0).clamp(0.0, 1.0);
-            let (r, g, b) = if at(x, y) <= 900.0 {
+            let (r, g, b) = if at(x, y) == 900.0 {
                 (120.0, 170.0, 230.0)
             } else {
                 (90.0 + 150.0 * e, 150.0 + 80.0 * e, 90.0 + 150.0 * e)
@@ -71,4 +71,34 @@ fn write_map_preview() {
     map_image(0, 0, 1050, 950, 2).save(std::env::temp_dir().join("demo_map.png")).unwrap();
     println!("whole sheet (every 2nd pixel) in {:?}", start.elapsed());
     map_image(900, 700, 400, 300, 1).save(std::env::temp_dir().join("demo_map_crop.png")).unwrap();
+    map_image(300, 150, 400, 300, 1).save(std::env::temp_dir().join("demo_map_rock.png")).unwrap();
+    map_image(450, 1000, 400, 300, 1).save(std::env::temp_dir().join("demo_map_lake.png")).unwrap();
+}
+
+#[test]
+#[ignore = "timings for the report"]
+fn time_demo() {
+    use std::time::Instant;
+    let t = Instant::now();
+    let mut acc = 0.0;
+    for i in 0..2_000 {
+        acc += super::terrain::ground(-9_000.0 + (i % 100) as f64 * 180.0, -8_000.0 + (i / 100) as f64 * 800.0).height_m;
+    }
+    println!("ground(), one point alone: {:.1} µs per call ({acc:.0})", t.elapsed().as_nanos() as f64 / 2e6);
+    let dem = DemSource::new().unwrap();
+    let t = Instant::now();
+    for by in 0..ROWS.div_ceil(256) {
+        for bx in 0..COLS.div_ceil(256) {
+            dem.read_block(bx, by).unwrap();
+        }
+    }
+    println!("whole DEM ({COLS}×{ROWS}), one thread: {:?}", t.elapsed());
+    let map = super::map::MapSource::new().unwrap();
+    let mut times = Vec::new();
+    for (bx, by) in [(0, 0), (2, 3), (4, 4), (6, 1), (7, 6), (3, 5), (1, 2), (5, 5), (2, 6), (6, 3)] {
+        let t = Instant::now();
+        map.read_block(bx, by).unwrap();
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    println!("map 256² blocks, one thread: {times:.1?} ms");
 }

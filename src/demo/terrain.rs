@@ -1,98 +1,61 @@
 //! The ground of Val Selva: one continuous height function of position, and
-//! the water features that belong to the shape of the land (the lake, the
-//! river and the side streams).
+//! the water that belongs to the shape of the land (the lake, the river and
+//! the side streams).
 //!
-//! Positions are metres in a local east/north frame centred on the region
-//! (an equirectangular projection at the centre latitude; over 20 km its scale
-//! error is below 0.1 %, and nothing needs it to match a real projection).
+//! Positions are metres in a local east/north frame: WGS 84 / UTM 32N
+//! (the map sheet's own projection, conformal, so landforms keep their
+//! shapes) less an origin near the region's centre. The origin is a multiple
+//! of the node spacing, like the sheet's corner, so the sheet's pixel corners
+//! fall on quarter nodes and the map interpolates with four fixed weight sets
+//! ([`Patch::sub_grid`]). The landforms themselves are in [`super::shape`].
 //!
-//! The shape, from large to small:
-//! - a glacial main valley winding west to east along a sine-bent centre line,
-//!   U-shaped across (flat floor, walls steepening to about 40°), its floor
-//!   falling from 1,230 m in the east to the lake at 900 m and on to 870 m in
-//!   the west;
-//! - a lake basin carved into the floor: inside it the ground is clamped to
-//!   the lake level, so the lake is exactly flat and its shore is the 900 m
-//!   line of the dry terrain;
-//! - five side valleys branching off north and south, their floors rising at
-//!   8 % and steepening towards their heads, each with a stream;
-//! - a mountain mass of ridged multifractal noise (sharp crests, smooth
-//!   troughs, domain-warped so that ridges wander), summits to about 3,500 m;
-//! - a limestone cliff band of up to 300 m on the north side of the upper
-//!   valley.
+//! The terrain is defined on a world-anchored lattice of nodes [`NODE_M`]
+//! apart: each node holds the shape, gullies cut down the shape's slope (the
+//! slope taken from the neighbouring nodes) and the lake basin; between nodes
+//! heights are interpolated bicubically (Catmull–Rom, so C¹: contours stay
+//! smooth) and the other fields bilinearly. Why a lattice: a node costs about
+//! 1 µs, mostly the mountain noise, and the gullies need the slope, which a
+//! point function would have to get from two more evaluations. A [`Patch`]
+//! evaluates each node once for a whole block (a 256² map block needs 4,900
+//! nodes for its 67,000 pixel corners).
 //!
-//! Invariant: [`ground`] is a pure function of its arguments, continuous in
-//! height (no steps beyond the cliff's 70 m-wide ramp), and costs a few
-//! hundred nanoseconds.
+//! Invariant: a node's values depend only on its indices, and interpolation
+//! only on the 4 × 4 nodes around the point, so [`ground`] and every patch
+//! that contains a point give it bitwise the same values; heights are
+//! continuous; the lake is exactly flat at [`LAKE_LEVEL_M`].
 
-use crate::geo::METRES_PER_DEGREE;
-use crate::noise::{self, ridged};
+use super::floor_i;
+use super::shape::{self, NO_STREAM_M};
+use crate::source::Crs;
 
-/// Longitude of the frame's origin (the centre of [`super::BBOX`]), degrees.
-pub const CENTRE_LON_DEG: f64 = 10.125;
-/// Latitude of the frame's origin, degrees.
-pub const CENTRE_LAT_DEG: f64 = 46.375;
-/// Surface of the lake, metres.
-pub const LAKE_LEVEL_M: f64 = 900.0;
+pub use super::shape::LAKE_LEVEL_M;
+
+/// The frame's projection: WGS 84 / UTM zone 32N.
+pub const FRAME_EPSG: u32 = 32632;
+/// The frame's origin in UTM 32N, metres: the region's centre (10.125° E,
+/// 46.375° N is E 586,520.7, N 5,136,328.8) rounded to whole nodes.
+pub const ORIGIN_E_M: f64 = 586_520.0;
+/// Northing of the frame's origin, metres.
+pub const ORIGIN_N_M: f64 = 5_136_320.0;
 /// Half the river's width, metres: 24 m of water is 2–3 map pixels of 10 m.
 pub const RIVER_HALF_WIDTH_M: f64 = 12.0;
-
-const SEED: u64 = 0x5E1A_7A11_E700;
-
-/// Main valley centre line `y = Y0 + TILT·x + BEND·sin(x / BEND_LEN)`: an
-/// S-bend through the region, from y ≈ −3.3 km at the west edge to +1.7 km
-/// at the east edge, the lake in its southern loop.
-const VALLEY_Y0_M: f64 = -800.0;
-const VALLEY_TILT: f64 = 0.15;
-const VALLEY_BEND_M: f64 = 1400.0;
-const VALLEY_BEND_LEN_M: f64 = 4200.0;
-
-/// Half-width of the main valley's flat floor and the width over which its
-/// walls rise (the wall profile reaches 78 % of the mountain height one
-/// `WALL` beyond the floor).
-const FLOOR_HALF_WIDTH_M: f64 = 400.0;
-const WALL_M: f64 = 1900.0;
-
-/// Lake basin: an ellipse in valley coordinates, centred at along = −3 km.
-const LAKE_CENTRE_ALONG_M: f64 = -3000.0;
-const LAKE_HALF_LENGTH_M: f64 = 3200.0;
-const LAKE_HALF_WIDTH_M: f64 = 1100.0;
-const LAKE_DEPTH_M: f64 = 160.0;
-/// The floor beside the basin is this far above the lake, more than the
-/// floor noise (±1.5 m) can take away, so the basin's rim is always dry and
-/// the clamped height is continuous there.
-const FLOOR_AT_LAKE_M: f64 = LAKE_LEVEL_M + 3.0;
-
-/// A side valley: its centre line leaves the main valley at `x_m` and runs
-/// `side` (+1 north, −1 south), wandering by ±350 m.
-struct SideValley {
-    x_m: f64,
-    side: f64,
-    lean: f64,
-    phase: f64,
-}
-
-const SIDE_VALLEYS: [SideValley; 5] = [
-    SideValley { x_m: -7200.0, side: 1.0, lean: 0.15, phase: 0.0 },
-    SideValley { x_m: 400.0, side: 1.0, lean: -0.1, phase: 1.7 },
-    SideValley { x_m: 8600.0, side: 1.0, lean: 0.05, phase: 3.1 },
-    SideValley { x_m: -4300.0, side: -1.0, lean: -0.2, phase: 4.4 },
-    SideValley { x_m: 4200.0, side: -1.0, lean: 0.12, phase: 2.2 },
-];
+/// Node spacing, metres. The finest landform, the 230 m gullies, gets
+/// almost six nodes per wavelength, where Catmull–Rom is within 3 % of the
+/// sine; the 1″ DEM's pixels (21 m × 31 m) are of the same order.
+pub const NODE_M: f64 = 40.0;
 
 /// Everything known about the ground at one point.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ground {
     /// Height of the ground or the lake surface, metres.
     pub height_m: f64,
-    /// Depth of the lake here, metres: positive under water, negative (the
-    /// dry ground's height above the lake, at least 1 m) elsewhere. Its zero
-    /// line is the shore.
+    /// Depth of the lake here, metres: positive under water, negative (at
+    /// most −1) on dry ground. Its zero line is the shore.
     pub lake_m: f64,
     /// Signed distance across the valley from the river's centre line, metres.
     pub river_m: f64,
-    /// Signed distance from the nearest side stream, metres; `f64::INFINITY`
-    /// where there is none.
+    /// Signed distance from the nearest side stream, metres; 10⁶ where
+    /// there is none.
     pub stream_m: f64,
     /// Position along the main valley (west → east), metres.
     pub along_m: f64,
@@ -101,179 +64,223 @@ pub struct Ground {
     pub across_m: f64,
 }
 
-/// Local frame metres per degree of longitude (at the centre latitude).
-pub fn metres_per_lon_deg() -> f64 {
-    METRES_PER_DEGREE * CENTRE_LAT_DEG.to_radians().cos()
+/// Local frame position of a UTM 32N position.
+pub fn local_from_utm(e_m: f64, n_m: f64) -> (f64, f64) {
+    (e_m - ORIGIN_E_M, n_m - ORIGIN_N_M)
 }
 
-/// Local frame position of a point given in degrees.
-pub fn local_m(lon_deg: f64, lat_deg: f64) -> (f64, f64) {
-    ((lon_deg - CENTRE_LON_DEG) * metres_per_lon_deg(), (lat_deg - CENTRE_LAT_DEG) * METRES_PER_DEGREE)
+/// Ground height at a point given in degrees, metres; `utm` is
+/// [`FRAME_EPSG`]. `None` where the projection fails.
+pub fn height_at(utm: &Crs, lon_deg: f64, lat_deg: f64) -> Option<f64> {
+    let (e, n) = utm.from_lon_lat(lon_deg, lat_deg)?;
+    let (x, y) = local_from_utm(e, n);
+    Some(ground(x, y).height_m)
 }
 
-/// Ground height at a point given in degrees, metres.
-pub fn height_m(lon_deg: f64, lat_deg: f64) -> f64 {
-    let (x, y) = local_m(lon_deg, lat_deg);
-    ground(x, y).height_m
-}
-
-/// The ground at local position `(x_m, y_m)`.
+/// The ground at local position `(x_m, y_m)` (about 40 µs: it evaluates the
+/// 36 nodes around the point; use a [`Patch`] for many points).
 pub fn ground(x_m: f64, y_m: f64) -> Ground {
-    let (along, across) = valley_coords(x_m, y_m);
-    let floor = floor_m(x_m, y_m, along, across);
-    let mountains = side_valleys(x_m, y_m, across, mountain_relief_m(x_m, y_m));
-    let dry = floor + wall_profile(across) * mountains + cliff_m(x_m, along, across);
-    let basin = lake_basin_m(x_m, y_m, along, across);
-    let raw = dry - basin;
-    let (height_m, lake_m) =
-        if basin > 0.0 { (raw.max(LAKE_LEVEL_M), LAKE_LEVEL_M - raw) } else { (raw, (LAKE_LEVEL_M - raw).min(-1.0)) };
-    let river_m = across - river_offset_m(along);
-    Ground {
-        height_m,
-        lake_m,
+    Patch::covering(x_m, y_m, x_m, y_m).ground(x_m, y_m)
+}
+
+/// What a node holds: the dry height before the lake is clamped, and the
+/// fields interpolated bilinearly.
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    raw_m: f64,
+    basin_m: f64,
+    river_m: f64,
+    stream_m: f64,
+    along_m: f64,
+    across_m: f64,
+}
+
+/// The nodes under a rectangle of the local frame.
+pub struct Patch {
+    i0: i64,
+    j0: i64,
+    cols: usize,
+    nodes: Vec<Node>,
+    /// Whether any node is in the lake basin (most patches are not, and
+    /// skip its interpolation).
+    basin: bool,
+}
+
+impl Patch {
+    /// The nodes that points in `[x0, x1] × [y0, y1]` interpolate from.
+    pub fn covering(x0_m: f64, y0_m: f64, x1_m: f64, y1_m: f64) -> Patch {
+        // Catmull–Rom at t ∈ [i, i + 1) reads nodes i − 1 … i + 2.
+        let (i0, i1) = (floor_i(x0_m / NODE_M) - 1, floor_i(x1_m / NODE_M) + 2);
+        let (j0, j1) = (floor_i(y0_m / NODE_M) - 1, floor_i(y1_m / NODE_M) + 2);
+        let (cols, rows) = ((i1 - i0 + 1) as usize, (j1 - j0 + 1) as usize);
+        // Shapes with one more node on every side, for the slopes.
+        let scols = cols + 2;
+        let mut shapes = Vec::with_capacity(scols * (rows + 2));
+        for j in j0 - 1..=j1 + 1 {
+            for i in i0 - 1..=i1 + 1 {
+                shapes.push(shape::shape(i as f64 * NODE_M, j as f64 * NODE_M));
+            }
+        }
+        let mut nodes = Vec::with_capacity(cols * rows);
+        for r in 0..rows {
+            for c in 0..cols {
+                let at = |dc: usize, dr: usize| &shapes[(r + dr) * scols + c + dc];
+                let here = at(1, 1);
+                let gx = (at(2, 1).dry_m - at(0, 1).dry_m) / (2.0 * NODE_M);
+                let gy = (at(1, 2).dry_m - at(1, 0).dry_m) / (2.0 * NODE_M);
+                let (x, y) = ((i0 + c as i64) as f64 * NODE_M, (j0 + r as i64) as f64 * NODE_M);
+                nodes.push(node(x, y, here, gx, gy));
+            }
+        }
+        let basin = nodes.iter().any(|n| n.basin_m > 0.0);
+        Patch { i0, j0, cols, nodes, basin }
+    }
+
+    /// The ground at `(x_m, y_m)`, which must lie in the rectangle the patch
+    /// was made for.
+    pub fn ground(&self, x_m: f64, y_m: f64) -> Ground {
+        let (c, wx) = self.weights(x_m / NODE_M, self.i0);
+        let (r, wy) = self.weights(y_m / NODE_M, self.j0);
+        let (raw, basin) = self.cubic(c, r, &wx, &wy);
+        let (tx, ty) = (x_m / NODE_M - (self.i0 + c as i64 + 1) as f64, y_m / NODE_M - (self.j0 + r as i64 + 1) as f64);
+        let corner = |dc: usize, dr: usize| &self.nodes[(r + 1 + dr) * self.cols + c + 1 + dc];
+        let (a, b, d, e) = (corner(0, 0), corner(1, 0), corner(0, 1), corner(1, 1));
+        let lerp = |f: fn(&Node) -> f64| {
+            let top = f(a) + tx * (f(b) - f(a));
+            let bottom = f(d) + tx * (f(e) - f(d));
+            top + ty * (bottom - top)
+        };
+        let (height_m, lake_m) = clamp_lake(raw, basin);
+        Ground {
+            height_m,
+            lake_m,
+            river_m: lerp(|n| n.river_m),
+            stream_m: lerp(|n| n.stream_m),
+            along_m: lerp(|n| n.along_m),
+            across_m: lerp(|n| n.across_m),
+        }
+    }
+
+    /// The ground at the grid points `x = (qx0 + k)·NODE_M / 4`,
+    /// `y = (qy0 − l)·NODE_M / 4` for `k < w`, `l < h` (quarter nodes, rows
+    /// running south, as the sheet's pixel corners are), handed to
+    /// `each(k, l, ground)` row by row. Separable: each node row is
+    /// interpolated along x once for all columns, then each column along y,
+    /// with the same operations in the same order as [`Patch::ground`], so
+    /// the values are bitwise the same, at a fifth of the cost.
+    pub fn sub_grid(&self, qx0: i64, qy0: i64, w: usize, h: usize, mut each: impl FnMut(usize, usize, &Ground)) {
+        let quarter = |q: i64| q as f64 * NODE_M / 4.0 / NODE_M;
+        let columns: Vec<(usize, [f64; 4], f64)> = (0..w as i64)
+            .map(|k| {
+                let t = quarter(qx0 + k);
+                let (c, wx) = self.weights(t, self.i0);
+                (c, wx, t - (self.i0 + c as i64 + 1) as f64)
+            })
+            .collect();
+        let rows = self.nodes.len() / self.cols;
+        // Node rows interpolated along x: raw, basin, river, stream, along, across.
+        let mut along_x = vec![[0.0f64; 6]; rows * w];
+        for r in 0..rows {
+            let row = &self.nodes[r * self.cols..][..self.cols];
+            for (k, (c, wx, tx)) in columns.iter().enumerate() {
+                let n = &row[*c..][..4];
+                let cubic = |f: fn(&Node) -> f64| wx[0] * f(&n[0]) + wx[1] * f(&n[1]) + wx[2] * f(&n[2]) + wx[3] * f(&n[3]);
+                let lerp = |f: fn(&Node) -> f64| f(&n[1]) + tx * (f(&n[2]) - f(&n[1]));
+                along_x[r * w + k] = [
+                    cubic(|n| n.raw_m),
+                    if self.basin { cubic(|n| n.basin_m) } else { 0.0 },
+                    lerp(|n| n.river_m),
+                    lerp(|n| n.stream_m),
+                    lerp(|n| n.along_m),
+                    lerp(|n| n.across_m),
+                ];
+            }
+        }
+        for l in 0..h {
+            let t = quarter(qy0 - l as i64);
+            let (r, wy) = self.weights(t, self.j0);
+            let ty = t - (self.j0 + r as i64 + 1) as f64;
+            for k in 0..w {
+                let v = |dr: usize| &along_x[(r + dr) * w + k];
+                let (mut raw, mut basin) = (0.0, 0.0);
+                for (dr, wyk) in wy.iter().enumerate() {
+                    raw += wyk * v(dr)[0];
+                    basin += wyk * v(dr)[1];
+                }
+                let lerp = |f: usize| v(1)[f] + ty * (v(2)[f] - v(1)[f]);
+                let (height_m, lake_m) = clamp_lake(raw, basin);
+                let g = Ground { height_m, lake_m, river_m: lerp(2), stream_m: lerp(3), along_m: lerp(4), across_m: lerp(5) };
+                each(k, l, &g);
+            }
+        }
+    }
+
+    /// Height only (what the DEM needs), metres.
+    pub fn height_m(&self, x_m: f64, y_m: f64) -> f64 {
+        let (c, wx) = self.weights(x_m / NODE_M, self.i0);
+        let (r, wy) = self.weights(y_m / NODE_M, self.j0);
+        let (raw, basin) = self.cubic(c, r, &wx, &wy);
+        clamp_lake(raw, basin).0
+    }
+
+    /// Raw height and basin depth, bicubic over the 4 × 4 nodes from `(c, r)`.
+    fn cubic(&self, c: usize, r: usize, wx: &[f64; 4], wy: &[f64; 4]) -> (f64, f64) {
+        let cubic = |f: fn(&Node) -> f64| {
+            let mut sum = 0.0;
+            for (k, wyk) in wy.iter().enumerate() {
+                let row = &self.nodes[(r + k) * self.cols + c..][..4];
+                sum += wyk * (wx[0] * f(&row[0]) + wx[1] * f(&row[1]) + wx[2] * f(&row[2]) + wx[3] * f(&row[3]));
+            }
+            sum
+        };
+        (cubic(|n| n.raw_m), if self.basin { cubic(|n| n.basin_m) } else { 0.0 })
+    }
+
+    /// First of the four nodes along one axis (relative to the patch) and
+    /// their Catmull–Rom weights at lattice coordinate `t`.
+    fn weights(&self, t: f64, first: i64) -> (usize, [f64; 4]) {
+        let i = floor_i(t);
+        let f = t - i as f64;
+        let (f2, f3) = (f * f, f * f * f);
+        let w = [
+            0.5 * (-f3 + 2.0 * f2 - f),
+            0.5 * (3.0 * f3 - 5.0 * f2 + 2.0),
+            0.5 * (-3.0 * f3 + 4.0 * f2 + f),
+            0.5 * (f3 - f2),
+        ];
+        ((i - 1 - first) as usize, w)
+    }
+}
+
+/// A node's values from its shape and the shape's slope.
+fn node(x: f64, y: f64, here: &shape::Shape, gx: f64, gy: f64) -> Node {
+    let (along, across) = (here.along_m, here.across_m);
+    let basin_m = shape::lake_basin_m(x, y, along, across);
+    let river_m = shape::river_m(along, across);
+    Node {
+        raw_m: here.dry_m + shape::gullies_m(x, y, gx, gy) - basin_m,
+        basin_m,
         river_m,
-        stream_m: stream_m(x_m, y_m, across, river_m),
+        stream_m: shape::stream_m(x, y, across, river_m),
         along_m: along,
         across_m: across,
     }
 }
 
-/// (along, across) of a point: along is x, across is the vertical offset from
-/// the centre line scaled by the line's cosine, a distance near the line.
-fn valley_coords(x: f64, y: f64) -> (f64, f64) {
-    let phase = x / VALLEY_BEND_LEN_M;
-    let centre = VALLEY_Y0_M + VALLEY_TILT * x + VALLEY_BEND_M * phase.sin();
-    let slope = VALLEY_TILT + VALLEY_BEND_M / VALLEY_BEND_LEN_M * phase.cos();
-    (x, (y - centre) / (1.0 + slope * slope).sqrt())
-}
-
-/// Floor height: flat at the lake, rising upstream (2.2 % steepening
-/// eastwards), falling 0.8 % downstream; a gentle rise towards the walls
-/// (12 m at the floor's edge) so contours bend upstream as they cross it.
-fn floor_m(x: f64, y: f64, along: f64, across: f64) -> f64 {
-    let east = along - (LAKE_CENTRE_ALONG_M + LAKE_HALF_LENGTH_M);
-    let west = (LAKE_CENTRE_ALONG_M - LAKE_HALF_LENGTH_M) - along;
-    let long = if east > 0.0 {
-        0.022 * east + 8.0e-7 * east * east
-    } else if west > 0.0 {
-        -0.008 * west
+/// Inside the basin the ground is the lake wherever it would be below the
+/// lake level. Outside it, the dry ground is at least 1 m above the lake
+/// (the basin's rim is kept above it), so both branches meet continuously.
+fn clamp_lake(raw_m: f64, basin_m: f64) -> (f64, f64) {
+    if basin_m > 0.0 {
+        (raw_m.max(LAKE_LEVEL_M), LAKE_LEVEL_M - raw_m)
     } else {
-        0.0
-    };
-    let t = (across / FLOOR_HALF_WIDTH_M).abs();
-    let cross = if t < 1.0 { 12.0 * t * t } else { 12.0 + 24.0 * (t - 1.0) };
-    FLOOR_AT_LAKE_M + long + cross + 1.5 * noise::at(x, y, 700.0, SEED + 1)
-}
-
-/// 0 on the valley floor, rising to 1 on the mountain mass: `1 − e^{−1.5 t²}`
-/// of the distance past the floor edge in walls, steepest (≈ 40° with the
-/// mountain relief) about 0.6 walls out.
-fn wall_profile(across: f64) -> f64 {
-    let t = (across.abs() - FLOOR_HALF_WIDTH_M).max(0.0) / WALL_M;
-    1.0 - (-1.5 * t * t).exp()
-}
-
-/// Height of the mountain mass above the valley floor: a base varying over
-/// 14 km plus domain-warped ridged noise (six octaves, 3.5 km down to 110 m,
-/// the smallest detail a 1″ DEM shows).
-fn mountain_relief_m(x: f64, y: f64) -> f64 {
-    let wx = x + 700.0 * noise::at(x, y, 4000.0, SEED + 2);
-    let wy = y + 700.0 * noise::at(x, y, 4000.0, SEED + 3);
-    let base = 1000.0 + 180.0 * noise::at(x, y, 14_000.0, SEED + 4);
-    base + 1200.0 * (ridged(wx, wy, 3500.0, 6, SEED + 10) - 0.35)
-}
-
-/// Carves the side valleys into the mountain relief: across a side valley the
-/// relief blends from its floor (rising with distance from the main valley)
-/// up to the mountains over 1.2 km.
-fn side_valleys(x: f64, y: f64, across: f64, relief: f64) -> f64 {
-    let mut out = relief;
-    for v in &SIDE_VALLEYS {
-        let up = v.side * across;
-        if up <= 0.0 {
-            continue;
-        }
-        let offset = side_offset_m(v, x, y);
-        if offset.abs() > 3.0 * SIDE_WALL_M {
-            continue;
-        }
-        // Floor rise: 8 % at the mouth, steepening into a head wall (the
-        // quadratic term adds 430 m at 6 km).
-        let a = (up - FLOOR_HALF_WIDTH_M).max(0.0);
-        let rise = 0.08 * a + 1.2e-5 * a * a;
-        let t = (offset.abs() - SIDE_FLOOR_HALF_WIDTH_M).max(0.0) / SIDE_WALL_M;
-        let p = 1.0 - (-1.5 * t * t).exp();
-        // Fades in over the first 800 m so the side valley opens into the main one.
-        let on = smoothstep(up / 800.0);
-        let carved = rise + p * (relief - rise);
-        out = out.min(relief + on * (carved - relief));
+        (raw_m, (LAKE_LEVEL_M - raw_m).min(-1.0))
     }
-    out
 }
 
-const SIDE_WALL_M: f64 = 1200.0;
-const SIDE_FLOOR_HALF_WIDTH_M: f64 = 120.0;
-
-/// Signed east–west offset from a side valley's centre line, metres.
-fn side_offset_m(v: &SideValley, x: f64, y: f64) -> f64 {
-    let centre = v.x_m + v.lean * y.abs() + 350.0 * (y / 1700.0 + v.phase).sin();
-    x - centre
-}
-
-/// The cliff band: up to 300 m over a 70 m-wide ramp (≈ 77°) on the north
-/// side of the upper valley, its foot wandering ±250 m around 1.3 km from the
-/// valley centre, tapering out over 1.5 km at both ends.
-fn cliff_m(x: f64, along: f64, across: f64) -> f64 {
-    let taper = smoothstep((along - 1500.0) / 1500.0) * smoothstep((8500.0 - along) / 1500.0);
-    if taper <= 0.0 {
-        return 0.0;
-    }
-    let foot = 1300.0 + 250.0 * noise::at(x, 0.0, 1800.0, SEED + 5);
-    300.0 * taper * smoothstep((across - foot) / 70.0 + 0.5)
-}
-
-/// How deep the basin is carved below the dry terrain: an ellipse in valley
-/// coordinates whose outline is roughened by noise (±25 % over 900 m), so the
-/// shore has bays and headlands.
-fn lake_basin_m(x: f64, y: f64, along: f64, across: f64) -> f64 {
-    let u = (along - LAKE_CENTRE_ALONG_M) / LAKE_HALF_LENGTH_M;
-    let v = across / LAKE_HALF_WIDTH_M;
-    let q = u * u + v * v;
-    if q >= 1.6 {
-        return 0.0;
-    }
-    let q = q * (1.0 + 0.25 * noise::at(x, y, 900.0, SEED + 6));
-    LAKE_DEPTH_M * (1.0 - q).max(0.0)
-}
-
-/// The river's meanders: two sines (650 m and 270 m) that keep it within
-/// ±160 m of the valley centre, inside the flat floor.
-fn river_offset_m(along: f64) -> f64 {
-    110.0 * (along / 650.0).sin() + 50.0 * (along / 270.0 + 1.3).sin()
-}
-
-/// Signed distance to the nearest side stream. A stream runs down the middle
-/// of each side valley from 6 km out to the river.
-fn stream_m(x: f64, y: f64, across: f64, river_m: f64) -> f64 {
-    let mut best = f64::INFINITY;
-    for v in &SIDE_VALLEYS {
-        let up = v.side * across;
-        let beyond_river = v.side * river_m > 0.0;
-        if !beyond_river || up > 6000.0 {
-            continue;
-        }
-        let offset = side_offset_m(v, x, y);
-        if offset.abs() < best.abs() {
-            best = offset;
-        }
-    }
-    best
-}
-
-/// `3t² − 2t³` on `t` clamped to `[0, 1]`.
-fn smoothstep(t: f64) -> f64 {
-    let t = t.clamp(0.0, 1.0);
-    t * t * (3.0 - 2.0 * t)
+/// True when `stream_m` names a stream (not the no-stream marker).
+pub fn has_stream(stream_m: f64) -> bool {
+    stream_m.abs() < 0.5 * NO_STREAM_M
 }
 
 #[cfg(test)]
@@ -281,38 +288,61 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_lake_is_flat_and_its_shore_is_continuous() {
-        let (along, y) = (LAKE_CENTRE_ALONG_M, VALLEY_Y0_M + VALLEY_TILT * LAKE_CENTRE_ALONG_M);
-        let centre_y = y + VALLEY_BEND_M * (LAKE_CENTRE_ALONG_M / VALLEY_BEND_LEN_M).sin();
-        let g = ground(along, centre_y);
+    fn the_lake_is_flat_and_heights_are_continuous() {
+        let (x, y) = shape::probe::lake_centre();
+        let patch = Patch::covering(x, y, x, y + 4000.0);
+        let g = patch.ground(x, y);
         assert_eq!(g.height_m, LAKE_LEVEL_M);
         assert!(g.lake_m > 50.0, "{g:?}");
-        // Walk north out of the lake: heights never jump by more than a cliff allows.
+        // Walk north out of the lake and up the wall: no jumps.
         let mut prev = g.height_m;
         for i in 1..4000 {
-            let h = ground(along, centre_y + i as f64).height_m;
+            let h = patch.ground(x, y + i as f64).height_m;
             assert!((h - prev).abs() < 5.0, "step at {i}: {prev} → {h}");
             prev = h;
         }
+        assert!(prev > 1500.0, "{prev}");
     }
 
     #[test]
-    fn heights_span_an_alpine_range() {
-        let (mut lo, mut hi) = (f64::MAX, f64::MIN);
-        for j in 0..200 {
-            for i in 0..200 {
-                let h = ground(-10_000.0 + i as f64 * 100.0, -9_000.0 + j as f64 * 90.0).height_m;
-                lo = lo.min(h);
-                hi = hi.max(h);
-            }
+    fn patches_agree_with_each_other_bitwise() {
+        let a = Patch::covering(-1000.0, -1000.0, 1000.0, 1000.0);
+        let b = Patch::covering(-40.0, 300.0, 2000.0, 2000.0);
+        for k in 0..500 {
+            let (x, y) = (-40.0 + k as f64 * 2.07, 300.0 + k as f64 * 1.31);
+            assert_eq!(a.ground(x, y), b.ground(x, y));
         }
-        assert!((820.0..=900.0).contains(&lo) && (2800.0..=3700.0).contains(&hi), "{lo} {hi}");
+        assert_eq!(a.ground(123.4, 567.8), ground(123.4, 567.8));
+    }
+
+    #[test]
+    fn nodes_are_interpolated_exactly_at_nodes() {
+        let p = Patch::covering(0.0, 0.0, 200.0, 200.0);
+        let n = p.nodes[3 * p.cols + 2];
+        let (x, y) = ((p.i0 + 2) as f64 * NODE_M, (p.j0 + 3) as f64 * NODE_M);
+        assert_eq!(p.ground(x, y).height_m, clamp_lake(n.raw_m, n.basin_m).0);
+    }
+
+    #[test]
+    fn the_sub_grid_is_the_point_interpolation() {
+        let (qx0, qy0, w, h) = (-37, 901, 40, 30);
+        let q = |v: i64| v as f64 * NODE_M / 4.0;
+        let p = Patch::covering(q(qx0), q(qy0 - h as i64), q(qx0 + w as i64), q(qy0));
+        let mut n = 0;
+        p.sub_grid(qx0, qy0, w, h, |k, l, g| {
+            assert_eq!(*g, p.ground(q(qx0 + k as i64), q(qy0 - l as i64)), "({k}, {l})");
+            n += 1;
+        });
+        assert_eq!(n, w * h);
     }
 
     #[test]
     fn the_frame_is_centred_on_the_region() {
-        assert_eq!(local_m(CENTRE_LON_DEG, CENTRE_LAT_DEG), (0.0, 0.0));
-        let (x, y) = local_m(10.25, 46.45);
-        assert!((x - 9_600.0).abs() < 50.0 && (y - 8_340.0).abs() < 10.0, "{x} {y}");
+        let utm = Crs::from_epsg(FRAME_EPSG).unwrap();
+        let (e, n) = utm.from_lon_lat(10.125, 46.375).unwrap();
+        let (x, y) = local_from_utm(e, n);
+        assert!(x.abs() < NODE_M && y.abs() < NODE_M, "{x} {y}");
+        const { assert!(ORIGIN_E_M % NODE_M == 0.0 && ORIGIN_N_M % NODE_M == 0.0) };
+        assert!(height_at(&utm, 10.125, 46.375).is_some_and(|h| (800.0..3000.0).contains(&h)));
     }
 }
