@@ -14,6 +14,8 @@
 //! See `ARCHITECTURE.md` for the code map and the invariants.
 
 pub mod bench;
+#[cfg(feature = "server")]
+pub mod cache;
 pub mod canopy;
 pub mod cem;
 pub mod config;
@@ -25,4 +27,6 @@ pub mod noise;
 pub mod produce;
 pub mod raster;
 pub mod region;
+#[cfg(feature = "server")]
+pub mod server;
 pub mod source;

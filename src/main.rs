@@ -80,6 +80,19 @@ enum Command {
         #[arg(short, long)]
         output: PathBuf,
     },
+    /// Serve WMS, World Wind and XYZ tiles over HTTP.
+    #[cfg(feature = "server")]
+    Serve {
+        /// Region and server configuration (default: the embedded demo region).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Address to listen on (default: `[server] bind`).
+        #[arg(long)]
+        bind: Option<String>,
+        /// Tile cache directory (default: `[server] cache_dir`).
+        #[arg(long)]
+        cache_dir: Option<PathBuf>,
+    },
     /// Print benchmark tables.
     Bench {
         #[command(subcommand)]
@@ -140,6 +153,8 @@ fn run(command: Command) -> Result<()> {
             let product = produce::area(&region, bbox, width, height, parse_layer(&layer)?, parse_format(&format)?)?;
             write(&output, &product)
         }
+        #[cfg(feature = "server")]
+        Command::Serve { config, bind, cache_dir } => serve(config, sylva::server::ServeOptions { bind, cache_dir }),
         Command::Bench { what: Bench::Pipeline { rmnp, labels, build_side } } => {
             println!("{}", sylva::bench::pipeline_report(&rmnp, &labels, build_side)?);
             Ok(())
@@ -149,6 +164,17 @@ fn run(command: Command) -> Result<()> {
             Ok(())
         }
     }
+}
+
+/// Logs to stderr (`RUST_LOG` filters, default `info`), then serves until
+/// SIGTERM.
+#[cfg(feature = "server")]
+fn serve(config: Option<PathBuf>, options: sylva::server::ServeOptions) -> Result<()> {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info,tower_http=warn".into());
+    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_ansi(ansi).init();
+    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    runtime.block_on(sylva::server::serve(config.as_deref(), options))
 }
 
 fn parse_layer(text: &str) -> Result<Layer> {

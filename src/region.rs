@@ -15,6 +15,10 @@ use std::sync::Arc;
 pub struct Region {
     /// Human-readable name.
     pub name: String,
+    /// Changes with anything that changes a tile's bytes (the cache key).
+    pub version: String,
+    /// Tiles made from upstream servers' data expire after this long.
+    pub upstream_ttl: Option<std::time::Duration>,
     /// The World Wind tiling.
     pub tiles: TileGrid,
     /// The area with data (the default box of whole-area builds).
@@ -25,6 +29,9 @@ pub struct Region {
     pub dem_resampling: Resampling,
     /// Derived land cover (band 0 cover, band 1 class), if any.
     pub landcover: Option<GeoRaster>,
+    /// The RGB map the land cover was keyed from, if it was (for the relief
+    /// preview's colours).
+    pub map: Option<GeoRaster>,
     /// The canopy proxy.
     pub proxy: Arc<dyn CanopyProxy>,
     /// 16-bit encodings of heights.

@@ -219,8 +219,8 @@ impl ProceduralProxy {
         let n = 200;
         let step = self.params.cell_m / 4.0 / crate::geo::METRES_PER_DEGREE;
         let grid = SampleGrid {
-            lon: Axis { origin: 7.0, step, first: 0, len: n },
-            lat: Axis { origin: 0.5, step: -step, first: 0, len: n },
+            lon: Axis::degrees(7.0, step, 0, n),
+            lat: Axis::degrees(0.5, -step, 0, n),
         };
         let mut row = vec![0.0f32; n];
         let mut sum = 0.0f64;
@@ -266,7 +266,7 @@ impl CanopyProxy for ProceduralProxy {
     fn heights(&self, grid: &SampleGrid, wanted: &(dyn Fn(usize, usize) -> bool + Sync)) -> Raster<f32> {
         use rayon::prelude::*;
         let mut out = Raster::filled(grid.width(), grid.height(), 0.0f32);
-        let blend = self.blend(grid.lat.step.abs() * crate::geo::METRES_PER_DEGREE);
+        let blend = self.blend(grid.lat.step_deg() * crate::geo::METRES_PER_DEGREE);
         let width = grid.width().max(1);
         out.data_mut().par_chunks_mut(width).enumerate().for_each(|(r, row)| {
             let spans = runs(row.len(), |c| wanted(c, r));

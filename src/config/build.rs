@@ -1,7 +1,7 @@
 //! Stage two of the configuration: checks every value and opens every source,
 //! producing a [`Region`]. Errors name the file and the problem.
 
-use super::{Config, LandcoverConfig, LandcoverKind};
+use super::{Config, LandcoverConfig, LandcoverKind, UpstreamConfig};
 use crate::canopy::ProceduralProxy;
 use crate::cem::colorkey::{ColorKey, LabKey};
 use crate::cem::landcover::{Landcover, Rule};
@@ -72,8 +72,13 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
     let landcover_rule =
         config.landcover.as_ref().map(rule).transpose().map_err(|m| invalid(format!("[landcover] {m}")))?;
     let resolve = |p: &PathBuf| if p.is_absolute() { p.clone() } else { base.join(p) };
-    let (dem, bounds, name) = match &config.dem.path {
-        Some(path) => {
+    let (dem, bounds, name) = match (&config.dem.path, &config.dem.upstream) {
+        (Some(_), Some(_)) => return Err(invalid("[dem] give a path or an upstream, not both".into())),
+        (None, Some(up)) => {
+            let bounds = up.bbox().map_err(|m| invalid(format!("[dem.upstream] {m}")))?;
+            (upstream(up, &cache, &invalid)?, bounds, up.url.clone())
+        }
+        (Some(path), None) => {
             let crs = parse_crs(&config.dem.crs).map_err(|m| invalid(format!("[dem] {m}")))?;
             let options = OpenOptions { crs, nodata: config.dem.nodata.clone(), classes: false };
             let dem = source::open_file(&resolve(path), &options, &cache)?;
@@ -82,30 +87,65 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
             let name = path.file_stem().map_or_else(|| "dem".into(), |s| s.to_string_lossy().into_owned());
             (dem, bounds, name)
         }
-        None => {
+        (None, None) => {
             let d = demo::sources()?;
             let pixels = source::nodata::apply(d.dem, &config.dem.nodata, &cache);
             (GeoRaster::new(pixels, d.dem_georef, &[Reducer::Mean], &cache), demo::BBOX, demo::NAME.to_string())
         }
     };
-    let landcover = match (&config.landcover, landcover_rule, &config.dem.path) {
+    let demo = config.dem.path.is_none() && config.dem.upstream.is_none();
+    let (landcover, map) = match (&config.landcover, landcover_rule, demo) {
         (Some(lc), Some(rule), _) => {
-            Some(landcover(lc, rule, &resolve, &cache, &|m| invalid(format!("[landcover] {m}")))?)
+            let (l, m) = landcover(lc, rule, &resolve, &cache, &|m| invalid(format!("[landcover] {m}")))?;
+            (Some(l), m)
         }
-        (None, _, None) => Some(demo_landcover(&cache)?),
-        _ => None,
+        (None, _, true) => {
+            let (l, m) = demo_landcover(&cache)?;
+            (Some(l), m)
+        }
+        _ => (None, None),
     };
+    let ttls = [config.dem.upstream.as_ref(), config.landcover.as_ref().and_then(|l| l.upstream.as_ref())];
     Ok(Region {
         name: config.name.clone().unwrap_or(name),
+        version: version_key(config, base),
+        upstream_ttl: ttls.into_iter().flatten().map(|u| std::time::Duration::from_secs(u.ttl_s)).min(),
         tiles,
         bounds,
         dem,
         dem_resampling: config.dem.resampling,
         landcover,
+        map,
         proxy: Arc::new(ProceduralProxy::new(config.canopy.clone())),
         heights_16: Quantization { offset: enc.png16_offset_m, scale: enc.png16_scale_m },
         cache,
     })
+}
+
+/// A key that changes with anything that changes a tile's bytes: every
+/// setting, the size and time of every source file, and Sylva's version.
+fn version_key(config: &Config, base: &Path) -> String {
+    let mut text = toml::to_string(config).unwrap_or_default();
+    text.push_str(env!("CARGO_PKG_VERSION"));
+    let files = [config.dem.path.as_ref(), config.landcover.as_ref().and_then(|l| l.path.as_ref())];
+    for path in files.into_iter().flatten() {
+        let meta = std::fs::metadata(base.join(path)).ok();
+        let stamp = meta.map(|m| (m.len(), m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())));
+        text.push_str(&format!("{path:?}{stamp:?}"));
+    }
+    format!("v{:016x}", crate::cache::digest(text.as_bytes()))
+}
+
+/// An upstream server as a source.
+#[cfg(feature = "http")]
+fn upstream(up: &UpstreamConfig, cache: &Arc<BlockCache>, _invalid: &dyn Fn(String) -> ConfigError) -> Result<GeoRaster, ConfigError> {
+    Ok(source::remote::open(up, cache)?)
+}
+
+/// Without the `http` feature there is no client to reach an upstream.
+#[cfg(not(feature = "http"))]
+fn upstream(up: &UpstreamConfig, _: &Arc<BlockCache>, invalid: &dyn Fn(String) -> ConfigError) -> Result<GeoRaster, ConfigError> {
+    Err(invalid(format!("upstream {} needs Sylva built with the `http` feature", up.url)))
 }
 
 /// `"EPSG:26910"` → 26910.
@@ -115,27 +155,33 @@ fn parse_crs(text: &Option<String>) -> Result<Option<u32>, String> {
     code.and_then(|c| c.parse().ok()).map(Some).ok_or_else(|| format!("crs {t:?} is not of the form \"EPSG:code\""))
 }
 
-/// The land-cover raster; `invalid` turns a message into a configuration error.
+/// The land-cover raster and, for a map, the map itself (its colours shade
+/// the relief preview); `invalid` turns a message into a configuration error.
 fn landcover(
     lc: &LandcoverConfig,
     rule: Rule,
     resolve: &impl Fn(&PathBuf) -> PathBuf,
     cache: &Arc<BlockCache>,
     invalid: &dyn Fn(String) -> ConfigError,
-) -> Result<GeoRaster, ConfigError> {
-    let (input, georef) = match &lc.path {
-        Some(path) => {
+) -> Result<(GeoRaster, Option<GeoRaster>), ConfigError> {
+    let (input, georef) = match (&lc.path, &lc.upstream) {
+        (Some(_), Some(_)) => return Err(invalid("give a path or an upstream, not both".into())),
+        (None, Some(up)) => {
+            let raster = upstream(up, cache, invalid)?;
+            (raster.base().clone(), raster.georef().clone())
+        }
+        (Some(path), None) => {
             let crs = parse_crs(&lc.crs).map_err(invalid)?;
             let options =
                 OpenOptions { crs, nodata: NodataPolicy::Propagate, classes: lc.kind == LandcoverKind::Classes };
             let raster = source::open_file(&resolve(path), &options, cache)?;
             (raster.base().clone(), raster.georef().clone())
         }
-        None if lc.kind == LandcoverKind::Map => {
+        (None, None) if lc.kind == LandcoverKind::Map => {
             let d = demo::sources()?;
             (Blocks::new(d.map, cache), d.map_georef)
         }
-        None => return Err(invalid(format!("kind {:?} needs a path", lc.kind))),
+        (None, None) => return Err(invalid(format!("kind {:?} needs a path or an upstream", lc.kind))),
     };
     let bands = input.source().bands();
     if lc.kind == LandcoverKind::Map && bands < 3 {
@@ -144,7 +190,8 @@ fn landcover(
             input.source().name().display()
         )));
     }
-    Ok(derived(input, georef, rule, cache))
+    let map = (lc.kind == LandcoverKind::Map).then(|| GeoRaster::new(input.clone(), georef.clone(), &[Reducer::Mean], cache));
+    Ok((derived(input, georef, rule, cache), map))
 }
 
 fn derived(input: Blocks, georef: Georef, rule: Rule, cache: &Arc<BlockCache>) -> GeoRaster {
@@ -152,8 +199,9 @@ fn derived(input: Blocks, georef: Georef, rule: Rule, cache: &Arc<BlockCache>) -
     GeoRaster::new(Blocks::new(pixels, cache), georef, &[Reducer::Mean, Reducer::Decimate], cache)
 }
 
-/// The demo's map with the demo's keys and the dissertation's close.
-fn demo_landcover(cache: &Arc<BlockCache>) -> Result<GeoRaster, ConfigError> {
+/// The demo's map with the demo's keys and the dissertation's close, and the
+/// map itself.
+fn demo_landcover(cache: &Arc<BlockCache>) -> Result<(GeoRaster, Option<GeoRaster>), ConfigError> {
     let d = demo::sources()?;
     let keys =
         compile(&demo_keys()).map_err(|message| ConfigError::Invalid { path: "<demo palette>".into(), message })?;
@@ -163,7 +211,9 @@ fn demo_landcover(cache: &Arc<BlockCache>) -> Result<GeoRaster, ConfigError> {
         radius_px: 1,
         blur_px: 1,
     };
-    Ok(derived(Blocks::new(d.map, cache), d.map_georef, rule, cache))
+    let input = Blocks::new(d.map, cache);
+    let map = GeoRaster::new(input.clone(), d.map_georef.clone(), &[Reducer::Mean], cache);
+    Ok((derived(input, d.map_georef, rule, cache), Some(map)))
 }
 
 /// Colour keys of the demo map's palette.

@@ -6,8 +6,10 @@
 //! Relative paths are relative to the configuration file.
 
 mod build;
+mod upstream;
 
 pub use build::{ConfigError, load, parse_file, region_from};
+pub use upstream::{UpstreamConfig, UpstreamService};
 
 use crate::canopy::ProxyParams;
 use crate::cem::colorkey::ColorKey;
@@ -35,6 +37,54 @@ pub struct Config {
     pub canopy: ProxyParams,
     /// 16-bit encodings.
     pub encoding: EncodingConfig,
+    /// The tile server.
+    pub server: ServerConfig,
+}
+
+/// `sylva serve`.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ServerConfig {
+    /// Address to listen on.
+    pub bind: String,
+    /// Tile cache directory (relative to the working directory).
+    pub cache_dir: PathBuf,
+    /// Encoded tiles kept in memory, MiB.
+    pub memory_cache_mb: u64,
+    /// Threads computing tiles; 0 = one per core.
+    pub workers: usize,
+    /// Tile computations waiting for a worker at most; more answer 503.
+    pub queue: usize,
+    /// Longest a request may take, seconds.
+    pub request_timeout_s: f64,
+    /// Largest WMS WIDTH and HEIGHT.
+    pub max_size: usize,
+    /// Largest tile halo, samples.
+    pub max_halo: usize,
+    /// `Cache-Control: max-age` of tiles, seconds.
+    pub tile_max_age_s: u64,
+    /// The URL clients reach the server at (for capabilities); default: from
+    /// the request's Host header.
+    pub public_url: Option<String>,
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        ServerConfig {
+            bind: "127.0.0.1:8080".into(),
+            cache_dir: PathBuf::from("cache"),
+            memory_cache_mb: 128,
+            workers: 0,
+            // A few tiles per worker: deep enough to keep workers busy,
+            // shallow enough that a burst is refused before it times out.
+            queue: 64,
+            request_timeout_s: 30.0,
+            max_size: 4096,
+            max_halo: 64,
+            tile_max_age_s: 86_400,
+            public_url: None,
+        }
+    }
 }
 
 /// World Wind tiling.
@@ -73,8 +123,11 @@ impl Default for CacheConfig {
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct DemConfig {
-    /// GeoTIFF or SRTM `.hgt` file; none = the embedded demo region.
+    /// GeoTIFF or SRTM `.hgt` file; none (and no upstream) = the embedded
+    /// demo region.
     pub path: Option<PathBuf>,
+    /// Read the DEM from another server instead of a file.
+    pub upstream: Option<UpstreamConfig>,
     /// `EPSG:code` overriding the file's own CRS.
     pub crs: Option<String>,
     /// nearest, bilinear or bicubic.
@@ -85,7 +138,7 @@ pub struct DemConfig {
 
 impl Default for DemConfig {
     fn default() -> Self {
-        DemConfig { path: None, crs: None, resampling: Resampling::Bilinear, nodata: NodataPolicy::default() }
+        DemConfig { path: None, upstream: None, crs: None, resampling: Resampling::Bilinear, nodata: NodataPolicy::default() }
     }
 }
 
@@ -95,8 +148,12 @@ impl Default for DemConfig {
 pub struct LandcoverConfig {
     /// `map`, `classes`, `percent` or `canopy_height`.
     pub kind: LandcoverKind,
-    /// The raster; none = the demo's topographic map (kind `map` only).
+    /// The raster; none (and no upstream) = the demo's topographic map (kind
+    /// `map` only).
     pub path: Option<PathBuf>,
+    /// Read the raster from another server instead of a file.
+    #[serde(default)]
+    pub upstream: Option<UpstreamConfig>,
     /// `EPSG:code` overriding the file's own CRS.
     pub crs: Option<String>,
     /// map: colour keys (default: the demo map's palette).

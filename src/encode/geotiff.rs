@@ -7,6 +7,7 @@
 
 use super::{EncodeError, NODATA_HEIGHT, Samples};
 use crate::grid::SampleGrid;
+use crate::grid::lattice::Mapping;
 use std::io::Cursor;
 use tiff::encoder::{TiffEncoder, colortype};
 use tiff::tags::Tag;
@@ -14,14 +15,18 @@ use tiff::tags::Tag;
 /// GeoKeyDirectory: version 1.1.0, three keys: model geographic, raster
 /// pixel-is-area, geographic CRS EPSG:4326.
 const GEOKEYS_4326: [u16; 16] = [1, 1, 0, 3, 1024, 0, 1, 2, 1025, 0, 1, 1, 2048, 0, 1, 4326];
+/// The same for Web Mercator: model projected, projected CRS EPSG:3857.
+const GEOKEYS_3857: [u16; 16] = [1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, 3857];
 
-/// Writes the samples as a one-band GeoTIFF over `grid`.
+/// Writes the samples as a one-band GeoTIFF over `grid`, in EPSG:4326 or,
+/// for grids regular in Web Mercator metres, EPSG:3857.
 pub fn write(samples: Samples, grid: &SampleGrid) -> Result<Vec<u8>, EncodeError> {
     let err = |e: tiff::TiffError| EncodeError(e.to_string());
     let (w, h) = (grid.width() as u32, grid.height() as u32);
     let (dx, dy) = (grid.lon.step.abs(), grid.lat.step.abs());
     let scale = [dx, dy, 0.0];
-    let tiepoint = [0.0, 0.0, 0.0, grid.lon.coord(0) - 0.5 * dx, grid.lat.coord(0) + 0.5 * dy, 0.0];
+    let tiepoint = [0.0, 0.0, 0.0, grid.lon.value(0) - 0.5 * dx, grid.lat.value(0) + 0.5 * dy, 0.0];
+    let geokeys = if grid.lat.mapping == Mapping::Degrees { &GEOKEYS_4326 } else { &GEOKEYS_3857 };
     let mut out = Cursor::new(Vec::new());
     let mut enc = TiffEncoder::new(&mut out).map_err(err)?;
     macro_rules! image {
@@ -30,7 +35,7 @@ pub fn write(samples: Samples, grid: &SampleGrid) -> Result<Vec<u8>, EncodeError
             let dir = img.encoder();
             dir.write_tag(Tag::ModelPixelScaleTag, &scale[..]).map_err(err)?;
             dir.write_tag(Tag::ModelTiepointTag, &tiepoint[..]).map_err(err)?;
-            dir.write_tag(Tag::GeoKeyDirectoryTag, &GEOKEYS_4326[..]).map_err(err)?;
+            dir.write_tag(Tag::GeoKeyDirectoryTag, &geokeys[..]).map_err(err)?;
             dir.write_tag(Tag::GdalNodata, $nodata).map_err(err)?;
             img.write_data($data).map_err(err)?;
         }};

@@ -9,6 +9,8 @@
 //! becomes the format's nodata value.
 
 pub mod geotiff;
+pub mod relief;
+pub mod terrarium;
 
 use crate::cem::Layer;
 use crate::grid::SampleGrid;

@@ -5,31 +5,81 @@
 //! level share origin (−180°, −90°), step and integer indices, so a sample has
 //! bitwise the same coordinate whichever request computes it — the root of the
 //! seamless-tile invariant.
+//!
+//! An axis is regular either in degrees (EPSG:4326 requests and tiles) or in
+//! Web Mercator metres (EPSG:3857 requests, XYZ tiles); in the latter case
+//! `origin` and `step` are metres and [`Axis::coord`] converts to degrees.
 
-/// One axis of a sample grid: `coord(i) = origin + (first + i) · step`.
+/// Equatorial radius of the WGS84 ellipsoid, the sphere of Web Mercator.
+pub const MERCATOR_RADIUS_M: f64 = 6_378_137.0;
+
+/// What an axis's regular values are.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mapping {
+    /// Degrees of longitude or latitude.
+    Degrees,
+    /// Web Mercator x, metres (longitude is linear in it).
+    MercatorX,
+    /// Web Mercator y, metres (latitude by the inverse Gudermannian).
+    MercatorY,
+}
+
+/// One axis of a sample grid: `value(i) = origin + (first + i) · step`,
+/// mapped to degrees by `mapping`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Axis {
-    /// Coordinate of index 0, degrees.
+    /// Value of index 0 (degrees, or metres for Mercator axes).
     pub origin: f64,
-    /// Degrees between neighbouring samples (negative for latitude rows, which
-    /// run north to south).
+    /// Value between neighbouring samples (negative for rows, which run
+    /// north to south).
     pub step: f64,
     /// Index of the first sample.
     pub first: i64,
     /// Number of samples.
     pub len: usize,
+    /// Degrees or Web Mercator metres.
+    pub mapping: Mapping,
 }
 
 impl Axis {
+    /// An axis regular in degrees.
+    pub fn degrees(origin: f64, step: f64, first: i64, len: usize) -> Axis {
+        Axis { origin, step, first, len, mapping: Mapping::Degrees }
+    }
+
     /// Coordinate of sample `i`, degrees.
     #[inline]
     pub fn coord(&self, i: usize) -> f64 {
+        self.degrees_of(self.origin + (self.first + i as i64) as f64 * self.step)
+    }
+
+    /// Coordinate of a possibly fractional or out-of-range position, degrees.
+    pub fn coord_at(&self, i: f64) -> f64 {
+        self.degrees_of(self.origin + (self.first as f64 + i) * self.step)
+    }
+
+    /// The regular value (degrees or metres) of sample `i`.
+    pub fn value(&self, i: usize) -> f64 {
         self.origin + (self.first + i as i64) as f64 * self.step
     }
 
-    /// Coordinate of a possibly fractional or out-of-range position.
-    pub fn coord_at(&self, i: f64) -> f64 {
-        self.origin + (self.first as f64 + i) * self.step
+    #[inline]
+    fn degrees_of(&self, v: f64) -> f64 {
+        match self.mapping {
+            Mapping::Degrees => v,
+            Mapping::MercatorX => (v / MERCATOR_RADIUS_M).to_degrees(),
+            Mapping::MercatorY => (v / MERCATOR_RADIUS_M).sinh().atan().to_degrees(),
+        }
+    }
+
+    /// Degrees between samples (for Mercator axes, at the axis's middle):
+    /// what decides overview levels and canopy filtering.
+    pub fn step_deg(&self) -> f64 {
+        let mid = (self.len as f64 - 1.0) / 2.0;
+        match self.mapping {
+            Mapping::Degrees => self.step.abs(),
+            _ => (self.coord_at(mid + 0.5) - self.coord_at(mid - 0.5)).abs(),
+        }
     }
 
     /// The axis grown by `margin` samples at both ends.
@@ -81,15 +131,15 @@ impl SampleGrid {
 
     /// Sample spacing in degrees: the larger of the two axes.
     pub fn spacing_deg(&self) -> f64 {
-        self.lon.step.abs().max(self.lat.step.abs())
+        self.lon.step_deg().max(self.lat.step_deg())
     }
 
     /// Sample spacing in metres on the ground (east–west spacing shrinks with
     /// the cosine of the latitude; the larger of the two is returned).
     pub fn spacing_m(&self) -> f64 {
         let mid_lat = self.lat.coord_at((self.lat.len as f64 - 1.0) / 2.0).clamp(-90.0, 90.0);
-        let east = self.lon.step.abs() * mid_lat.to_radians().cos();
-        east.max(self.lat.step.abs()) * crate::geo::METRES_PER_DEGREE
+        let east = self.lon.step_deg() * mid_lat.to_radians().cos();
+        east.max(self.lat.step_deg()) * crate::geo::METRES_PER_DEGREE
     }
 
     /// The `(lon, lat)` of sample `(x, y)`, exactly as computed from the
@@ -130,6 +180,9 @@ impl Axis {
     /// Samples per `span` degrees when this axis is on a global lattice with
     /// that origin and a whole (even) number of samples in the span.
     fn period(&self, span: f64, origin: f64) -> Option<i64> {
+        if self.mapping != Mapping::Degrees {
+            return None;
+        }
         let n = span / self.step.abs();
         let whole = n.round();
         (self.origin == origin && (n - whole).abs() < 1e-6 && whole as i64 % 2 == 0 && whole > 0.0)
@@ -143,7 +196,7 @@ mod tests {
 
     #[test]
     fn slices_and_growth_keep_coordinates_bitwise() {
-        let a = Axis { origin: -180.0, step: 0.1, first: 37, len: 10 };
+        let a = Axis::degrees(-180.0, 0.1, 37, 10);
         let g = a.grown(3);
         assert_eq!(g.coord(3).to_bits(), a.coord(0).to_bits());
         assert_eq!(a.slice(-3, 16), g);
@@ -154,8 +207,8 @@ mod tests {
     fn positions_across_the_antimeridian_and_the_poles_are_exact() {
         let s = 0.25;
         let grid = SampleGrid {
-            lon: Axis { origin: -180.0, step: s, first: -2, len: 5 },
-            lat: Axis { origin: -90.0, step: -s, first: -(4 * 180 + 2), len: 5 },
+            lon: Axis::degrees(-180.0, s, -2, 5),
+            lat: Axis::degrees(-90.0, -s, -(4 * 180 + 2), 5),
         };
         // Two samples west of −180° are the last two of the globe.
         assert_eq!(grid.on_globe(0, 2).0.to_bits(), (-180.0f64 + 1438.0 * s).to_bits());
@@ -163,15 +216,15 @@ mod tests {
         // Two rows north of the pole: 89.5° on the opposite meridian.
         assert_eq!(grid.on_globe(2, 0), (0.0, 89.5));
         let free = SampleGrid {
-            lon: Axis { origin: 179.9, step: 0.3, first: 0, len: 2 },
-            lat: Axis { origin: 10.0, step: -1.0, first: 0, len: 1 },
+            lon: Axis::degrees(179.9, 0.3, 0, 2),
+            lat: Axis::degrees(10.0, -1.0, 0, 1),
         };
         assert!((free.on_globe(1, 0).0 - (-179.8)).abs() < 1e-9);
     }
 
     #[test]
     fn latitude_rows_run_north_to_south() {
-        let lat = Axis { origin: -90.0, step: -0.5, first: -20, len: 3 };
+        let lat = Axis::degrees(-90.0, -0.5, -20, 3);
         assert_eq!(lat.coords(), vec![-80.0, -80.5, -81.0]);
     }
 }

@@ -11,6 +11,7 @@
 //! sample coordinates from the same global lattice (see [`lattice`]).
 
 pub mod lattice;
+pub mod mercator;
 
 pub use lattice::{Axis, SampleGrid};
 
@@ -212,9 +213,37 @@ impl TileGrid {
         let len = self.samples as usize + 2 * halo;
         let top = (tile.row as i64 + 1) * n1 + halo as i64;
         SampleGrid {
-            lon: Axis { origin: -180.0, step, first: tile.col as i64 * n1 - halo as i64, len },
-            lat: Axis { origin: -90.0, step: -step, first: -top, len },
+            lon: Axis::degrees(-180.0, step, tile.col as i64 * n1 - halo as i64, len),
+            lat: Axis::degrees(-90.0, -step, -top, len),
         }
+    }
+
+    /// Where a grid's samples fall on a level's lattice: the level and the
+    /// global column and row index (counted north from the south pole) of its
+    /// north-west sample, if every sample is a lattice point.
+    pub fn lattice_position(&self, grid: &SampleGrid) -> Option<(u32, i64, i64)> {
+        let (lon, lat) = (grid.lon, grid.lat);
+        if lon.mapping != lattice::Mapping::Degrees || lat.mapping != lattice::Mapping::Degrees {
+            return None;
+        }
+        let level = self.level_of_spacing(lon.step)?;
+        let s = self.spacing_deg(level);
+        let index = |v: f64| {
+            let i = v / s;
+            ((i - i.round()).abs() < 1e-6).then_some(i.round() as i64)
+        };
+        ((lat.step + s).abs() < 1e-9 * s).then_some(())?;
+        Some((level, index(lon.coord(0) + 180.0)?, index(lat.coord(0) + 90.0)?))
+    }
+
+    /// The tile whose samples (without halo) a grid is, if it is one.
+    pub fn tile_of(&self, grid: &SampleGrid) -> Option<TileId> {
+        let n = self.samples as usize;
+        let (level, gx, top) = self.lattice_position(grid)?;
+        let n1 = (n - 1) as i64;
+        let whole = grid.width() == n && grid.height() == n && gx.rem_euclid(n1) == 0 && top.rem_euclid(n1) == 0;
+        let id = TileId::new(level, u64::try_from(top / n1 - 1).ok()?, u64::try_from(gx / n1).ok()?);
+        (whole && self.check(id).is_ok()).then_some(id)
     }
 
     /// The level whose lattice has spacing `step_deg`, if any (relative
@@ -290,8 +319,8 @@ impl BBox {
         let dx = (self.east - self.west) / width as f64;
         let dy = (self.north - self.south) / height as f64;
         Ok(SampleGrid {
-            lon: Axis { origin: self.west + 0.5 * dx, step: dx, first: 0, len: width },
-            lat: Axis { origin: self.north - 0.5 * dy, step: -dy, first: 0, len: height },
+            lon: Axis::degrees(self.west + 0.5 * dx, dx, 0, width),
+            lat: Axis::degrees(self.north - 0.5 * dy, -dy, 0, height),
         })
     }
 }
@@ -299,7 +328,7 @@ impl BBox {
 /// Largest side of a single request; 4097² float planes are ~67 MB each.
 pub const MAX_REQUEST_SIDE: usize = 8193;
 
-fn check_size(width: usize, height: usize) -> Result<(), GridError> {
+pub(crate) fn check_size(width: usize, height: usize) -> Result<(), GridError> {
     let bad = |reason: &str| GridError::BadSize { width, height, reason: reason.into() };
     if width == 0 || height == 0 {
         return Err(bad("must be at least 1×1"));
@@ -320,19 +349,14 @@ fn point_axis(a: f64, b: f64, len: usize, sign: f64, tiles: &TileGrid) -> Option
     let step = tiles.spacing_deg(level);
     let origin = if sign > 0.0 { -180.0 } else { -90.0 };
     let index = (a - origin) / step;
-    ((index - index.round()).abs() < 1e-6).then(|| Axis {
-        origin,
-        step: sign * step,
-        first: (sign * index.round()) as i64,
-        len,
-    })
+    ((index - index.round()).abs() < 1e-6).then(|| Axis::degrees(origin, sign * step, (sign * index.round()) as i64, len))
 }
 
 fn free_axis(a: f64, b: f64, len: usize, sign: f64) -> Axis {
     if len == 1 {
-        return Axis { origin: 0.5 * (a + b), step: sign * (b - a).abs(), first: 0, len };
+        return Axis::degrees(0.5 * (a + b), sign * (b - a).abs(), 0, len);
     }
-    Axis { origin: a, step: sign * (b - a).abs() / (len - 1) as f64, first: 0, len }
+    Axis::degrees(a, sign * (b - a).abs() / (len - 1) as f64, 0, len)
 }
 
 #[cfg(test)]
@@ -407,6 +431,23 @@ mod tests {
             let built = bbox.point_grid(65, 65, &grid).unwrap();
             prop_assert_eq!(built, grid.tile_samples(t, 0));
         }
+    }
+
+    #[test]
+    fn grids_on_the_lattice_are_recognised() {
+        let g = TileGrid::new(36.0, 65).unwrap();
+        let t = TileId::new(7, 100, 300);
+        let samples = g.tile_samples(t, 0);
+        assert_eq!(g.tile_of(&samples), Some(t));
+        assert_eq!(g.tile_of(&g.tile_samples(t, 2)), None);
+        let (level, gx, top) = g.lattice_position(&g.tile_samples(t, 2)).unwrap();
+        assert_eq!((level, gx, top), (7, 300 * 64 - 2, 101 * 64 + 2));
+        // A WMS grid whose pixel centres are the tile's samples.
+        let s = g.sector(t);
+        let d = g.spacing_deg(7) / 2.0;
+        let wms = BBox { west: s.min_lon - d, south: s.min_lat - d, east: s.max_lon + d, north: s.max_lat + d }.area_grid(65, 65).unwrap();
+        assert_eq!(g.tile_of(&wms), Some(t));
+        assert_eq!(g.tile_of(&BBox::parse("0,0,1,1").unwrap().area_grid(65, 65).unwrap()), None);
     }
 
     #[test]

@@ -71,6 +71,14 @@ impl GeoRaster {
         GeoRaster { levels: pyramid::build(base, reducers, cache), georef, bounds }
     }
 
+    /// A source whose overviews come with it (level `k` halves level
+    /// `k − 1`), such as an upstream server's zoom levels.
+    pub fn from_levels(levels: Vec<Blocks>, georef: Georef) -> GeoRaster {
+        let size = levels.first().map_or((0, 0), Blocks::size);
+        let bounds = lon_lat_bounds(&georef, size);
+        GeoRaster { levels, georef, bounds }
+    }
+
     /// The source's name (its file, or a description).
     pub fn name(&self) -> &Path {
         self.levels[0].source().name()
@@ -100,7 +108,7 @@ impl GeoRaster {
     /// larger than the grid spacing. Depends on the spacing alone, so every
     /// tile of a level reads the same overview.
     pub fn level_for(&self, grid: &SampleGrid) -> usize {
-        let spacing = grid.lon.step.abs().min(grid.lat.step.abs());
+        let spacing = grid.lon.step_deg().min(grid.lat.step_deg());
         let ratio = spacing / self.georef.pixel_deg();
         if ratio < 2.0 { 0 } else { (ratio.log2().floor() as usize).min(self.levels.len() - 1) }
     }
@@ -137,7 +145,7 @@ impl GeoRaster {
         let (w0, w1) = (grid.lon.coord(0), grid.lon.coord(grid.width() - 1));
         let (n0, s0) = (grid.lat.coord(0), grid.lat.coord(grid.height() - 1));
         let wraps = w0 < -180.0 || w1 > 180.0 || n0 > 90.0 || s0 < -90.0;
-        let (pad_lon, pad_lat) = (grid.lon.step.abs(), grid.lat.step.abs());
+        let (pad_lon, pad_lat) = (grid.lon.step_deg(), grid.lat.step_deg());
         let sector =
             Sector { min_lat: s0 - pad_lat, max_lat: n0 + pad_lat, min_lon: w0 - pad_lon, max_lon: w1 + pad_lon };
         wraps || sector.intersects(&self.bounds)
@@ -238,7 +246,7 @@ fn grid_crosses_pole(grid: &SampleGrid) -> bool {
 /// Mesh step: a power of two, at most 16, with cells of at most `MESH_CELL_M`.
 /// Uses the latitude spacing only, so it is constant per level.
 fn mesh_step(grid: &SampleGrid) -> i64 {
-    let spacing_m = grid.lat.step.abs() * METRES_PER_DEGREE;
+    let spacing_m = grid.lat.step_deg() * METRES_PER_DEGREE;
     let mut m = 16;
     while m > 1 && m as f64 * spacing_m > MESH_CELL_M {
         m /= 2;

@@ -22,6 +22,8 @@ pub mod memory;
 pub mod nodata;
 mod palette;
 pub mod pyramid;
+#[cfg(feature = "http")]
+pub mod remote;
 
 pub use blocks::{BlockCache, Blocks};
 pub use crs::{Crs, CrsError};
@@ -60,6 +62,14 @@ pub enum SourceError {
         path: PathBuf,
         /// Which feature.
         what: String,
+    },
+    /// An upstream server failed or answered nonsense.
+    #[error("upstream {url}: {problem}")]
+    Upstream {
+        /// The request.
+        url: String,
+        /// What went wrong.
+        problem: String,
     },
     /// The file's coordinate reference system is unusable.
     #[error("{path}: {source}")]

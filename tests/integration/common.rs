@@ -107,6 +107,8 @@ pub fn synthetic(dem: Raster<f32>, cover_percent: Option<Raster<f32>>, lon0: f64
     let half = 0.5 * pixel_deg;
     Region {
         name: "synthetic".into(),
+        version: "synthetic".into(),
+        upstream_ttl: None,
         tiles: sylva::grid::TileGrid::new(36.0, 513).expect("grid"),
         bounds: sylva::grid::BBox {
             west: lon0 - half,
@@ -117,6 +119,7 @@ pub fn synthetic(dem: Raster<f32>, cover_percent: Option<Raster<f32>>, lon0: f64
         dem,
         dem_resampling: sylva::raster::resample::Resampling::Bilinear,
         landcover,
+        map: None,
         proxy: Arc::new(sylva::canopy::ProceduralProxy::new(Default::default())),
         heights_16: sylva::encode::Quantization::PNG16_HEIGHTS,
         cache,

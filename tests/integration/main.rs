@@ -10,7 +10,9 @@ mod common; // shared helpers: data paths, regions, comparisons
 mod config_files; // every file in config/ parses and builds its region
 mod conservative; // acceleration bounds never below the surface, exhaustively
 mod extreme; // stiff and extreme inputs: huge ranges, cliffs, nodata, poles, sizes
+mod http; // a `sylva serve` process for tests, and an HTTP client
 mod real_data; // rmnp, mt_hood, storm_lake, nz_forest against their sources
 mod seamless; // tiles equal windows of whole-area builds; neighbours agree
+mod server; // the server over HTTP: WMS, tiles, cache, concurrency, bad input, shutdown
 mod skipped_work; // stages nobody needs do not run (counted)
 mod sources; // broken and hostile files give errors that name them

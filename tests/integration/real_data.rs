@@ -15,8 +15,8 @@ use sylva::source::Crs;
 /// A one-sample grid at a point, at a fine spacing (native-resolution reads).
 fn point(lon: f64, lat: f64) -> SampleGrid {
     SampleGrid {
-        lon: Axis { origin: lon, step: 1e-5, first: 0, len: 1 },
-        lat: Axis { origin: lat, step: -1e-5, first: 0, len: 1 },
+        lon: Axis::degrees(lon, 1e-5, 0, 1),
+        lat: Axis::degrees(lat, -1e-5, 0, 1),
     }
 }
 

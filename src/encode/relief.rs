@@ -1,0 +1,98 @@
+//! The shaded-relief preview, for people in QGIS and web maps: the map's
+//! colours (or a colour per surface class) shaded by the combined elevation
+//! map, so canopy and terrain both show, as an RGBA PNG.
+//!
+//! Shading is Horn's gradient with light from the north-west, 45° up; it
+//! needs one sample of margin around the image.
+
+use super::EncodeError;
+use crate::cem::surface::{NODATA, SurfaceType};
+use crate::raster::Raster;
+
+/// What the preview is made from.
+pub struct Relief<'a> {
+    /// CEM heights with one extra sample on every side.
+    pub cem: &'a Raster<f32>,
+    /// Surface classes of the image's samples.
+    pub surface: &'a Raster<u8>,
+    /// The map's R, G, B at the image's samples, if the region has a map.
+    pub map: Option<&'a [Raster<f32>]>,
+    /// Ground distance between columns and between rows, metres.
+    pub spacing_m: (f64, f64),
+}
+
+/// Colours of surface classes when there is no map.
+fn class_colour(class: u8) -> [f32; 3] {
+    match SurfaceType::from_id(class) {
+        Some(SurfaceType::Forest) => [96.0, 140.0, 80.0],
+        Some(SurfaceType::Water) => [120.0, 170.0, 220.0],
+        Some(SurfaceType::Rock) => [205.0, 200.0, 190.0],
+        Some(SurfaceType::Ice) => [245.0, 248.0, 252.0],
+        Some(SurfaceType::Built) => [200.0, 150.0, 140.0],
+        _ => [215.0, 215.0, 175.0],
+    }
+}
+
+/// Renders the preview as an RGBA PNG; nodata is transparent.
+pub fn encode(r: &Relief) -> Result<Vec<u8>, EncodeError> {
+    let (w, h) = (r.surface.width(), r.surface.height());
+    let mut rgba = Vec::with_capacity(4 * w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let class = r.surface.get(x, y);
+            let shade = shade(r.cem, x + 1, y + 1, r.spacing_m);
+            if class == NODATA || shade.is_nan() {
+                rgba.extend_from_slice(&[0, 0, 0, 0]);
+                continue;
+            }
+            let base = match r.map {
+                Some(bands) => [0, 1, 2].map(|b| bands[b].get(x, y)),
+                None => class_colour(class),
+            };
+            // Canopy reads darker and greener, as forest does from the air.
+            let tint = if class == SurfaceType::Forest as u8 { [0.8, 0.9, 0.75] } else { [1.0; 3] };
+            let light = 0.3 + 0.7 * shade;
+            let c = [0, 1, 2].map(|k| (base[k] * tint[k] * light).clamp(0.0, 255.0) as u8);
+            rgba.extend_from_slice(&[c[0], c[1], c[2], 255]);
+        }
+    }
+    let mut out = Vec::new();
+    let encoder = image::codecs::png::PngEncoder::new_with_quality(
+        &mut out,
+        image::codecs::png::CompressionType::Fast,
+        image::codecs::png::FilterType::Paeth,
+    );
+    image::ImageEncoder::write_image(encoder, &rgba, w as u32, h as u32, image::ExtendedColorType::Rgba8)
+        .map_err(|e| EncodeError(e.to_string()))?;
+    Ok(out)
+}
+
+/// Lambertian shade in [0, 1] at `(x, y)` of `cem` from Horn's 3×3 gradient.
+fn shade(cem: &Raster<f32>, x: usize, y: usize, (dx, dy): (f64, f64)) -> f32 {
+    let z = |i: usize, j: usize| f64::from(cem.get(i, j));
+    let gx = ((z(x + 1, y - 1) + 2.0 * z(x + 1, y) + z(x + 1, y + 1)) - (z(x - 1, y - 1) + 2.0 * z(x - 1, y) + z(x - 1, y + 1))) / (8.0 * dx);
+    let gy = ((z(x - 1, y + 1) + 2.0 * z(x, y + 1) + z(x + 1, y + 1)) - (z(x - 1, y - 1) + 2.0 * z(x, y - 1) + z(x + 1, y - 1))) / (8.0 * dy);
+    // Light from azimuth 315°, altitude 45°: direction (−½, ½, √½) with y to the south.
+    let (lx, ly, lz) = (-0.5, -0.5, std::f64::consts::FRAC_1_SQRT_2);
+    let n = (gx * gx + gy * gy + 1.0).sqrt();
+    (((-gx * lx - gy * ly + lz) / n).clamp(0.0, 1.0)) as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slopes_facing_the_light_are_brighter_and_nodata_is_transparent() {
+        // Heights rising to the east: the slope faces west, towards the light.
+        let rising_east = Raster::from_fn(5, 5, |x, _| x as f32 * 10.0);
+        let falling_east = Raster::from_fn(5, 5, |x, _| -(x as f32) * 10.0);
+        assert!(shade(&rising_east, 2, 2, (10.0, 10.0)) > shade(&falling_east, 2, 2, (10.0, 10.0)));
+        let mut surface = Raster::filled(3, 3, SurfaceType::Plain as u8);
+        surface.set(1, 1, NODATA);
+        let png = encode(&Relief { cem: &rising_east, surface: &surface, map: None, spacing_m: (10.0, 10.0) }).unwrap();
+        let img = image::load_from_memory(&png).unwrap().into_rgba8();
+        assert_eq!(img.get_pixel(1, 1).0[3], 0);
+        assert_eq!(img.get_pixel(0, 0).0[3], 255);
+    }
+}

@@ -1,0 +1,87 @@
+//! Web Mercator (EPSG:3857) request grids and XYZ tile addressing (the
+//! "slippy map" scheme of OpenStreetMap, MapLibre and Terrarium tiles: tile
+//! (0, 0) at the north-west, `2^z × 2^z` tiles).
+
+use super::lattice::{Axis, MERCATOR_RADIUS_M, Mapping, SampleGrid};
+use super::{GridError, check_size};
+use std::f64::consts::PI;
+
+/// Half the side of the Web Mercator square, metres.
+pub const HALF_WORLD_M: f64 = PI * MERCATOR_RADIUS_M;
+
+/// A box in Web Mercator metres.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MercatorBox {
+    /// West, metres.
+    pub west: f64,
+    /// South, metres.
+    pub south: f64,
+    /// East, metres.
+    pub east: f64,
+    /// North, metres.
+    pub north: f64,
+}
+
+impl MercatorBox {
+    /// Validates the box: finite, west < east, south < north, within the
+    /// Mercator square (with 1 m of slack for rounding).
+    pub fn checked(self) -> Result<MercatorBox, GridError> {
+        let MercatorBox { west, south, east, north } = self;
+        let limit = HALF_WORLD_M + 1.0;
+        let ok = [west, south, east, north].iter().all(|v| v.is_finite() && v.abs() <= limit);
+        if !ok || west >= east || south >= north {
+            return Err(GridError::BadBBox(format!(
+                "EPSG:3857 box {west},{south},{east},{north}: need west < east, south < north, within ±{HALF_WORLD_M:.0} m"
+            )));
+        }
+        Ok(self)
+    }
+
+    /// The pixel centres of a `width × height` image over the box.
+    pub fn area_grid(&self, width: usize, height: usize) -> Result<SampleGrid, GridError> {
+        check_size(width, height)?;
+        let dx = (self.east - self.west) / width as f64;
+        let dy = (self.north - self.south) / height as f64;
+        Ok(SampleGrid {
+            lon: Axis { origin: self.west + 0.5 * dx, step: dx, first: 0, len: width, mapping: Mapping::MercatorX },
+            lat: Axis { origin: self.north - 0.5 * dy, step: -dy, first: 0, len: height, mapping: Mapping::MercatorY },
+        })
+    }
+
+    /// The box of XYZ tile `(z, x, y)`, or an error if it does not exist.
+    pub fn of_tile(z: u32, x: u64, y: u64) -> Result<MercatorBox, GridError> {
+        if z > 30 || x >= 1 << z || y >= 1 << z {
+            return Err(GridError::NoSuchTile { level: z, row: y, col: x, rows: 1 << z.min(30), cols: 1 << z.min(30) });
+        }
+        let size = 2.0 * HALF_WORLD_M / (1u64 << z) as f64;
+        let west = -HALF_WORLD_M + x as f64 * size;
+        let north = HALF_WORLD_M - y as f64 * size;
+        Ok(MercatorBox { west, south: north - size, east: west + size, north })
+    }
+}
+
+/// Web Mercator metres of a longitude/latitude (degrees).
+pub fn to_mercator(lon_deg: f64, lat_deg: f64) -> (f64, f64) {
+    let lat = lat_deg.clamp(-85.051_128_779_806_6, 85.051_128_779_806_6).to_radians();
+    (MERCATOR_RADIUS_M * lon_deg.to_radians(), MERCATOR_RADIUS_M * lat.tan().asinh())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tile_boxes_nest_and_their_grids_hit_known_latitudes() {
+        let world = MercatorBox::of_tile(0, 0, 0).unwrap();
+        assert_eq!(world, MercatorBox { west: -HALF_WORLD_M, south: -HALF_WORLD_M, east: HALF_WORLD_M, north: HALF_WORLD_M });
+        let ne = MercatorBox::of_tile(1, 1, 0).unwrap();
+        assert_eq!((ne.west, ne.south), (0.0, 0.0));
+        // The centre of a 2×2 grid over the world sits at ±(half the square): latitude ±66.51°.
+        let g = world.area_grid(2, 2).unwrap();
+        assert!((g.lat.coord(0) - 66.513_260_443_111_83).abs() < 1e-9 && (g.lon.coord(1) - 90.0).abs() < 1e-12);
+        assert!(MercatorBox::of_tile(3, 8, 0).is_err());
+        let (x, y) = to_mercator(-105.7, 40.35);
+        let back = MercatorBox { west: x - 1.0, south: y - 1.0, east: x + 1.0, north: y + 1.0 }.area_grid(1, 1).unwrap();
+        assert!((back.lon.coord(0) + 105.7).abs() < 1e-9 && (back.lat.coord(0) - 40.35).abs() < 1e-9);
+    }
+}

@@ -1,0 +1,166 @@
+//! `sylva serve`: the tile proxy server (axum + tokio). WMS 1.1.1/1.3.0 at
+//! `/wms`, World Wind tiles at `/tiles`, XYZ Terrarium tiles at `/xyz`,
+//! `/health` and Prometheus `/metrics`; tiles cached on disk and in memory,
+//! computed once however many clients ask (dissertation 6.5, "Preprocessing
+//! via Proxy Servers").
+//!
+//! [`router`] builds the application without a socket, so tests drive it in
+//! process; [`serve`] binds it and shuts down gracefully on SIGTERM/SIGINT.
+//!
+//! Invariant: only this module knows HTTP; CPU work runs on [`pool::Pool`],
+//! never on the async executor; no request can panic the server (bad input
+//! is a 4xx with a message, an OGC exception on `/wms`).
+
+pub mod exception;
+pub mod metrics;
+pub mod pool;
+pub mod products;
+mod respond;
+mod routes;
+pub mod service;
+pub mod wms;
+
+use crate::config::{Config, ServerConfig};
+use crate::produce::ProduceError;
+use crate::region::Region;
+use axum::Router;
+use metrics::Metrics;
+use pool::{Pool, PoolError};
+use service::TileService;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+use thiserror::Error;
+
+/// Why a request failed, sorted by who is at fault (mapped to HTTP statuses in
+/// [`respond`]).
+#[derive(Clone, Debug, Error)]
+pub enum ServeError {
+    /// The request is wrong (400).
+    #[error("{0}")]
+    BadRequest(String),
+    /// Nothing there (404, no body).
+    #[error("not found")]
+    NotFound,
+    /// Overloaded: retry later (503).
+    #[error(transparent)]
+    Busy(#[from] PoolError),
+    /// An upstream server failed (502).
+    #[error("{0}")]
+    Upstream(String),
+    /// The server failed (500).
+    #[error("internal error: {0}")]
+    Internal(String),
+}
+
+impl ServeError {
+    fn internal(e: impl std::fmt::Display) -> ServeError {
+        ServeError::Internal(e.to_string())
+    }
+}
+
+impl From<ProduceError> for ServeError {
+    fn from(e: ProduceError) -> ServeError {
+        match e {
+            ProduceError::Request(g) => ServeError::BadRequest(g.to_string()),
+            ProduceError::Source(s @ crate::source::SourceError::Upstream { .. }) => ServeError::Upstream(s.to_string()),
+            other => ServeError::Internal(other.to_string()),
+        }
+    }
+}
+
+/// Everything the handlers share.
+pub struct AppState {
+    /// Tiles of the region.
+    pub tiles: TileService,
+    /// Metrics.
+    pub metrics: Arc<Metrics>,
+    /// Server settings.
+    pub settings: ServerConfig,
+}
+
+impl AppState {
+    /// State over a region, its tile directory and settings.
+    pub fn new(region: Region, cache_dir: &Path, settings: ServerConfig) -> std::io::Result<Arc<AppState>> {
+        let metrics = Arc::new(Metrics::new());
+        let pool = Arc::new(Pool::new(settings.workers, settings.queue)?);
+        let store = Arc::new(crate::cache::DirStore::new(cache_dir));
+        let memory = settings.memory_cache_mb.max(1) * 1024 * 1024;
+        let tiles = TileService::new(Arc::new(region), store, memory, pool, metrics.clone());
+        Ok(Arc::new(AppState { tiles, metrics, settings }))
+    }
+
+    /// The region served.
+    pub fn region(&self) -> &Region {
+        self.tiles.region()
+    }
+}
+
+/// The application: every route and layer, no socket.
+pub fn router(state: Arc<AppState>) -> Router {
+    routes::router(state)
+}
+
+/// Options of `sylva serve` beyond the configuration file.
+#[derive(Clone, Debug, Default)]
+pub struct ServeOptions {
+    /// Listen here instead of `[server] bind`.
+    pub bind: Option<String>,
+    /// Cache tiles here instead of `[server] cache_dir`.
+    pub cache_dir: Option<PathBuf>,
+}
+
+/// Loads the configuration, binds, serves until SIGTERM or SIGINT, then
+/// finishes the requests in flight.
+pub async fn serve(config: Option<&Path>, options: ServeOptions) -> anyhow::Result<()> {
+    let (cfg, base, label) = match config {
+        Some(path) => (crate::config::parse_file(path)?, path.parent().unwrap_or(Path::new(".")).to_path_buf(), path.to_path_buf()),
+        None => (Config::default(), PathBuf::from("."), PathBuf::from("<built-in defaults>")),
+    };
+    let region = tokio::task::spawn_blocking(move || crate::config::region_from(&cfg, &base, &label).map(|r| (r, cfg))).await??;
+    let (region, cfg) = region;
+    let settings = cfg.server.clone();
+    let bind = options.bind.unwrap_or_else(|| settings.bind.clone());
+    let cache_dir = options.cache_dir.unwrap_or_else(|| settings.cache_dir.clone());
+    let state = AppState::new(region, &cache_dir, settings)?;
+    let listener = tokio::net::TcpListener::bind(&bind).await.map_err(|e| anyhow::anyhow!("cannot listen on {bind}: {e}"))?;
+    tracing::info!(
+        address = %listener.local_addr()?,
+        region = %state.region().name,
+        cache = %cache_dir.display(),
+        version = %state.region().version,
+        workers = state.settings.workers,
+        "serving"
+    );
+    axum::serve(listener, router(state)).with_graceful_shutdown(shutdown_signal()).await?;
+    tracing::info!("stopped");
+    Ok(())
+}
+
+/// Resolves on SIGTERM or Ctrl-C.
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = term => {},
+    }
+    tracing::info!("shutting down: finishing requests in flight");
+}
+
+/// Seconds as a duration, refusing nonsense.
+fn seconds(s: f64) -> Duration {
+    Duration::from_secs_f64(if s.is_finite() && s > 0.0 { s } else { 30.0 })
+}

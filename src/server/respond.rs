@@ -1,0 +1,67 @@
+//! HTTP responses for tiles and errors: entity tags with `304 Not Modified`,
+//! `Cache-Control`, `Server-Timing`, the 16-bit quantization of PNG16 and
+//! BIL16 bodies in `X-Sylva-Scale` / `X-Sylva-Offset`, and status codes by
+//! who is at fault.
+
+use super::ServeError;
+use super::service::Tile;
+use crate::encode::Quantization;
+use axum::body::Body;
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+
+/// What a tile response says beyond its bytes.
+pub struct TileMeta {
+    /// MIME type.
+    pub mime: &'static str,
+    /// How 16-bit codes read back, for 16-bit bodies.
+    pub quantization: Option<Quantization>,
+    /// `Cache-Control: max-age`, seconds.
+    pub max_age_s: u64,
+}
+
+/// 200 with the tile, 304 if the client has it, 404 (no body) for a tile
+/// without data.
+pub fn tile(t: &Tile, meta: &TileMeta, request: &HeaderMap) -> Response {
+    if t.bytes.is_empty() {
+        return StatusCode::NOT_FOUND.into_response();
+    }
+    let mut headers = HeaderMap::new();
+    insert(&mut headers, header::ETAG, &t.etag);
+    insert(&mut headers, header::CACHE_CONTROL, &format!("public, max-age={}", meta.max_age_s));
+    insert(&mut headers, "server-timing", &t.timing);
+    if t.stale {
+        insert(&mut headers, header::WARNING, "110 sylva \"Response is Stale\"");
+    }
+    if let Some(q) = meta.quantization {
+        insert(&mut headers, "x-sylva-scale", &q.scale.to_string());
+        insert(&mut headers, "x-sylva-offset", &q.offset.to_string());
+    }
+    let matches = request.get(header::IF_NONE_MATCH).and_then(|v| v.to_str().ok()).is_some_and(|v| v.split(',').any(|e| e.trim() == t.etag || e.trim() == "*"));
+    if matches {
+        return (StatusCode::NOT_MODIFIED, headers).into_response();
+    }
+    insert(&mut headers, header::CONTENT_TYPE, meta.mime);
+    (StatusCode::OK, headers, Body::from(t.bytes.clone())).into_response()
+}
+
+fn insert(headers: &mut HeaderMap, name: impl axum::http::header::IntoHeaderName, value: &str) {
+    if let Ok(v) = HeaderValue::from_str(value) {
+        headers.insert(name, v);
+    }
+}
+
+impl IntoResponse for ServeError {
+    fn into_response(self) -> Response {
+        match self {
+            ServeError::NotFound => StatusCode::NOT_FOUND.into_response(),
+            ServeError::BadRequest(m) => (StatusCode::BAD_REQUEST, m).into_response(),
+            ServeError::Busy(e) => (StatusCode::SERVICE_UNAVAILABLE, [(header::RETRY_AFTER, "1")], e.to_string()).into_response(),
+            ServeError::Upstream(m) => (StatusCode::BAD_GATEWAY, m).into_response(),
+            ServeError::Internal(m) => {
+                tracing::error!(error = %m, "request failed");
+                (StatusCode::INTERNAL_SERVER_ERROR, m).into_response()
+            }
+        }
+    }
+}

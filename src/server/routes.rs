@@ -1,0 +1,174 @@
+//! Routes and middleware: `/health`, `/metrics`, World Wind tiles (path and
+//! `?T=&L=&X=&Y=` forms), XYZ Terrarium tiles, and `/wms`; per-request
+//! timeout, URI length limit, gzip for BIL bodies, request metrics and logs.
+
+use super::products::{Encoding, Product};
+use super::respond::{self, TileMeta};
+use super::wms::request::MapLayer;
+use super::{AppState, ServeError};
+use crate::cem::Layer;
+use crate::encode::{self, Format};
+use crate::grid::TileId;
+use axum::Router;
+use axum::extract::{MatchedPath, Path, RawQuery, Request, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::Instant;
+use tower_http::compression::CompressionLayer;
+use tower_http::timeout::TimeoutLayer;
+use tower_http::trace::TraceLayer;
+
+/// Longest request URI, bytes; a WMS request is a few hundred.
+const MAX_URI_BYTES: usize = 8192;
+
+pub fn router(state: Arc<AppState>) -> Router {
+    let timeout = super::seconds(state.settings.request_timeout_s);
+    // Elevation grids compress well; PNG and TIFF are compressed already.
+    let bil_only = |_: StatusCode, _: axum::http::Version, h: &HeaderMap, _: &axum::http::Extensions| {
+        h.get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok()).is_some_and(|t| t.starts_with("application/bil"))
+    };
+    Router::new()
+        .route("/health", get(health))
+        .route("/metrics", get(metrics))
+        .route("/wms", get(super::wms::handle))
+        .route("/tiles", get(tile_query))
+        .route("/tiles/{layer}/{level}/{row}/{file}", get(tile_path))
+        .route("/xyz/{layer}/{z}/{x}/{file}", get(xyz))
+        .layer(CompressionLayer::new().gzip(true).compress_when(bil_only))
+        .layer(TimeoutLayer::with_status_code(StatusCode::SERVICE_UNAVAILABLE, timeout))
+        .layer(middleware::from_fn_with_state(state.clone(), observe))
+        .layer(TraceLayer::new_for_http())
+        .with_state(state)
+}
+
+/// Refuses overlong URIs and records every request's route, status and time.
+async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
+    let start = Instant::now();
+    let route = request.extensions().get::<MatchedPath>().map_or("other", |p| route_label(p.as_str()));
+    let response = if request.uri().to_string().len() > MAX_URI_BYTES {
+        (StatusCode::URI_TOO_LONG, format!("request URI longer than {MAX_URI_BYTES} bytes")).into_response()
+    } else {
+        next.run(request).await
+    };
+    state.metrics.request(route, response.status().as_u16(), start.elapsed());
+    response
+}
+
+fn route_label(path: &str) -> &'static str {
+    match path {
+        "/health" => "health",
+        "/metrics" => "metrics",
+        "/wms" => "wms",
+        "/tiles" | "/tiles/{layer}/{level}/{row}/{file}" => "tiles",
+        "/xyz/{layer}/{z}/{x}/{file}" => "xyz",
+        _ => "other",
+    }
+}
+
+async fn health(State(state): State<Arc<AppState>>) -> Response {
+    let r = state.region();
+    let body = format!("{{\"status\":\"ok\",\"region\":{:?},\"version\":{:?}}}\n", r.name, r.version);
+    ([(header::CONTENT_TYPE, "application/json")], body).into_response()
+}
+
+async fn metrics(State(state): State<Arc<AppState>>) -> Response {
+    ([(header::CONTENT_TYPE, "application/openmetrics-text; version=1.0.0; charset=utf-8")], state.metrics.render()).into_response()
+}
+
+/// `/tiles/{layer}/{level}/{row}/{row}_{col}.{ext}?halo=B`.
+async fn tile_path(
+    State(state): State<Arc<AppState>>,
+    Path((layer, level, row, file)): Path<(String, u32, u64, String)>,
+    RawQuery(query): RawQuery,
+    headers: HeaderMap,
+) -> Result<Response, ServeError> {
+    let (stem, ext) = file.rsplit_once('.').ok_or(ServeError::NotFound)?;
+    let (file_row, col) = stem.split_once('_').ok_or(ServeError::NotFound)?;
+    if file_row.parse::<u64>().ok() != Some(row) {
+        return Err(ServeError::NotFound);
+    }
+    let col: u64 = col.parse().map_err(|_| ServeError::NotFound)?;
+    let params = query_map(query.as_deref());
+    tile(&state, &layer, TileId::new(level, row, col), ext, halo(&params, &state)?, &headers).await
+}
+
+/// `/tiles?T={layer}&L={level}&X={col}&Y={row}` (World Wind's request form);
+/// BIL16 unless `F` names another extension.
+async fn tile_query(State(state): State<Arc<AppState>>, RawQuery(query): RawQuery, headers: HeaderMap) -> Result<Response, ServeError> {
+    let params = query_map(query.as_deref());
+    let need = |k: &str| params.get(k).ok_or_else(|| ServeError::BadRequest(format!("parameter {k} is missing")));
+    let number = |k: &str| need(k)?.parse::<u64>().map_err(|_| ServeError::BadRequest(format!("{k} must be a whole number")));
+    let id = TileId::new(u32::try_from(number("L")?).map_err(|_| ServeError::NotFound)?, number("Y")?, number("X")?);
+    let ext = params.get("F").map_or("bil", String::as_str);
+    tile(&state, need("T")?, id, ext, halo(&params, &state)?, &headers).await
+}
+
+fn halo(params: &HashMap<String, String>, state: &AppState) -> Result<usize, ServeError> {
+    let Some(text) = params.get("HALO") else { return Ok(0) };
+    let max = state.settings.max_halo;
+    text.parse::<usize>().ok().filter(|&h| h <= max).ok_or_else(|| ServeError::BadRequest(format!("halo must be 0 to {max}")))
+}
+
+async fn tile(state: &AppState, layer: &str, id: TileId, ext: &str, halo: usize, headers: &HeaderMap) -> Result<Response, ServeError> {
+    let layer = parse_layer(layer)?;
+    let encoding = match (layer, ext.to_ascii_lowercase().as_str()) {
+        (MapLayer::Relief, "png") => Encoding::Relief,
+        (MapLayer::Relief, _) => return Err(ServeError::BadRequest("relief tiles are .png".into())),
+        (_, "bil" | "bil16") => Encoding::Data(Format::Bil16),
+        (_, "bil32") => Encoding::Data(Format::Bil32),
+        (_, "png") => Encoding::Data(Format::Png16),
+        (_, "tif" | "tiff") => Encoding::Data(Format::Tiff),
+        (_, other) => return Err(ServeError::BadRequest(format!("tile extension .{other}: use bil, bil32, png or tif"))),
+    };
+    if state.region().tiles.check(id).is_err() {
+        return Err(ServeError::NotFound);
+    }
+    let product = Product::Tile { layer, id, halo, encoding };
+    let t = state.tiles.get(product).await?;
+    Ok(respond::tile(&t, &meta(state, layer, encoding), headers))
+}
+
+/// `/xyz/{layer}/{z}/{x}/{y}.png`: Terrarium heights, or the relief preview.
+async fn xyz(
+    State(state): State<Arc<AppState>>,
+    Path((layer, z, x, file)): Path<(String, u32, u64, String)>,
+    headers: HeaderMap,
+) -> Result<Response, ServeError> {
+    let y: u64 = file.strip_suffix(".png").and_then(|s| s.parse().ok()).ok_or(ServeError::NotFound)?;
+    let layer = parse_layer(&layer)?;
+    if matches!(layer, MapLayer::Data(Layer::Cover | Layer::Surface)) {
+        return Err(ServeError::BadRequest(format!("{} is not a height: XYZ tiles carry heights or the relief", layer.name())));
+    }
+    if z > 24 || x >= 1 << z || y >= 1 << z {
+        return Err(ServeError::NotFound);
+    }
+    let t = state.tiles.get(Product::Xyz { layer, zxy: (z, x, y) }).await?;
+    let encoding = if layer == MapLayer::Relief { Encoding::Relief } else { Encoding::Terrarium };
+    Ok(respond::tile(&t, &meta(&state, layer, encoding), &headers))
+}
+
+fn parse_layer(name: &str) -> Result<MapLayer, ServeError> {
+    if name.eq_ignore_ascii_case("relief") {
+        return Ok(MapLayer::Relief);
+    }
+    Layer::parse(name).map(MapLayer::Data).ok_or_else(|| ServeError::BadRequest(format!("unknown layer {name:?}")))
+}
+
+/// MIME type, quantization and caching of a tile response.
+pub fn meta(state: &AppState, layer: MapLayer, encoding: Encoding) -> TileMeta {
+    let quantization = match (layer, encoding) {
+        (MapLayer::Data(l), Encoding::Data(Format::Bil16)) => Some(encode::quantizations(l, state.region().heights_16).0),
+        (MapLayer::Data(l), Encoding::Data(Format::Png16)) => Some(encode::quantizations(l, state.region().heights_16).1),
+        _ => None,
+    };
+    TileMeta { mime: encoding.mime(), quantization, max_age_s: state.settings.tile_max_age_s }
+}
+
+/// Query parameters with upper-cased keys.
+fn query_map(query: Option<&str>) -> HashMap<String, String> {
+    form_urlencoded::parse(query.unwrap_or("").as_bytes()).map(|(k, v)| (k.to_ascii_uppercase(), v.into_owned())).collect()
+}

@@ -1,0 +1,203 @@
+//! WMS GetCapabilities documents, 1.1.1 and 1.3.0: one root layer holding
+//! the served layers, their geographic box and a bounding box per CRS in
+//! that CRS's axis order (1.3.0 EPSG:4326 is lat,lon), the formats, the size
+//! limits, and — in each layer's abstract — how 16-bit PNG codes map to
+//! values.
+
+use super::super::exception::escape;
+use super::request::{LAYERS, MapFormat, MapLayer, RequestCrs, Version};
+use crate::encode::{self, Quantization};
+use crate::grid::BBox;
+use crate::grid::mercator::to_mercator;
+
+/// What the documents describe.
+pub struct Service<'a> {
+    /// Absolute URL of the WMS endpoint (without query).
+    pub url: &'a str,
+    /// Region name, the service title.
+    pub title: &'a str,
+    /// Where the data is.
+    pub bounds: BBox,
+    /// Largest WIDTH / HEIGHT.
+    pub max_side: usize,
+    /// PNG16 quantization of heights.
+    pub heights_16: Quantization,
+}
+
+/// The capabilities document of `version`, and its MIME type.
+pub fn document(s: &Service, version: Version) -> (&'static str, String) {
+    match version {
+        Version::V130 => ("text/xml", v130(s)),
+        Version::V111 => ("application/vnd.ogc.wms_xml", v111(s)),
+    }
+}
+
+fn v130(s: &Service) -> String {
+    let url = escape(s.url);
+    let b = s.bounds;
+    let formats: String = MapFormat::ALL.iter().map(|(_, m)| format!("<Format>{m}</Format>")).collect();
+    let crs: String = RequestCrs::ALL.iter().map(|(_, n)| format!("<CRS>{n}</CRS>")).collect();
+    format!(
+        r#"<?xml version="1.0" encoding="UTF-8"?>
+<WMS_Capabilities version="1.3.0" xmlns="http://www.opengis.net/wms" xmlns:xlink="http://www.w3.org/1999/xlink" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengis.net/wms http://schemas.opengis.net/wms/1.3.0/capabilities_1_3_0.xsd">
+<Service><Name>WMS</Name><Title>{title}</Title><Abstract>Combined elevation maps (terrain + forest canopy) computed on demand by Sylva.</Abstract><OnlineResource xlink:type="simple" xlink:href="{url}"/><MaxWidth>{max}</MaxWidth><MaxHeight>{max}</MaxHeight></Service>
+<Capability><Request>
+<GetCapabilities><Format>text/xml</Format>{dcp}</GetCapabilities>
+<GetMap>{formats}{dcp}</GetMap>
+</Request>
+<Exception><Format>XML</Format><Format>INIMAGE</Format><Format>BLANK</Format></Exception>
+<Layer><Title>{title}</Title>{crs}
+<EX_GeographicBoundingBox><westBoundLongitude>{w}</westBoundLongitude><eastBoundLongitude>{e}</eastBoundLongitude><southBoundLatitude>{so}</southBoundLatitude><northBoundLatitude>{n}</northBoundLatitude></EX_GeographicBoundingBox>
+{boxes}
+{layers}</Layer>
+</Capability>
+</WMS_Capabilities>
+"#,
+        title = escape(s.title),
+        max = s.max_side,
+        dcp = dcp(&url),
+        w = b.west,
+        e = b.east,
+        so = b.south,
+        n = b.north,
+        boxes = bounding_boxes(b, Version::V130),
+        layers = layers(s, Version::V130),
+    )
+}
+
+fn v111(s: &Service) -> String {
+    let url = escape(s.url);
+    let b = s.bounds;
+    let formats: String = MapFormat::ALL.iter().map(|(_, m)| format!("<Format>{m}</Format>")).collect();
+    let srs: String = RequestCrs::ALL.iter().filter(|(c, _)| *c != RequestCrs::Crs84).map(|(_, n)| format!("<SRS>{n}</SRS>")).collect();
+    format!(
+        r#"<?xml version="1.0" encoding="UTF-8"?>
+<!DOCTYPE WMT_MS_Capabilities SYSTEM "http://schemas.opengis.net/wms/1.1.1/WMS_MS_Capabilities.dtd">
+<WMT_MS_Capabilities version="1.1.1">
+<Service><Name>OGC:WMS</Name><Title>{title}</Title><Abstract>Combined elevation maps (terrain + forest canopy) computed on demand by Sylva.</Abstract><OnlineResource xmlns:xlink="http://www.w3.org/1999/xlink" xlink:type="simple" xlink:href="{url}"/></Service>
+<Capability><Request>
+<GetCapabilities><Format>application/vnd.ogc.wms_xml</Format>{dcp}</GetCapabilities>
+<GetMap>{formats}{dcp}</GetMap>
+</Request>
+<Exception><Format>application/vnd.ogc.se_xml</Format><Format>application/vnd.ogc.se_inimage</Format><Format>application/vnd.ogc.se_blank</Format></Exception>
+<Layer><Title>{title}</Title>{srs}
+<LatLonBoundingBox minx="{w}" miny="{so}" maxx="{e}" maxy="{n}"/>
+{boxes}
+{layers}</Layer>
+</Capability>
+</WMT_MS_Capabilities>
+"#,
+        title = escape(s.title),
+        dcp = dcp_111(&url),
+        w = b.west,
+        e = b.east,
+        so = b.south,
+        n = b.north,
+        boxes = bounding_boxes(b, Version::V111),
+        layers = layers(s, Version::V111),
+    )
+}
+
+fn dcp(url: &str) -> String {
+    format!(r#"<DCPType><HTTP><Get><OnlineResource xlink:type="simple" xlink:href="{url}?"/></Get></HTTP></DCPType>"#)
+}
+
+fn dcp_111(url: &str) -> String {
+    format!(
+        r#"<DCPType><HTTP><Get><OnlineResource xmlns:xlink="http://www.w3.org/1999/xlink" xlink:type="simple" xlink:href="{url}?"/></Get></HTTP></DCPType>"#
+    )
+}
+
+/// A `BoundingBox` per CRS, in the CRS's axis order for `version`.
+fn bounding_boxes(b: BBox, version: Version) -> String {
+    let (x0, y0) = to_mercator(b.west, b.south);
+    let (x1, y1) = to_mercator(b.east, b.north);
+    let attr = if version == Version::V130 { "CRS" } else { "SRS" };
+    let mut out = Vec::new();
+    for (crs, name) in RequestCrs::ALL {
+        let [a, bb, c, d] = match (crs, version) {
+            (RequestCrs::Epsg3857, _) => [x0, y0, x1, y1],
+            (RequestCrs::Epsg4326, Version::V130) => [b.south, b.west, b.north, b.east],
+            (RequestCrs::Crs84, Version::V111) => continue,
+            _ => [b.west, b.south, b.east, b.north],
+        };
+        out.push(format!(r#"<BoundingBox {attr}="{name}" minx="{a}" miny="{bb}" maxx="{c}" maxy="{d}"/>"#));
+    }
+    out.join("\n")
+}
+
+fn layers(s: &Service, version: Version) -> String {
+    LAYERS.iter().map(|&l| format!(r#"<Layer queryable="0"><Name>{}</Name><Title>{}</Title><Abstract>{}</Abstract>{}</Layer>"#, l.name(), title(l), escape(&abstract_of(l, s)), bounding_boxes(s.bounds, version).replace('\n', ""))).collect::<Vec<_>>().join("\n")
+}
+
+fn title(layer: MapLayer) -> &'static str {
+    use crate::cem::Layer::*;
+    match layer {
+        MapLayer::Data(Dem) => "Ground elevation (m)",
+        MapLayer::Data(Cover) => "Vegetation cover (0-1)",
+        MapLayer::Data(Canopy) => "Canopy height above ground (m)",
+        MapLayer::Data(Cem) => "Combined elevation map: ground + canopy (m)",
+        MapLayer::Data(Surface) => "Surface type (class id)",
+        MapLayer::Data(_) => "Safety zone (m)",
+        MapLayer::Relief => "Shaded relief with map colours and canopy",
+    }
+}
+
+/// How to read the layer's encodings.
+fn abstract_of(layer: MapLayer, s: &Service) -> String {
+    let MapLayer::Data(l) = layer else {
+        return "RGBA PNG for viewing: hillshade of the combined elevation map over the map colours.".into();
+    };
+    let (bil16, png16) = encode::quantizations(l, s.heights_16);
+    let units = match l {
+        crate::cem::Layer::Cover => "cover fraction",
+        crate::cem::Layer::Surface => "class id (0 plain, 1 forest, 2 water, 3 rock, 4 ice, 5 built, 255 nodata)",
+        _ => "metres",
+    };
+    format!(
+        "Values in {units}. image/png: 16-bit grey, value = {} + {} * code (code 0 is nodata for heights). \
+         application/bil16: little-endian int16, value = {} + {} * code, nodata -32768. \
+         application/bil32 and image/tiff: float32, nodata -32768.",
+        png16.offset, png16.scale, bil16.offset, bil16.scale
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn service() -> Service<'static> {
+        Service {
+            url: "http://127.0.0.1:8080/wms",
+            title: "Test & region",
+            bounds: BBox { west: -106.0, south: 40.0, east: -105.0, north: 41.0 },
+            max_side: 4096,
+            heights_16: Quantization::PNG16_HEIGHTS,
+        }
+    }
+
+    #[test]
+    fn both_versions_are_well_formed_and_list_every_layer() {
+        for version in [Version::V111, Version::V130] {
+            let (_, xml) = document(&service(), version);
+            let options = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
+            let doc = roxmltree::Document::parse_with_options(&xml, options).unwrap_or_else(|e| panic!("{version:?}: {e}\n{xml}"));
+            let names: Vec<&str> = doc.descendants().filter(|n| n.has_tag_name("Name") && n.parent().is_some_and(|p| p.has_tag_name("Layer"))).filter_map(|n| n.text()).collect();
+            assert_eq!(names, ["dem", "cover", "canopy", "cem", "surface", "relief"]);
+        }
+    }
+
+    #[test]
+    fn bounding_boxes_use_each_crs_axis_order() {
+        let (_, xml) = document(&service(), Version::V130);
+        let doc = roxmltree::Document::parse(&xml).unwrap();
+        let boxes: Vec<_> = doc.descendants().filter(|n| n.has_tag_name("BoundingBox")).take(3).collect();
+        let attr = |i: usize, a: &str| boxes[i].attribute(a).unwrap().parse::<f64>().unwrap();
+        assert_eq!(boxes[0].attribute("CRS"), Some("EPSG:4326"));
+        assert_eq!((attr(0, "minx"), attr(0, "miny")), (40.0, -106.0));
+        assert_eq!(boxes[1].attribute("CRS"), Some("CRS:84"));
+        assert_eq!((attr(1, "minx"), attr(1, "miny")), (-106.0, 40.0));
+        assert!(attr(2, "minx") < -1.1e7 && attr(2, "miny") > 4.8e6);
+        assert!(xml.contains("-500.15 + 0.15 * code"));
+    }
+}

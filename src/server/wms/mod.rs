@@ -1,0 +1,171 @@
+//! The `/wms` endpoint: GetCapabilities and GetMap, with OGC exceptions.
+//!
+//! A GetMap whose pixel centres are exactly a tile's samples is that tile and
+//! comes from the tile cache; one whose pixel centres lie on a level's lattice
+//! is stitched from cached tiles; any other grid is computed directly.
+
+pub mod capabilities;
+mod inimage;
+pub mod request;
+
+use super::exception::Exception;
+use super::products::{Encoding, Product};
+use super::routes::meta;
+use super::{AppState, ServeError, respond};
+use crate::cem::Layer;
+use crate::encode::{self, Format, Samples};
+use crate::grid::TileId;
+use crate::raster::Raster;
+use axum::extract::{RawQuery, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use request::{ExceptionStyle, GetMap, Limits, MapFormat, MapLayer, Reply, Request};
+use std::sync::Arc;
+
+/// Most tiles a GetMap is stitched from; larger requests are computed directly.
+const MAX_STITCHED_TILES: usize = 16;
+
+/// Answers a WMS request.
+pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuery, headers: HeaderMap) -> Response {
+    let limits = Limits { max_side: state.settings.max_size };
+    match request::parse(query.as_deref().unwrap_or(""), limits) {
+        Err((e, reply)) => exception(&e, reply, &state),
+        Ok(Request::GetCapabilities(version)) => {
+            let url = endpoint(&state, &headers);
+            let r = state.region();
+            let service = capabilities::Service { url: &url, title: &r.name, bounds: r.bounds, max_side: limits.max_side, heights_16: r.heights_16 };
+            let (mime, body) = capabilities::document(&service, version);
+            ([(header::CONTENT_TYPE, mime)], body).into_response()
+        }
+        Ok(Request::GetMap(map)) => {
+            let reply = Reply { version: map.version, style: ExceptionStyle::Xml, image: None };
+            match get_map(&state, &map, &headers).await {
+                Ok(response) => response,
+                Err(ServeError::BadRequest(m)) => {
+                    exception(&Exception::new(super::exception::Code::InvalidParameterValue, m), reply, &state)
+                }
+                Err(ServeError::Upstream(m)) => {
+                    let (mime, body) = Exception::new(super::exception::Code::NoApplicableCode, m).report(map.version);
+                    (StatusCode::BAD_GATEWAY, [(header::CONTENT_TYPE, mime)], body).into_response()
+                }
+                Err(other) => other.into_response(),
+            }
+        }
+    }
+}
+
+/// The absolute URL of this endpoint: configured, or from the Host header.
+fn endpoint(state: &AppState, headers: &HeaderMap) -> String {
+    if let Some(url) = &state.settings.public_url {
+        return format!("{}/wms", url.trim_end_matches('/'));
+    }
+    let host = headers.get(header::HOST).and_then(|h| h.to_str().ok()).unwrap_or("localhost");
+    format!("http://{host}/wms")
+}
+
+async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<Response, ServeError> {
+    let encoding = match (map.layer, map.format) {
+        (MapLayer::Relief, _) => Encoding::Relief,
+        (_, MapFormat::Png) => Encoding::Data(Format::Png16),
+        (_, MapFormat::Tiff) => Encoding::Data(Format::Tiff),
+        (_, MapFormat::Bil16) => Encoding::Data(Format::Bil16),
+        (_, MapFormat::Bil32) => Encoding::Data(Format::Bil32),
+    };
+    let tiles = &state.region().tiles;
+    let tile = match tiles.tile_of(&map.grid) {
+        Some(id) => state.tiles.get(Product::Tile { layer: map.layer, id, halo: 0, encoding }).await?,
+        None => match stitched(state, map, encoding).await? {
+            Some(bytes) => Arc::new(super::service::Tile::new(bytes, "stitch".into())),
+            None => state.tiles.get(Product::Image { layer: map.layer, grid: map.grid, encoding }).await?,
+        },
+    };
+    if tile.bytes.is_empty() {
+        // No data here: WMS still answers with an image, empty.
+        let body = inimage::blank(&map.grid, map.format, state.region().heights_16);
+        return Ok(([(header::CONTENT_TYPE, map.format.mime())], body).into_response());
+    }
+    Ok(respond::tile(&tile, &meta(state, map.layer, encoding), headers))
+}
+
+/// The image stitched from cached BIL32 tiles, when its pixel centres lie on
+/// a level's lattice and it needs at most [`MAX_STITCHED_TILES`] tiles.
+async fn stitched(state: &AppState, map: &GetMap, encoding: Encoding) -> Result<Option<Vec<u8>>, ServeError> {
+    let MapLayer::Data(layer) = map.layer else { return Ok(None) };
+    let tiles = &state.region().tiles;
+    let Some((level, gx, top)) = tiles.lattice_position(&map.grid) else { return Ok(None) };
+    let n1 = (tiles.samples() - 1) as i64;
+    let (w, h) = (map.grid.width() as i64, map.grid.height() as i64);
+    let (cols, rows) = tiles.tiles_on_level(level);
+    let (c0, c1) = (gx.div_euclid(n1), (gx + w - 2).div_euclid(n1).max(gx.div_euclid(n1)));
+    let (r0, r1) = ((top - h + 1).div_euclid(n1), (top - 1).div_euclid(n1).max((top - h + 1).div_euclid(n1)));
+    let count = ((c1 - c0 + 1) * (r1 - r0 + 1)) as usize;
+    if c0 < 0 || r0 < 0 || c1 >= cols as i64 || r1 >= rows as i64 || count > MAX_STITCHED_TILES {
+        return Ok(None);
+    }
+    let mut out = Raster::filled(w as usize, h as usize, f32::NAN);
+    for row in r0..=r1 {
+        for col in c0..=c1 {
+            let id = TileId::new(level, row as u64, col as u64);
+            let product = Product::Tile { layer: map.layer, id, halo: 0, encoding: Encoding::Data(Format::Bil32) };
+            let tile = state.tiles.get(product).await?;
+            paste(&mut out, &tile.bytes, n1, (col * n1 - gx, top - (row + 1) * n1));
+        }
+    }
+    let Encoding::Data(format) = encoding else { return Ok(None) };
+    // BIL32 carries nodata as −32768.
+    let bytes = match layer {
+        Layer::Surface => {
+            let classes = out.map(|v| if v.is_nan() || v == encode::NODATA_HEIGHT { crate::cem::surface::NODATA } else { v as u8 });
+            encode::encode(layer, Samples::Class(&classes), &map.grid, format, state.region().heights_16)
+        }
+        _ => {
+            let heights = out.map(|v| if v == encode::NODATA_HEIGHT { f32::NAN } else { v });
+            encode::encode(layer, Samples::Float(&heights), &map.grid, format, state.region().heights_16)
+        }
+    };
+    bytes.map(|e| Some(e.bytes)).map_err(ServeError::internal)
+}
+
+/// Copies a BIL32 tile (N × N, row 0 north) into `out`, whose north-west
+/// sample is at offset `(dx, dy)` from the tile's (in samples).
+fn paste(out: &mut Raster<f32>, bil32: &[u8], n1: i64, (dx, dy): (i64, i64)) {
+    let n = (n1 + 1) as usize;
+    if bil32.len() != n * n * 4 {
+        return;
+    }
+    for j in 0..n as i64 {
+        let y = j - dy;
+        if y < 0 || y >= out.height() as i64 {
+            continue;
+        }
+        for i in 0..n as i64 {
+            let x = i - dx;
+            if x >= 0 && x < out.width() as i64 {
+                let k = 4 * (j as usize * n + i as usize);
+                out.set(x as usize, y as usize, f32::from_le_bytes([bil32[k], bil32[k + 1], bil32[k + 2], bil32[k + 3]]));
+            }
+        }
+    }
+}
+
+/// An exception answered as the request asked: a report (400), or an image.
+fn exception(e: &Exception, reply: Reply, state: &AppState) -> Response {
+    match (reply.style, reply.image) {
+        (ExceptionStyle::InImage, Some((w, h, MapFormat::Png))) => {
+            ([(header::CONTENT_TYPE, "image/png")], inimage::message(&e.to_string(), w, h)).into_response()
+        }
+        (ExceptionStyle::InImage | ExceptionStyle::Blank, Some((w, h, format))) => {
+            let grid = crate::grid::BBox { west: 0.0, south: 0.0, east: 1.0, north: 1.0 }.area_grid(w, h);
+            match grid {
+                Ok(g) => ([(header::CONTENT_TYPE, format.mime())], inimage::blank(&g, format, state.region().heights_16)).into_response(),
+                Err(_) => report(e, reply),
+            }
+        }
+        _ => report(e, reply),
+    }
+}
+
+fn report(e: &Exception, reply: Reply) -> Response {
+    let (mime, body) = e.report(reply.version);
+    (StatusCode::BAD_REQUEST, [(header::CONTENT_TYPE, mime)], body).into_response()
+}

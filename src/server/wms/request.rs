@@ -1,0 +1,359 @@
+//! Parsing and checking WMS requests (1.1.1 and 1.3.0), pure: a query string
+//! in, a typed request or an OGC exception out.
+//!
+//! Keys are case-insensitive, repeated `&` and a trailing `&` are fine.
+//! Axis order follows the specifications: WMS 1.3.0 with EPSG:4326 gives the
+//! box as lat,lon; CRS:84, EPSG:3857 and all of WMS 1.1.1 as x,y (lon,lat).
+
+use super::super::exception::{Code, Exception};
+use crate::cem::Layer;
+use crate::grid::mercator::MercatorBox;
+use crate::grid::{BBox, SampleGrid};
+use std::collections::HashMap;
+
+/// WMS version.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Version {
+    /// 1.1.1: `SRS`, lon,lat everywhere, `application/vnd.ogc.se_xml` exceptions.
+    V111,
+    /// 1.3.0: `CRS`, lat,lon for EPSG:4326, `text/xml` exceptions.
+    V130,
+}
+
+/// A layer served over WMS: a pipeline layer, or the shaded preview.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MapLayer {
+    /// One of the pipeline's layers.
+    Data(Layer),
+    /// Hillshaded map colours with the canopy, for people (RGBA PNG).
+    Relief,
+}
+
+/// Layers offered over WMS, in capabilities order.
+pub const LAYERS: [MapLayer; 6] = [
+    MapLayer::Data(Layer::Dem),
+    MapLayer::Data(Layer::Cover),
+    MapLayer::Data(Layer::Canopy),
+    MapLayer::Data(Layer::Cem),
+    MapLayer::Data(Layer::Surface),
+    MapLayer::Relief,
+];
+
+impl MapLayer {
+    /// The layer's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            MapLayer::Data(l) => l.name(),
+            MapLayer::Relief => "relief",
+        }
+    }
+
+    fn parse(text: &str) -> Option<MapLayer> {
+        LAYERS.into_iter().find(|l| l.name().eq_ignore_ascii_case(text))
+    }
+}
+
+/// Coordinate reference systems of requests.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RequestCrs {
+    /// Geographic WGS84 (lat,lon axis order in WMS 1.3.0).
+    Epsg4326,
+    /// Geographic WGS84, lon,lat always.
+    Crs84,
+    /// Web Mercator.
+    Epsg3857,
+}
+
+impl RequestCrs {
+    /// Every CRS served, as named in capabilities.
+    pub const ALL: [(RequestCrs, &'static str); 3] =
+        [(RequestCrs::Epsg4326, "EPSG:4326"), (RequestCrs::Crs84, "CRS:84"), (RequestCrs::Epsg3857, "EPSG:3857")];
+
+    fn parse(text: &str) -> Option<RequestCrs> {
+        let t = text.trim().to_ascii_uppercase();
+        match t.as_str() {
+            "EPSG:4326" => Some(RequestCrs::Epsg4326),
+            "CRS:84" | "EPSG:4326:LONLAT" => Some(RequestCrs::Crs84),
+            "EPSG:3857" | "EPSG:900913" => Some(RequestCrs::Epsg3857),
+            _ => None,
+        }
+    }
+}
+
+/// GetMap output formats.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MapFormat {
+    /// `application/bil16`.
+    Bil16,
+    /// `application/bil32`.
+    Bil32,
+    /// `image/png`: 16-bit grey for data layers, RGBA for `relief`.
+    Png,
+    /// `image/tiff`: float32 GeoTIFF.
+    Tiff,
+}
+
+impl MapFormat {
+    /// Every format, as named in capabilities.
+    pub const ALL: [(MapFormat, &'static str); 4] = [
+        (MapFormat::Png, "image/png"),
+        (MapFormat::Tiff, "image/tiff"),
+        (MapFormat::Bil16, "application/bil16"),
+        (MapFormat::Bil32, "application/bil32"),
+    ];
+
+    fn parse(text: &str) -> Option<MapFormat> {
+        match text.trim().to_ascii_lowercase().as_str() {
+            "image/png" | "png" => Some(MapFormat::Png),
+            "image/tiff" | "image/geotiff" | "tiff" => Some(MapFormat::Tiff),
+            "application/bil16" | "application/bil" | "image/bil" => Some(MapFormat::Bil16),
+            "application/bil32" => Some(MapFormat::Bil32),
+            _ => None,
+        }
+    }
+
+    /// The MIME type answered.
+    pub fn mime(self) -> &'static str {
+        Self::ALL.iter().find(|(f, _)| *f == self).map_or("application/octet-stream", |(_, m)| m)
+    }
+}
+
+/// How errors are reported (the `EXCEPTIONS` parameter).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ExceptionStyle {
+    /// A ServiceExceptionReport document.
+    Xml,
+    /// An image of the requested size with the message drawn in it.
+    InImage,
+    /// A blank (transparent) image of the requested size.
+    Blank,
+}
+
+/// A checked GetMap request.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GetMap {
+    /// Version asked for.
+    pub version: Version,
+    /// The layer.
+    pub layer: MapLayer,
+    /// The request CRS.
+    pub crs: RequestCrs,
+    /// Pixel centres of the image, row 0 at the north.
+    pub grid: SampleGrid,
+    /// Output format.
+    pub format: MapFormat,
+}
+
+/// A parsed request.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Request {
+    /// Capabilities document.
+    GetCapabilities(Version),
+    /// A map.
+    GetMap(GetMap),
+}
+
+/// Limits a request must respect.
+#[derive(Clone, Copy, Debug)]
+pub struct Limits {
+    /// Largest WIDTH and HEIGHT.
+    pub max_side: usize,
+}
+
+/// How an exception must be answered: its style, and the image it replaces.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Reply {
+    /// Version for the report's form.
+    pub version: Version,
+    /// XML, in-image or blank.
+    pub style: ExceptionStyle,
+    /// Image size and format for in-image and blank replies.
+    pub image: Option<(usize, usize, MapFormat)>,
+}
+
+/// Parses a query string.
+pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)> {
+    let params = Params::new(query);
+    let version = match params.get("VERSION").or(params.get("WMTVER")) {
+        Some("1.1.1" | "1.1.0" | "1.1" | "1.0.0") => Version::V111,
+        _ => Version::V130,
+    };
+    let mut reply = Reply { version, style: ExceptionStyle::Xml, image: None };
+    let fail = |e: Exception, reply: Reply| Err((e, reply));
+    if let Some(service) = params.get("SERVICE").filter(|s| !s.eq_ignore_ascii_case("WMS")) {
+        return fail(Exception::new(Code::InvalidParameterValue, format!("SERVICE={service}: only WMS is served")), reply);
+    }
+    let Some(request) = params.get("REQUEST") else {
+        return fail(Exception::new(Code::MissingParameterValue, "REQUEST is missing"), reply);
+    };
+    match request.to_ascii_lowercase().as_str() {
+        "getcapabilities" | "capabilities" => Ok(Request::GetCapabilities(version)),
+        "getmap" | "map" => {
+            reply.style = exception_style(params.get("EXCEPTIONS"));
+            reply.image = image_of(&params);
+            get_map(&params, version, limits).map(Request::GetMap).map_err(|e| (e, reply))
+        }
+        other => fail(Exception::new(Code::OperationNotSupported, format!("REQUEST={other} is not supported")), reply),
+    }
+}
+
+fn exception_style(value: Option<&str>) -> ExceptionStyle {
+    let v = value.unwrap_or("").to_ascii_lowercase();
+    if v.ends_with("inimage") {
+        ExceptionStyle::InImage
+    } else if v.ends_with("blank") {
+        ExceptionStyle::Blank
+    } else {
+        ExceptionStyle::Xml
+    }
+}
+
+/// Size and format of the image an in-image exception replaces, if they parse.
+fn image_of(params: &Params) -> Option<(usize, usize, MapFormat)> {
+    let w = params.get("WIDTH")?.trim().parse().ok()?;
+    let h = params.get("HEIGHT")?.trim().parse().ok()?;
+    let f = MapFormat::parse(params.get("FORMAT")?)?;
+    (w > 0 && h > 0 && w <= 8192 && h <= 8192).then_some((w, h, f))
+}
+
+fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, Exception> {
+    let required = |key: &'static str| {
+        params.get(key).filter(|v| !v.is_empty()).ok_or_else(|| Exception::new(Code::MissingParameterValue, format!("{key} is missing")))
+    };
+    let layers = required("LAYERS")?;
+    let layer = match layers.split(',').collect::<Vec<_>>()[..] {
+        [one] => MapLayer::parse(one.trim())
+            .ok_or_else(|| Exception::new(Code::LayerNotDefined, format!("layer {one:?} is not served")).locator("LAYERS"))?,
+        _ => return Err(Exception::new(Code::InvalidParameterValue, "one layer per request").locator("LAYERS")),
+    };
+    let crs_key = if version == Version::V130 { "CRS" } else { "SRS" };
+    let crs_text = params.get(crs_key).or(params.get(if crs_key == "CRS" { "SRS" } else { "CRS" }));
+    let crs_text = crs_text.ok_or_else(|| Exception::new(Code::MissingParameterValue, format!("{crs_key} is missing")))?;
+    let crs = RequestCrs::parse(crs_text).ok_or_else(|| {
+        let code = if version == Version::V130 { Code::InvalidCrs } else { Code::InvalidSrs };
+        Exception::new(code, format!("{crs_text} is not offered (EPSG:4326, CRS:84, EPSG:3857)")).locator(crs_key)
+    })?;
+    let format_text = required("FORMAT")?;
+    let format = MapFormat::parse(format_text)
+        .ok_or_else(|| Exception::new(Code::InvalidFormat, format!("format {format_text:?} is not offered")).locator("FORMAT"))?;
+    if layer == MapLayer::Relief && format != MapFormat::Png {
+        return Err(Exception::new(Code::InvalidFormat, "relief is an image: ask for image/png").locator("FORMAT"));
+    }
+    let (width, height) = (size(required("WIDTH")?, "WIDTH", limits)?, size(required("HEIGHT")?, "HEIGHT", limits)?);
+    let bbox = numbers(required("BBOX")?)?;
+    let grid = grid(bbox, crs, version, width, height)?;
+    Ok(GetMap { version, layer, crs, grid, format })
+}
+
+fn size(text: &str, key: &'static str, limits: Limits) -> Result<usize, Exception> {
+    let bad = |why: String| Exception::new(Code::InvalidParameterValue, format!("{key}={text}: {why}")).locator(key);
+    let v: usize = text.trim().parse().map_err(|_| bad("not a whole number".into()))?;
+    if v == 0 || v > limits.max_side {
+        return Err(bad(format!("must be 1 to {}", limits.max_side)));
+    }
+    Ok(v)
+}
+
+fn numbers(text: &str) -> Result<[f64; 4], Exception> {
+    let bad = || Exception::new(Code::InvalidParameterValue, format!("BBOX={text}: need four numbers")).locator("BBOX");
+    let v: Vec<f64> = text.split(',').map(|p| p.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|_| bad())?;
+    <[f64; 4]>::try_from(v).map_err(|_| bad())
+}
+
+/// The pixel-centre grid of the request, its box read in the CRS's axis order.
+fn grid(b: [f64; 4], crs: RequestCrs, version: Version, width: usize, height: usize) -> Result<SampleGrid, Exception> {
+    let bad = |e: crate::grid::GridError| Exception::new(Code::InvalidParameterValue, e.to_string()).locator("BBOX");
+    match (crs, version) {
+        (RequestCrs::Epsg3857, _) => {
+            MercatorBox { west: b[0], south: b[1], east: b[2], north: b[3] }.checked().and_then(|m| m.area_grid(width, height)).map_err(bad)
+        }
+        (RequestCrs::Epsg4326, Version::V130) => BBox { south: b[0], west: b[1], north: b[2], east: b[3] }
+            .checked()
+            .and_then(|g| g.area_grid(width, height))
+            .map_err(bad),
+        _ => BBox { west: b[0], south: b[1], east: b[2], north: b[3] }.checked().and_then(|g| g.area_grid(width, height)).map_err(bad),
+    }
+}
+
+/// Query parameters with upper-cased keys; the first value of a key wins.
+struct Params(HashMap<String, String>);
+
+impl Params {
+    fn new(query: &str) -> Params {
+        let mut map = HashMap::new();
+        for (k, v) in form_urlencoded::parse(query.as_bytes()) {
+            if !k.is_empty() {
+                map.entry(k.to_ascii_uppercase()).or_insert_with(|| v.into_owned());
+            }
+        }
+        Params(map)
+    }
+
+    fn get(&self, key: &str) -> Option<&str> {
+        self.0.get(key).map(String::as_str)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const LIMITS: Limits = Limits { max_side: 4096 };
+
+    fn map(q: &str) -> GetMap {
+        match parse(q, LIMITS) {
+            Ok(Request::GetMap(m)) => m,
+            other => panic!("{q}: {other:?}"),
+        }
+    }
+
+    fn code(q: &str) -> Code {
+        match parse(q, LIMITS) {
+            Err((e, _)) => e.code,
+            Ok(r) => panic!("{q}: accepted as {r:?}"),
+        }
+    }
+
+    #[test]
+    fn axis_order_follows_version_and_crs() {
+        let a = map("SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=dem&STYLES=&CRS=EPSG:4326&BBOX=40,-106,41,-105&WIDTH=4&HEIGHT=2&FORMAT=image/tiff");
+        let b = map("service=wms&version=1.3.0&request=getmap&layers=dem&crs=CRS:84&bbox=-106,40,-105,41&width=4&height=2&format=image/tiff&");
+        let c = map("SERVICE=WMS&VERSION=1.1.1&REQUEST=GetMap&LAYERS=dem&SRS=EPSG:4326&BBOX=-106,40,-105,41&WIDTH=4&HEIGHT=2&FORMAT=image/tiff");
+        assert_eq!(a.grid, b.grid);
+        assert_eq!(a.grid, c.grid);
+        assert_eq!(a.grid.lon_lat(0, 0), (-105.875, 40.75));
+    }
+
+    #[test]
+    fn errors_carry_the_specification_codes() {
+        let base = "SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&CRS=EPSG:4326&BBOX=40,-106,41,-105&WIDTH=4&HEIGHT=2&FORMAT=image/png";
+        assert_eq!(code(&format!("{base}&LAYERS=nope")), Code::LayerNotDefined);
+        assert_eq!(code(&base.replace("CRS=EPSG:4326", "CRS=EPSG:2193").replace("&REQUEST", "&LAYERS=dem&REQUEST")), Code::InvalidCrs);
+        assert_eq!(code(&(base.replace("VERSION=1.3.0", "VERSION=1.1.1").replace("CRS=EPSG:4326", "SRS=EPSG:2193") + "&LAYERS=dem")), Code::InvalidSrs);
+        assert_eq!(code(&(base.replace("image/png", "image/gif") + "&LAYERS=dem")), Code::InvalidFormat);
+        assert_eq!(code(&(base.replace("&WIDTH=4", "") + "&LAYERS=dem")), Code::MissingParameterValue);
+        assert_eq!(code(&(base.replace("WIDTH=4", "WIDTH=99999") + "&LAYERS=dem")), Code::InvalidParameterValue);
+        assert_eq!(code(&(base.replace("BBOX=40,-106,41,-105", "BBOX=41,-106,40,-105") + "&LAYERS=dem")), Code::InvalidParameterValue);
+        assert_eq!(code(&(base.replace("BBOX=40,-106,41,-105", "BBOX=a,b") + "&LAYERS=dem")), Code::InvalidParameterValue);
+        assert_eq!(code("SERVICE=WMS&REQUEST=GetFeatureInfo"), Code::OperationNotSupported);
+        assert_eq!(code("SERVICE=WMS"), Code::MissingParameterValue);
+        assert_eq!(code(&format!("{base}&LAYERS=relief").replace("image/png", "image/tiff")), Code::InvalidFormat);
+    }
+
+    #[test]
+    fn exception_style_and_image_are_kept_for_in_image_replies() {
+        let q = "REQUEST=GetMap&VERSION=1.1.1&LAYERS=x&SRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=8&HEIGHT=4&FORMAT=image/png&EXCEPTIONS=application/vnd.ogc.se_inimage";
+        let Err((e, reply)) = parse(q, LIMITS) else { panic!() };
+        assert_eq!(e.code, Code::LayerNotDefined);
+        assert_eq!(reply, Reply { version: Version::V111, style: ExceptionStyle::InImage, image: Some((8, 4, MapFormat::Png)) });
+    }
+
+    #[test]
+    fn web_mercator_boxes_give_mercator_grids() {
+        let m = map("REQUEST=GetMap&LAYERS=cem&CRS=EPSG:3857&BBOX=0,0,20037508.342789244,20037508.342789244&WIDTH=2&HEIGHT=2&FORMAT=application/bil32");
+        assert_eq!(m.crs, RequestCrs::Epsg3857);
+        // Pixel centres at a quarter and three quarters of the north half: 40.98° and 79.17°.
+        assert!((m.grid.lat.coord(1) - 40.979_898_069_620_14).abs() < 1e-9);
+        assert!((m.grid.lon.coord(0) - 45.0).abs() < 1e-9);
+    }
+}

@@ -1,0 +1,220 @@
+//! The real server on a loopback port, driven over HTTP: WMS capabilities and
+//! axis order, World Wind tiles, XYZ tiles, caching, single computation under
+//! concurrency, corrupt cache files, bad input, HTTP behaviour, shutdown.
+
+use crate::common::{self, TempDir};
+use crate::http::{Server, get};
+use sylva::cem::Layer;
+use sylva::encode::Format;
+use sylva::grid::TileId;
+
+/// A level-11 tile in the middle of the demo region.
+fn demo_tile() -> TileId {
+    let demo = common::demo();
+    let b = demo.bounds;
+    demo.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), 11)
+}
+
+fn bil32(bytes: &[u8]) -> Vec<f32> {
+    bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+}
+
+#[test]
+fn capabilities_are_valid_in_both_versions() {
+    let dir = TempDir::new("srv-caps");
+    let server = Server::start(None, &dir.join("cache"));
+    assert!(server.get("/health").text().contains("\"status\":\"ok\""));
+    for (version, root) in [("1.3.0", "WMS_Capabilities"), ("1.1.1", "WMT_MS_Capabilities")] {
+        let r = server.get(&format!("/wms?service=WMS&request=GetCapabilities&version={version}"));
+        assert_eq!(r.status, 200);
+        let text = r.text();
+        let doc = roxmltree::Document::parse_with_options(&text, roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() }).unwrap();
+        assert_eq!(doc.root_element().tag_name().name(), root);
+        assert!(text.contains(&format!("{}/wms", server.base)), "OnlineResource names the server");
+        for layer in ["dem", "cover", "canopy", "cem", "surface", "relief"] {
+            assert!(text.contains(&format!("<Name>{layer}</Name>")), "{layer}");
+        }
+    }
+}
+
+#[test]
+fn the_same_area_in_every_axis_order_gives_identical_bytes() {
+    let dir = TempDir::new("srv-axes");
+    let server = Server::start(None, &dir.join("cache"));
+    let common = "SERVICE=WMS&REQUEST=GetMap&LAYERS=cem&STYLES=&WIDTH=300&HEIGHT=200&FORMAT=application/bil32";
+    let a = server.get(&format!("/wms?{common}&VERSION=1.3.0&CRS=EPSG:4326&BBOX=46.33,10.05,46.42,10.2"));
+    let b = server.get(&format!("/wms?{common}&VERSION=1.3.0&CRS=CRS:84&BBOX=10.05,46.33,10.2,46.42&"));
+    let c = server.get(&format!("/wms?{}&VERSION=1.1.1&SRS=EPSG:4326&BBOX=10.05,46.33,10.2,46.42", common.to_lowercase()));
+    assert_eq!(a.status, 200, "{}", a.text());
+    assert_eq!(a.body.len(), 300 * 200 * 4);
+    assert!(a.body == b.body && b.body == c.body);
+    assert!(bil32(&a.body).iter().all(|v| (500.0..4000.0).contains(v)));
+}
+
+#[test]
+fn world_wind_tiles_have_n_squared_samples_and_neighbours_share_edges() {
+    let dir = TempDir::new("srv-ww");
+    let server = Server::start(None, &dir.join("cache"));
+    let t = demo_tile();
+    let n = 513usize;
+    let tile = |row: u64, col: u64, ext: &str| server.get(&format!("/tiles/cem/{}/{row}/{row}_{col}.{ext}", t.level));
+    let bil16 = tile(t.row, t.col, "bil");
+    assert_eq!((bil16.status, bil16.body.len()), (200, n * n * 2));
+    let (sw, se, nw) = (bil32(&tile(t.row, t.col, "bil32").body), bil32(&tile(t.row, t.col + 1, "bil32").body), bil32(&tile(t.row + 1, t.col, "bil32").body));
+    for i in 0..n {
+        assert_eq!(sw[i * n + n - 1].to_bits(), se[i * n].to_bits(), "east edge, row {i}");
+        assert_eq!(sw[i].to_bits(), nw[(n - 1) * n + i].to_bits(), "north edge, column {i}");
+    }
+    // The same bytes as the library computes in process, in the query form too.
+    let expected = sylva::produce::tile(&common::demo(), t, 0, Layer::Cem, Format::Bil32).unwrap().encoded.bytes;
+    assert!(tile(t.row, t.col, "bil32").body == expected);
+    let query = server.get(&format!("/tiles?T=cem&L={}&X={}&Y={}&F=bil32", t.level, t.col, t.row));
+    assert!(query.body == expected);
+    let halo = server.get(&format!("/tiles/cem/{}/{}/{}_{}.bil32?halo=8", t.level, t.row, t.row, t.col));
+    assert_eq!(halo.body.len(), (n + 16) * (n + 16) * 4);
+    // Far from the region there is nothing: 404 with no body.
+    let absent = server.get("/tiles/cem/11/10/10_10.bil");
+    assert_eq!((absent.status, absent.body.len()), (404, 0));
+}
+
+#[test]
+fn two_hundred_concurrent_requests_cause_one_computation() {
+    let dir = TempDir::new("srv-flight");
+    let server = Server::start(None, &dir.join("cache"));
+    let t = demo_tile();
+    let url = format!("{}/tiles/cem/{}/{}/{}_{}.png", server.base, t.level, t.row, t.row, t.col);
+    let bodies: Vec<Vec<u8>> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..200).map(|_| s.spawn(|| get(&url, &[]).body)).collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    assert!(bodies.iter().all(|b| !b.is_empty() && *b == bodies[0]));
+    assert_eq!(server.metric("sylva_tile_computations_total"), 1.0);
+}
+
+#[test]
+fn a_corrupt_cache_file_is_recomputed_not_served() {
+    let dir = TempDir::new("srv-corrupt");
+    let cache = dir.join("cache");
+    let t = demo_tile();
+    let path = format!("/tiles/dem/{}/{}/{}_{}.bil32", t.level, t.row, t.row, t.col);
+    let first = {
+        let server = Server::start(None, &cache);
+        server.get(&path).body
+    };
+    let file = walk(&cache).into_iter().find(|p| p.to_string_lossy().ends_with(&format!("dem/{}/{}/{}_{}.bil32", t.level, t.row, t.row, t.col))).expect("cached file");
+    let mut bytes = std::fs::read(&file).unwrap();
+    bytes.truncate(bytes.len() / 2);
+    std::fs::write(&file, bytes).unwrap();
+    let server = Server::start(None, &cache);
+    let again = server.get(&path);
+    assert!(again.body == first);
+    assert_eq!(server.metric("sylva_tile_cache_total{result=\"corrupt\"}"), 1.0);
+    assert_eq!(server.metric("sylva_tile_computations_total"), 1.0);
+    // A second server on the same directory now reads the repaired file.
+    let third = Server::start(None, &cache);
+    assert!(third.get(&path).body == first);
+    assert_eq!(third.metric("sylva_tile_computations_total"), 0.0);
+}
+
+fn walk(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let p = entry.path();
+        if p.is_dir() { out.extend(walk(&p)) } else { out.push(p) }
+    }
+    out
+}
+
+#[test]
+fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
+    let dir = TempDir::new("srv-bad");
+    let server = Server::start(None, &dir.join("cache"));
+    let cases = [
+        ("/wms", "MissingParameterValue"),
+        ("/wms?REQUEST=GetMap", "MissingParameterValue"),
+        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=trees&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png", "LayerNotDefined"),
+        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:2193&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png", "InvalidCRS"),
+        ("/wms?REQUEST=GetMap&VERSION=1.1.1&LAYERS=dem&SRS=EPSG:2193&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png", "InvalidSRS"),
+        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/gif", "InvalidFormat"),
+        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=1,0,0,1&WIDTH=10&HEIGHT=10&FORMAT=image/png", "InvalidParameterValue"),
+        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=100000&HEIGHT=10&FORMAT=image/png", "InvalidParameterValue"),
+        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=nan,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png", "InvalidParameterValue"),
+        ("/wms?REQUEST=GetFeatureInfo", "OperationNotSupported"),
+        ("/tiles/cem/3/1/1_1.gif", ""),
+        ("/tiles/trees/3/1/1_1.bil", ""),
+        ("/tiles/cem/3/1/1_1.bil?halo=100000", ""),
+        ("/tiles?T=cem&L=x&X=1&Y=1", ""),
+        ("/xyz/cover/3/1/1.png", ""),
+    ];
+    for (path, code) in cases {
+        let r = server.get(path);
+        assert!((400..500).contains(&r.status), "{path}: {} {}", r.status, r.text());
+        assert!(r.text().contains(code), "{path}: {}", r.text());
+    }
+    for path in ["/tiles/cem/99/1/1_1.bil", "/tiles/cem/3/1/2_1.bil", "/xyz/dem/3/99/1.png", "/nowhere"] {
+        assert_eq!(server.get(path).status, 404, "{path}");
+    }
+    let long = format!("/wms?x={}", "a".repeat(10_000));
+    assert_eq!(server.get(&long).status, 414);
+    assert_eq!(server.get("/health").status, 200, "still up");
+}
+
+#[test]
+fn in_image_and_blank_exceptions_are_images() {
+    let dir = TempDir::new("srv-inimage");
+    let server = Server::start(None, &dir.join("cache"));
+    let q = "/wms?REQUEST=GetMap&VERSION=1.1.1&LAYERS=trees&SRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=200&HEIGHT=50&FORMAT=image/png";
+    let inimage = server.get(&format!("{q}&EXCEPTIONS=application/vnd.ogc.se_inimage"));
+    assert_eq!((inimage.status, inimage.header("content-type")), (200, Some("image/png")));
+    let img = image::load_from_memory(&inimage.body).unwrap().into_rgba8();
+    assert_eq!(img.dimensions(), (200, 50));
+    assert!(img.pixels().any(|p| p.0[3] > 0));
+    let blank = server.get(&format!("{q}&EXCEPTIONS=BLANK").replace("image/png", "application/bil16"));
+    assert_eq!((blank.status, blank.body.len()), (200, 200 * 50 * 2));
+}
+
+#[test]
+fn tiles_carry_etags_cache_control_timing_and_gzip() {
+    let dir = TempDir::new("srv-http");
+    let server = Server::start(None, &dir.join("cache"));
+    let t = demo_tile();
+    let path = format!("/tiles/cem/{}/{}/{}_{}.png", t.level, t.row, t.row, t.col);
+    let r = server.get(&path);
+    let etag = r.header("etag").expect("etag").to_string();
+    assert!(r.header("cache-control").unwrap().contains("max-age="));
+    assert!(r.header("server-timing").unwrap().contains("elevation;dur="));
+    assert_eq!(r.header("x-sylva-scale"), Some("0.15"));
+    assert_eq!(server.get_with(&path, &[("If-None-Match", &etag)]).status, 304);
+    let bil = server.get_with(&path.replace(".png", ".bil"), &[("Accept-Encoding", "gzip")]);
+    assert_eq!(bil.status, 200);
+    assert_eq!(bil.body.len(), 513 * 513 * 2, "the client decompressed it");
+    let raw = crate::http::get_raw(&format!("{}{}", server.base, path.replace(".png", ".bil")));
+    assert_eq!(raw.header("content-encoding"), Some("gzip"));
+    assert!(raw.body.len() < 513 * 513 * 2);
+}
+
+#[test]
+fn xyz_tiles_are_terrarium_heights() {
+    let dir = TempDir::new("srv-xyz");
+    let server = Server::start(None, &dir.join("cache"));
+    let (x, y) = sylva::grid::mercator::to_mercator(10.125, 46.375);
+    let z = 12u32;
+    let size = 2.0 * sylva::grid::mercator::HALF_WORLD_M / f64::from(1u32 << z);
+    let (tx, ty) = (((x + sylva::grid::mercator::HALF_WORLD_M) / size) as u64, ((sylva::grid::mercator::HALF_WORLD_M - y) / size) as u64);
+    let r = server.get(&format!("/xyz/dem/{z}/{tx}/{ty}.png"));
+    assert_eq!(r.status, 200);
+    let img = image::load_from_memory(&r.body).unwrap().into_rgb8();
+    assert_eq!(img.dimensions(), (256, 256));
+    let heights: Vec<f64> = img.pixels().map(|p| sylva::encode::terrarium::height(p.0)).collect();
+    assert!(heights.iter().all(|h| (800.0..3600.0).contains(h)), "{:?}", &heights[..4]);
+    assert_eq!(server.get(&format!("/xyz/relief/{z}/{tx}/{ty}.png")).status, 200);
+}
+
+#[test]
+fn sigterm_stops_the_server_cleanly() {
+    let dir = TempDir::new("srv-term");
+    let server = Server::start(None, &dir.join("cache"));
+    assert_eq!(server.get("/health").status, 200);
+    let status = server.terminate();
+    assert!(status.success(), "{status:?}");
+}
