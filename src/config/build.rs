@@ -63,7 +63,10 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
     let invalid = |message: String| ConfigError::Invalid { path: label.into(), message };
     let tiles = TileGrid::new(config.grid.level0_delta_deg, config.grid.tile_samples)
         .map_err(|e| invalid(format!("[grid] {e}")))?;
-    let cache = BlockCache::new(config.cache.memory_mb.max(1) * 1024 * 1024);
+    // Data from upstream servers expires, in the block cache as in the tile cache.
+    let ttls = [config.dem.upstream.as_ref(), config.landcover.as_ref().and_then(|l| l.upstream.as_ref())];
+    let upstream_ttl = ttls.into_iter().flatten().map(|u| std::time::Duration::from_secs(u.ttl_s)).min();
+    let cache = BlockCache::expiring(config.cache.memory_mb.max(1) * 1024 * 1024, upstream_ttl);
     let enc = &config.encoding;
     if !(enc.png16_scale_m > 0.0 && enc.png16_scale_m.is_finite() && enc.png16_offset_m.is_finite()) {
         return Err(invalid(format!("[encoding] png16_scale_m must be positive, got {}", enc.png16_scale_m)));
@@ -105,11 +108,10 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
         }
         _ => (None, None),
     };
-    let ttls = [config.dem.upstream.as_ref(), config.landcover.as_ref().and_then(|l| l.upstream.as_ref())];
     Ok(Region {
         name: config.name.clone().unwrap_or(name),
         version: version_key(config, base),
-        upstream_ttl: ttls.into_iter().flatten().map(|u| std::time::Duration::from_secs(u.ttl_s)).min(),
+        upstream_ttl,
         tiles,
         bounds,
         dem,

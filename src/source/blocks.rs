@@ -3,7 +3,9 @@
 //!
 //! The cache is weighted by bytes and evicts least-recently-used blocks beyond
 //! its budget. Concurrent requests for one missing block compute it once (the
-//! cache's own single-flight insertion).
+//! cache's own single-flight insertion). A cache may give its blocks a time
+//! to live, for regions fed by upstream servers: an expired block is read
+//! again from its source.
 
 use super::{PixelSource, SourceError};
 use crate::raster::{Raster, Window};
@@ -12,34 +14,50 @@ use quick_cache::sync::Cache;
 use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
 
 type Block = Arc<Vec<Raster<f32>>>;
+
+/// A block and when it was read.
+#[derive(Clone)]
+struct Stamped {
+    block: Block,
+    read_at: Instant,
+}
 
 #[derive(Clone)]
 struct ByteWeight;
 
-impl Weighter<(u64, usize, usize), Block> for ByteWeight {
-    fn weight(&self, _key: &(u64, usize, usize), block: &Block) -> u64 {
-        block.iter().map(|r| (r.data().len() * 4) as u64).sum::<u64>().max(1)
+impl Weighter<(u64, usize, usize), Stamped> for ByteWeight {
+    fn weight(&self, _key: &(u64, usize, usize), stamped: &Stamped) -> u64 {
+        stamped.block.iter().map(|r| (r.data().len() * 4) as u64).sum::<u64>().max(1)
     }
 }
 
 /// Decoded and derived blocks of every source, bounded by bytes.
 pub struct BlockCache {
-    blocks: Cache<(u64, usize, usize), Block, ByteWeight>,
+    blocks: Cache<(u64, usize, usize), Stamped, ByteWeight>,
     next_id: AtomicU64,
     computed: AtomicU64,
+    ttl: Option<Duration>,
 }
 
 impl BlockCache {
     /// A cache holding at most `budget_bytes` of pixels.
     pub fn new(budget_bytes: u64) -> Arc<BlockCache> {
+        BlockCache::expiring(budget_bytes, None)
+    }
+
+    /// A cache whose blocks are read again once older than `ttl` (none:
+    /// kept until evicted).
+    pub fn expiring(budget_bytes: u64, ttl: Option<Duration>) -> Arc<BlockCache> {
         // One 256² single-band block is 256 KiB: size the table for that.
         let estimated = (budget_bytes / (256 * 1024)).clamp(16, 1 << 20) as usize;
         Arc::new(BlockCache {
             blocks: Cache::with_weighter(estimated, budget_bytes.max(1), ByteWeight),
             next_id: AtomicU64::new(1),
             computed: AtomicU64::new(0),
+            ttl,
         })
     }
 
@@ -122,10 +140,19 @@ impl Blocks {
     }
 
     fn block(&self, bx: usize, by: usize) -> Result<Block, SourceError> {
-        self.cache.blocks.get_or_insert_with(&(self.id, bx, by), || {
-            self.cache.computed.fetch_add(1, Ordering::Relaxed);
-            self.source.read_block(bx, by).map(Arc::new)
-        })
+        let key = (self.id, bx, by);
+        let cache = &self.cache;
+        if let Some(ttl) = cache.ttl
+            && cache.blocks.get(&key).is_some_and(|s| s.read_at.elapsed() > ttl)
+        {
+            cache.blocks.remove(&key);
+        }
+        let stamped = cache.blocks.get_or_insert_with(&key, || {
+            cache.computed.fetch_add(1, Ordering::Relaxed);
+            let block = self.source.read_block(bx, by).map(Arc::new)?;
+            Ok::<_, SourceError>(Stamped { block, read_at: Instant::now() })
+        })?;
+        Ok(stamped.block)
     }
 }
 
@@ -177,6 +204,18 @@ pub(crate) mod tests {
         assert_eq!(first, 2 * 3);
         blocks.read(Window::new(0, 10, 10, 10)).unwrap();
         assert_eq!(src.reads.load(Ordering::Relaxed), first);
+    }
+
+    #[test]
+    fn expired_blocks_are_read_again() {
+        let src = Arc::new(Counting { size: (16, 16), block: (16, 16), reads: AtomicUsize::new(0) });
+        let blocks = Blocks::new(src.clone(), &BlockCache::expiring(1 << 20, Some(Duration::from_millis(30))));
+        blocks.read(Window::new(0, 0, 4, 4)).unwrap();
+        blocks.read(Window::new(0, 0, 4, 4)).unwrap();
+        assert_eq!(src.reads.load(Ordering::Relaxed), 1);
+        std::thread::sleep(Duration::from_millis(40));
+        blocks.read(Window::new(0, 0, 4, 4)).unwrap();
+        assert_eq!(src.reads.load(Ordering::Relaxed), 2);
     }
 
     #[test]

@@ -56,11 +56,6 @@ impl Server {
         Server { child, base: format!("http://{address}") }
     }
 
-    /// The process id.
-    pub fn pid(&self) -> u32 {
-        self.child.id()
-    }
-
     /// GET `path` (with query) and the given headers.
     pub fn get_with(&self, path: &str, headers: &[(&str, &str)]) -> Reply {
         get(&format!("{}{path}", self.base), headers)

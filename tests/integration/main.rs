@@ -16,3 +16,4 @@ mod seamless; // tiles equal windows of whole-area builds; neighbours agree
 mod server; // the server over HTTP: WMS, tiles, cache, concurrency, bad input, shutdown
 mod skipped_work; // stages nobody needs do not run (counted)
 mod sources; // broken and hostile files give errors that name them
+mod upstream; // proxy sources over HTTP: WMS and Terrarium upstreams, failures, stale tiles

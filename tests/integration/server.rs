@@ -218,3 +218,79 @@ fn sigterm_stops_the_server_cleanly() {
     let status = server.terminate();
     assert!(status.success(), "{status:?}");
 }
+
+#[test]
+fn get_maps_on_the_tile_lattice_come_from_the_tile_cache() {
+    let dir = TempDir::new("srv-stitch");
+    let server = Server::start(None, &dir.join("cache"));
+    let tiles = common::demo().tiles;
+    let t = demo_tile();
+    let (s, sector) = (tiles.spacing_deg(t.level), tiles.sector(t));
+    let wms = |west: f64, south: f64, side: usize| {
+        let (east, north) = (west + side as f64 * s, south + side as f64 * s);
+        format!("/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=cem&STYLES=&CRS=CRS:84&BBOX={west},{south},{east},{north}&WIDTH={side}&HEIGHT={side}&FORMAT=application/bil32")
+    };
+    // Pixel centres 600 × 600 samples from the tile's middle: parts of four tiles.
+    let (west, south) = (sector.min_lon + 255.5 * s, sector.min_lat + 255.5 * s);
+    let stitched = server.get(&wms(west, south, 600));
+    assert_eq!(stitched.status, 200, "{}", stitched.text());
+    assert_eq!(server.metric("sylva_tile_computations_total"), 4.0, "one computation per tile touched");
+    let fetch = |dr: u64, dc: u64| bil32(&server.get(&format!("/tiles/cem/{}/{}/{}_{}.bil32", t.level, t.row + dr, t.row + dr, t.col + dc)).body);
+    let quad = [[fetch(0, 0), fetch(0, 1)], [fetch(1, 0), fetch(1, 1)]];
+    assert_eq!(server.metric("sylva_tile_computations_total"), 4.0, "the tiles were cached by the GetMap");
+    let image = bil32(&stitched.body);
+    for y in 0..600 {
+        // Sample indices from tile t's south-west corner, northward and eastward.
+        let gy = 256 + 599 - y;
+        for x in 0..600 {
+            let gx = 256 + x;
+            let (dr, dc) = (gy / 512, gx / 512);
+            let (i, j) = (gx - 512 * dc, 512 - (gy - 512 * dr));
+            let expected = quad[dr][dc][j * 513 + i];
+            assert_eq!(image[y * 600 + x].to_bits(), expected.to_bits(), "pixel ({x}, {y})");
+        }
+    }
+    // A GetMap whose pixel centres are exactly one tile's samples is that tile.
+    let whole = server.get(&wms(sector.min_lon - 0.5 * s, sector.min_lat - 0.5 * s, 513));
+    assert!(bil32(&whole.body) == quad[0][0]);
+    assert_eq!(server.metric("sylva_tile_computations_total"), 4.0);
+}
+
+#[test]
+fn world_wind_dem_tiles_match_the_dem_at_their_samples() {
+    let dir = TempDir::new("srv-rmnp");
+    let server = Server::start(Some(&common::repo().join("config/examples/rmnp.toml")), &dir.join("cache"));
+    // The DEM's pixels, decoded independently, and its georeferencing as gdalinfo prints it.
+    let file = std::fs::File::open(common::data("rmnp/rmnp-dem.tif")).unwrap();
+    let mut decoder = tiff::decoder::Decoder::new(std::io::BufReader::new(file)).unwrap();
+    let (w, h) = decoder.dimensions().unwrap();
+    let tiff::decoder::DecodingResult::U16(pixels) = decoder.read_image().unwrap() else { panic!("rmnp DEM is UInt16") };
+    let (x0, y0, dx, dy) = (-105.912_500_000_000_01, 40.553_678_069_620_155, 0.00275, -0.00211);
+    let dem = |px: usize, py: usize| f64::from(pixels[py * w as usize + px]);
+    let tiles = common::region("examples/rmnp.toml").tiles;
+    let t = tiles.tile_containing(-105.7, 40.35, 8);
+    let reply = server.get(&format!("/tiles/dem/8/{}/{}_{}.bil32", t.row, t.row, t.col));
+    assert_eq!(reply.status, 200);
+    let values = bil32(&reply.body);
+    let grid = tiles.tile_samples(t, 0);
+    let mut checked = 0;
+    for j in 0..513 {
+        for i in 0..513 {
+            let (lon, lat) = grid.lon_lat(i, j);
+            // Bilinear between the four pixel centres around the sample.
+            let (fx, fy) = ((lon - x0) / dx - 0.5, (lat - y0) / dy - 0.5);
+            let (px, py) = (fx.floor(), fy.floor());
+            if px < 0.0 || py < 0.0 || px + 1.0 >= f64::from(w) || py + 1.0 >= f64::from(h) {
+                continue;
+            }
+            let (px, py, tx, ty) = (px as usize, py as usize, fx - fx.floor(), fy - fy.floor());
+            let top = dem(px, py) * (1.0 - tx) + dem(px + 1, py) * tx;
+            let bottom = dem(px, py + 1) * (1.0 - tx) + dem(px + 1, py + 1) * tx;
+            let expected = top * (1.0 - ty) + bottom * ty;
+            let got = f64::from(values[j * 513 + i]);
+            assert!((got - expected).abs() < 1e-3, "sample ({i}, {j}) at {lon}, {lat}: {got} against {expected}");
+            checked += 1;
+        }
+    }
+    assert!(checked > 100_000, "only {checked} samples inside the DEM");
+}

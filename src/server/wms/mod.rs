@@ -15,7 +15,7 @@ use super::{AppState, ServeError, respond};
 use crate::cem::Layer;
 use crate::encode::{self, Format, Samples};
 use crate::grid::TileId;
-use crate::raster::Raster;
+use crate::raster::{Raster, Window};
 use axum::extract::{RawQuery, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -95,7 +95,7 @@ async fn stitched(state: &AppState, map: &GetMap, encoding: Encoding) -> Result<
     let Some((level, gx, top)) = tiles.lattice_position(&map.grid) else { return Ok(None) };
     let n1 = (tiles.samples() - 1) as i64;
     let (w, h) = (map.grid.width() as i64, map.grid.height() as i64);
-    let (cols, rows) = tiles.tiles_on_level(level);
+    let (rows, cols) = tiles.tiles_on_level(level);
     let (c0, c1) = (gx.div_euclid(n1), (gx + w - 2).div_euclid(n1).max(gx.div_euclid(n1)));
     let (r0, r1) = ((top - h + 1).div_euclid(n1), (top - 1).div_euclid(n1).max((top - h + 1).div_euclid(n1)));
     let count = ((c1 - c0 + 1) * (r1 - r0 + 1)) as usize;
@@ -126,26 +126,15 @@ async fn stitched(state: &AppState, map: &GetMap, encoding: Encoding) -> Result<
     bytes.map(|e| Some(e.bytes)).map_err(ServeError::internal)
 }
 
-/// Copies a BIL32 tile (N × N, row 0 north) into `out`, whose north-west
-/// sample is at offset `(dx, dy)` from the tile's (in samples).
-fn paste(out: &mut Raster<f32>, bil32: &[u8], n1: i64, (dx, dy): (i64, i64)) {
+/// Copies a BIL32 tile (N × N, row 0 north) into `out`, the tile's
+/// north-west sample landing on sample `(x0, y0)` of `out`.
+fn paste(out: &mut Raster<f32>, bil32: &[u8], n1: i64, (x0, y0): (i64, i64)) {
     let n = (n1 + 1) as usize;
-    if bil32.len() != n * n * 4 {
-        return;
-    }
-    for j in 0..n as i64 {
-        let y = j - dy;
-        if y < 0 || y >= out.height() as i64 {
-            continue;
-        }
-        for i in 0..n as i64 {
-            let x = i - dx;
-            if x >= 0 && x < out.width() as i64 {
-                let k = 4 * (j as usize * n + i as usize);
-                out.set(x as usize, y as usize, f32::from_le_bytes([bil32[k], bil32[k + 1], bil32[k + 2], bil32[k + 3]]));
-            }
-        }
-    }
+    let values = bil32.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+    let Some(tile) = Raster::from_vec(n, n, values) else { return };
+    let Some(common) = Window::new(x0, y0, n, n).intersect(&Window::new(0, 0, out.width(), out.height())) else { return };
+    let local = Window::new(common.x - x0, common.y - y0, common.width, common.height);
+    out.paste(&tile, local, common.x as usize, common.y as usize);
 }
 
 /// An exception answered as the request asked: a report (400), or an image.
