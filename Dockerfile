@@ -1,18 +1,23 @@
-# Multi-stage build of the sylva binary; runs as a non-root user with the
-# configurations baked in.
+# Multi-stage build of the tile server: the release binary with the server
+# feature only, on a slim Debian, running as a non-root user with the
+# configurations baked in at /etc/sylva. Tiles are cached in /var/lib/sylva/cache
+# (mount a volume there to keep them, or share it between replicas).
 FROM rust:1.95-slim-bookworm AS build
 WORKDIR /src
 COPY Cargo.toml Cargo.lock ./
 COPY src ./src
-COPY shaders ./shaders
-COPY benches ./benches
-RUN cargo build --release --locked --bin sylva
+COPY assets ./assets
+RUN cargo build --release --locked --no-default-features --features server --bin sylva
 
 FROM debian:bookworm-slim
-RUN useradd --system --uid 10001 --home /var/lib/sylva sylva && mkdir -p /var/lib/sylva && chown sylva /var/lib/sylva
+RUN useradd --system --uid 10001 --home /var/lib/sylva sylva \
+ && mkdir -p /var/lib/sylva/cache && chown -R sylva /var/lib/sylva
 COPY --from=build /src/target/release/sylva /usr/local/bin/sylva
 COPY config /etc/sylva
 USER sylva
 WORKDIR /var/lib/sylva
+EXPOSE 8080
+STOPSIGNAL SIGTERM
 ENTRYPOINT ["sylva"]
-CMD ["info", "--config", "/etc/sylva/default.toml"]
+# The embedded demo region; pass `serve --config /etc/sylva/... ` for another.
+CMD ["serve", "--bind", "0.0.0.0:8080", "--cache-dir", "/var/lib/sylva/cache"]

@@ -14,7 +14,6 @@
 //! See `ARCHITECTURE.md` for the code map and the invariants.
 
 pub mod bench;
-#[cfg(feature = "server")]
 pub mod cache;
 pub mod canopy;
 pub mod cem;

@@ -121,6 +121,42 @@ enum Bench {
         #[arg(long, default_value_t = 4096)]
         build_side: usize,
     },
+    /// The server over loopback HTTP beside MapServer and MapProxy: GetMap,
+    /// uncached and cached tile latency and throughput, memory.
+    #[cfg(feature = "server")]
+    Serve {
+        /// Configurations of the peers' three DEMs.
+        #[arg(long, num_args = 3, default_values = ["config/examples/rmnp.toml", "config/examples/bigtujunga.toml", "config/examples/mt_hood.toml"])]
+        configs: Vec<PathBuf>,
+        /// MapServer's WMS endpoint (`shared/peers/run_mapserver.sh`).
+        #[arg(long, default_value = "http://127.0.0.1:8081/mapserv?")]
+        mapserver: String,
+        /// MapProxy's base URL (`shared/peers/run_mapproxy.sh`).
+        #[arg(long, default_value = "http://127.0.0.1:8083")]
+        mapproxy: String,
+        /// Warm requests per latency run.
+        #[arg(long, default_value_t = 50)]
+        n: usize,
+        /// Uncached tiles per format.
+        #[arg(long, default_value_t = 100)]
+        uncached: usize,
+        /// Seconds of each wrk run.
+        #[arg(long, default_value_t = 10)]
+        wrk_seconds: u32,
+    },
+    /// Mixed load on one server for a while, printing resident memory.
+    #[cfg(feature = "server")]
+    Soak {
+        /// Region configuration (default: the embedded demo region).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// How long, minutes.
+        #[arg(long, default_value_t = 10.0)]
+        minutes: f64,
+        /// Seconds between memory readings.
+        #[arg(long, default_value_t = 30.0)]
+        every: f64,
+    },
 }
 
 fn main() {
@@ -159,6 +195,18 @@ fn run(command: Command) -> Result<()> {
             println!("{}", sylva::bench::pipeline_report(&rmnp, &labels, build_side)?);
             Ok(())
         }
+        #[cfg(feature = "server")]
+        Command::Bench { what: Bench::Serve { configs, mapserver, mapproxy, n, uncached, wrk_seconds } } => {
+            let configs: [PathBuf; 3] = configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
+            let bench = sylva::bench::serve::ServeBench { configs, mapserver, mapproxy, n, uncached, wrk_seconds };
+            println!("{}", sylva::bench::serve::report(&bench)?);
+            Ok(())
+        }
+        #[cfg(feature = "server")]
+        Command::Bench { what: Bench::Soak { config, minutes, every } } => {
+            println!("{}", sylva::bench::serve::soak(config.as_deref(), minutes, every)?);
+            Ok(())
+        }
         Command::Info { config } => {
             println!("{}", sylva::config::load(config.as_deref())?.describe());
             Ok(())
@@ -166,13 +214,17 @@ fn run(command: Command) -> Result<()> {
     }
 }
 
-/// Logs to stderr (`RUST_LOG` filters, default `info`), then serves until
-/// SIGTERM.
+/// Logs to stderr (`RUST_LOG` filters, default `info`; JSON lines with
+/// `SYLVA_LOG_FORMAT=json`), then serves until SIGTERM.
 #[cfg(feature = "server")]
 fn serve(config: Option<PathBuf>, options: sylva::server::ServeOptions) -> Result<()> {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info,tower_http=warn".into());
-    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_ansi(ansi).init();
+    let logs = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    if std::env::var("SYLVA_LOG_FORMAT").is_ok_and(|f| f.eq_ignore_ascii_case("json")) {
+        logs.json().init();
+    } else {
+        logs.with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr())).init();
+    }
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     runtime.block_on(sylva::server::serve(config.as_deref(), options))
 }

@@ -4,6 +4,8 @@
 
 pub mod pipeline;
 pub mod quality;
+#[cfg(feature = "server")]
+pub mod serve;
 
 use std::time::Duration;
 

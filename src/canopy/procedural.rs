@@ -6,8 +6,9 @@
 //! columns around the globe (`⌊2πR cos φ / cell⌋`), so cells stay roughly
 //! square at every latitude and wrap exactly at the antimeridian. A tree's
 //! crown is `H · (1 − (d/r)^p)` for `d < r`; the canopy is the highest crown
-//! over a sample, 0 in gaps. Crowns are at most one cell wide in radius, so only
-//! the 3 × 3 neighbouring cells can reach a sample.
+//! over a sample, 0 in gaps, with east–west distances measured at the scale of
+//! the tree's cell row (its middle latitude). Crowns are at most one cell wide
+//! in radius, so only the 3 × 3 neighbouring cells can reach a sample.
 //!
 //! Filtering to the sample spacing `s`: below `cell/2` the crowns are sampled
 //! as they are (a crown spans at least three samples); from `1.5·cell` on
@@ -68,15 +69,30 @@ pub struct ProceduralProxy {
     /// Radians of latitude per cell row.
     row_rad: f64,
     radius_m: f64,
+    /// `radius_m²` and `1 / radius_m`.
+    radius2: f64,
+    inv_radius: f64,
     mean_m: f32,
 }
 
-/// One tree: canonical centre (radians) and size.
+/// One tree: canonical centre (radians), size, and the east–west metres per
+/// radian of longitude of its cell row (at the row's middle).
 #[derive(Clone, Copy, Debug)]
 struct Tree {
     lon: f64,
     lat: f64,
     height: f32,
+    east_m_per_rad: f64,
+}
+
+/// A row of cells: its index, its columns around the globe, their width in
+/// radians and the east–west scale at the row's middle.
+#[derive(Clone, Copy, Debug)]
+struct CellRow {
+    j: i64,
+    columns: i64,
+    column_rad: f64,
+    east_m_per_rad: f64,
 }
 
 impl ProceduralProxy {
@@ -91,6 +107,8 @@ impl ProceduralProxy {
         let mut proxy = ProceduralProxy {
             row_rad: p.cell_m / EARTH_RADIUS_M,
             radius_m: p.crown_radius * p.cell_m,
+            radius2: (p.crown_radius * p.cell_m).powi(2),
+            inv_radius: 1.0 / (p.crown_radius * p.cell_m),
             mean_m: 0.0,
             params: p,
         };
@@ -115,41 +133,58 @@ impl ProceduralProxy {
         (t * t * (3.0 - 2.0 * t)) as f32
     }
 
-    /// Columns of cells in row `j`.
-    fn columns(&self, j: i64) -> i64 {
+    /// Row `j` of cells: `⌊2πR cos φ / cell⌋` columns at its middle latitude φ.
+    fn cell_row(&self, j: i64) -> CellRow {
         let lat = ((j as f64 + 0.5) * self.row_rad).clamp(-PI / 2.0, PI / 2.0);
-        ((TAU * EARTH_RADIUS_M * lat.cos() / self.params.cell_m).floor() as i64).max(1)
+        let east_m_per_rad = EARTH_RADIUS_M * lat.cos();
+        let columns = ((TAU * east_m_per_rad / self.params.cell_m).floor() as i64).max(1);
+        CellRow { j, columns, column_rad: TAU / columns as f64, east_m_per_rad }
     }
 
-    fn tree(&self, j: i64, i: i64, columns: i64) -> Option<Tree> {
-        let h = hash2(j, i, self.params.seed);
+    /// The tree of cell `i` (taken modulo the columns) of `row` and its
+    /// north–south distance in metres from latitude `lat` (radians), if there
+    /// is a tree and its crown reaches that latitude.
+    #[inline]
+    fn tree(&self, row: CellRow, i: i64, lat: f64) -> Option<(Tree, f64)> {
+        let i = i.rem_euclid(row.columns);
+        let h = hash2(row.j, i, self.params.seed);
         if unit(h, 0) < self.params.gap_fraction {
             return None;
         }
         // Keep centres away from cell edges so crowns of radius ≤ 1 cell reach
         // only neighbouring cells.
         let jitter = |k| 0.15 + 0.7 * unit(h, k);
+        let tree_lat = (row.j as f64 + jitter(2)) * self.row_rad;
+        let dy = (lat - tree_lat) * EARTH_RADIUS_M;
+        if dy.abs() >= self.radius_m {
+            return None;
+        }
         let p = &self.params;
-        Some(Tree {
-            lon: -PI + (i as f64 + jitter(1)) * TAU / columns as f64,
-            lat: (j as f64 + jitter(2)) * self.row_rad,
+        let tree = Tree {
+            lon: -PI + (i as f64 + jitter(1)) * row.column_rad,
+            lat: tree_lat,
             height: p.height_m * (1.0 - unit(h, 3) as f32 * p.height_variation),
-        })
+            east_m_per_rad: row.east_m_per_rad,
+        };
+        Some((tree, dy))
     }
 
-    /// Crown height of `tree` (whose latitude has cosine `cos_lat`) at
-    /// normalised `(lon, lat)` radians.
+    /// Crown height of `tree` at normalised longitude `lon` (radians), on a
+    /// row `dy2` square metres north or south of it.
     #[inline]
-    fn crown(&self, tree: &Tree, cos_lat: f64, lon: f64, lat: f64) -> f32 {
+    fn crown(&self, tree: &Tree, lon: f64, dy2: f64) -> f32 {
         let mut dlon = lon - tree.lon;
         if dlon > PI {
             dlon -= TAU;
         } else if dlon < -PI {
             dlon += TAU;
         }
-        let dx = dlon * EARTH_RADIUS_M * cos_lat;
-        let dy = (lat - tree.lat) * EARTH_RADIUS_M;
-        let d = ((dx * dx + dy * dy).sqrt() / self.radius_m) as f32;
+        let dx = dlon * tree.east_m_per_rad;
+        let d2 = dx * dx + dy2;
+        if d2 >= self.radius2 {
+            return 0.0;
+        }
+        let d = (d2.sqrt() * self.inv_radius) as f32;
         if d >= 1.0 { 0.0 } else { tree.height * (1.0 - self.profile(d)) }
     }
 
@@ -167,31 +202,30 @@ impl ProceduralProxy {
     /// Full-detail crowns of grid row `r` into `out`, over the column ranges
     /// `runs` (the wanted samples).
     fn splat_row(&self, grid: &SampleGrid, r: usize, out: &mut [f32], runs: &[(usize, usize)]) {
-        let lat = grid.on_globe(0, r as i64).1.to_radians();
-        let lon_of = |c: usize| grid.on_globe(c as i64, r as i64).0.to_radians();
+        let globe = grid.globe();
+        let lat = globe.at(0, r as i64).1.to_radians();
+        // Every column's longitude once: crowns overlap, so each is read several times.
+        let lons: Vec<f64> = (0..out.len()).map(|c| globe.at(c as i64, r as i64).0.to_radians()).collect();
+        let lon_of = |c: usize| lons[c];
         // Rows of cells whose trees (centres 0.15–0.85 into the cell) can
         // reach this latitude: about 2.3 of the 3 around it.
         let reach = self.radius_m / EARTH_RADIUS_M;
         let j_lo = ((lat - reach) / self.row_rad - 0.85).floor() as i64;
         let j_hi = ((lat + reach) / self.row_rad - 0.15).floor() as i64;
+        let cell_rows: Vec<CellRow> = (j_lo..=j_hi).map(|j| self.cell_row(j)).collect();
         for &(start, end) in runs {
             for (start, end) in monotone_segments(start, end, &lon_of) {
                 let (la, lb) = (lon_of(start), lon_of(end - 1));
                 let step = if end - start > 1 { (lb - la) / (end - start - 1) as f64 } else { 1.0 };
-                let column = |lon: f64| start as f64 + (lon - la) / step;
-                for j in j_lo..=j_hi {
-                    let n = self.columns(j);
-                    let col = |lon: f64| ((lon + PI) / TAU * n as f64).floor() as i64;
+                let per_step = 1.0 / step;
+                let column = |lon: f64| start as f64 + (lon - la) * per_step;
+                for &row in &cell_rows {
+                    let col = |lon: f64| ((lon + PI) / row.column_rad).floor() as i64;
                     for i in col(la) - 1..=col(lb) + 1 {
-                        let Some(tree) = self.tree(j, i.rem_euclid(n), n) else { continue };
-                        let dy = (lat - tree.lat) * EARTH_RADIUS_M;
-                        if dy.abs() >= self.radius_m {
-                            continue;
-                        }
-                        let cos_lat = tree.lat.cos();
-                        // Candidate columns (one sample of slack); the crown test is exact.
-                        let half =
-                            (self.radius_m * self.radius_m - dy * dy).sqrt() / (EARTH_RADIUS_M * cos_lat.max(1e-9));
+                        let Some((tree, dy)) = self.tree(row, i, lat) else { continue };
+                        // Candidate columns: those within the crown's chord, rounded
+                        // outwards; the crown test is exact.
+                        let half = (self.radius2 - dy * dy).sqrt() / row.east_m_per_rad.max(1e-9);
                         let mut centre = tree.lon;
                         // The tree may sit on the other side of the antimeridian from the row.
                         if centre - la > PI {
@@ -199,11 +233,12 @@ impl ProceduralProxy {
                         } else if la - centre > PI {
                             centre += TAU;
                         }
-                        let first = (column(centre - half).floor() as i64 - 1).max(start as i64);
-                        let last = (column(centre + half).ceil() as i64 + 1).min(end as i64 - 1);
+                        let first = ((column(centre - half) - SLACK).floor() as i64).max(start as i64);
+                        let last = ((column(centre + half) + SLACK).ceil() as i64).min(end as i64 - 1);
+                        let dy2 = dy * dy;
                         for c in first..=last {
                             let c = c as usize;
-                            let z = self.crown(&tree, cos_lat, lon_of(c), lat);
+                            let z = self.crown(&tree, lons[c], dy2);
                             if z > out[c] {
                                 out[c] = z;
                             }
@@ -232,6 +267,9 @@ impl ProceduralProxy {
         (sum / (n * n) as f64) as f32
     }
 }
+
+/// Columns of slack around a crown's chord, for rounding in its end points.
+const SLACK: f64 = 1e-6;
 
 /// Index ranges within `start..end` over which `lon_of` increases (a row
 /// crossing the antimeridian has two).
@@ -317,11 +355,11 @@ mod tests {
         let j0 = (lat / p.row_rad).floor() as i64;
         let mut best = 0.0f32;
         for j in j0 - 1..=j0 + 1 {
-            let n = p.columns(j);
-            let i0 = ((lon + PI) / TAU * n as f64).floor() as i64;
+            let row = p.cell_row(j);
+            let i0 = ((lon + PI) / row.column_rad).floor() as i64;
             for i in i0 - 1..=i0 + 1 {
-                if let Some(t) = p.tree(j, i.rem_euclid(n), n) {
-                    best = best.max(p.crown(&t, t.lat.cos(), lon, lat));
+                if let Some((t, dy)) = p.tree(row, i, lat) {
+                    best = best.max(p.crown(&t, lon, dy * dy));
                 }
             }
         }

@@ -157,22 +157,47 @@ impl SampleGrid {
     /// reached across the antimeridian or a pole has bitwise the coordinate it
     /// has on the other side.
     pub fn on_globe(&self, x: i64, y: i64) -> (f64, f64) {
-        let (gx, gy) = (self.lon.first + x, self.lat.first + y);
-        match (self.lon.period(360.0, -180.0), self.lat.period(360.0, -90.0)) {
-            (Some(around), Some(_)) => {
-                // Latitude index counted north from the south pole.
-                let mut north = gy * self.lat.step.signum() as i64;
-                let pole = around / 2;
-                let mut east = gx;
-                if north > pole || north < 0 {
-                    north = if north > pole { 2 * pole - north } else { -north };
-                    east += around / 2;
-                }
-                let east = east.rem_euclid(around);
-                (-180.0 + east as f64 * self.lon.step, -90.0 + north as f64 * self.lat.step.abs())
-            }
-            _ => crate::geo::normalize(self.lon.coord_at(x as f64), self.lat.coord_at(y as f64)),
+        self.globe().at(x, y)
+    }
+
+    /// [`SampleGrid::on_globe`] with the lattice's periods worked out once,
+    /// for callers that place many samples.
+    pub fn globe(&self) -> Globe<'_> {
+        let periods = match (self.lon.period(360.0, -180.0), self.lat.period(360.0, -90.0)) {
+            (Some(around), Some(_)) => Some(around),
+            _ => None,
+        };
+        Globe { grid: self, around: periods }
+    }
+}
+
+/// Positions on the globe of a grid's samples (see [`SampleGrid::globe`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Globe<'a> {
+    grid: &'a SampleGrid,
+    /// Samples around the globe, on a global lattice.
+    around: Option<i64>,
+}
+
+impl Globe<'_> {
+    /// The position of sample `(x, y)`, as [`SampleGrid::on_globe`].
+    #[inline]
+    pub fn at(&self, x: i64, y: i64) -> (f64, f64) {
+        let g = self.grid;
+        let Some(around) = self.around else {
+            return crate::geo::normalize(g.lon.coord_at(x as f64), g.lat.coord_at(y as f64));
+        };
+        let (gx, gy) = (g.lon.first + x, g.lat.first + y);
+        // Latitude index counted north from the south pole.
+        let mut north = gy * g.lat.step.signum() as i64;
+        let pole = around / 2;
+        let mut east = gx;
+        if north > pole || north < 0 {
+            north = if north > pole { 2 * pole - north } else { -north };
+            east += around / 2;
         }
+        let east = east.rem_euclid(around);
+        (-180.0 + east as f64 * g.lon.step, -90.0 + north as f64 * g.lat.step.abs())
     }
 }
 

@@ -110,29 +110,57 @@ pub struct ServeOptions {
     pub cache_dir: Option<PathBuf>,
 }
 
-/// Loads the configuration, binds, serves until SIGTERM or SIGINT, then
-/// finishes the requests in flight.
-pub async fn serve(config: Option<&Path>, options: ServeOptions) -> anyhow::Result<()> {
+/// A server bound to its socket, not yet serving.
+pub struct Bound {
+    /// The socket.
+    pub listener: tokio::net::TcpListener,
+    /// What the handlers share.
+    pub state: Arc<AppState>,
+    /// Where tiles are cached.
+    pub cache_dir: PathBuf,
+}
+
+impl Bound {
+    /// `http://ADDRESS` of the socket.
+    pub fn base_url(&self) -> std::io::Result<String> {
+        Ok(format!("http://{}", self.listener.local_addr()?))
+    }
+
+    /// Serves until `shutdown` resolves, then finishes the requests in flight.
+    pub async fn run(self, shutdown: impl std::future::Future<Output = ()> + Send + 'static) -> std::io::Result<()> {
+        axum::serve(self.listener, router(self.state)).with_graceful_shutdown(shutdown).await
+    }
+}
+
+/// Loads the configuration (off the executor: it opens files) and binds.
+pub async fn bind(config: Option<&Path>, options: ServeOptions) -> anyhow::Result<Bound> {
     let (cfg, base, label) = match config {
         Some(path) => (crate::config::parse_file(path)?, path.parent().unwrap_or(Path::new(".")).to_path_buf(), path.to_path_buf()),
         None => (Config::default(), PathBuf::from("."), PathBuf::from("<built-in defaults>")),
     };
-    let region = tokio::task::spawn_blocking(move || crate::config::region_from(&cfg, &base, &label).map(|r| (r, cfg))).await??;
-    let (region, cfg) = region;
+    let (region, cfg) = tokio::task::spawn_blocking(move || crate::config::region_from(&cfg, &base, &label).map(|r| (r, cfg))).await??;
     let settings = cfg.server.clone();
     let bind = options.bind.unwrap_or_else(|| settings.bind.clone());
     let cache_dir = options.cache_dir.unwrap_or_else(|| settings.cache_dir.clone());
     let state = AppState::new(region, &cache_dir, settings)?;
     let listener = tokio::net::TcpListener::bind(&bind).await.map_err(|e| anyhow::anyhow!("cannot listen on {bind}: {e}"))?;
+    Ok(Bound { listener, state, cache_dir })
+}
+
+/// Loads the configuration, binds, serves until SIGTERM or SIGINT, then
+/// finishes the requests in flight.
+pub async fn serve(config: Option<&Path>, options: ServeOptions) -> anyhow::Result<()> {
+    let bound = bind(config, options).await?;
+    let (state, cache_dir) = (bound.state.clone(), bound.cache_dir.clone());
     tracing::info!(
-        address = %listener.local_addr()?,
+        address = %bound.listener.local_addr()?,
         region = %state.region().name,
         cache = %cache_dir.display(),
         version = %state.region().version,
         workers = state.settings.workers,
         "serving"
     );
-    axum::serve(listener, router(state)).with_graceful_shutdown(shutdown_signal()).await?;
+    bound.run(shutdown_signal()).await?;
     tracing::info!("stopped");
     Ok(())
 }

@@ -6,6 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod cli; // the `sylva` binary: tile, build, info, errors that name the file
+mod clients; // GDAL's WMS driver and OWSLib against the server, values against build
 mod common; // shared helpers: data paths, regions, comparisons
 mod config_files; // every file in config/ parses and builds its region
 mod conservative; // acceleration bounds never below the surface, exhaustively

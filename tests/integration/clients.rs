@@ -1,0 +1,135 @@
+//! Real WMS clients against the real server: GDAL's WMS driver (`gdalinfo`,
+//! `gdal_translate`, Debian `gdal-bin`) and OWSLib (Debian `python3-owslib`)
+//! read the capabilities and fetch a `dem` map of rmnp whose values match
+//! `sylva build` of the same grid.
+
+use crate::common::{self, TempDir};
+use crate::http::Server;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The map fetched by every client: W, S, E, N and size in pixels.
+const BOX: [f64; 4] = [-105.8, 40.25, -105.6, 40.45];
+const SIDE: usize = 300;
+
+fn rmnp_server(dir: &TempDir) -> Server {
+    Server::start(Some(&common::repo().join("config/examples/rmnp.toml")), &dir.join("cache"))
+}
+
+/// `sylva build` of the map's pixel centres (a point-registered build of the
+/// box shrunk by half a pixel).
+fn reference(dir: &TempDir) -> Vec<f32> {
+    let [w, s, e, n] = BOX;
+    let half = 0.5 * (e - w) / SIDE as f64;
+    let out = dir.join("reference.bil");
+    let bbox = format!("{},{},{},{}", w + half, s + half, e - half, n - half);
+    let config = common::repo().join("config/examples/rmnp.toml");
+    let side = SIDE.to_string();
+    let status = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(["build", "--config"])
+        .arg(&config)
+        .args(["--layer", "dem", "--bbox", &bbox, "--width", &side, "--height", &side, "--format", "bil32", "-o"])
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let bytes = std::fs::read(&out).unwrap();
+    bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+}
+
+/// The float32 samples of a GeoTIFF, decoded with the `tiff` crate.
+fn tiff_values(path: &Path) -> Vec<f32> {
+    let file = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut decoder = tiff::decoder::Decoder::new(std::io::BufReader::new(file)).unwrap();
+    assert_eq!(decoder.dimensions().unwrap(), (SIDE as u32, SIDE as u32), "{}", path.display());
+    match decoder.read_image().unwrap() {
+        tiff::decoder::DecodingResult::F32(v) => v,
+        _ => panic!("{}: not float32", path.display()),
+    }
+}
+
+fn assert_matches(client: &str, got: &[f32], reference: &[f32]) {
+    assert_eq!(got.len(), reference.len(), "{client}");
+    let worst = got.iter().zip(reference).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    assert!(worst < 0.01, "{client}: differs from sylva build by up to {worst} m");
+    assert!(reference.iter().all(|v| (2000.0..4500.0).contains(v)), "the box lies inside the DEM");
+}
+
+fn run(cmd: &mut Command, what: &str) -> String {
+    let out = cmd.output().unwrap_or_else(|e| panic!("{what} ({e}): install it with `bash scripts/setup.sh`"));
+    assert!(out.status.success(), "{what} failed:\n{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// A GDAL WMS service description of the map for `version`.
+fn gdal_description(base: &str, version: &str) -> String {
+    let [w, s, e, n] = BOX;
+    let crs = match version {
+        "1.1.1" => "<SRS>EPSG:4326</SRS>".to_string(),
+        // GDAL 3.6 does not swap EPSG:4326 axes by itself; say so.
+        _ => "<CRS>EPSG:4326</CRS><BBoxOrder>yxYX</BBoxOrder>".to_string(),
+    };
+    format!(
+        "<GDAL_WMS><Service name=\"WMS\"><Version>{version}</Version><ServerUrl>{base}/wms?</ServerUrl>{crs}\
+         <ImageFormat>image/tiff</ImageFormat><Layers>dem</Layers></Service>\
+         <DataWindow><UpperLeftX>{w}</UpperLeftX><UpperLeftY>{n}</UpperLeftY><LowerRightX>{e}</LowerRightX><LowerRightY>{s}</LowerRightY>\
+         <SizeX>{SIDE}</SizeX><SizeY>{SIDE}</SizeY></DataWindow>\
+         <BandsCount>1</BandsCount><DataType>Float32</DataType><BlockSizeX>128</BlockSizeX><BlockSizeY>128</BlockSizeY></GDAL_WMS>"
+    )
+}
+
+#[test]
+fn gdal_reads_the_capabilities_and_a_dem_map_that_matches_build() {
+    let dir = TempDir::new("client-gdal");
+    let server = rmnp_server(&dir);
+    let info = run(Command::new("gdalinfo").arg(format!("WMS:{}/wms", server.base)), "gdalinfo");
+    for layer in ["dem", "cover", "canopy", "cem", "surface", "relief"] {
+        assert!(info.contains(&format!("LAYERS={layer}&")), "gdalinfo lists {layer}:\n{info}");
+    }
+    assert!(info.contains("SUBDATASET_1_DESC=Ground elevation (m)"), "{info}");
+    let reference = reference(&dir);
+    for version in ["1.1.1", "1.3.0"] {
+        let xml = dir.join(&format!("wms-{version}.xml"));
+        std::fs::write(&xml, gdal_description(&server.base, version)).unwrap();
+        let out = dir.join(&format!("gdal-{version}.tif"));
+        run(Command::new("gdal_translate").arg("-q").arg(&xml).arg(&out), "gdal_translate");
+        assert_matches(&format!("GDAL WMS {version}"), &tiff_values(&out), &reference);
+        // The geotransform GDAL gives the map is the box's.
+        let info = run(Command::new("gdalinfo").arg(&out), "gdalinfo");
+        assert!(info.contains("Origin = (-105.7999999") || info.contains("Origin = (-105.800000"), "{info}");
+    }
+}
+
+/// A Python with OWSLib: Debian's (`python3-owslib`), else the one on PATH.
+fn python_with_owslib() -> PathBuf {
+    for python in ["/usr/bin/python3", "python3"] {
+        let ok = Command::new(python).args(["-c", "import owslib"]).output().is_ok_and(|o| o.status.success());
+        if ok {
+            return PathBuf::from(python);
+        }
+    }
+    panic!("no Python with OWSLib: install it with `bash scripts/setup.sh` (Debian python3-owslib)")
+}
+
+#[test]
+fn owslib_reads_the_capabilities_and_a_dem_map_that_matches_build() {
+    let dir = TempDir::new("client-owslib");
+    let server = rmnp_server(&dir);
+    let reference = reference(&dir);
+    let [w, s, e, n] = BOX;
+    for version in ["1.1.1", "1.3.0"] {
+        let out = dir.join(&format!("owslib-{version}.tif"));
+        // OWSLib swaps 1.3.0's EPSG:4326 box to lat,lon itself.
+        let script = format!(
+            "import sys\nfrom owslib.wms import WebMapService\n\
+             wms = WebMapService('{base}/wms', version='{version}')\n\
+             assert list(wms.contents) == ['dem', 'cover', 'canopy', 'cem', 'surface', 'relief'], list(wms.contents)\n\
+             assert wms['dem'].title == 'Ground elevation (m)'\n\
+             img = wms.getmap(layers=['dem'], srs='EPSG:4326', bbox=({w}, {s}, {e}, {n}), size=({SIDE}, {SIDE}), format='image/tiff')\n\
+             open(sys.argv[1], 'wb').write(img.read())\n",
+            base = server.base
+        );
+        run(Command::new(python_with_owslib()).args(["-c", &script]).arg(&out), "OWSLib");
+        assert_matches(&format!("OWSLib {version}"), &tiff_values(&out), &reference);
+    }
+}
