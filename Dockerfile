@@ -5,6 +5,7 @@
 FROM rust:1.95-slim-bookworm AS build
 WORKDIR /src
 COPY Cargo.toml Cargo.lock ./
+COPY .cargo ./.cargo
 COPY src ./src
 COPY assets ./assets
 RUN cargo build --release --locked --no-default-features --features server --bin sylva

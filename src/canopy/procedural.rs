@@ -75,12 +75,11 @@ pub struct ProceduralProxy {
     mean_m: f32,
 }
 
-/// One tree: canonical centre (radians), size, and the east–west metres per
-/// radian of longitude of its cell row (at the row's middle).
+/// One tree: canonical longitude (radians), size, and the east–west metres
+/// per radian of longitude of its cell row (at the row's middle).
 #[derive(Clone, Copy, Debug)]
 struct Tree {
     lon: f64,
-    lat: f64,
     height: f32,
     east_m_per_rad: f64,
 }
@@ -162,7 +161,6 @@ impl ProceduralProxy {
         let p = &self.params;
         let tree = Tree {
             lon: -PI + (i as f64 + jitter(1)) * row.column_rad,
-            lat: tree_lat,
             height: p.height_m * (1.0 - unit(h, 3) as f32 * p.height_variation),
             east_m_per_rad: row.east_m_per_rad,
         };

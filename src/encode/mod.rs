@@ -12,6 +12,7 @@ pub mod geotiff;
 pub mod relief;
 pub mod terrarium;
 
+use std::ops::RangeInclusive;
 use crate::cem::Layer;
 use crate::grid::SampleGrid;
 use crate::raster::Raster;
@@ -159,11 +160,8 @@ pub fn encode(
 }
 
 fn bil16(samples: Samples, q: Quantization) -> Encoded {
-    let (codes, clamped) = quantize(&samples.floats(), q, NODATA_HEIGHT as i32, i16::MIN as i32 + 1, i16::MAX as i32);
-    let mut bytes = Vec::with_capacity(2 * codes.len());
-    for c in codes {
-        bytes.extend_from_slice(&(c as i16).to_le_bytes());
-    }
+    let lo = i32::from(i16::MIN) + 1;
+    let (bytes, clamped) = quantize(&samples.floats(), q, NODATA_HEIGHT as i32, lo..=i32::from(i16::MAX), |c| (c as i16).to_le_bytes());
     Encoded { bytes, clamped, quantization: Some(q) }
 }
 
@@ -176,33 +174,29 @@ fn bil32(samples: Samples) -> Vec<u8> {
     bytes
 }
 
-/// Codes of `values` clamped to `lo..=hi`, `nodata` for NaN; and how many
-/// were clamped.
-fn quantize(values: &[f32], q: Quantization, nodata: i32, lo: i32, hi: i32) -> (Vec<i32>, usize) {
+/// The 16-bit codes of `values` as bytes (`to_bytes` picks the byte order):
+/// `nodata` for NaN, others clamped into `codes`; and how many were clamped.
+fn quantize(values: &[f32], q: Quantization, nodata: i32, codes: RangeInclusive<i32>, to_bytes: impl Fn(i32) -> [u8; 2]) -> (Vec<u8>, usize) {
     let mut clamped = 0;
-    let codes = values
-        .iter()
-        .map(|&v| {
-            if v.is_nan() {
-                return nodata;
-            }
-            let (c, was) = q.code(v, lo, hi);
+    let mut bytes = Vec::with_capacity(2 * values.len());
+    for &v in values {
+        let code = if v.is_nan() {
+            nodata
+        } else {
+            let (c, was) = q.code(v, *codes.start(), *codes.end());
             clamped += usize::from(was);
             c
-        })
-        .collect();
-    (codes, clamped)
+        };
+        bytes.extend_from_slice(&to_bytes(code));
+    }
+    (bytes, clamped)
 }
 
 /// PNG16: when `zero_is_nodata`, valid samples use codes 1..=65535.
 fn png16(samples: Samples, q: Quantization, zero_is_nodata: bool) -> Result<Encoded, EncodeError> {
-    let (codes, clamped) = quantize(&samples.floats(), q, 0, i32::from(zero_is_nodata), 65535);
-    let (w, h) = (samples.width(), codes.len() / samples.width().max(1));
     // The image crate takes 16-bit samples in native byte order.
-    let mut bytes = Vec::with_capacity(2 * codes.len());
-    for c in codes {
-        bytes.extend_from_slice(&(c as u16).to_ne_bytes());
-    }
+    let (bytes, clamped) = quantize(&samples.floats(), q, 0, i32::from(zero_is_nodata)..=65535, |c| (c as u16).to_ne_bytes());
+    let (w, h) = (samples.width(), bytes.len() / 2 / samples.width().max(1));
     let mut out = Vec::new();
     let encoder = image::codecs::png::PngEncoder::new_with_quality(
         &mut out,
