@@ -137,8 +137,8 @@ enum Bench {
         /// Warm requests per latency run.
         #[arg(long, default_value_t = 50)]
         n: usize,
-        /// Uncached tiles per format.
-        #[arg(long, default_value_t = 100)]
+        /// Uncached tiles per level, at most.
+        #[arg(long, default_value_t = 50)]
         uncached: usize,
         /// Seconds of each wrk run.
         #[arg(long, default_value_t = 10)]

@@ -30,7 +30,7 @@ pub struct ServeBench {
     pub mapproxy: String,
     /// Warm requests per latency run.
     pub n: usize,
-    /// Uncached tiles requested per format.
+    /// Uncached tiles requested per level, at most.
     pub uncached: usize,
     /// Seconds of each `wrk` run.
     pub wrk_seconds: u32,
@@ -258,27 +258,32 @@ fn ratio_line(medians: &[(&str, f64)], over: &str, under: &str, what: &str) -> S
     }
 }
 
-/// Level of the uncached tiles: 12 × 11 tiles over rmnp.
-const UNCACHED_LEVEL: u32 = 10;
+/// Levels of the uncached tiles: rmnp's DEM pixels are ~230 m, its map's
+/// ~130 m; level 8 samples every ~60 m, level 11 every ~7 m (where the
+/// canopy proxy shows single crowns).
+const UNCACHED_LEVELS: [u32; 4] = [8, 9, 10, 11];
 
-/// Uncached 513² `cem` World Wind tiles of the first region, nearest its
-/// centre first, as `.bil` and as `.png`; returns the section and a cached
-/// tile's URL.
+/// Uncached 513² `cem` World Wind tiles of the first region per level,
+/// nearest its centre first, as `.bil` (and `.png` on one level); returns the
+/// section and a cached tile's URL (without extension).
 fn uncached_section(b: &ServeBench, base: &str, config: &Path) -> Result<(String, String)> {
     let region = crate::config::load(Some(config))?;
-    let tiles = nearest_tiles(&region, UNCACHED_LEVEL, b.uncached);
     let mut rows = Vec::new();
-    for ext in ["bil", "png"] {
+    let mut first = None;
+    for (level, ext) in UNCACHED_LEVELS.iter().map(|&l| (l, "bil")).chain([(10, "png")]) {
+        let tiles = nearest_tiles(&region, level, b.uncached);
+        let Some(&nearest) = tiles.first() else { continue };
+        first = first.or(Some(nearest));
         let urls: Vec<String> = tiles.iter().map(|t| format!("{base}/tiles/cem/{}/{}/{}_{}.{ext}", t.level, t.row, t.row, t.col)).collect();
-        let lat = Latency::measure(&urls, urls.len())?;
-        rows.push(lat.row(&format!("sylva cem .{ext}, uncached")));
+        let spacing = region.tiles.tile_samples(nearest, 0).spacing_m();
+        rows.push(Latency::measure(&urls, urls.len())?.row(&format!("level {level} ({spacing:.0} m) .{ext}")));
     }
     let section = format!(
-        "Uncached tiles: 513² cem World Wind tiles of {} at level {UNCACHED_LEVEL} (each requested once; source blocks warm after the first) (ms)\n{}\n",
+        "Uncached 513² cem World Wind tiles of {}, each requested once, nearest the centre first (ms)\n{}\n",
         region.name,
         table(&["tiles", "n", "p50", "p90", "p99", "bytes", "non-200"], &rows)
     );
-    let t = tiles.first().copied().ok_or_else(|| anyhow!("{}: no tiles at level {UNCACHED_LEVEL}", config.display()))?;
+    let t = first.ok_or_else(|| anyhow!("{}: no tiles", config.display()))?;
     Ok((section, format!("{base}/tiles/cem/{}/{}/{}_{}", t.level, t.row, t.row, t.col)))
 }
 

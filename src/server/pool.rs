@@ -50,8 +50,10 @@ impl Pool {
         let permit = self.permits.clone().try_acquire_owned().map_err(|_| PoolError::Busy(self.workers))?;
         let (tx, rx) = oneshot::channel();
         self.threads.spawn(move || {
-            let _permit = permit;
             let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(job));
+            // Free the slot before answering, so that a caller that has its
+            // answer can use the slot again at once.
+            drop(permit);
             let _ = tx.send(out);
         });
         match rx.await {
@@ -77,7 +79,10 @@ mod tests {
                 tokio::spawn(async move { pool.run(move || go_rx.lock().map(|r| r.recv()).is_ok()).await })
             })
             .collect();
-        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        // Both jobs hold their slots (one running, one queued) before the third comes.
+        while pool.permits.available_permits() > 0 {
+            tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+        }
         assert!(matches!(pool.run(|| ()).await, Err(PoolError::Busy(1))));
         go_tx.send(()).unwrap();
         go_tx.send(()).unwrap();
