@@ -69,9 +69,9 @@ pub struct ProceduralProxy {
     /// Radians of latitude per cell row.
     row_rad: f64,
     radius_m: f64,
-    /// `radius_m²` and `1 / radius_m`.
+    /// `radius_m²` and `1 / radius_m²`.
     radius2: f64,
-    inv_radius: f64,
+    inv_radius2: f64,
     mean_m: f32,
 }
 
@@ -92,6 +92,8 @@ struct CellRow {
     columns: i64,
     column_rad: f64,
     east_m_per_rad: f64,
+    /// Longitude a crown reaches east and west of its centre, radians.
+    reach_rad: f64,
 }
 
 impl ProceduralProxy {
@@ -107,7 +109,7 @@ impl ProceduralProxy {
             row_rad: p.cell_m / EARTH_RADIUS_M,
             radius_m: p.crown_radius * p.cell_m,
             radius2: (p.crown_radius * p.cell_m).powi(2),
-            inv_radius: 1.0 / (p.crown_radius * p.cell_m),
+            inv_radius2: 1.0 / (p.crown_radius * p.cell_m).powi(2),
             mean_m: 0.0,
             params: p,
         };
@@ -137,7 +139,8 @@ impl ProceduralProxy {
         let lat = ((j as f64 + 0.5) * self.row_rad).clamp(-PI / 2.0, PI / 2.0);
         let east_m_per_rad = EARTH_RADIUS_M * lat.cos();
         let columns = ((TAU * east_m_per_rad / self.params.cell_m).floor() as i64).max(1);
-        CellRow { j, columns, column_rad: TAU / columns as f64, east_m_per_rad }
+        let reach_rad = self.radius_m / east_m_per_rad.max(1e-9);
+        CellRow { j, columns, column_rad: TAU / columns as f64, east_m_per_rad, reach_rad }
     }
 
     /// The tree of cell `i` (taken modulo the columns) of `row` and its
@@ -168,7 +171,9 @@ impl ProceduralProxy {
     }
 
     /// Crown height of `tree` at normalised longitude `lon` (radians), on a
-    /// row `dy2` square metres north or south of it.
+    /// row `dy2` square metres north or south of it; 0 outside the crown.
+    /// Branch-free past the antimeridian test: samples in and out of crowns
+    /// alternate unpredictably.
     #[inline]
     fn crown(&self, tree: &Tree, lon: f64, dy2: f64) -> f32 {
         let mut dlon = lon - tree.lon;
@@ -178,22 +183,22 @@ impl ProceduralProxy {
             dlon += TAU;
         }
         let dx = dlon * tree.east_m_per_rad;
-        let d2 = dx * dx + dy2;
-        if d2 >= self.radius2 {
-            return 0.0;
-        }
-        let d = (d2.sqrt() * self.inv_radius) as f32;
-        if d >= 1.0 { 0.0 } else { tree.height * (1.0 - self.profile(d)) }
+        let q = ((dx * dx + dy2) * self.inv_radius2) as f32;
+        // (d/r)^p ≥ 1 outside the crown, so the height there is ≤ 0.
+        (tree.height * (1.0 - self.profile(q))).max(0.0)
     }
 
-    /// `d^p`, without `powf` for the usual exponents.
+    /// `(d/r)^p` from `q = (d/r)²`, without `powf` for the usual exponents.
     #[inline]
-    fn profile(&self, d: f32) -> f32 {
+    fn profile(&self, q: f32) -> f32 {
         match self.params.crown_exponent {
-            1.0 => d,
-            1.5 => d * d.sqrt(),
-            2.0 => d * d,
-            p => d.powf(p),
+            1.0 => q.sqrt(),
+            1.5 => {
+                let d = q.sqrt();
+                d * d.sqrt()
+            }
+            2.0 => q,
+            p => q.powf(0.5 * p),
         }
     }
 
@@ -221,9 +226,9 @@ impl ProceduralProxy {
                     let col = |lon: f64| ((lon + PI) / row.column_rad).floor() as i64;
                     for i in col(la) - 1..=col(lb) + 1 {
                         let Some((tree, dy)) = self.tree(row, i, lat) else { continue };
-                        // Candidate columns: those within the crown's chord, rounded
-                        // outwards; the crown test is exact.
-                        let half = (self.radius2 - dy * dy).sqrt() / row.east_m_per_rad.max(1e-9);
+                        // Candidate columns: those within the crown's radius east or
+                        // west, rounded outwards; the crown test is exact.
+                        let half = row.reach_rad;
                         let mut centre = tree.lon;
                         // The tree may sit on the other side of the antimeridian from the row.
                         if centre - la > PI {
@@ -236,10 +241,7 @@ impl ProceduralProxy {
                         let dy2 = dy * dy;
                         for c in first..=last {
                             let c = c as usize;
-                            let z = self.crown(&tree, lons[c], dy2);
-                            if z > out[c] {
-                                out[c] = z;
-                            }
+                            out[c] = out[c].max(self.crown(&tree, lons[c], dy2));
                         }
                     }
                 }

@@ -196,7 +196,8 @@ impl Globe<'_> {
             north = if north > pole { 2 * pole - north } else { -north };
             east += around / 2;
         }
-        let east = east.rem_euclid(around);
+        // Most samples are on the globe already: skip the division.
+        let east = if (0..around).contains(&east) { east } else { east.rem_euclid(around) };
         (-180.0 + east as f64 * g.lon.step, -90.0 + north as f64 * g.lat.step.abs())
     }
 }
