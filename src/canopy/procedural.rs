@@ -69,8 +69,7 @@ pub struct ProceduralProxy {
     /// Radians of latitude per cell row.
     row_rad: f64,
     radius_m: f64,
-    /// `radius_m²` and `1 / radius_m²`.
-    radius2: f64,
+    /// `1 / radius_m²`.
     inv_radius2: f64,
     mean_m: f32,
 }
@@ -108,7 +107,6 @@ impl ProceduralProxy {
         let mut proxy = ProceduralProxy {
             row_rad: p.cell_m / EARTH_RADIUS_M,
             radius_m: p.crown_radius * p.cell_m,
-            radius2: (p.crown_radius * p.cell_m).powi(2),
             inv_radius2: 1.0 / (p.crown_radius * p.cell_m).powi(2),
             mean_m: 0.0,
             params: p,
