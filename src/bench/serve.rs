@@ -127,6 +127,7 @@ struct Servers {
     runtime: tokio::runtime::Runtime,
     bases: Vec<String>,
     caches: Vec<PathBuf>,
+    states: Vec<std::sync::Arc<crate::server::AppState>>,
 }
 
 impl Servers {
@@ -135,6 +136,7 @@ impl Servers {
         let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
         let mut bases = Vec::new();
         let mut caches = Vec::new();
+        let mut states = Vec::new();
         for (i, config) in configs.iter().enumerate() {
             let cache = std::env::temp_dir().join(format!("sylva-bench-serve-{}-{i}", std::process::id()));
             let _ = std::fs::remove_dir_all(&cache);
@@ -143,9 +145,10 @@ impl Servers {
             let bound: Bound = runtime.block_on(crate::server::bind(*config, options)).context(name)?;
             bases.push(bound.base_url()?);
             caches.push(cache);
+            states.push(bound.state.clone());
             runtime.spawn(bound.run(std::future::pending()));
         }
-        Ok(Servers { runtime, bases, caches })
+        Ok(Servers { runtime, bases, caches, states })
     }
 }
 
@@ -359,20 +362,29 @@ pub fn soak(config: Option<&Path>, minutes: f64, every_s: f64) -> Result<String>
             });
         }
         let start = Instant::now();
-        while Instant::now() < deadline {
+        let state = &servers.states[0];
+        let reading = || {
             let (rss, peak) = rss_mib();
+            let mib = |bytes: u64| format!("{:.0}", bytes as f64 / (1 << 20) as f64);
             let n = done.load(std::sync::atomic::Ordering::Relaxed);
-            rows.push(vec![format!("{:.0}", start.elapsed().as_secs_f64()), format!("{rss:.0}"), format!("{peak:.0}"), n.to_string()]);
-            std::thread::sleep(Duration::from_secs_f64(every_s).min(deadline.saturating_duration_since(Instant::now())));
+            let tiles = servers.runtime.block_on(state.tiles.memory_bytes());
+            let blocks = state.region().cache.bytes();
+            vec![format!("{:.0}", start.elapsed().as_secs_f64()), format!("{rss:.0}"), format!("{peak:.0}"), mib(blocks), mib(tiles), n.to_string()]
+        };
+        loop {
+            rows.push(reading());
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                break;
+            }
+            std::thread::sleep(Duration::from_secs_f64(every_s).min(left));
         }
-        let (rss, peak) = rss_mib();
-        rows.push(vec![format!("{:.0}", start.elapsed().as_secs_f64()), format!("{rss:.0}"), format!("{peak:.0}"), done.load(std::sync::atomic::Ordering::Relaxed).to_string()]);
     });
     let failed = failed.into_inner();
     Ok(format!(
-        "sylva bench soak — {}, {minutes} min, 2 clients, resident memory (MiB)\n{}\nrequests that failed (not 200/404): {failed}\n",
+        "sylva bench soak — {}, {minutes} min, 2 clients; resident memory, its peak, the block cache and the tile memory cache (MiB)\n{}\nrequests that failed (not 200/404): {failed}\n",
         region.name,
-        table(&["s", "rss", "peak", "requests"], &rows)
+        table(&["s", "rss", "peak", "blocks", "tiles", "requests"], &rows)
     ))
 }
 

@@ -197,15 +197,20 @@ fn png16(samples: Samples, q: Quantization, zero_is_nodata: bool) -> Result<Enco
     // The image crate takes 16-bit samples in native byte order.
     let (bytes, clamped) = quantize(&samples.floats(), q, 0, i32::from(zero_is_nodata)..=65535, |c| (c as u16).to_ne_bytes());
     let (w, h) = (samples.width(), bytes.len() / 2 / samples.width().max(1));
+    Ok(Encoded { bytes: png(&bytes, w, h, image::ExtendedColorType::L16)?, clamped, quantization: Some(q) })
+}
+
+/// A PNG of `w × h` pixels of `color` (16-bit samples in native byte order),
+/// fast deflate with Paeth filtering: what every PNG Sylva writes uses.
+pub fn png(pixels: &[u8], w: usize, h: usize, color: image::ExtendedColorType) -> Result<Vec<u8>, EncodeError> {
     let mut out = Vec::new();
     let encoder = image::codecs::png::PngEncoder::new_with_quality(
         &mut out,
         image::codecs::png::CompressionType::Fast,
         image::codecs::png::FilterType::Paeth,
     );
-    image::ImageEncoder::write_image(encoder, &bytes, w as u32, h as u32, image::ExtendedColorType::L16)
-        .map_err(|e| EncodeError(e.to_string()))?;
-    Ok(Encoded { bytes: out, clamped, quantization: Some(q) })
+    image::ImageEncoder::write_image(encoder, pixels, w as u32, h as u32, color).map_err(|e| EncodeError(e.to_string()))?;
+    Ok(out)
 }
 
 #[cfg(test)]

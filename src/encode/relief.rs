@@ -45,9 +45,10 @@ pub fn encode(r: &Relief) -> Result<Vec<u8>, EncodeError> {
                 rgba.extend_from_slice(&[0, 0, 0, 0]);
                 continue;
             }
-            let base = match r.map {
-                Some(bands) => [0, 1, 2].map(|b| bands[b].get(x, y)),
-                None => class_colour(class),
+            // The map's colour where it has one, else the class's.
+            let base = match r.map.map(|bands| [0, 1, 2].map(|b| bands[b].get(x, y))) {
+                Some(rgb) if rgb.iter().all(|v| v.is_finite()) => rgb,
+                _ => class_colour(class),
             };
             // Canopy reads darker and greener, as forest does from the air.
             let tint = if class == SurfaceType::Forest as u8 { [0.8, 0.9, 0.75] } else { [1.0; 3] };
@@ -56,15 +57,7 @@ pub fn encode(r: &Relief) -> Result<Vec<u8>, EncodeError> {
             rgba.extend_from_slice(&[c[0], c[1], c[2], 255]);
         }
     }
-    let mut out = Vec::new();
-    let encoder = image::codecs::png::PngEncoder::new_with_quality(
-        &mut out,
-        image::codecs::png::CompressionType::Fast,
-        image::codecs::png::FilterType::Paeth,
-    );
-    image::ImageEncoder::write_image(encoder, &rgba, w as u32, h as u32, image::ExtendedColorType::Rgba8)
-        .map_err(|e| EncodeError(e.to_string()))?;
-    Ok(out)
+    super::png(&rgba, w, h, image::ExtendedColorType::Rgba8)
 }
 
 /// Lambertian shade in [0, 1] at `(x, y)` of `cem` from Horn's 3×3 gradient.

@@ -12,15 +12,7 @@ pub fn encode(heights: &Raster<f32>) -> Result<Vec<u8>, EncodeError> {
     for &h in heights.data() {
         rgb.extend_from_slice(&pixel(h));
     }
-    let mut out = Vec::new();
-    let encoder = image::codecs::png::PngEncoder::new_with_quality(
-        &mut out,
-        image::codecs::png::CompressionType::Fast,
-        image::codecs::png::FilterType::Paeth,
-    );
-    image::ImageEncoder::write_image(encoder, &rgb, heights.width() as u32, heights.height() as u32, image::ExtendedColorType::Rgb8)
-        .map_err(|e| EncodeError(e.to_string()))?;
-    Ok(out)
+    super::png(&rgb, heights.width(), heights.height(), image::ExtendedColorType::Rgb8)
 }
 
 /// The RGB of one height (clamped to the encodable −32768 … 32767.996 m).

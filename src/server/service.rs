@@ -59,6 +59,12 @@ impl TileService {
         TileService { region, store, memory, pool, metrics }
     }
 
+    /// Bytes of tiles held in memory (after pending evictions).
+    pub async fn memory_bytes(&self) -> u64 {
+        self.memory.run_pending_tasks().await;
+        self.memory.weighted_size()
+    }
+
     /// The region served.
     pub fn region(&self) -> &Arc<Region> {
         &self.region

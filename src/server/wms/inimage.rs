@@ -61,10 +61,7 @@ pub fn message(message: &str, w: usize, h: usize) -> Vec<u8> {
 }
 
 fn rgba_png(rgba: &[u8], w: usize, h: usize) -> Vec<u8> {
-    let mut out = Vec::new();
-    let encoder = image::codecs::png::PngEncoder::new_with_quality(&mut out, image::codecs::png::CompressionType::Fast, image::codecs::png::FilterType::NoFilter);
-    let _ = image::ImageEncoder::write_image(encoder, rgba, w as u32, h as u32, image::ExtendedColorType::Rgba8);
-    out
+    encode::png(rgba, w, h, image::ExtendedColorType::Rgba8).unwrap_or_default()
 }
 
 #[cfg(test)]
