@@ -157,7 +157,6 @@ impl Drop for Servers {
         for c in &self.caches {
             let _ = std::fs::remove_dir_all(c);
         }
-        let _ = &self.runtime;
     }
 }
 
@@ -210,7 +209,7 @@ pub fn report(b: &ServeBench) -> Result<String> {
     let servers = Servers::start(&b.configs.each_ref().map(|c| Some(c.as_path())))?;
     let mut out = vec![format!("sylva bench serve — {} cores, servers in-process on loopback\n", rayon::current_num_threads())];
     out.push(get_map_section(b, &servers)?);
-    let (uncached, tile_url) = uncached_section(b, &servers.bases[0], &b.configs[0])?;
+    let (uncached, tile_url) = uncached_section(b, &servers.bases[0], servers.states[0].region())?;
     out.push(uncached);
     out.push(cached_section(b, &tile_url));
     let (rss, peak) = rss_mib();
@@ -269,12 +268,11 @@ const UNCACHED_LEVELS: [u32; 4] = [8, 9, 10, 11];
 /// Uncached 513² `cem` World Wind tiles of the first region per level,
 /// nearest its centre first, as `.bil` (and `.png` on one level); returns the
 /// section and a cached tile's URL (without extension).
-fn uncached_section(b: &ServeBench, base: &str, config: &Path) -> Result<(String, String)> {
-    let region = crate::config::load(Some(config))?;
+fn uncached_section(b: &ServeBench, base: &str, region: &crate::region::Region) -> Result<(String, String)> {
     let mut rows = Vec::new();
     let mut first = None;
     for (level, ext) in UNCACHED_LEVELS.iter().map(|&l| (l, "bil")).chain([(10, "png")]) {
-        let tiles = nearest_tiles(&region, level, b.uncached);
+        let tiles = nearest_tiles(region, level, b.uncached);
         let Some(&nearest) = tiles.first() else { continue };
         first = first.or(Some(nearest));
         let urls: Vec<String> = tiles.iter().map(|t| format!("{base}/tiles/cem/{}/{}/{}_{}.{ext}", t.level, t.row, t.row, t.col)).collect();
@@ -286,7 +284,7 @@ fn uncached_section(b: &ServeBench, base: &str, config: &Path) -> Result<(String
         region.name,
         table(&["tiles", "n", "p50", "p90", "p99", "bytes", "non-200"], &rows)
     );
-    let t = first.ok_or_else(|| anyhow!("{}: no tiles", config.display()))?;
+    let t = first.ok_or_else(|| anyhow!("{}: no tiles", region.name))?;
     Ok((section, format!("{base}/tiles/cem/{}/{}/{}_{}", t.level, t.row, t.row, t.col)))
 }
 
@@ -341,7 +339,7 @@ fn cached_section(b: &ServeBench, tile_url: &str) -> String {
 /// resident memory every `every_s` seconds.
 pub fn soak(config: Option<&Path>, minutes: f64, every_s: f64) -> Result<String> {
     let servers = Servers::start(&[config])?;
-    let region = crate::config::load(config)?;
+    let region = servers.states[0].region();
     let base = servers.bases[0].clone();
     let deadline = Instant::now() + Duration::from_secs_f64(minutes * 60.0);
     let done = std::sync::atomic::AtomicU64::new(0);
@@ -349,7 +347,7 @@ pub fn soak(config: Option<&Path>, minutes: f64, every_s: f64) -> Result<String>
     let mut rows = Vec::new();
     std::thread::scope(|s| {
         for client in 0..2i64 {
-            let (region, base, done, failed) = (&region, &base, &done, &failed);
+            let (base, done, failed) = (&base, &done, &failed);
             s.spawn(move || {
                 let mut rng = Draws { client, k: 0 };
                 while Instant::now() < deadline {

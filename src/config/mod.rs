@@ -73,7 +73,7 @@ impl Default for ServerConfig {
         ServerConfig {
             bind: "127.0.0.1:8080".into(),
             cache_dir: PathBuf::from("cache"),
-            memory_cache_mb: 64,
+            memory_cache_mb: 32,
             workers: 0,
             // A few tiles per worker: deep enough to keep workers busy,
             // shallow enough that a burst is refused before it times out.
