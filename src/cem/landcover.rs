@@ -115,12 +115,11 @@ fn from_map(
 ) -> (Raster<f32>, Raster<f32>) {
     let band = |b: usize, x: usize, y: usize| rgb.get(b).map_or(f32::NAN, |r| r.get(x, y));
     let (w, h) = (rgb[0].width(), rgb[0].height());
-    // Maps and 8-bit images repeat colours: classify each distinct colour once.
-    let mut seen: HashMap<[u32; 3], f32> = HashMap::new();
+    // Maps and 8-bit images repeat colours: remember recent classifications.
+    let mut memo = ColourMemo::new();
     let classes = Raster::from_fn(w, h, |x, y| {
         let rgb = [band(0, x, y), band(1, x, y), band(2, x, y)];
-        let class = || colorkey::classify(rgb, keys).map_or(SurfaceType::Plain as u8 as f32, |s| s as u8 as f32);
-        *seen.entry(rgb.map(f32::to_bits)).or_insert_with(class)
+        memo.class(rgb, || colorkey::classify(rgb, keys).map_or(SurfaceType::Plain as u8 as f32, |s| s as u8 as f32))
     });
     let mask = classes.map(|c| if c == SurfaceType::Forest as u8 as f32 { 1.0 } else { 0.0 });
     let closed = morphology::apply_sequence(&mask, ops, radius);
@@ -131,6 +130,36 @@ fn from_map(
         }
     }
     (cover, classes)
+}
+
+/// Classes of recently seen colours: a direct-mapped table of 4096 slots
+/// (hashing every pixel with SipHash in a `HashMap` was 5 % of `sylva bench
+/// pipeline`, measured with perf).
+struct ColourMemo {
+    slots: Vec<([u32; 3], f32)>,
+}
+
+impl ColourMemo {
+    const BITS: u32 = 12;
+    /// Bits of no colour (the values are f32 bits; this is a NaN no decoder writes).
+    const EMPTY: [u32; 3] = [u32::MAX; 3];
+
+    fn new() -> ColourMemo {
+        ColourMemo { slots: vec![(Self::EMPTY, 0.0); 1 << Self::BITS] }
+    }
+
+    /// The class of `rgb`, from the table or from `classify`.
+    #[inline]
+    fn class(&mut self, rgb: [f32; 3], classify: impl FnOnce() -> f32) -> f32 {
+        let key = rgb.map(f32::to_bits);
+        let mix = (key[0].wrapping_mul(0x9E37_79B1) ^ key[1].wrapping_mul(0x85EB_CA77) ^ key[2].wrapping_mul(0xC2B2_AE3D))
+            .wrapping_mul(0x27D4_EB2F);
+        let slot = &mut self.slots[(mix >> (32 - Self::BITS)) as usize];
+        if slot.0 != key {
+            *slot = (key, classify());
+        }
+        slot.1
+    }
 }
 
 fn from_classes(values: &Raster<f32>, table: &HashMap<i64, (SurfaceType, f32)>) -> (Raster<f32>, Raster<f32>) {
