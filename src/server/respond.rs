@@ -51,17 +51,34 @@ fn insert(headers: &mut HeaderMap, name: impl axum::http::header::IntoHeaderName
     }
 }
 
+impl ServeError {
+    /// The status (who is at fault), headers (when to retry an overloaded
+    /// server) and message of the error's response; server failures are logged.
+    pub fn parts(&self) -> (StatusCode, HeaderMap, String) {
+        let mut headers = HeaderMap::new();
+        let status = match self {
+            ServeError::NotFound => StatusCode::NOT_FOUND,
+            ServeError::BadRequest(_) => StatusCode::BAD_REQUEST,
+            ServeError::Busy(_) => {
+                insert(&mut headers, header::RETRY_AFTER, "1");
+                StatusCode::SERVICE_UNAVAILABLE
+            }
+            ServeError::Upstream(_) => StatusCode::BAD_GATEWAY,
+            ServeError::Internal(m) => {
+                tracing::error!(error = %m, "request failed");
+                StatusCode::INTERNAL_SERVER_ERROR
+            }
+        };
+        (status, headers, self.to_string())
+    }
+}
+
 impl IntoResponse for ServeError {
     fn into_response(self) -> Response {
         match self {
+            // Absent tiles have no body.
             ServeError::NotFound => StatusCode::NOT_FOUND.into_response(),
-            ServeError::BadRequest(m) => (StatusCode::BAD_REQUEST, m).into_response(),
-            ServeError::Busy(e) => (StatusCode::SERVICE_UNAVAILABLE, [(header::RETRY_AFTER, "1")], e.to_string()).into_response(),
-            ServeError::Upstream(m) => (StatusCode::BAD_GATEWAY, m).into_response(),
-            ServeError::Internal(m) => {
-                tracing::error!(error = %m, "request failed");
-                (StatusCode::INTERNAL_SERVER_ERROR, m).into_response()
-            }
+            other => other.parts().into_response(),
         }
     }
 }

@@ -294,3 +294,33 @@ fn world_wind_dem_tiles_match_the_dem_at_their_samples() {
     }
     assert!(checked > 100_000, "only {checked} samples inside the DEM");
 }
+
+#[test]
+fn an_overloaded_server_answers_503_with_retry_after_at_once() {
+    let dir = TempDir::new("srv-busy");
+    let config = dir.join("busy.toml");
+    std::fs::write(&config, "[server]\nworkers = 1\nqueue = 0\n").unwrap();
+    let server = Server::start(Some(&config), &dir.join("cache"));
+    // Eight different uncached maps at once: one computes, the others find no room.
+    let replies: Vec<_> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..8)
+            .map(|i| {
+                let url = format!(
+                    "{}/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=cem&STYLES=&CRS=CRS:84&BBOX=10.0{i},46.3,10.2,46.45&WIDTH=900&HEIGHT=700&FORMAT=image/tiff",
+                    server.base
+                );
+                s.spawn(move || get(&url, &[]))
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    assert!(replies.iter().all(|r| r.status == 200 || r.status == 503), "{:?}", replies.iter().map(|r| r.status).collect::<Vec<_>>());
+    let busy: Vec<_> = replies.iter().filter(|r| r.status == 503).collect();
+    assert!(!busy.is_empty(), "no request was refused");
+    for r in busy {
+        assert_eq!(r.header("retry-after"), Some("1"));
+        assert!(r.text().contains("ServiceExceptionReport") && r.text().contains("busy"), "{}", r.text());
+    }
+    assert!(replies.iter().any(|r| r.status == 200));
+    assert_eq!(server.get("/health").status, 200);
+}

@@ -44,11 +44,13 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
                 Err(ServeError::BadRequest(m)) => {
                     exception(&Exception::new(super::exception::Code::InvalidParameterValue, m), reply, &state)
                 }
-                Err(ServeError::Upstream(m)) => {
-                    let (mime, body) = Exception::new(super::exception::Code::NoApplicableCode, m).report(map.version);
-                    (StatusCode::BAD_GATEWAY, [(header::CONTENT_TYPE, mime)], body).into_response()
+                // The server's or an upstream's failure: still a report, with the status.
+                Err(e) => {
+                    let (status, mut headers, message) = e.parts();
+                    let (mime, body) = Exception::new(super::exception::Code::NoApplicableCode, message).report(map.version);
+                    headers.insert(header::CONTENT_TYPE, axum::http::HeaderValue::from_static(mime));
+                    (status, headers, body).into_response()
                 }
-                Err(other) => other.into_response(),
             }
         }
     }
