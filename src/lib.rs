@@ -17,6 +17,7 @@ pub mod bench;
 pub mod cache;
 pub mod canopy;
 pub mod cem;
+pub mod client;
 pub mod config;
 pub mod demo;
 pub mod encode;

@@ -1,0 +1,236 @@
+//! A tile's hull: the coarse, closed mesh whose fragments start the rays
+//! (dissertation 6.4, "Choice of Rendering Primitives"), and the terrain
+//! mesh drawn where no ray is cast.
+//!
+//! The top is a `(K + 1)²` vertex grid over the cast range (samples −1 to N)
+//! with quads of ~16 samples. Each top vertex carries two hull heights — the
+//! maximum ground and the maximum CEM over the cells of the quads around it —
+//! and the ground height at its position. The vertex shader places the hull
+//! at `ground_max + f·(cem_max − ground_max)` for a canopy fade `f ∈ [0, 1]`,
+//! which bounds `ground + f·canopy` over those cells (a convex combination
+//! of two bounds); triangles interpolate vertices that all bound their quad,
+//! so the hull never dips below the surface. Vertical skirts down to below
+//! the lowest ground and a bottom face close it: a ray that meets the
+//! surface inside the tile first crosses a front face of the hull, and a
+//! camera inside sees its back faces.
+//!
+//! Faces wind counter-clockwise seen from outside.
+
+use crate::raster::Raster;
+
+/// Samples per hull quad side (about; quads split the cast range evenly).
+pub const QUAD_SAMPLES: usize = 16;
+
+/// One hull vertex, as the GPU reads it.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct HullVertex {
+    /// Sample coordinates `(i, j)`, east and north.
+    pub sample: [f32; 2],
+    /// Hull heights: maximum ground, maximum CEM (local metres).
+    pub hull_m: [f32; 2],
+    /// Ground height at the vertex (local metres).
+    pub terrain_m: f32,
+}
+
+/// The mesh of one tile.
+#[derive(Clone, Debug)]
+pub struct Hull {
+    /// Vertices: the top grid, then the bottom ring.
+    pub vertices: Vec<HullVertex>,
+    /// Triangles.
+    pub indices: Vec<u32>,
+    /// Quads per side of the top grid, `K`.
+    pub quads: usize,
+    /// Height of the skirts' lower edge and the bottom face (local metres).
+    pub bottom_m: f32,
+    /// Largest distance between a ground sample and the terrain mesh.
+    pub mesh_error_m: f32,
+}
+
+impl Hull {
+    /// The hull of a tile's cast range: `cem` and `dem` hold samples −1 ..= N
+    /// on both axes, row 0 at the south, NaN for nodata.
+    pub fn build(cem: &Raster<f32>, dem: &Raster<f32>) -> Hull {
+        let cells = cem.width() - 1;
+        let k = cells.div_ceil(QUAD_SAMPLES).max(1);
+        let pos: Vec<f64> = (0..=k).map(|a| a as f64 * cells as f64 / k as f64).collect();
+        let bottom_m = dem.min_max().map_or(0.0, |(lo, _)| lo - 1.0);
+        let quad_max = |layer: &Raster<f32>, a: usize, b: usize| {
+            let (x0, x1) = (pos[a].floor() as usize, (pos[a + 1].ceil() as usize).min(cells));
+            let (y0, y1) = (pos[b].floor() as usize, (pos[b + 1].ceil() as usize).min(cells));
+            let mut m = f32::NAN;
+            for y in y0..=y1 {
+                for &v in &layer.row(y)[x0..=x1] {
+                    m = m.max(v);
+                }
+            }
+            m
+        };
+        let around = |layer: &Raster<f32>, a: usize, b: usize| {
+            let mut m = f32::NAN;
+            for (qa, qb) in [(a.wrapping_sub(1), b.wrapping_sub(1)), (a, b.wrapping_sub(1)), (a.wrapping_sub(1), b), (a, b)] {
+                if qa < k && qb < k {
+                    m = m.max(quad_max(layer, qa, qb));
+                }
+            }
+            if m.is_nan() { bottom_m } else { m }
+        };
+        let mut vertices = Vec::with_capacity((k + 1) * (k + 1) + 4 * k);
+        for b in 0..=k {
+            for a in 0..=k {
+                let terrain = bilinear(dem, pos[a], pos[b]);
+                vertices.push(HullVertex {
+                    sample: [(pos[a] - 1.0) as f32, (pos[b] - 1.0) as f32],
+                    hull_m: [around(dem, a, b), around(cem, a, b).max(around(dem, a, b))],
+                    terrain_m: if terrain.is_nan() { bottom_m } else { terrain },
+                });
+            }
+        }
+        let ring = ring(k);
+        let top_count = vertices.len() as u32;
+        for &(a, b) in &ring {
+            let v = vertices[b * (k + 1) + a];
+            vertices.push(HullVertex { sample: v.sample, hull_m: [bottom_m; 2], terrain_m: bottom_m });
+        }
+        let indices = indices(k, &ring, top_count);
+        let mesh_error_m = mesh_error(dem, &vertices, &pos, k);
+        Hull { vertices, indices, quads: k, bottom_m, mesh_error_m }
+    }
+}
+
+/// Top-grid positions `(a, b)` around the boundary, counter-clockwise seen
+/// from above, starting at the south-west corner.
+fn ring(k: usize) -> Vec<(usize, usize)> {
+    let south = (0..k).map(|a| (a, 0));
+    let east = (0..k).map(|b| (k, b));
+    let north = (0..k).map(|a| (k - a, k));
+    let west = (0..k).map(|b| (0, k - b));
+    south.chain(east).chain(north).chain(west).collect()
+}
+
+fn indices(k: usize, ring: &[(usize, usize)], top_count: u32) -> Vec<u32> {
+    let top = |a: usize, b: usize| (b * (k + 1) + a) as u32;
+    let mut out = Vec::with_capacity(6 * (k * k + ring.len() + 1));
+    for b in 0..k {
+        for a in 0..k {
+            let (v00, v10, v11, v01) = (top(a, b), top(a + 1, b), top(a + 1, b + 1), top(a, b + 1));
+            out.extend([v00, v10, v11, v00, v11, v01]);
+        }
+    }
+    let n = ring.len();
+    for p in 0..n {
+        let q = (p + 1) % n;
+        let (tp, tq) = (top(ring[p].0, ring[p].1), top(ring[q].0, ring[q].1));
+        let (bp, bq) = (top_count + p as u32, top_count + q as u32);
+        out.extend([tp, bp, bq, tp, bq, tq]);
+    }
+    // The bottom face, seen from below.
+    let corner = |c: usize| top_count + (c * k) as u32;
+    out.extend([corner(0), corner(2), corner(1), corner(0), corner(3), corner(2)]);
+    out
+}
+
+/// Bilinear ground at fractional raster position `(x, y)`.
+fn bilinear(r: &Raster<f32>, x: f64, y: f64) -> f32 {
+    let (x0, y0) = ((x.floor() as usize).min(r.width() - 2), (y.floor() as usize).min(r.height() - 2));
+    let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
+    let top = r.get(x0, y0) * (1.0 - fx) + r.get(x0 + 1, y0) * fx;
+    let bot = r.get(x0, y0 + 1) * (1.0 - fx) + r.get(x0 + 1, y0 + 1) * fx;
+    top * (1.0 - fy) + bot * fy
+}
+
+/// The largest gap between ground samples and the triangulated terrain
+/// mesh (split along each quad's south-west to north-east diagonal).
+fn mesh_error(dem: &Raster<f32>, vertices: &[HullVertex], pos: &[f64], k: usize) -> f32 {
+    let h = |a: usize, b: usize| vertices[b * (k + 1) + a].terrain_m;
+    let mut worst: f32 = 0.0;
+    let mut b = 0;
+    for y in 0..dem.height() {
+        while b + 1 < k && y as f64 > pos[b + 1] {
+            b += 1;
+        }
+        let v = ((y as f64 - pos[b]) / (pos[b + 1] - pos[b])) as f32;
+        let mut a = 0;
+        for (x, &g) in dem.row(y).iter().enumerate() {
+            while a + 1 < k && x as f64 > pos[a + 1] {
+                a += 1;
+            }
+            let u = ((x as f64 - pos[a]) / (pos[a + 1] - pos[a])) as f32;
+            let (v00, v10, v11, v01) = (h(a, b), h(a + 1, b), h(a + 1, b + 1), h(a, b + 1));
+            let mesh = if u >= v { v00 + u * (v10 - v00) + v * (v11 - v10) } else { v00 + v * (v01 - v00) + u * (v11 - v01) };
+            if g.is_finite() {
+                worst = worst.max((g - mesh).abs());
+            }
+        }
+    }
+    worst
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    fn bumpy(n: usize) -> (Raster<f32>, Raster<f32>) {
+        let dem = Raster::from_fn(n, n, |x, y| (x as f32 * 0.7).sin() * 30.0 + (y as f32 * 0.3).cos() * 50.0);
+        let cem = Raster::from_fn(n, n, |x, y| dem.get(x, y) + if (x / 5 + y / 7) % 2 == 0 { 25.0 } else { 0.0 });
+        (cem, dem)
+    }
+
+    fn position(v: &HullVertex, f: f32) -> Vec3 {
+        Vec3::new(v.sample[0], v.sample[1], v.hull_m[0] + f * (v.hull_m[1] - v.hull_m[0]))
+    }
+
+    #[test]
+    fn faces_point_outward() {
+        let (cem, dem) = bumpy(67);
+        let hull = Hull::build(&cem, &dem);
+        let centre = Vec3::new(32.0, 32.0, hull.bottom_m + 1.0);
+        for t in hull.indices.chunks(3) {
+            let [p, q, r] = [0, 1, 2].map(|i| position(&hull.vertices[t[i] as usize], 1.0));
+            let normal = (q - p).cross(r - p);
+            let mid = (p + q + r) / 3.0;
+            assert!(normal.dot(mid - centre) > 0.0, "triangle {t:?} faces inward");
+        }
+    }
+
+    #[test]
+    fn the_hull_bounds_the_surface_for_any_fade() {
+        let (cem, dem) = bumpy(67);
+        let hull = Hull::build(&cem, &dem);
+        let k = hull.quads;
+        for f in [0.0f32, 0.3, 1.0] {
+            for t in hull.indices.chunks(3).take(2 * k * k) {
+                let [p, q, r] = [0, 1, 2].map(|i| position(&hull.vertices[t[i] as usize], f));
+                // Every sample under the triangle lies below it.
+                for y in 0..cem.height() {
+                    for x in 0..cem.width() {
+                        let s = Vec3::new(x as f32 - 1.0, y as f32 - 1.0, 0.0);
+                        if let Some(z) = plane_z(p, q, r, s) {
+                            let surface = dem.get(x, y) + f * (cem.get(x, y) - dem.get(x, y));
+                            assert!(z >= surface - 1e-3, "hull {z} under surface {surface} at {x},{y}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// The triangle's height above `s` if `s` is inside it.
+    fn plane_z(p: Vec3, q: Vec3, r: Vec3, s: Vec3) -> Option<f32> {
+        let d = (q.x - p.x) * (r.y - p.y) - (r.x - p.x) * (q.y - p.y);
+        let u = ((s.x - p.x) * (r.y - p.y) - (r.x - p.x) * (s.y - p.y)) / d;
+        let v = ((q.x - p.x) * (s.y - p.y) - (s.x - p.x) * (q.y - p.y)) / d;
+        (u >= -1e-6 && v >= -1e-6 && u + v <= 1.0 + 1e-6).then(|| p.z + u * (q.z - p.z) + v * (r.z - p.z))
+    }
+
+    #[test]
+    fn a_flat_tile_has_no_mesh_error_and_a_bumpy_one_reports_it() {
+        let flat = Raster::filled(67, 67, 500.0f32);
+        assert_eq!(Hull::build(&flat, &flat).mesh_error_m, 0.0);
+        let (cem, dem) = bumpy(67);
+        let e = Hull::build(&cem, &dem).mesh_error_m;
+        assert!(e > 10.0 && e < 160.0, "{e}");
+    }
+}

@@ -1,0 +1,16 @@
+//! The client: a World-Wind-style quadtree flyover of CEM tiles, ray cast
+//! per pixel (dissertation 6.4).
+//!
+//! The pure parts — the ellipsoid ([`globe`]), tile frames ([`frame`]), the
+//! camera ([`camera`]), prepared tiles and their hulls ([`tile`],
+//! [`hull`]), the ray-casting model shared by both ray casters
+//! ([`raycast`]) and the exact CPU reference ([`reference`]) — know nothing
+//! of wgpu; the GPU path lives in `render` (feature `client`).
+//!
+//! Positions are `f64` on the CPU; the GPU sees tile-local `f32` values only.
+
+pub mod camera;
+pub mod frame;
+pub mod globe;
+pub mod hull;
+pub mod tile;

@@ -1,0 +1,229 @@
+//! A tile made ready for ray casting: what a tile source delivers (CEM,
+//! ground, surface classes and map colour with a halo) moved into the tile's
+//! flat frame, with its acceleration data and its hull mesh.
+//!
+//! - **Heights** are measured from the tile's tangent plane raised to a base
+//!   height (the middle of the tile's range), so `f32` keeps sub-millimetre
+//!   steps even on a 2 mm level-22 tile; the ellipsoid's drop below the
+//!   plane is added to every sample ([`super::frame`]).
+//! - **Texels** are stored row 0 at the south, so texel `(i + B, j + B)`
+//!   holds sample `(i, j)` (east, north) of a tile with halo `B`. Each texel
+//!   carries CEM, ground and the two safety zones (dissertation 6.4: the
+//!   maximum within 4 and 32 samples), the linear march reads all four in
+//!   one fetch.
+//! - **Cast range.** A tile's rays look for hits in the cells between
+//!   samples −1 and N (one cell of overlap with each neighbour, read from the
+//!   halo), so no sliver between two flat frames lets a ray through. The
+//!   maximum mipmap covers exactly those `N + 1` cells: cell `m` has its
+//!   south-west corner at sample `m − 1`.
+//! - **Nodata** is [`NODATA_M`], far below any surface: cells with a nodata
+//!   corner hold no surface, and bound nothing.
+
+use super::frame::TileFrame;
+use super::hull::Hull;
+use crate::cem::accel::{MaxMipmap, ZONE_FAR, ZONE_NEAR};
+use crate::grid::{TileGrid, TileId};
+use crate::raster::Raster;
+use crate::raster::morphology::dilate;
+
+/// Height of nodata texels: below this is no surface.
+pub const NODATA_M: f32 = -1.0e30;
+
+/// What a tile source delivers for one tile: `(N + 2B)²` samples per
+/// layer, row 0 at the north (the server's order), NaN for nodata.
+#[derive(Clone, Debug)]
+pub struct TilePayload {
+    /// The tile.
+    pub id: TileId,
+    /// Halo `B`, samples per side.
+    pub halo: usize,
+    /// Combined elevation (ground + canopy), metres.
+    pub cem: Vec<f32>,
+    /// Ground elevation, metres.
+    pub dem: Vec<f32>,
+    /// Surface class ids.
+    pub surface: Vec<u8>,
+    /// Map colour, sRGB with alpha 0 for nodata.
+    pub colour: Vec<[u8; 4]>,
+}
+
+/// Height statistics of a prepared tile, in its local frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TileRange {
+    /// Lowest ground in the cast range, local metres.
+    pub min_m: f32,
+    /// Highest CEM in the cast range, local metres.
+    pub max_m: f32,
+    /// Tallest canopy (CEM − ground) in the cast range, metres.
+    pub canopy_max_m: f32,
+    /// How far the coarse terrain mesh departs from the ground samples,
+    /// metres: the error of drawing the tile without ray casting.
+    pub mesh_error_m: f32,
+}
+
+/// A tile ready for the ray casters, on the CPU.
+#[derive(Clone, Debug)]
+pub struct TileData {
+    /// The tile's flat frame, raised to its base height.
+    pub frame: TileFrame,
+    /// Halo `B`.
+    pub halo: usize,
+    /// Texels per side, `N + 2B`.
+    pub size: usize,
+    /// Per texel: CEM, ground, 4-sample zone, 32-sample zone (local metres).
+    pub texels: Vec<[f32; 4]>,
+    /// Map colour per texel.
+    pub colour: Vec<[u8; 4]>,
+    /// Surface class per texel.
+    pub surface: Vec<u8>,
+    /// Maximum mipmap of the CEM over the cast cells.
+    pub mip: MaxMipmap,
+    /// The hull and terrain mesh.
+    pub hull: Hull,
+    /// Height statistics.
+    pub range: TileRange,
+}
+
+/// Why a payload cannot become a tile.
+#[derive(Debug, thiserror::Error)]
+pub enum TileError {
+    /// The layers do not have `(N + 2B)²` samples.
+    #[error("tile {id:?}: expected {expected} samples per layer, got {got}")]
+    Size {
+        /// The tile.
+        id: TileId,
+        /// `(N + 2B)²`.
+        expected: usize,
+        /// What the payload had.
+        got: usize,
+    },
+    /// The halo must reach the overlap cell.
+    #[error("tile {0:?}: a halo of at least one sample is needed")]
+    NoHalo(TileId),
+}
+
+impl TileData {
+    /// Prepares a payload on `grid`.
+    pub fn prepare(grid: &TileGrid, payload: TilePayload) -> Result<TileData, TileError> {
+        let id = payload.id;
+        let halo = payload.halo;
+        let size = grid.samples() as usize + 2 * halo;
+        let expected = size * size;
+        for got in [payload.cem.len(), payload.dem.len(), payload.surface.len(), payload.colour.len()] {
+            if got != expected {
+                return Err(TileError::Size { id, expected, got });
+            }
+        }
+        if halo == 0 {
+            return Err(TileError::NoHalo(id));
+        }
+        let flat = TileFrame::new(grid, id);
+        let base = base_height(&payload.cem);
+        let frame = flat.raised(base);
+        let drops = frame.drops_m(halo);
+        let south_up = |k: usize| (size - 1 - k / size) * size + k % size;
+        let local = |layer: &[f32]| -> Raster<f32> {
+            Raster::from_fn(size, size, |x, y| {
+                let v = layer[(size - 1 - y) * size + x];
+                if v.is_nan() { f32::NAN } else { (v as f64 + drops[y * size + x]) as f32 }
+            })
+        };
+        let (cem, dem) = (local(&payload.cem), local(&payload.dem));
+        let near = dilate(&cem, ZONE_NEAR);
+        let far = dilate(&near, ZONE_FAR - ZONE_NEAR);
+        let texels = (0..expected)
+            .map(|k| [cem.data()[k], dem.data()[k], near.data()[k], far.data()[k]].map(nodata_low))
+            .collect();
+        let reorder = |k: usize| south_up(k);
+        let colour = (0..expected).map(|k| payload.colour[reorder(k)]).collect();
+        let surface = (0..expected).map(|k| payload.surface[reorder(k)]).collect();
+        let cast = cast_window(&cem, halo, grid.samples() as usize);
+        let mip = MaxMipmap::build(&cast);
+        let hull = Hull::build(&cast, &cast_window(&dem, halo, grid.samples() as usize));
+        let range = TileRange {
+            min_m: hull.bottom_m,
+            max_m: cast.min_max().map_or(0.0, |(_, hi)| hi),
+            canopy_max_m: canopy_max(&cast, &cast_window(&dem, halo, grid.samples() as usize)),
+            mesh_error_m: hull.mesh_error_m,
+        };
+        Ok(TileData { frame, halo, size, texels, colour, surface, mip, hull, range })
+    }
+
+    /// The tile.
+    pub fn id(&self) -> TileId {
+        self.frame.id
+    }
+
+    /// Texel at sample `(i, j)` (may be in the halo).
+    pub fn texel(&self, i: i64, j: i64) -> [f32; 4] {
+        let b = self.halo as i64;
+        self.texels[((j + b) as usize) * self.size + (i + b) as usize]
+    }
+
+    /// Bytes the tile takes on the GPU (texels, mipmap, colour, classes).
+    pub fn gpu_bytes(&self) -> usize {
+        let mip: usize = (0..self.mip.levels()).map(|l| self.mip.level(l).data().len() * 4).sum();
+        self.texels.len() * 16 + mip + self.colour.len() * 4 + self.surface.len()
+    }
+}
+
+/// The height the frame is raised to: the middle of the valid CEM range.
+fn base_height(cem: &[f32]) -> f64 {
+    let (lo, hi) = cem.iter().filter(|v| v.is_finite()).fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    if lo > hi { 0.0 } else { ((lo as f64 + hi as f64) / 2.0).round() }
+}
+
+fn nodata_low(v: f32) -> f32 {
+    if v.is_nan() { NODATA_M } else { v }
+}
+
+/// The samples of the cast range, −1 ..= N on both axes (row 0 south).
+fn cast_window(layer: &Raster<f32>, halo: usize, samples: usize) -> Raster<f32> {
+    let w = crate::raster::Window::new(halo as i64 - 1, halo as i64 - 1, samples + 2, samples + 2);
+    layer.crop(w, f32::NAN)
+}
+
+fn canopy_max(cem: &Raster<f32>, dem: &Raster<f32>) -> f32 {
+    cem.data().iter().zip(dem.data()).map(|(c, d)| c - d).filter(|v| v.is_finite()).fold(0.0, f32::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A payload whose CEM is a ramp plus canopy on the east half.
+    pub(crate) fn ramp(grid: &TileGrid, id: TileId, halo: usize) -> TilePayload {
+        let size = grid.samples() as usize + 2 * halo;
+        let dem: Vec<f32> = (0..size * size).map(|k| 1000.0 + (k % size) as f32 * 2.0 + (k / size) as f32).collect();
+        let cem = dem.iter().enumerate().map(|(k, d)| d + if k % size > size / 2 { 20.0 } else { 0.0 }).collect();
+        TilePayload { id, halo, cem, dem, surface: vec![1; size * size], colour: vec![[90, 140, 80, 255]; size * size] }
+    }
+
+    #[test]
+    fn texels_are_south_up_and_measured_from_the_raised_plane() {
+        let grid = TileGrid::new(36.0, 33).unwrap();
+        let id = grid.tile_containing(10.2, 46.4, 12);
+        let t = TileData::prepare(&grid, ramp(&grid, id, 2)).unwrap();
+        // Payload row 0 is the north edge: sample (0, N−1+B) in texel space.
+        let size = 37;
+        let north_west = t.texel(-2, 34);
+        let payload_first = 1000.0f64;
+        let drop = t.frame.drops_m(2)[36 * size];
+        assert!((north_west[1] as f64 - (payload_first + drop)).abs() < 1e-3, "{north_west:?}");
+        // The canopy of 20 m is there and the zones bound the CEM.
+        assert!((t.range.canopy_max_m - 20.0).abs() < 1e-3);
+        for tx in &t.texels {
+            assert!(tx[2] >= tx[0] && tx[3] >= tx[2]);
+        }
+    }
+
+    #[test]
+    fn bad_payloads_are_refused() {
+        let grid = TileGrid::new(36.0, 33).unwrap();
+        let id = TileId::new(3, 1, 1);
+        let mut p = ramp(&grid, id, 2);
+        p.dem.pop();
+        assert!(matches!(TileData::prepare(&grid, p), Err(TileError::Size { .. })));
+        assert!(matches!(TileData::prepare(&grid, ramp(&grid, id, 0)), Err(TileError::NoHalo(_))));
+    }
+}
