@@ -13,4 +13,9 @@ pub mod camera;
 pub mod frame;
 pub mod globe;
 pub mod hull;
+pub mod raycast;
+pub mod reference;
+pub mod source;
+#[cfg(feature = "client")]
+pub mod render;
 pub mod tile;

@@ -21,6 +21,15 @@ pub struct Relief<'a> {
     pub spacing_m: (f64, f64),
 }
 
+/// A sample's unshaded colour (0–255): the map's where it has one, else
+/// its surface class's.
+pub fn base_colour(class: u8, map: Option<[f32; 3]>) -> [f32; 3] {
+    match map {
+        Some(rgb) if rgb.iter().all(|v| v.is_finite()) => rgb,
+        _ => class_colour(class),
+    }
+}
+
 /// Colours of surface classes when there is no map.
 fn class_colour(class: u8) -> [f32; 3] {
     match SurfaceType::from_id(class) {
@@ -46,10 +55,7 @@ pub fn encode(r: &Relief) -> Result<Vec<u8>, EncodeError> {
                 continue;
             }
             // The map's colour where it has one, else the class's.
-            let base = match r.map.map(|bands| [0, 1, 2].map(|b| bands[b].get(x, y))) {
-                Some(rgb) if rgb.iter().all(|v| v.is_finite()) => rgb,
-                _ => class_colour(class),
-            };
+            let base = base_colour(class, r.map.map(|bands| [0, 1, 2].map(|b| bands[b].get(x, y))));
             // Canopy reads darker and greener, as forest does from the air.
             let tint = if class == SurfaceType::Forest as u8 { [0.8, 0.9, 0.75] } else { [1.0; 3] };
             let light = 0.3 + 0.7 * shade;

@@ -176,7 +176,7 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
     if cem.all_nodata() {
         return Ok(Computed { bytes: Vec::new(), stats: products.stats, encode: Duration::ZERO });
     }
-    let map = region.map.as_ref().map(|m| map_colours(m, grid)).transpose()?.flatten();
+    let map = crate::produce::map_colours(region, grid)?;
     let inner = Window::new(1, 1, grid.width(), grid.height());
     let surface = surface.crop(inner, cem::surface::NODATA);
     let start = Instant::now();
@@ -185,14 +185,6 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
     let spacing_m = (dx * mid_lat.cos() * crate::geo::METRES_PER_DEGREE, dy * crate::geo::METRES_PER_DEGREE);
     let bytes = encode::relief::encode(&encode::relief::Relief { cem, surface: &surface, map: map.as_deref(), spacing_m })?;
     Ok(Computed { bytes, stats: products.stats, encode: start.elapsed() })
-}
-
-/// The map's R, G, B at the grid's samples, read and projected once for the
-/// three bands; `None` where the grid misses the map.
-fn map_colours(map: &crate::source::GeoRaster, grid: &SampleGrid) -> Result<Option<Vec<crate::raster::Raster<f32>>>, ProduceError> {
-    let bilinear = crate::raster::resample::Resampling::Bilinear;
-    let footprint = map.read(grid, bilinear, 3)?;
-    Ok(footprint.map(|f| (0..3).map(|b| f.resample(b, bilinear)).collect()))
 }
 
 #[cfg(test)]

@@ -12,7 +12,8 @@ mod config_files; // every file in config/ parses and builds its region
 mod conservative; // acceleration bounds never below the surface, exhaustively
 mod extreme; // stiff and extreme inputs: huge ranges, cliffs, nodata, poles, sizes
 mod http; // a `sylva serve` process for tests, and an HTTP client
-mod real_data; // rmnp, mt_hood, storm_lake, nz_forest against their sources
+mod real_data;
+mod render; // the GPU ray caster against the exact CPU reference // rmnp, mt_hood, storm_lake, nz_forest against their sources
 mod seamless; // tiles equal windows of whole-area builds; neighbours agree
 mod server; // the server over HTTP: WMS, tiles, cache, concurrency, bad input, shutdown
 mod skipped_work; // stages nobody needs do not run (counted)

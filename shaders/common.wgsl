@@ -1,0 +1,80 @@
+// Shared declarations of the ray-casting shaders: the uniform blocks (their
+// Rust twins are in src/client/render/uniforms.rs, checked field by field
+// against naga's layout in a test), the bindings, and the tile texel access.
+//
+// Coordinates: sample space (i, j) east/north of the tile's south-west
+// sample, heights and ray parameters in the tile's local metres
+// (src/client/frame.rs). Texel (i + B, j + B) of the tile's slot holds sample
+// (i, j); the cast range is samples -1 ..= N, cast cell m has its south-west
+// corner at sample m - 1.
+
+struct Frame {
+    proj: mat4x4<f32>,
+    // rgb: sky colour, a: ambient light.
+    sky: vec4<f32>,
+    // canopy reference height (m), fade low (px), fade high (px), focal length (px).
+    fade: vec4<f32>,
+    // width, height (px), near plane (m), unused.
+    viewport: vec4<f32>,
+    // shadow weight, shadow softness (m), unused, unused.
+    shadow: vec4<f32>,
+    // rgb: canopy tint.
+    canopy_tint: vec4<f32>,
+    // traversal (0 exact, 1 linear), linear steps, shadow steps, sun on.
+    mode: vec4<u32>,
+    // The maximum mipmap's levels in the atlas: x, y, width, height.
+    mip_rects: array<vec4<u32>, 16>,
+};
+
+struct Tile {
+    // Tile-local metres to camera space.
+    model_view: mat4x4<f32>,
+    // xyz: camera in the tile frame (m); w: hull fade reach (m).
+    camera: vec4<f32>,
+    // xyz: unit direction to the sun in the tile frame; w: shadow reach (samples).
+    sun: vec4<f32>,
+    // metres per sample east, north; centre index c; samples per side N.
+    grid: vec4<f32>,
+    // lowest ground, highest CEM (local m), unused, unused.
+    range: vec4<f32>,
+    // halo B, texels per side, texture slot, top mipmap level.
+    index: vec4<i32>,
+    // draw mode (0 hull, 1 camera inside the hull, 2 plain), canopy whole (1), unused, unused.
+    flags: vec4<u32>,
+};
+
+const MODE_HULL: u32 = 0u;
+const MODE_INSIDE: u32 = 1u;
+const MODE_PLAIN: u32 = 2u;
+const NODATA_BELOW: f32 = -1.0e29;
+const NO_HIT: f32 = -1.0;
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+// cem, ground, 4-sample zone, 32-sample zone.
+@group(0) @binding(1) var texels: texture_2d_array<f32>;
+// sRGB map colour; alpha holds the surface class.
+@group(0) @binding(2) var colours: texture_2d_array<f32>;
+// Maximum mipmap levels packed in an atlas (frame.mip_rects).
+@group(0) @binding(3) var mip: texture_2d_array<f32>;
+@group(0) @binding(4) var gather_sampler: sampler;
+@group(1) @binding(0) var<uniform> tile: Tile;
+
+// Texture accesses of this invocation (view ray, shadow ray): the benchmark's
+// "fetches per pixel".
+var<private> view_fetches: u32 = 0u;
+var<private> shadow_fetches: u32 = 0u;
+
+fn texel(i: i32, j: i32) -> vec4<f32> {
+    let b = tile.index.x;
+    return textureLoad(texels, vec2<i32>(i + b, j + b), tile.index.z, 0);
+}
+
+// Bound of the surface over mipmap texel `cell` of `level`.
+fn mip_bound(level: i32, cell: vec2<i32>) -> f32 {
+    let r = frame.mip_rects[level];
+    return textureLoad(mip, vec2<i32>(r.xy) + cell, tile.index.z, 0).r;
+}
+
+fn mip_cells(level: i32) -> vec2<i32> {
+    return vec2<i32>(frame.mip_rects[level].zw);
+}

@@ -1,0 +1,120 @@
+// Entry points: the hull's vertices, the ray-casting fragments that start
+// on them (dissertation 6.4), and plain texture mapping of the terrain mesh
+// where no ray is cast.
+
+struct VertexIn {
+    @location(0) sample: vec2<f32>,
+    @location(1) hull: vec2<f32>,
+    @location(2) terrain: f32,
+};
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) local: vec3<f32>,
+};
+
+struct FragmentOut {
+    @location(0) colour: vec4<f32>,
+    @location(1) fetches: vec2<u32>,
+    @builtin(frag_depth) depth: f32,
+};
+
+struct PlainOut {
+    @location(0) colour: vec4<f32>,
+    @location(1) fetches: vec2<u32>,
+};
+
+fn project(local: vec3<f32>) -> vec4<f32> {
+    return frame.proj * (tile.model_view * vec4<f32>(local, 1.0));
+}
+
+@vertex
+fn vs_hull(v: VertexIn) -> VertexOut {
+    let xy = (v.sample - vec2<f32>(tile.grid.z)) * tile.grid.xy;
+    var f = 1.0;
+    if tile.flags.y == 0u {
+        // The canopy factor of the nearest sample this vertex must bound.
+        let d = length(vec3<f32>(xy, v.hull.y) - tile.camera.xyz) - tile.camera.w;
+        f = fade_factor(max(d, 0.0));
+    }
+    let local = vec3<f32>(xy, v.hull.x + f * (v.hull.y - v.hull.x));
+    return VertexOut(project(local), local);
+}
+
+@vertex
+fn vs_plain(v: VertexIn) -> VertexOut {
+    let local = vec3<f32>((v.sample - vec2<f32>(tile.grid.z)) * tile.grid.xy, v.terrain);
+    return VertexOut(project(local), local);
+}
+
+// The ray's parameter interval inside the cast box, in sample space.
+fn cast_box(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
+    let n = tile.grid.w;
+    let lo = vec3<f32>(-1.0, -1.0, tile.range.x);
+    let hi = vec3<f32>(n, n, tile.range.y);
+    let inv = 1.0 / d;
+    let a = (lo - o) * inv;
+    let b = (hi - o) * inv;
+    let near = min(a, b);
+    let far = max(a, b);
+    return vec2<f32>(max(max(near.x, near.y), near.z), min(min(far.x, far.y), far.z));
+}
+
+fn to_samples(p: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(p.xy / tile.grid.xy + tile.grid.z, p.z);
+}
+
+@fragment
+fn fs_ray(in: VertexOut) -> FragmentOut {
+    let camera = tile.camera.xyz;
+    let to_fragment = in.local - camera;
+    let dir = normalize(to_fragment);
+    let ds = vec3<f32>(dir.xy / tile.grid.xy, dir.z);
+    // Rays start on the hull (measured from there, for precision), or at the
+    // camera when it is inside the hull; never before the near plane.
+    let forward = -vec3<f32>(tile.model_view[0].z, tile.model_view[1].z, tile.model_view[2].z);
+    let t_near = frame.viewport.z / dot(dir, forward);
+    var origin = in.local;
+    var t_base = length(to_fragment);
+    if tile.flags.x == MODE_INSIDE {
+        origin = camera;
+        t_base = 0.0;
+    }
+    let os = to_samples(origin);
+    let span = cast_box(os, ds);
+    let t0 = max(max(span.x, 0.0), t_near - t_base);
+    let t1 = span.y;
+    var t = NO_HIT;
+    if t0 <= t1 {
+        if frame.mode.x == 0u {
+            t = traverse_exact(os, ds, t0, t1);
+        } else {
+            t = traverse_linear(os, ds, t0, t1, frame.mode.y);
+        }
+    }
+    if t == NO_HIT {
+        discard;
+    }
+    let hit = origin + dir * t;
+    let hs = to_samples(hit);
+    let colour = shade(hs.xy, hs.z, dir);
+    let view = tile.model_view * vec4<f32>(hit, 1.0);
+    let depth = frame.viewport.z / max(-view.z, 1.0e-30);
+    return FragmentOut(vec4<f32>(colour, 1.0), vec2<u32>(view_fetches, shadow_fetches), depth);
+}
+
+@fragment
+fn fs_plain(in: VertexOut) -> PlainOut {
+    let s = to_samples(in.local);
+    let c = clamp(vec2<i32>(floor(s.xy)), vec2<i32>(-1), vec2<i32>(i32(tile.grid.w) - 1));
+    let f = clamp(s.xy - vec2<f32>(c), vec2<f32>(0.0), vec2<f32>(1.0));
+    let base = mix(mix(colour_at(c.x, c.y).rgb, colour_at(c.x + 1, c.y).rgb, f.x),
+                   mix(colour_at(c.x, c.y + 1).rgb, colour_at(c.x + 1, c.y + 1).rgb, f.x), f.y);
+    var lit = base;
+    if frame.mode.w == 1u {
+        let g = vec4<f32>(texel(c.x, c.y).y, texel(c.x + 1, c.y).y, texel(c.x, c.y + 1).y, texel(c.x + 1, c.y + 1).y);
+        let lambert = max(dot(patch_normal(g, f), tile.sun.xyz), 0.0);
+        lit = base * (frame.sky.a + (1.0 - frame.sky.a) * lambert);
+    }
+    return PlainOut(vec4<f32>(lit, 1.0), vec2<u32>(0u, 0u));
+}

@@ -1,0 +1,114 @@
+// The two ways a view ray finds the surface, selectable per frame:
+//
+// - exact: hierarchical traversal of the maximum mipmap. Integer cell
+//   stepping on each level; a cell the ray passes above (its lowest point
+//   over the cell is above the cell's bound) is skipped whole, then the walk
+//   climbs a level when it leaves its parent; a cell the ray may enter is
+//   descended into; on level 0 the bilinear patch is intersected exactly.
+//   Bounds are conservative, so no hit is ever skipped, at any angle.
+// - linear: the dissertation's fixed-step march (6.4) with its 4- and
+//   32-sample safety zones, giving up after a fixed number of steps.
+//
+// Rays are in sample space: origin o, direction d per metre of the ray
+// parameter t (samples east/north, metres up). Both return t or NO_HIT.
+
+const START_LEVEL: i32 = 4;
+const MAX_ITERATIONS: u32 = 8192u;
+
+// The ray parameter where the ray leaves cell `cell` of side `size` (cell m
+// spans samples m*size - 1 .. (m+1)*size - 1), per axis.
+fn cell_exit(cell: vec2<i32>, size: f32, o: vec2<f32>, d: vec2<f32>) -> vec2<f32> {
+    let lo = vec2<f32>(cell) * size - 1.0;
+    let hi = lo + size;
+    var t = vec2<f32>(1.0e30);
+    if d.x > 0.0 { t.x = (hi.x - o.x) / d.x; } else if d.x < 0.0 { t.x = (lo.x - o.x) / d.x; }
+    if d.y > 0.0 { t.y = (hi.y - o.y) / d.y; } else if d.y < 0.0 { t.y = (lo.y - o.y) / d.y; }
+    return t;
+}
+
+fn cell_of(p: vec2<f32>, size: f32, lo: vec2<i32>, hi: vec2<i32>) -> vec2<i32> {
+    return clamp(vec2<i32>(floor((p + 1.0) / size)), lo, hi);
+}
+
+fn traverse_exact(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> f32 {
+    let top = tile.index.w;
+    var level = min(START_LEVEL, top);
+    var t = t0;
+    let step = vec2<i32>(sign(d.xy));
+    var cell = cell_of(o.xy + d.xy * t, f32(1 << u32(level)), vec2<i32>(0), mip_cells(level) - 1);
+    for (var it = 0u; it < MAX_ITERATIONS; it++) {
+        let size = f32(1 << u32(level));
+        let exits = cell_exit(cell, size, o.xy, d.xy);
+        let t_out = min(min(exits.x, exits.y), t1);
+        let bound = mip_bound(level, cell);
+        view_fetches += 1u;
+        if min(o.z + d.z * t, o.z + d.z * t_out) <= bound {
+            if level > 0 {
+                level -= 1;
+                let first = cell * 2;
+                cell = cell_of(o.xy + d.xy * t, size / 2.0, first, first + 1);
+                continue;
+            }
+            let h = cell_heights(cell.x - 1, cell.y - 1, &view_fetches);
+            if has_data(h) {
+                let p = o.xy + d.xy * t;
+                let tau = patch_hit(h, p - vec2<f32>(cell - 1), d, o.z + d.z * t, t_out - t);
+                if tau != NO_HIT {
+                    return t + tau;
+                }
+            }
+        }
+        if t_out >= t1 {
+            return NO_HIT;
+        }
+        t = t_out;
+        let old = cell;
+        if exits.x <= exits.y { cell.x += step.x; } else { cell.y += step.y; }
+        let cells = mip_cells(level);
+        if any(cell < vec2<i32>(0)) || any(cell >= cells) {
+            return NO_HIT;
+        }
+        // Climb when the walk leaves its parent.
+        if level < top && any((cell >> vec2<u32>(1u)) != (old >> vec2<u32>(1u))) {
+            level += 1;
+            cell = cell >> vec2<u32>(1u);
+        }
+    }
+    return NO_HIT;
+}
+
+fn traverse_linear(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32, steps: u32) -> f32 {
+    let per_m = length(d.xy);
+    // One sample horizontally per base step; a zone of radius r is left after
+    // r - 0.5 samples from anywhere in the current texel.
+    let unit = 1.0 / max(per_m, 1.0e-9);
+    var t = t0;
+    for (var k = 0u; k < steps; k++) {
+        let p = o + d * t;
+        let s = vec2<i32>(floor(p.xy + 0.5));
+        let zones = texel(s.x, s.y).zw;
+        view_fetches += 1u;
+        let far = min(t + 31.5 * unit, t1);
+        let near = min(t + 3.5 * unit, t1);
+        if min(p.z, o.z + d.z * far) > zones.y {
+            t = far;
+        } else if min(p.z, o.z + d.z * near) > zones.x {
+            t = near;
+        } else {
+            let next = min(t + unit, t1);
+            let q = o + d * next;
+            let h = height_at(q.xy, &view_fetches);
+            if h >= q.z {
+                // Between the last point above and this one below.
+                let h0 = height_at(p.xy, &view_fetches);
+                let g0 = select(max(p.z - h0, 0.0), 0.0, h0 <= NODATA_BELOW);
+                return t + (next - t) * g0 / max(g0 + (h - q.z), 1.0e-12);
+            }
+            t = next;
+        }
+        if t >= t1 {
+            return NO_HIT;
+        }
+    }
+    return NO_HIT;
+}

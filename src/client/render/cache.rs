@@ -1,0 +1,217 @@
+//! The GPU tile cache: fixed-size slots in texture arrays — texels (CEM,
+//! ground, safety zones), colour + surface class, and the maximum mipmap
+//! packed in an atlas — plus each resident tile's hull mesh. The number of
+//! slots follows from the memory budget; a full cache evicts the least
+//! recently drawn tile that the current frame does not use.
+//!
+//! Invariant: bytes resident ≤ the budget (slots are allocated up front).
+
+use super::super::hull::HullVertex;
+use super::super::tile::TileData;
+use crate::grid::TileId;
+use wgpu::util::DeviceExt;
+
+/// Texture arrays hold at most this many layers on every adapter.
+const MAX_SLOTS: u32 = 256;
+
+/// A resident tile.
+struct Resident {
+    id: TileId,
+    last_frame: u64,
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+}
+
+/// A resident tile's mesh, for drawing.
+pub struct MeshRef<'a> {
+    /// Texture slot.
+    pub slot: u32,
+    /// Hull vertices.
+    pub vertices: &'a wgpu::Buffer,
+    /// Hull triangles.
+    pub indices: &'a wgpu::Buffer,
+    /// Number of indices.
+    pub index_count: u32,
+}
+
+/// The cache is smaller than one frame's tiles.
+#[derive(Debug, thiserror::Error)]
+#[error("the GPU tile cache has {slots} slots and this frame needs more")]
+pub struct CacheFull {
+    /// Slots in the cache.
+    pub slots: u32,
+}
+
+/// Tile textures on the GPU.
+pub struct TileCache {
+    /// Texels: CEM, ground, 4- and 32-sample zones.
+    pub texels: wgpu::Texture,
+    /// Colour (rgb) and surface class (alpha).
+    pub colours: wgpu::Texture,
+    /// The maximum mipmap atlas.
+    pub mip: wgpu::Texture,
+    /// Atlas rectangle of each mipmap level: x, y, width, height.
+    pub mip_rects: Vec<[u32; 4]>,
+    size: u32,
+    slots: Vec<Option<Resident>>,
+    slot_bytes: usize,
+}
+
+impl TileCache {
+    /// A cache for tiles of `samples` per side with `halo`, within
+    /// `budget_bytes` (at least one slot).
+    pub fn new(device: &wgpu::Device, samples: u32, halo: u32, budget_bytes: usize) -> TileCache {
+        let size = samples + 2 * halo;
+        let mip_rects = atlas(samples + 1);
+        let atlas_w = mip_rects.iter().map(|r| r[0] + r[2]).max().unwrap_or(1);
+        let atlas_h = mip_rects.iter().map(|r| r[1] + r[3]).max().unwrap_or(1);
+        let slot_bytes = (size * size * (16 + 4) + atlas_w * atlas_h * 4) as usize;
+        let count = ((budget_bytes / slot_bytes) as u32).clamp(1, MAX_SLOTS.min(device.limits().max_texture_array_layers));
+        let array = |label, w, h, format| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: count },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            })
+        };
+        TileCache {
+            texels: array("tile texels", size, size, wgpu::TextureFormat::Rgba32Float),
+            colours: array("tile colours", size, size, wgpu::TextureFormat::Rgba8Unorm),
+            mip: array("tile max mipmaps", atlas_w, atlas_h, wgpu::TextureFormat::R32Float),
+            mip_rects,
+            size,
+            slots: (0..count).map(|_| None).collect(),
+            slot_bytes,
+        }
+    }
+
+    /// Number of slots.
+    pub fn capacity(&self) -> u32 {
+        self.slots.len() as u32
+    }
+
+    /// Bytes of texture memory per slot.
+    pub fn slot_bytes(&self) -> usize {
+        self.slot_bytes
+    }
+
+    /// Bytes of tiles resident now (textures and meshes).
+    pub fn resident_bytes(&self) -> usize {
+        self.slots.iter().flatten().map(|r| self.slot_bytes + r.vertices.size() as usize + r.indices.size() as usize).sum()
+    }
+
+    /// The slot of a resident tile, marking it used in `frame`.
+    pub fn lookup(&mut self, id: TileId, frame: u64) -> Option<u32> {
+        let k = self.slots.iter().position(|s| s.as_ref().is_some_and(|r| r.id == id))?;
+        if let Some(r) = self.slots[k].as_mut() {
+            r.last_frame = frame;
+        }
+        Some(k as u32)
+    }
+
+    /// The mesh of the tile in `slot`.
+    pub fn mesh(&self, slot: u32) -> Option<MeshRef<'_>> {
+        let r = self.slots.get(slot as usize)?.as_ref()?;
+        Some(MeshRef { slot, vertices: &r.vertices, indices: &r.indices, index_count: r.index_count })
+    }
+
+    /// Makes `tile` resident (if it is not), evicting the least recently
+    /// drawn tile not used in `frame`; returns its slot.
+    pub fn insert(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, tile: &TileData, frame: u64) -> Result<u32, CacheFull> {
+        if let Some(slot) = self.lookup(tile.id(), frame) {
+            return Ok(slot);
+        }
+        let slot = self.victim(frame).ok_or(CacheFull { slots: self.capacity() })?;
+        self.write(queue, tile, slot);
+        let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("hull vertices"),
+            contents: bytemuck::cast_slice::<HullVertex, u8>(&tile.hull.vertices),
+            usage: wgpu::BufferUsages::VERTEX,
+        });
+        let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("hull indices"),
+            contents: bytemuck::cast_slice(&tile.hull.indices),
+            usage: wgpu::BufferUsages::INDEX,
+        });
+        let index_count = tile.hull.indices.len() as u32;
+        self.slots[slot as usize] = Some(Resident { id: tile.id(), last_frame: frame, vertices, indices, index_count });
+        Ok(slot)
+    }
+
+    fn victim(&self, frame: u64) -> Option<u32> {
+        if let Some(free) = self.slots.iter().position(Option::is_none) {
+            return Some(free as u32);
+        }
+        let (k, _) = self
+            .slots
+            .iter()
+            .enumerate()
+            .filter_map(|(k, s)| s.as_ref().map(|r| (k, r.last_frame)))
+            .filter(|&(_, used)| used < frame)
+            .min_by_key(|&(_, used)| used)?;
+        Some(k as u32)
+    }
+
+    fn write(&self, queue: &wgpu::Queue, tile: &TileData, slot: u32) {
+        let size = self.size;
+        let colours: Vec<[u8; 4]> = tile.colour.iter().zip(&tile.surface).map(|(c, &s)| [c[0], c[1], c[2], s]).collect();
+        write_layer(queue, &self.texels, slot, [0, 0, size, size], bytemuck::cast_slice(&tile.texels), 16);
+        write_layer(queue, &self.colours, slot, [0, 0, size, size], bytemuck::cast_slice(&colours), 4);
+        for (level, rect) in self.mip_rects.iter().enumerate().take(tile.mip.levels()) {
+            write_layer(queue, &self.mip, slot, *rect, bytemuck::cast_slice(tile.mip.level(level).data()), 4);
+        }
+    }
+}
+
+fn write_layer(queue: &wgpu::Queue, texture: &wgpu::Texture, slot: u32, rect: [u32; 4], bytes: &[u8], texel_bytes: u32) {
+    queue.write_texture(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d { x: rect[0], y: rect[1], z: slot },
+            aspect: wgpu::TextureAspect::All,
+        },
+        bytes,
+        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(rect[2] * texel_bytes), rows_per_image: Some(rect[3]) },
+        wgpu::Extent3d { width: rect[2], height: rect[3], depth_or_array_layers: 1 },
+    );
+}
+
+/// Where the levels of a maximum mipmap over `cells²` cells go in one
+/// atlas: level 0 at the origin, the others stacked in a column beside it
+/// (each level `ceil(previous / 2)` wide, as `MaxMipmap` builds them).
+pub fn atlas(cells: u32) -> Vec<[u32; 4]> {
+    let mut rects = vec![[0, 0, cells, cells]];
+    let (mut side, mut y) = (cells, 0);
+    while side > 1 {
+        side = side.div_ceil(2);
+        rects.push([cells, y, side, side]);
+        y += side;
+    }
+    rects
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_atlas_holds_every_level_without_overlap() {
+        let rects = atlas(514);
+        assert_eq!(rects.len(), 11);
+        assert_eq!(rects.last().map(|r| (r[2], r[3])), Some((1, 1)));
+        for (a, ra) in rects.iter().enumerate() {
+            for rb in rects.iter().skip(a + 1) {
+                let apart = ra[0] + ra[2] <= rb[0] || rb[0] + rb[2] <= ra[0] || ra[1] + ra[3] <= rb[1] || rb[1] + rb[3] <= ra[1];
+                assert!(apart, "{ra:?} overlaps {rb:?}");
+            }
+        }
+        assert!(rects.len() <= super::super::uniforms::MAX_MIP_LEVELS);
+    }
+}

@@ -1,0 +1,59 @@
+//! The headless GPU: an adapter and device without a window, with
+//! timestamp queries when the adapter has them. `WGPU_BACKEND` (e.g.
+//! `vulkan`, `gl`) picks the backend; on a machine without a GPU Mesa's
+//! lavapipe serves Vulkan in software.
+
+/// Why no GPU could be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    /// No adapter at all.
+    #[error(
+        "no GPU adapter found ({0}); without a GPU install Mesa's software Vulkan: apt-get install -y mesa-vulkan-drivers libvulkan1"
+    )]
+    NoAdapter(String),
+    /// The adapter refused the device.
+    #[error("the GPU refused a device: {0}")]
+    Device(String),
+}
+
+/// An opened GPU.
+pub struct Gpu {
+    /// The device.
+    pub device: wgpu::Device,
+    /// Its queue.
+    pub queue: wgpu::Queue,
+    /// What it is, for reports.
+    pub info: wgpu::AdapterInfo,
+    /// Whether render passes can write timestamps.
+    pub timestamps: bool,
+}
+
+impl Gpu {
+    /// Opens the best adapter, headless.
+    pub fn open() -> Result<Gpu, GpuError> {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let options = wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            ..Default::default()
+        };
+        let adapter = pollster::block_on(instance.request_adapter(&options)).map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
+        let mut required_features = wgpu::Features::empty();
+        if timestamps {
+            required_features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        let desc = wgpu::DeviceDescriptor {
+            label: Some("sylva"),
+            required_features,
+            required_limits: adapter.limits(),
+            ..Default::default()
+        };
+        let (device, queue) = pollster::block_on(adapter.request_device(&desc)).map_err(|e| GpuError::Device(e.to_string()))?;
+        Ok(Gpu { device, queue, info: adapter.get_info(), timestamps })
+    }
+
+    /// A one-line description: name, backend, driver.
+    pub fn describe(&self) -> String {
+        format!("{} ({:?}, {} {})", self.info.name, self.info.backend, self.info.driver, self.info.driver_info)
+    }
+}

@@ -1,0 +1,245 @@
+//! The wgpu renderer (feature `client`): each visible tile's hull is
+//! rasterised and its fragments ray cast into the tile's textures
+//! (dissertation 6.4); tiles too far for their canopy and relief to show are
+//! texture-mapped terrain meshes instead. Headless: frames are rendered to
+//! textures and read back.
+//!
+//! - `gpu`: the adapter and device; `cache`: tile texture slots within a
+//!   memory budget; `pipeline`: the three pipelines; `uniforms`: the
+//!   uniform blocks; `targets`: render targets and readback; `timer`: GPU
+//!   pass time; `shaders`: the WGSL table.
+
+pub mod cache;
+pub mod gpu;
+pub mod pipeline;
+pub mod shaders;
+pub mod targets;
+pub mod timer;
+pub mod uniforms;
+
+use super::camera::Camera;
+use super::raycast::SKY;
+use super::tile::TileData;
+use cache::{CacheFull, TileCache};
+use gpu::Gpu;
+use pipeline::Pipelines;
+use std::time::Instant;
+use targets::Targets;
+use timer::PassTimer;
+use uniforms::{DrawMode, FrameSettings, FrameUniform, TILE_STRIDE, TileUniform};
+
+/// Below this projected error (pixels) a tile needs no ray casting: its
+/// canopy is faded out and its terrain mesh departs from the ground by
+/// less than half a pixel.
+pub const PLAIN_ERROR_PX: f64 = 0.5;
+
+/// What to read back after a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Readback {
+    /// Nothing (timing runs).
+    None,
+    /// Colour only.
+    Colour,
+    /// Colour, depth and fetch counts.
+    All,
+}
+
+/// Counts and times of one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameStats {
+    /// GPU time of the pass, if the adapter has timestamps.
+    pub gpu_ms: Option<f64>,
+    /// CPU time from encoding to the GPU being done, ms.
+    pub wall_ms: f64,
+    /// Tiles ray cast from their hull.
+    pub tiles_hull: u32,
+    /// Tiles ray cast from the camera inside them.
+    pub tiles_inside: u32,
+    /// Tiles drawn without ray casting.
+    pub tiles_plain: u32,
+    /// Tile bytes resident on the GPU.
+    pub resident_bytes: usize,
+}
+
+/// A rendered frame, row 0 at the top; empty buffers where not read back.
+#[derive(Clone, Debug, Default)]
+pub struct Rendered {
+    /// Colour.
+    pub colour: Vec<[u8; 4]>,
+    /// Distance along the view axis, metres; 0 where nothing was hit.
+    pub view_z_m: Vec<f32>,
+    /// Texture fetches per pixel: view ray, shadow ray and shading.
+    pub fetches: Vec<[u32; 2]>,
+    /// Counts and times.
+    pub stats: FrameStats,
+}
+
+/// The renderer and its GPU resources.
+pub struct Renderer {
+    gpu: Gpu,
+    pipelines: Pipelines,
+    cache: TileCache,
+    frame_buffer: wgpu::Buffer,
+    frame_group: wgpu::BindGroup,
+    tile_buffer: wgpu::Buffer,
+    tile_group: wgpu::BindGroup,
+    targets: Option<Targets>,
+    timer: Option<PassTimer>,
+    frame_no: u64,
+}
+
+impl Renderer {
+    /// A renderer for tiles of `samples` per side with `halo`, keeping at
+    /// most `budget_bytes` of tiles on the GPU.
+    pub fn new(gpu: Gpu, samples: u32, halo: u32, budget_bytes: usize) -> Renderer {
+        let device = &gpu.device;
+        let pipelines = Pipelines::new(device);
+        let cache = TileCache::new(device, samples, halo, budget_bytes);
+        let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("frame"),
+            size: std::mem::size_of::<FrameUniform>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let frame_group = pipelines.frame_group(device, &frame_buffer, &cache);
+        let tile_buffer = tile_buffer(device, cache.capacity());
+        let tile_group = pipelines.tile_group(device, &tile_buffer);
+        let timer = PassTimer::new(device, &gpu.queue, gpu.timestamps);
+        Renderer { gpu, pipelines, cache, frame_buffer, frame_group, tile_buffer, tile_group, targets: None, timer, frame_no: 0 }
+    }
+
+    /// The GPU.
+    pub fn gpu(&self) -> &Gpu {
+        &self.gpu
+    }
+
+    /// Tiles the GPU cache holds at most.
+    pub fn cache_slots(&self) -> u32 {
+        self.cache.capacity()
+    }
+
+    /// Renders `tiles` (all the frame's tiles, at most [`Self::cache_slots`]).
+    pub fn render(&mut self, camera: &Camera, tiles: &[&TileData], settings: &FrameSettings, readback: Readback) -> Result<Rendered, CacheFull> {
+        self.frame_no += 1;
+        let size = (camera.width_px, camera.height_px);
+        if self.targets.as_ref().map(|t| t.size) != Some(size) {
+            self.targets = Some(Targets::new(&self.gpu.device, size));
+        }
+        let start = Instant::now();
+        let mut stats = FrameStats::default();
+        let draws = self.prepare(camera, tiles, settings, &mut stats)?;
+        self.encode_and_submit(&draws);
+        stats.gpu_ms = self.timer.as_ref().and_then(|t| t.read_ms(&self.gpu.device));
+        stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        stats.resident_bytes = self.cache.resident_bytes();
+        Ok(self.read(readback, stats, camera.near_m))
+    }
+
+    /// Uploads tiles, decides how each is drawn and writes the uniforms.
+    fn prepare(&mut self, camera: &Camera, tiles: &[&TileData], settings: &FrameSettings, stats: &mut FrameStats) -> Result<Vec<(u32, DrawMode)>, CacheFull> {
+        let (device, queue) = (&self.gpu.device, &self.gpu.queue);
+        let mut order: Vec<(f64, &TileData)> = tiles.iter().map(|t| (uniforms::tile_near_m(camera, t), *t)).collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut blocks = Vec::with_capacity(order.len());
+        let mut draws = Vec::with_capacity(order.len());
+        for (near_m, tile) in order {
+            let slot = self.cache.insert(device, queue, tile, self.frame_no)?;
+            let mode = draw_mode(camera, tile, settings, near_m);
+            match mode {
+                DrawMode::Hull => stats.tiles_hull += 1,
+                DrawMode::Inside => stats.tiles_inside += 1,
+                DrawMode::Plain => stats.tiles_plain += 1,
+            }
+            let block = TileUniform::new(camera, settings, tile, slot, mode);
+            let mut bytes = bytemuck::bytes_of(&block).to_vec();
+            bytes.resize(TILE_STRIDE as usize, 0);
+            blocks.extend(bytes);
+            draws.push((slot, mode));
+        }
+        let frame = FrameUniform::new(camera, settings, &self.cache.mip_rects);
+        queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
+        queue.write_buffer(&self.tile_buffer, 0, &blocks);
+        Ok(draws)
+    }
+
+    fn encode_and_submit(&self, draws: &[(u32, DrawMode)]) {
+        let Some(targets) = &self.targets else { return };
+        let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+        let (colour, fetches, depth) = (view(&targets.colour), view(&targets.fetches), view(&targets.depth));
+        let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
+        {
+            let sky = wgpu::Color { r: SKY[0], g: SKY[1], b: SKY[2], a: 1.0 };
+            let attach = |v, clear| {
+                Some(wgpu::RenderPassColorAttachment {
+                    view: v,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(clear), store: wgpu::StoreOp::Store },
+                })
+            };
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("tiles"),
+                color_attachments: &[attach(&colour, sky), attach(&fetches, wgpu::Color::TRANSPARENT)],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &depth,
+                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: self.timer.as_ref().map(|t| t.writes()),
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_bind_group(0, &self.frame_group, &[]);
+            for (k, &(slot, mode)) in draws.iter().enumerate() {
+                let Some(mesh) = self.cache.mesh(slot) else { continue };
+                pass.set_pipeline(match mode {
+                    DrawMode::Hull => &self.pipelines.hull,
+                    DrawMode::Inside => &self.pipelines.inside,
+                    DrawMode::Plain => &self.pipelines.plain,
+                });
+                pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
+                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
+            }
+        }
+        if let Some(t) = &self.timer {
+            t.resolve(&mut encoder);
+        }
+        self.gpu.queue.submit([encoder.finish()]);
+        // Waiting here makes the frame time the GPU's, not the queue's.
+        let _ = self.gpu.device.poll(wgpu::PollType::wait_indefinitely());
+    }
+
+    fn read(&self, readback: Readback, stats: FrameStats, near_m: f64) -> Rendered {
+        let mut out = Rendered { stats, ..Default::default() };
+        let (Some(targets), true) = (&self.targets, readback != Readback::None) else { return out };
+        let (device, queue) = (&self.gpu.device, &self.gpu.queue);
+        out.colour = bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.colour, 4)).to_vec();
+        if readback == Readback::All {
+            let depth: Vec<f32> = bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.depth, 4)).to_vec();
+            out.view_z_m = depth.iter().map(|&d| if d > 0.0 { (near_m / d as f64) as f32 } else { 0.0 }).collect();
+            out.fetches = bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.fetches, 8)).to_vec();
+        }
+        out
+    }
+}
+
+/// How a tile is drawn from `camera`.
+fn draw_mode(camera: &Camera, tile: &TileData, settings: &FrameSettings, near_m: f64) -> DrawMode {
+    if uniforms::camera_inside(camera, tile) {
+        return DrawMode::Inside;
+    }
+    let fade_gone = settings.fade.factor(near_m) <= 0.0;
+    let mesh_px = tile.range.mesh_error_m as f64 * camera.focal_px() / near_m.max(1e-9);
+    if fade_gone && mesh_px < PLAIN_ERROR_PX { DrawMode::Plain } else { DrawMode::Hull }
+}
+
+fn tile_buffer(device: &wgpu::Device, slots: u32) -> wgpu::Buffer {
+    device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("tiles"),
+        size: TILE_STRIDE * slots.max(1) as u64,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    })
+}

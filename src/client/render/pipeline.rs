@@ -1,0 +1,187 @@
+//! The render pipelines and their bindings: hull fragments that ray cast
+//! (front faces), the same from a camera inside the hull (back faces), and
+//! plain texture mapping of the terrain mesh. All write colour, per-pixel
+//! fetch counts and reversed-Z depth (greater is nearer).
+
+use super::cache::TileCache;
+use super::shaders;
+use super::uniforms::{FrameUniform, TILE_STRIDE, TileUniform};
+use super::super::hull::HullVertex;
+
+/// Colour target format.
+pub const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
+/// Fetch-count target format.
+pub const FETCH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Uint;
+/// Depth format.
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+
+/// The pipelines and bind group layouts.
+pub struct Pipelines {
+    /// Rays from the hull's front faces.
+    pub hull: wgpu::RenderPipeline,
+    /// Rays from the camera, on the hull's back faces.
+    pub inside: wgpu::RenderPipeline,
+    /// Texture-mapped terrain mesh.
+    pub plain: wgpu::RenderPipeline,
+    /// Group 0: frame uniform, tile textures, sampler.
+    pub frame_layout: wgpu::BindGroupLayout,
+    /// Group 1: the tile uniform at a dynamic offset.
+    pub tile_layout: wgpu::BindGroupLayout,
+}
+
+impl Pipelines {
+    /// Compiles the shaders and builds the pipelines.
+    pub fn new(device: &wgpu::Device) -> Pipelines {
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("raycast"),
+            source: wgpu::ShaderSource::Wgsl(shaders::raycast_source().into()),
+        });
+        let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("frame"),
+            entries: &[
+                uniform_entry(0, std::mem::size_of::<FrameUniform>() as u64, false),
+                texture_entry(1),
+                texture_entry(2),
+                texture_entry(3),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 4,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
+                    count: None,
+                },
+            ],
+        });
+        let tile_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("tile"),
+            entries: &[uniform_entry(0, std::mem::size_of::<TileUniform>() as u64, true)],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("raycast"),
+            bind_group_layouts: &[Some(&frame_layout), Some(&tile_layout)],
+            immediate_size: 0,
+        });
+        let make = |vs, fs, cull| pipeline(device, &layout, &module, vs, fs, cull);
+        Pipelines {
+            hull: make("vs_hull", "fs_ray", wgpu::Face::Back),
+            inside: make("vs_hull", "fs_ray", wgpu::Face::Front),
+            plain: make("vs_plain", "fs_plain", wgpu::Face::Back),
+            frame_layout,
+            tile_layout,
+        }
+    }
+
+    /// The frame bind group over the cache's textures.
+    pub fn frame_group(&self, device: &wgpu::Device, frame: &wgpu::Buffer, cache: &TileCache) -> wgpu::BindGroup {
+        let view = |t: &wgpu::Texture| {
+            t.create_view(&wgpu::TextureViewDescriptor {
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            })
+        };
+        let (texels, colours, mip) = (view(&cache.texels), view(&cache.colours), view(&cache.mip));
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor { label: Some("gather"), ..Default::default() });
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame"),
+            layout: &self.frame_layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: frame.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: wgpu::BindingResource::TextureView(&texels) },
+                wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&colours) },
+                wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&mip) },
+                wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::Sampler(&sampler) },
+            ],
+        })
+    }
+
+    /// The tile bind group over the per-tile uniform buffer.
+    pub fn tile_group(&self, device: &wgpu::Device, tiles: &wgpu::Buffer) -> wgpu::BindGroup {
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("tile"),
+            layout: &self.tile_layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: tiles,
+                    offset: 0,
+                    size: wgpu::BufferSize::new(TILE_STRIDE),
+                }),
+            }],
+        })
+    }
+}
+
+fn uniform_entry(binding: u32, size: u64, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: dynamic,
+            min_binding_size: wgpu::BufferSize::new(size),
+        },
+        count: None,
+    }
+}
+
+fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: wgpu::TextureViewDimension::D2Array,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+fn pipeline(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    vs: &str,
+    fs: &str,
+    cull: wgpu::Face,
+) -> wgpu::RenderPipeline {
+    let attributes = wgpu::vertex_attr_array![0 => Float32x2, 1 => Float32x2, 2 => Float32];
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(fs),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some(vs),
+            compilation_options: Default::default(),
+            buffers: &[Some(wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<HullVertex>() as u64,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &attributes,
+            })],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            front_face: wgpu::FrontFace::Ccw,
+            cull_mode: Some(cull),
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Greater),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some(fs),
+            compilation_options: Default::default(),
+            targets: &[
+                Some(wgpu::ColorTargetState { format: COLOUR_FORMAT, blend: None, write_mask: wgpu::ColorWrites::ALL }),
+                Some(wgpu::ColorTargetState { format: FETCH_FORMAT, blend: None, write_mask: wgpu::ColorWrites::ALL }),
+            ],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}

@@ -1,0 +1,80 @@
+//! Off-screen render targets (colour, fetch counts, depth) and reading
+//! them back: rows are copied with wgpu's 256-byte row alignment and
+//! unpadded here.
+
+use super::pipeline::{COLOUR_FORMAT, DEPTH_FORMAT, FETCH_FORMAT};
+
+/// The three targets of one image size.
+pub struct Targets {
+    /// Width and height, pixels.
+    pub size: (u32, u32),
+    /// Colour.
+    pub colour: wgpu::Texture,
+    /// Per-pixel texture fetches (view ray, shadow ray).
+    pub fetches: wgpu::Texture,
+    /// Reversed-Z depth.
+    pub depth: wgpu::Texture,
+}
+
+impl Targets {
+    /// Targets of `size`.
+    pub fn new(device: &wgpu::Device, size: (u32, u32)) -> Targets {
+        let make = |label, format| {
+            device.create_texture(&wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d { width: size.0, height: size.1, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+                view_formats: &[],
+            })
+        };
+        Targets {
+            size,
+            colour: make("colour", COLOUR_FORMAT),
+            fetches: make("fetches", FETCH_FORMAT),
+            depth: make("depth", DEPTH_FORMAT),
+        }
+    }
+}
+
+/// Reads one 2-D texture back, `texel_bytes` per texel, rows unpadded.
+pub fn read_texture(device: &wgpu::Device, queue: &wgpu::Queue, texture: &wgpu::Texture, texel_bytes: u32) -> Vec<u8> {
+    let (w, h) = (texture.width(), texture.height());
+    let row = w * texel_bytes;
+    let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: (padded * h) as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let aspect = if texture.format().is_depth_stencil_format() { wgpu::TextureAspect::DepthOnly } else { wgpu::TextureAspect::All };
+    let mut encoder = device.create_command_encoder(&Default::default());
+    encoder.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo { texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded), rows_per_image: Some(h) },
+        },
+        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+    );
+    queue.submit([encoder.finish()]);
+    let bytes = map_read(device, &buffer);
+    bytes.chunks(padded as usize).flat_map(|r| r[..row as usize].to_vec()).collect()
+}
+
+/// Maps a buffer and copies its bytes out, waiting for the GPU.
+pub fn map_read(device: &wgpu::Device, buffer: &wgpu::Buffer) -> Vec<u8> {
+    let slice = buffer.slice(..);
+    slice.map_async(wgpu::MapMode::Read, |_| {});
+    // A lost device leaves the buffer unmapped; an empty read says so.
+    if device.poll(wgpu::PollType::wait_indefinitely()).is_err() {
+        return Vec::new();
+    }
+    let bytes = slice.get_mapped_range().map(|view| view.to_vec()).unwrap_or_default();
+    buffer.unmap();
+    bytes
+}

@@ -1,0 +1,179 @@
+//! The GPU's uniform blocks: the Rust twins of `Frame` and `Tile` in
+//! `shaders/common.wgsl`, field for field (a test checks the layout against
+//! naga's), and how they are filled from a camera, a tile and the settings.
+
+use super::super::camera::Camera;
+use super::super::raycast::{self, Fade, Traversal};
+use super::super::tile::TileData;
+use glam::DVec3;
+
+/// Levels the mipmap atlas can describe.
+pub const MAX_MIP_LEVELS: usize = 16;
+/// Stride of per-tile uniforms in their buffer (the dynamic-offset alignment).
+pub const TILE_STRIDE: u64 = 256;
+
+/// Per frame.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct FrameUniform {
+    /// Projection.
+    pub proj: [[f32; 4]; 4],
+    /// Sky colour, ambient light.
+    pub sky: [f32; 4],
+    /// Canopy reference height, fade low and high (px), focal length (px).
+    pub fade: [f32; 4],
+    /// Width, height, near plane, unused.
+    pub viewport: [f32; 4],
+    /// Shadow weight, softness, unused, unused.
+    pub shadow: [f32; 4],
+    /// Canopy tint.
+    pub canopy_tint: [f32; 4],
+    /// Traversal, linear steps, shadow steps, sun on.
+    pub mode: [u32; 4],
+    /// Mipmap atlas rectangles per level.
+    pub mip_rects: [[u32; 4]; MAX_MIP_LEVELS],
+}
+
+/// Per tile, padded to [`TILE_STRIDE`].
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TileUniform {
+    /// Tile-local metres → camera space.
+    pub model_view: [[f32; 4]; 4],
+    /// Camera in the tile frame; hull fade reach.
+    pub camera: [f32; 4],
+    /// Sun direction in the tile frame; shadow reach in samples.
+    pub sun: [f32; 4],
+    /// Spacing east and north, centre index, samples per side.
+    pub grid: [f32; 4],
+    /// Lowest ground, highest CEM.
+    pub range: [f32; 4],
+    /// Halo, texels per side, slot, top mipmap level.
+    pub index: [i32; 4],
+    /// Draw mode, canopy whole.
+    pub flags: [u32; 4],
+    _pad: [f32; 24],
+}
+
+/// How a tile is drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DrawMode {
+    /// Rays start on the hull's front faces.
+    Hull = 0,
+    /// The camera is inside the hull: back faces, rays from the camera.
+    Inside = 1,
+    /// No ray casting: the terrain mesh, texture mapped.
+    Plain = 2,
+}
+
+/// What a frame is drawn with.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameSettings {
+    /// View-ray traversal.
+    pub traversal: Traversal,
+    /// Shadow samples per hit.
+    pub shadow_steps: u32,
+    /// Unit direction to the sun (ECEF), or none.
+    pub sun_ecef: Option<DVec3>,
+    /// Canopy fade.
+    pub fade: Fade,
+}
+
+impl FrameUniform {
+    /// The frame block for `camera` and `settings`, with the atlas layout.
+    pub fn new(camera: &Camera, settings: &FrameSettings, mip_rects: &[[u32; 4]]) -> FrameUniform {
+        let mut rects = [[0u32; 4]; MAX_MIP_LEVELS];
+        for (r, m) in rects.iter_mut().zip(mip_rects) {
+            *r = *m;
+        }
+        let (traversal, steps) = match settings.traversal {
+            Traversal::Exact => (0, 0),
+            Traversal::Linear(n) => (1, n),
+        };
+        let f = &settings.fade;
+        let rgb = |c: [f64; 3], a: f64| [c[0] as f32, c[1] as f32, c[2] as f32, a as f32];
+        FrameUniform {
+            proj: camera.projection().to_cols_array_2d(),
+            sky: rgb(raycast::SKY, raycast::AMBIENT),
+            fade: [f.canopy_ref_m as f32, f.lo_px as f32, f.hi_px as f32, f.focal_px as f32],
+            viewport: [camera.width_px as f32, camera.height_px as f32, camera.near_m as f32, 0.0],
+            shadow: [raycast::SHADOW_WEIGHT as f32, raycast::SHADOW_SOFT_M as f32, 0.0, 0.0],
+            canopy_tint: rgb(raycast::CANOPY_TINT, 1.0),
+            mode: [traversal, steps, settings.shadow_steps, settings.sun_ecef.is_some() as u32],
+            mip_rects: rects,
+        }
+    }
+}
+
+impl TileUniform {
+    /// The tile block for `tile` in texture `slot`.
+    pub fn new(camera: &Camera, settings: &FrameSettings, tile: &TileData, slot: u32, mode: DrawMode) -> TileUniform {
+        let frame = &tile.frame;
+        let to_local = frame.basis.transpose();
+        let cam = frame.to_local(camera.position_ecef);
+        let sun = settings.sun_ecef.map_or(DVec3::Z, |s| to_local * s);
+        let hull = &tile.hull;
+        // A hull vertex bounds samples up to a quad diagonal away and the
+        // tile's height range apart.
+        let quad = hull_quad_m(tile);
+        let rise = (tile.range.max_m - tile.range.min_m) as f64;
+        let reach = (quad * quad * 2.0 + rise * rise).sqrt();
+        let whole = canopy_whole(camera, tile, &settings.fade);
+        TileUniform {
+            model_view: camera.model_view(frame).to_cols_array_2d(),
+            camera: [cam.x as f32, cam.y as f32, cam.z as f32, reach as f32],
+            sun: [sun.x as f32, sun.y as f32, sun.z as f32, tile.halo as f32],
+            grid: [frame.spacing_m.x as f32, frame.spacing_m.y as f32, frame.centre_index() as f32, frame.samples as f32],
+            range: [tile.range.min_m, tile.range.max_m, hull.bottom_m, 0.0],
+            index: [tile.halo as i32, tile.size as i32, slot as i32, tile.mip.levels() as i32 - 1],
+            flags: [mode as u32, whole as u32, 0, 0],
+            _pad: [0.0; 24],
+        }
+    }
+}
+
+/// Side of a hull quad, metres (the larger axis).
+fn hull_quad_m(tile: &TileData) -> f64 {
+    let cells = tile.frame.samples as f64 + 1.0;
+    let q = cells / tile.hull.quads as f64;
+    q * tile.frame.spacing_m.max_element()
+}
+
+/// Whether every sample of the tile is close enough for the whole canopy.
+fn canopy_whole(camera: &Camera, tile: &TileData, fade: &Fade) -> bool {
+    let far = tile_far_m(camera, tile);
+    fade.factor(far) >= 1.0
+}
+
+/// The farthest distance from the camera to the tile's box.
+pub fn tile_far_m(camera: &Camera, tile: &TileData) -> f64 {
+    let cam = tile.frame.to_local(camera.position_ecef);
+    corners(tile).iter().map(|c| (*c - cam).length()).fold(0.0, f64::max)
+}
+
+/// The nearest distance from the camera to the tile's box.
+pub fn tile_near_m(camera: &Camera, tile: &TileData) -> f64 {
+    let cam = tile.frame.to_local(camera.position_ecef);
+    let [lo, hi] = bounds(tile);
+    (cam.clamp(lo, hi) - cam).length()
+}
+
+/// Whether the camera is inside the tile's hull box.
+pub fn camera_inside(camera: &Camera, tile: &TileData) -> bool {
+    let cam = tile.frame.to_local(camera.position_ecef);
+    let [lo, hi] = bounds(tile);
+    cam.cmpge(lo).all() && cam.cmple(hi).all()
+}
+
+/// The local box of the cast range.
+fn bounds(tile: &TileData) -> [DVec3; 2] {
+    let n = tile.frame.samples as f64;
+    let lo = tile.frame.local_xy(-1.0, -1.0).extend(tile.hull.bottom_m as f64);
+    let hi = tile.frame.local_xy(n, n).extend(tile.range.max_m as f64);
+    [lo, hi]
+}
+
+fn corners(tile: &TileData) -> [DVec3; 8] {
+    let [lo, hi] = bounds(tile);
+    std::array::from_fn(|k| DVec3::new([lo.x, hi.x][k & 1], [lo.y, hi.y][(k >> 1) & 1], [lo.z, hi.z][k >> 2]))
+}

@@ -1,0 +1,115 @@
+//! Where the client's tiles come from: the CEM pipeline in process
+//! ([`RegionSource`]), or a `sylva serve` over HTTP (`http_source`, feature
+//! `client`). Both deliver the same [`TilePayload`]: CEM, ground, surface
+//! classes and unshaded map colour with a halo.
+
+use super::tile::TilePayload;
+use crate::cem::{self, Layer};
+use crate::encode::relief::base_colour;
+use crate::grid::{BBox, TileGrid, TileId};
+use crate::produce::{self, ProduceError};
+use crate::raster::Raster;
+use crate::region::Region;
+use std::sync::Arc;
+
+/// Why a tile could not be fetched.
+#[derive(Debug, thiserror::Error)]
+pub enum FetchError {
+    /// The pipeline failed on a source.
+    #[error("tile {id:?}: {source}")]
+    Produce {
+        /// The tile.
+        id: TileId,
+        /// What failed.
+        source: ProduceError,
+    },
+    /// The server failed or answered something unusable.
+    #[error("tile {id:?} from {url}: {reason}")]
+    Http {
+        /// The tile.
+        id: TileId,
+        /// The request.
+        url: String,
+        /// What went wrong.
+        reason: String,
+    },
+}
+
+/// A source of tiles on one grid.
+pub trait TileSource: Send + Sync {
+    /// The tile grid.
+    fn grid(&self) -> TileGrid;
+    /// The area with data.
+    fn bounds(&self) -> BBox;
+    /// One tile with `halo`; `None` where the tile has no data at all.
+    fn fetch(&self, id: TileId, halo: usize) -> Result<Option<TilePayload>, FetchError>;
+    /// Bytes transferred so far (0 in process).
+    fn bytes_fetched(&self) -> u64 {
+        0
+    }
+    /// A one-line description.
+    fn describe(&self) -> String;
+}
+
+/// Tiles computed by the pipeline in this process.
+#[derive(Clone)]
+pub struct RegionSource {
+    region: Arc<Region>,
+}
+
+impl RegionSource {
+    /// A source over `region`.
+    pub fn new(region: Arc<Region>) -> RegionSource {
+        RegionSource { region }
+    }
+}
+
+impl TileSource for RegionSource {
+    fn grid(&self) -> TileGrid {
+        self.region.tiles
+    }
+
+    fn bounds(&self) -> BBox {
+        self.region.bounds
+    }
+
+    fn fetch(&self, id: TileId, halo: usize) -> Result<Option<TilePayload>, FetchError> {
+        let region = &self.region;
+        let err = |source: ProduceError| FetchError::Produce { id, source };
+        region.tiles.check(id).map_err(|e| err(e.into()))?;
+        let grid = region.tiles.tile_samples(id, halo);
+        let products = cem::compute(region, &grid, &[Layer::Dem, Layer::Cem, Layer::Surface]).map_err(|e| err(e.into()))?;
+        let (Some(dem), Some(cem), Some(surface)) = (products.dem, products.cem, products.surface) else {
+            return Ok(None);
+        };
+        if cem.all_nodata() {
+            return Ok(None);
+        }
+        let map = produce::map_colours(region, &grid).map_err(err)?;
+        let colour = colours(&surface, map.as_deref());
+        Ok(Some(TilePayload { id, halo, cem: cem.into_vec(), dem: dem.into_vec(), surface: surface.into_vec(), colour }))
+    }
+
+    fn describe(&self) -> String {
+        format!("in process: {}", self.region.describe())
+    }
+}
+
+/// Unshaded colour per sample from the map (or the class), alpha 0 where
+/// there is no data.
+pub fn colours(surface: &Raster<u8>, map: Option<&[Raster<f32>]>) -> Vec<[u8; 4]> {
+    let w = surface.width();
+    surface
+        .data()
+        .iter()
+        .enumerate()
+        .map(|(k, &class)| {
+            if class == cem::surface::NODATA {
+                return [0; 4];
+            }
+            let rgb = map.map(|bands| [0, 1, 2].map(|b| bands[b].get(k % w, k / w)));
+            let c = base_colour(class, rgb).map(|v| v.round().clamp(0.0, 255.0) as u8);
+            [c[0], c[1], c[2], 255]
+        })
+        .collect()
+}
