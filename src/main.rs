@@ -93,6 +93,46 @@ enum Command {
         #[arg(long)]
         cache_dir: Option<PathBuf>,
     },
+    /// Fly a camera path headless: PNG frames and per-frame statistics.
+    #[cfg(feature = "client")]
+    Fly {
+        /// Region configuration (default: the embedded demo region).
+        #[arg(long, conflicts_with = "server")]
+        config: Option<PathBuf>,
+        /// A `sylva serve` to fetch tiles from, e.g. http://127.0.0.1:8080.
+        #[arg(long)]
+        server: Option<String>,
+        /// Camera path (TOML; see config/paths/).
+        #[arg(long)]
+        path: PathBuf,
+        /// Frames spread evenly over the path.
+        #[arg(long, default_value_t = 60)]
+        frames: usize,
+        /// Image size, WxH.
+        #[arg(long, default_value = "640x480")]
+        size: String,
+        /// Output directory for frame_NNNNN.png and stats.csv.
+        #[arg(long)]
+        out: PathBuf,
+        /// `exact` or `linear:STEPS`.
+        #[arg(long, default_value = "exact")]
+        traversal: String,
+        /// Shadow samples per hit (0: none).
+        #[arg(long, default_value_t = 10)]
+        shadow_steps: u32,
+        /// Largest projected tile error, pixels.
+        #[arg(long, default_value_t = 2.0)]
+        max_error_px: f64,
+        /// Deepest tile level.
+        #[arg(long, default_value_t = 13)]
+        max_level: u32,
+        /// GPU tile cache budget, MiB.
+        #[arg(long, default_value_t = 512)]
+        gpu_budget_mib: usize,
+        /// Statistics only, no PNG frames.
+        #[arg(long)]
+        no_frames: bool,
+    },
     /// Print benchmark tables.
     Bench {
         #[command(subcommand)]
@@ -207,6 +247,25 @@ fn run(command: Command) -> Result<()> {
             println!("{}", sylva::bench::serve::soak(config.as_deref(), minutes, every)?);
             Ok(())
         }
+        #[cfg(feature = "client")]
+        Command::Fly { config, server, path, frames, size, out, traversal, shadow_steps, max_error_px, max_level, gpu_budget_mib, no_frames } => {
+            let options = sylva::client::fly::FlyOptions {
+                frames,
+                size: parse_size(&size)?,
+                out_dir: Some(out),
+                write_frames: !no_frames,
+                traversal: sylva::client::fly::parse_traversal(&traversal)
+                    .ok_or_else(|| anyhow::anyhow!("unknown traversal {traversal:?}; expected exact or linear:STEPS"))?,
+                shadow_steps,
+                lod: sylva::client::quadtree::LodRule { max_error_px, max_level },
+                ..Default::default()
+            };
+            let path = sylva::client::path::CameraPath::load(&path)?;
+            let source = sylva::client::source::open(config.as_deref(), server.as_deref())?;
+            let records = sylva::client::fly::run(source.as_ref(), &path, &options, gpu_budget_mib << 20)?;
+            println!("{}", sylva::client::fly::summary(&records));
+            Ok(())
+        }
         Command::Info { config } => {
             println!("{}", sylva::config::load(config.as_deref())?.describe());
             Ok(())
@@ -227,6 +286,16 @@ fn serve(config: Option<PathBuf>, options: sylva::server::ServeOptions) -> Resul
     }
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     runtime.block_on(sylva::server::serve(config.as_deref(), options))
+}
+
+/// Parses `WxH`.
+#[cfg(feature = "client")]
+fn parse_size(text: &str) -> Result<(u32, u32)> {
+    let parsed = text.split_once(['x', 'X']).and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)));
+    match parsed {
+        Some((w, h)) if (1..=16384).contains(&w) && (1..=16384).contains(&h) => Ok((w, h)),
+        _ => bail!("bad size {text:?}; expected WxH, e.g. 640x480"),
+    }
 }
 
 fn parse_layer(text: &str) -> Result<Layer> {

@@ -40,7 +40,35 @@ pub struct Region {
     pub cache: Arc<BlockCache>,
 }
 
+/// What a tile client needs to know about a served region
+/// (`/tiles.json`): its tiling, its bounds and the largest halo served.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Tileset {
+    /// Region name.
+    pub name: String,
+    /// Level-0 tile delta, degrees.
+    pub level0_delta_deg: f64,
+    /// Samples per tile side.
+    pub samples: u32,
+    /// West, south, east, north, degrees.
+    pub bounds: [f64; 4],
+    /// Largest `?halo=` the server accepts.
+    pub max_halo: usize,
+}
+
 impl Region {
+    /// The region's tileset descriptor.
+    pub fn tileset(&self, max_halo: usize) -> Tileset {
+        let b = self.bounds;
+        Tileset {
+            name: self.name.clone(),
+            level0_delta_deg: self.tiles.level0_delta_deg(),
+            samples: self.tiles.samples(),
+            bounds: [b.west, b.south, b.east, b.north],
+            max_halo,
+        }
+    }
+
     /// A multi-line summary for `sylva info`.
     pub fn describe(&self) -> String {
         let b = &self.bounds;

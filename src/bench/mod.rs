@@ -9,6 +9,15 @@ pub mod serve;
 
 use std::time::Duration;
 
+/// Resident and peak resident memory of this process, MiB.
+pub fn rss_mib() -> (f64, f64) {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let field = |name: &str| {
+        status.lines().find(|l| l.starts_with(name)).and_then(|l| l.split_whitespace().nth(1)).and_then(|v| v.parse::<f64>().ok()).map_or(f64::NAN, |kib| kib / 1024.0)
+    };
+    (field("VmRSS:"), field("VmHWM:"))
+}
+
 /// Median of durations, in milliseconds.
 pub fn median_ms(samples: &mut [Duration]) -> f64 {
     if samples.is_empty() {

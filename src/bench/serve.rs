@@ -160,15 +160,6 @@ impl Drop for Servers {
     }
 }
 
-/// Resident and peak resident memory of this process, MiB.
-pub fn rss_mib() -> (f64, f64) {
-    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
-    let field = |name: &str| {
-        status.lines().find(|l| l.starts_with(name)).and_then(|l| l.split_whitespace().nth(1)).and_then(|v| v.parse::<f64>().ok()).map_or(f64::NAN, |kib| kib / 1024.0)
-    };
-    (field("VmRSS:"), field("VmHWM:"))
-}
-
 /// `wrk -t1 -c4` on one URL: requests per second and p50 / p99 latency, ms.
 fn wrk(url: &str, seconds: u32) -> Result<(f64, f64, f64)> {
     let out = Command::new("wrk")
@@ -212,7 +203,7 @@ pub fn report(b: &ServeBench) -> Result<String> {
     let (uncached, tile_url) = uncached_section(b, &servers.bases[0], servers.states[0].region())?;
     out.push(uncached);
     out.push(cached_section(b, &tile_url));
-    let (rss, peak) = rss_mib();
+    let (rss, peak) = super::rss_mib();
     out.push(format!("resident memory after the run: {rss:.0} MiB (peak {peak:.0} MiB), three regions served\n"));
     Ok(out.join("\n"))
 }
@@ -362,7 +353,7 @@ pub fn soak(config: Option<&Path>, minutes: f64, every_s: f64) -> Result<String>
         let start = Instant::now();
         let state = &servers.states[0];
         let reading = || {
-            let (rss, peak) = rss_mib();
+            let (rss, peak) = super::rss_mib();
             let mib = |bytes: u64| format!("{:.0}", bytes as f64 / (1 << 20) as f64);
             let n = done.load(std::sync::atomic::Ordering::Relaxed);
             let tiles = servers.runtime.block_on(state.tiles.memory_bytes());

@@ -10,12 +10,19 @@
 //! Positions are `f64` on the CPU; the GPU sees tile-local `f32` values only.
 
 pub mod camera;
+#[cfg(feature = "client")]
+pub mod fly;
 pub mod frame;
+pub mod path;
 pub mod globe;
 pub mod hull;
+#[cfg(feature = "http")]
+pub mod http;
+pub mod quadtree;
 pub mod raycast;
 pub mod reference;
 pub mod source;
+pub mod store;
 #[cfg(feature = "client")]
 pub mod render;
 pub mod tile;

@@ -5,10 +5,9 @@
 
 use super::tile::TilePayload;
 use crate::cem::{self, Layer};
-use crate::encode::relief::base_colour;
+use crate::encode::relief::base_colours;
 use crate::grid::{BBox, TileGrid, TileId};
 use crate::produce::{self, ProduceError};
-use crate::raster::Raster;
 use crate::region::Region;
 use std::sync::Arc;
 
@@ -86,7 +85,7 @@ impl TileSource for RegionSource {
             return Ok(None);
         }
         let map = produce::map_colours(region, &grid).map_err(err)?;
-        let colour = colours(&surface, map.as_deref());
+        let colour = base_colours(&surface, map.as_deref());
         Ok(Some(TilePayload { id, halo, cem: cem.into_vec(), dem: dem.into_vec(), surface: surface.into_vec(), colour }))
     }
 
@@ -95,21 +94,23 @@ impl TileSource for RegionSource {
     }
 }
 
-/// Unshaded colour per sample from the map (or the class), alpha 0 where
-/// there is no data.
-pub fn colours(surface: &Raster<u8>, map: Option<&[Raster<f32>]>) -> Vec<[u8; 4]> {
-    let w = surface.width();
-    surface
-        .data()
-        .iter()
-        .enumerate()
-        .map(|(k, &class)| {
-            if class == cem::surface::NODATA {
-                return [0; 4];
-            }
-            let rgb = map.map(|bands| [0, 1, 2].map(|b| bands[b].get(k % w, k / w)));
-            let c = base_colour(class, rgb).map(|v| v.round().clamp(0.0, 255.0) as u8);
-            [c[0], c[1], c[2], 255]
-        })
-        .collect()
+/// The tile source of `sylva fly`: a server if given, else the region of a
+/// configuration (or the demo).
+#[cfg(feature = "http")]
+pub fn open(config: Option<&std::path::Path>, server: Option<&str>) -> Result<Box<dyn TileSource>, OpenError> {
+    match server {
+        Some(url) => Ok(Box::new(super::http::HttpSource::connect(url)?)),
+        None => Ok(Box::new(RegionSource::new(Arc::new(crate::config::load(config)?)))),
+    }
+}
+
+/// Why a tile source could not be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    /// The configuration is bad.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// The server could not be used.
+    #[error("{0}")]
+    Server(String),
 }

@@ -66,6 +66,8 @@ pub struct TileRange {
 pub struct TileData {
     /// The tile's flat frame, raised to its base height.
     pub frame: TileFrame,
+    /// The base height: local heights are measured from it, metres.
+    pub base_m: f64,
     /// Halo `B`.
     pub halo: usize,
     /// Texels per side, `N + 2B`.
@@ -146,7 +148,7 @@ impl TileData {
             canopy_max_m: canopy_max(&cast, &cast_window(&dem, halo, grid.samples() as usize)),
             mesh_error_m: hull.mesh_error_m,
         };
-        Ok(TileData { frame, halo, size, texels, colour, surface, mip, hull, range })
+        Ok(TileData { frame, base_m: base, halo, size, texels, colour, surface, mip, hull, range })
     }
 
     /// The tile.

@@ -30,6 +30,31 @@ pub fn base_colour(class: u8, map: Option<[f32; 3]>) -> [f32; 3] {
     }
 }
 
+/// Unshaded colour of every sample (the map's, else its class's), alpha
+/// 0 where there is no data: the `colour` layer and the renderer's texture.
+pub fn base_colours(surface: &Raster<u8>, map: Option<&[Raster<f32>]>) -> Vec<[u8; 4]> {
+    let w = surface.width();
+    surface
+        .data()
+        .iter()
+        .enumerate()
+        .map(|(k, &class)| {
+            if class == NODATA {
+                return [0; 4];
+            }
+            let rgb = map.map(|bands| [0, 1, 2].map(|b| bands[b].get(k % w, k / w)));
+            let c = base_colour(class, rgb).map(|v| v.round().clamp(0.0, 255.0) as u8);
+            [c[0], c[1], c[2], 255]
+        })
+        .collect()
+}
+
+/// [`base_colours`] as an RGBA PNG.
+pub fn encode_colours(surface: &Raster<u8>, map: Option<&[Raster<f32>]>) -> Result<Vec<u8>, EncodeError> {
+    let rgba: Vec<u8> = base_colours(surface, map).into_iter().flatten().collect();
+    super::png(&rgba, surface.width(), surface.height(), image::ExtendedColorType::Rgba8)
+}
+
 /// Colours of surface classes when there is no map.
 fn class_colour(class: u8) -> [f32; 3] {
     match SurfaceType::from_id(class) {

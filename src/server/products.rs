@@ -20,8 +20,8 @@ pub enum Encoding {
     Data(Format),
     /// Terrarium RGB PNG (XYZ tiles).
     Terrarium,
-    /// The RGBA relief preview.
-    Relief,
+    /// An RGBA PNG picture: the relief preview or the map colours.
+    Rgba,
 }
 
 impl Encoding {
@@ -30,7 +30,7 @@ impl Encoding {
         match self {
             Encoding::Data(Format::Bil16) => "bil",
             Encoding::Data(Format::Bil32) => "bil32",
-            Encoding::Data(Format::Png16) | Encoding::Terrarium | Encoding::Relief => "png",
+            Encoding::Data(Format::Png16) | Encoding::Terrarium | Encoding::Rgba => "png",
             Encoding::Data(Format::Tiff) => "tif",
         }
     }
@@ -39,7 +39,7 @@ impl Encoding {
     pub fn mime(self) -> &'static str {
         match self {
             Encoding::Data(f) => f.mime(),
-            Encoding::Terrarium | Encoding::Relief => "image/png",
+            Encoding::Terrarium | Encoding::Rgba => "image/png",
         }
     }
 }
@@ -103,7 +103,7 @@ impl Product {
     fn encoding(&self) -> Encoding {
         match self {
             Product::Tile { encoding, .. } | Product::Image { encoding, .. } => *encoding,
-            Product::Xyz { layer: MapLayer::Relief, .. } => Encoding::Relief,
+            Product::Xyz { layer, .. } if layer.is_picture() => Encoding::Rgba,
             Product::Xyz { .. } => Encoding::Terrarium,
         }
     }
@@ -140,6 +140,7 @@ pub fn compute(region: &Region, product: &Product) -> Result<Computed, ProduceEr
     }
     match product.layer() {
         MapLayer::Relief => relief(region, &grid),
+        MapLayer::Colour => colour(region, &grid),
         MapLayer::Data(layer) => data(region, &grid, layer, product.encoding()),
     }
 }
@@ -187,6 +188,18 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
     Ok(Computed { bytes, stats: products.stats, encode: start.elapsed() })
 }
 
+/// The unshaded map colours.
+fn colour(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> {
+    let products = cem::compute(region, grid, &[Layer::Surface])?;
+    let Some(surface) = products.surface.filter(|s| s.data().iter().any(|&c| c != cem::surface::NODATA)) else {
+        return Ok(Computed { bytes: Vec::new(), stats: products.stats, encode: Duration::ZERO });
+    };
+    let map = crate::produce::map_colours(region, grid)?;
+    let start = Instant::now();
+    let bytes = encode::relief::encode_colours(&surface, map.as_deref())?;
+    Ok(Computed { bytes, stats: products.stats, encode: start.elapsed() })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -195,7 +208,7 @@ mod tests {
     fn keys_follow_the_world_wind_layout_under_the_version() {
         let t = Product::Tile { layer: MapLayer::Data(Layer::Cem), id: TileId::new(9, 1939, 2704), halo: 0, encoding: Encoding::Data(Format::Bil16) };
         assert_eq!(t.key("v1").as_deref(), Some("v1/cem/9/1939/1939_2704.bil"));
-        let h = Product::Tile { layer: MapLayer::Relief, id: TileId::new(9, 1, 2), halo: 32, encoding: Encoding::Relief };
+        let h = Product::Tile { layer: MapLayer::Relief, id: TileId::new(9, 1, 2), halo: 32, encoding: Encoding::Rgba };
         assert_eq!(h.key("v1").as_deref(), Some("v1/relief/9/1/1_2_h32.png"));
         let x = Product::Xyz { layer: MapLayer::Data(Layer::Dem), zxy: (11, 400, 780) };
         assert_eq!(x.key("v2").as_deref(), Some("v2/xyz/dem/11/400/780.png"));

@@ -35,6 +35,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/health", get(health))
         .route("/metrics", get(metrics))
         .route("/wms", get(super::wms::handle))
+        .route("/tiles.json", get(tileset))
         .route("/tiles", get(tile_query))
         .route("/tiles/{layer}/{level}/{row}/{file}", get(tile_path))
         .route("/xyz/{layer}/{z}/{x}/{file}", get(xyz))
@@ -63,7 +64,7 @@ fn route_label(path: &str) -> &'static str {
         "/health" => "health",
         "/metrics" => "metrics",
         "/wms" => "wms",
-        "/tiles" | "/tiles/{layer}/{level}/{row}/{file}" => "tiles",
+        "/tiles" | "/tiles/{layer}/{level}/{row}/{file}" | "/tiles.json" => "tiles",
         "/xyz/{layer}/{z}/{x}/{file}" => "xyz",
         _ => "other",
     }
@@ -72,6 +73,13 @@ fn route_label(path: &str) -> &'static str {
 async fn health(State(state): State<Arc<AppState>>) -> Response {
     let r = state.region();
     let body = format!("{{\"status\":\"ok\",\"region\":{:?},\"version\":{:?}}}\n", r.name, r.version);
+    ([(header::CONTENT_TYPE, "application/json")], body).into_response()
+}
+
+/// The tiling, bounds and halo limit, for tile clients such as `sylva fly`.
+async fn tileset(State(state): State<Arc<AppState>>) -> Response {
+    let tileset = state.region().tileset(state.settings.max_halo);
+    let body = serde_json::to_string(&tileset).unwrap_or_default();
     ([(header::CONTENT_TYPE, "application/json")], body).into_response()
 }
 
@@ -116,8 +124,8 @@ fn halo(params: &HashMap<String, String>, state: &AppState) -> Result<usize, Ser
 async fn tile(state: &AppState, layer: &str, id: TileId, ext: &str, halo: usize, headers: &HeaderMap) -> Result<Response, ServeError> {
     let layer = parse_layer(layer)?;
     let encoding = match (layer, ext.to_ascii_lowercase().as_str()) {
-        (MapLayer::Relief, "png") => Encoding::Relief,
-        (MapLayer::Relief, _) => return Err(ServeError::BadRequest("relief tiles are .png".into())),
+        (layer, "png") if layer.is_picture() => Encoding::Rgba,
+        (layer, _) if layer.is_picture() => return Err(ServeError::BadRequest(format!("{} tiles are .png", layer.name()))),
         (_, "bil" | "bil16") => Encoding::Data(Format::Bil16),
         (_, "bil32") => Encoding::Data(Format::Bil32),
         (_, "png") => Encoding::Data(Format::Png16),
@@ -147,15 +155,14 @@ async fn xyz(
         return Err(ServeError::NotFound);
     }
     let t = state.tiles.get(Product::Xyz { layer, zxy: (z, x, y) }).await?;
-    let encoding = if layer == MapLayer::Relief { Encoding::Relief } else { Encoding::Terrarium };
+    let encoding = if layer.is_picture() { Encoding::Rgba } else { Encoding::Terrarium };
     Ok(respond::tile(&t, &meta(&state, layer, encoding), &headers))
 }
 
 fn parse_layer(name: &str) -> Result<MapLayer, ServeError> {
-    if name.eq_ignore_ascii_case("relief") {
-        return Ok(MapLayer::Relief);
-    }
-    Layer::parse(name).map(MapLayer::Data).ok_or_else(|| ServeError::BadRequest(format!("unknown layer {name:?}")))
+    MapLayer::parse(name)
+        .or_else(|| Layer::parse(name).map(MapLayer::Data))
+        .ok_or_else(|| ServeError::BadRequest(format!("unknown layer {name:?}")))
 }
 
 /// MIME type, quantization and caching of a tile response.

@@ -23,6 +23,8 @@ pub mod nodata;
 mod palette;
 pub mod pyramid;
 #[cfg(feature = "http")]
+pub mod link;
+#[cfg(feature = "http")]
 pub mod remote;
 
 pub use blocks::{BlockCache, Blocks};

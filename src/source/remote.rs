@@ -3,29 +3,22 @@
 //! GeoServer) — block by block through the block cache (dissertation 6.5: the
 //! server is a proxy in front of the data).
 //!
-//! Each request has a timeout and is retried a bounded number of times with
-//! exponential backoff; after repeated failures a circuit breaker fails
-//! requests at once for a cool-down, so a dead upstream costs no waiting.
-//! Overviews are the upstream's own coarser zoom levels or resolutions.
+//! Requests go through a [`Link`] (timeouts, retries with backoff, a
+//! circuit breaker). Overviews are the upstream's own coarser zoom levels or resolutions.
 
+use super::link::Link;
 use super::{BLOCK, BlockCache, Blocks, Crs, GeoRaster, Georef, PixelSource, SourceError};
 use crate::config::{UpstreamConfig, UpstreamService};
 use crate::grid::mercator::HALF_WORLD_M;
 use crate::raster::Raster;
-use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::{Arc, Mutex};
-use std::time::{Duration, Instant};
-
-/// Largest upstream response read, bytes (a 256² float32 block is 256 KiB).
-const MAX_RESPONSE_BYTES: u64 = 16 << 20;
+use std::sync::Arc;
 
 /// Opens an upstream as a georeferenced source with native overviews.
 pub fn open(config: &UpstreamConfig, cache: &Arc<BlockCache>) -> Result<GeoRaster, SourceError> {
     let name = PathBuf::from(&config.url);
     let bad = |problem: String| SourceError::Malformed { path: name.clone(), problem };
-    let link = Arc::new(Link::new(config));
+    let link = Arc::new(Link::new(&config.into()));
     match config.service {
         UpstreamService::Terrarium => {
             if !(config.url.contains("{z}") && config.url.contains("{x}") && config.url.contains("{y}")) || config.zoom > 22 {
@@ -62,80 +55,6 @@ pub fn open(config: &UpstreamConfig, cache: &Arc<BlockCache>) -> Result<GeoRaste
             }
             let georef = Georef { crs: Arc::new(Crs::wgs84()), x0: area.west + 0.5 * res, y0: area.north - 0.5 * res, dx: res, dy: -res, overhang: 0.5 };
             Ok(GeoRaster::from_levels(levels, georef))
-        }
-    }
-}
-
-/// HTTP with timeouts, retries and a circuit breaker, shared by the levels of
-/// one upstream.
-struct Link {
-    agent: ureq::Agent,
-    retries: u32,
-    backoff: Duration,
-    threshold: u32,
-    cooldown: Duration,
-    failures: AtomicU32,
-    open_until: Mutex<Option<Instant>>,
-}
-
-impl Link {
-    fn new(c: &UpstreamConfig) -> Link {
-        let agent = ureq::Agent::config_builder()
-            .timeout_global(Some(Duration::from_millis(c.timeout_ms.max(1))))
-            .http_status_as_error(false)
-            .build()
-            .into();
-        Link {
-            agent,
-            retries: c.retries,
-            backoff: Duration::from_millis(c.backoff_ms),
-            threshold: c.breaker_failures.max(1),
-            cooldown: Duration::from_secs_f64(c.breaker_cooldown_s.max(0.0)),
-            failures: AtomicU32::new(0),
-            open_until: Mutex::new(None),
-        }
-    }
-
-    /// The body at `url`; `None` for 404 (no data there).
-    fn fetch(&self, url: &str) -> Result<Option<Vec<u8>>, SourceError> {
-        let fail = |problem: String| SourceError::Upstream { url: url.to_string(), problem };
-        if let Ok(guard) = self.open_until.lock()
-            && let Some(until) = *guard
-            && Instant::now() < until
-        {
-            return Err(fail("circuit breaker open after repeated failures".into()));
-        }
-        let mut last = String::new();
-        for attempt in 0..=self.retries {
-            if attempt > 0 {
-                std::thread::sleep(self.backoff * 2u32.pow(attempt - 1));
-            }
-            match self.try_once(url) {
-                Ok(body) => {
-                    self.failures.store(0, Ordering::Relaxed);
-                    return Ok(body);
-                }
-                Err(e) => last = e,
-            }
-        }
-        if self.failures.fetch_add(1, Ordering::Relaxed) + 1 >= self.threshold
-            && let Ok(mut guard) = self.open_until.lock()
-        {
-            *guard = Some(Instant::now() + self.cooldown);
-        }
-        Err(fail(format!("{last} (after {} attempts)", self.retries + 1)))
-    }
-
-    fn try_once(&self, url: &str) -> Result<Option<Vec<u8>>, String> {
-        let mut response = self.agent.get(url).call().map_err(|e| e.to_string())?;
-        match response.status().as_u16() {
-            200 => {
-                let mut body = Vec::new();
-                response.body_mut().as_reader().take(MAX_RESPONSE_BYTES).read_to_end(&mut body).map_err(|e| e.to_string())?;
-                Ok(Some(body))
-            }
-            404 => Ok(None),
-            status => Err(format!("HTTP {status}")),
         }
     }
 }

@@ -139,6 +139,7 @@ fn title(layer: MapLayer) -> &'static str {
         MapLayer::Data(Cem) => "Combined elevation map: ground + canopy (m)",
         MapLayer::Data(Surface) => "Surface type (class id)",
         MapLayer::Data(_) => "Safety zone (m)",
+        MapLayer::Colour => "Map colours, unshaded (the renderer's texture)",
         MapLayer::Relief => "Shaded relief with map colours and canopy",
     }
 }

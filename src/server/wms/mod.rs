@@ -67,7 +67,7 @@ fn endpoint(state: &AppState, headers: &HeaderMap) -> String {
 
 async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<Response, ServeError> {
     let encoding = match (map.layer, map.format) {
-        (MapLayer::Relief, _) => Encoding::Relief,
+        (layer, _) if layer.is_picture() => Encoding::Rgba,
         (_, MapFormat::Png) => Encoding::Data(Format::Png16),
         (_, MapFormat::Tiff) => Encoding::Data(Format::Tiff),
         (_, MapFormat::Bil16) => Encoding::Data(Format::Bil16),

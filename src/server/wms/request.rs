@@ -25,17 +25,20 @@ pub enum Version {
 pub enum MapLayer {
     /// One of the pipeline's layers.
     Data(Layer),
+    /// Unshaded map colours (the renderer's texture; RGBA PNG).
+    Colour,
     /// Hillshaded map colours with the canopy, for people (RGBA PNG).
     Relief,
 }
 
 /// Layers offered over WMS, in capabilities order.
-pub const LAYERS: [MapLayer; 6] = [
+pub const LAYERS: [MapLayer; 7] = [
     MapLayer::Data(Layer::Dem),
     MapLayer::Data(Layer::Cover),
     MapLayer::Data(Layer::Canopy),
     MapLayer::Data(Layer::Cem),
     MapLayer::Data(Layer::Surface),
+    MapLayer::Colour,
     MapLayer::Relief,
 ];
 
@@ -44,11 +47,18 @@ impl MapLayer {
     pub fn name(self) -> &'static str {
         match self {
             MapLayer::Data(l) => l.name(),
+            MapLayer::Colour => "colour",
             MapLayer::Relief => "relief",
         }
     }
 
-    fn parse(text: &str) -> Option<MapLayer> {
+    /// Whether the layer is an RGBA picture rather than data.
+    pub fn is_picture(self) -> bool {
+        matches!(self, MapLayer::Colour | MapLayer::Relief)
+    }
+
+    /// The layer with this name (any case).
+    pub fn parse(text: &str) -> Option<MapLayer> {
         LAYERS.into_iter().find(|l| l.name().eq_ignore_ascii_case(text))
     }
 }
@@ -236,8 +246,8 @@ fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, 
     let format_text = required("FORMAT")?;
     let format = MapFormat::parse(format_text)
         .ok_or_else(|| Exception::new(Code::InvalidFormat, format!("format {format_text:?} is not offered")).locator("FORMAT"))?;
-    if layer == MapLayer::Relief && format != MapFormat::Png {
-        return Err(Exception::new(Code::InvalidFormat, "relief is an image: ask for image/png").locator("FORMAT"));
+    if layer.is_picture() && format != MapFormat::Png {
+        return Err(Exception::new(Code::InvalidFormat, format!("{} is an image: ask for image/png", layer.name())).locator("FORMAT"));
     }
     let (width, height) = (size(required("WIDTH")?, "WIDTH", limits)?, size(required("HEIGHT")?, "HEIGHT", limits)?);
     let bbox = numbers(required("BBOX")?)?;

@@ -1,0 +1,296 @@
+//! `sylva fly`: renders a camera path headless, frame by frame — select
+//! tiles ([`super::quadtree`]), load the missing ones ([`super::store`]),
+//! ray cast them on the GPU — and records per-frame statistics: CPU and GPU
+//! time, tiles drawn per level and how, texture fetches per pixel (the ray
+//! steps), bytes fetched and memory resident.
+
+use super::path::CameraPath;
+use super::quadtree::{self, LodRule};
+use super::raycast::{Fade, Traversal};
+use super::render::cache::CacheFull;
+use super::render::uniforms::FrameSettings;
+use super::render::{Readback, Renderer};
+use super::source::TileSource;
+use super::store::{LoadError, TileStore};
+use super::tile::TileData;
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// How to fly.
+#[derive(Clone, Debug)]
+pub struct FlyOptions {
+    /// Frames spread evenly over the path.
+    pub frames: usize,
+    /// Image size, pixels.
+    pub size: (u32, u32),
+    /// Where frames (`frame_NNNNN.png`) and `stats.csv` go, if anywhere.
+    pub out_dir: Option<PathBuf>,
+    /// Write every frame's PNG (else only the statistics).
+    pub write_frames: bool,
+    /// View-ray traversal.
+    pub traversal: Traversal,
+    /// Shadow samples per hit (0: no shadows).
+    pub shadow_steps: u32,
+    /// Tile refinement.
+    pub lod: LodRule,
+    /// Halo requested with every tile, samples.
+    pub halo: usize,
+    /// The canopy fade: reference height (m), then low and high (px).
+    pub fade: (f64, f64, f64),
+    /// Tiles fetched at once, at most.
+    pub in_flight: usize,
+}
+
+impl Default for FlyOptions {
+    fn default() -> Self {
+        FlyOptions {
+            frames: 60,
+            size: (640, 480),
+            out_dir: None,
+            write_frames: true,
+            traversal: Traversal::Exact,
+            shadow_steps: 10,
+            lod: LodRule { max_error_px: 2.0, max_level: 13 },
+            halo: 32,
+            fade: (30.0, 0.5, 2.0),
+            in_flight: 8,
+        }
+    }
+}
+
+/// One frame's statistics.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameRecord {
+    /// Frame index.
+    pub frame: usize,
+    /// Selection, loading and preparing tiles, ms.
+    pub cpu_ms: f64,
+    /// GPU pass time, if measured, ms.
+    pub gpu_ms: Option<f64>,
+    /// Encode, submit and wait for the GPU, ms.
+    pub render_ms: f64,
+    /// Tiles drawn per level.
+    pub levels: BTreeMap<u32, u32>,
+    /// Tiles ray cast (from the hull or from inside), and drawn plain.
+    pub tiles_ray: u32,
+    /// Tiles drawn without rays.
+    pub tiles_plain: u32,
+    /// The error threshold used (raised when the GPU cache was too small).
+    pub error_px: f64,
+    /// Pixels where a view ray was cast.
+    pub ray_pixels: usize,
+    /// Mean and largest view-ray fetches over ray-cast pixels.
+    pub view_fetches: (f64, u32),
+    /// Mean shadow and shading fetches over ray-cast pixels.
+    pub shadow_fetches_mean: f64,
+    /// Bytes fetched from the source during the frame.
+    pub bytes_fetched: u64,
+    /// Tile bytes resident on the GPU.
+    pub gpu_bytes: usize,
+    /// Tile bytes held on the CPU.
+    pub cpu_bytes: usize,
+    /// Resident memory of the process, MiB.
+    pub rss_mib: f64,
+}
+
+/// Why a flight stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum FlyError {
+    /// A tile could not be loaded.
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    /// The GPU cache cannot hold even the coarsest view.
+    #[error(transparent)]
+    Cache(#[from] CacheFull),
+    /// Writing frames or statistics failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The failure.
+        source: std::io::Error,
+    },
+}
+
+/// Flies `path` over `source`, rendering with `renderer`.
+pub fn fly(source: &dyn TileSource, path: &CameraPath, renderer: &mut Renderer, options: &FlyOptions) -> Result<Vec<FrameRecord>, FlyError> {
+    let budget = 2 * renderer.cache_slots() as usize * slot_estimate(source, options.halo);
+    let mut store = TileStore::new(options.halo, budget, options.in_flight)?;
+    if let Some(dir) = &options.out_dir {
+        std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
+    }
+    let mut records = Vec::with_capacity(options.frames);
+    for k in 0..options.frames {
+        let record = frame(source, path, renderer, &mut store, options, k)?;
+        records.push(record);
+    }
+    if let Some(dir) = &options.out_dir {
+        let csv = dir.join("stats.csv");
+        std::fs::write(&csv, to_csv(&records)).map_err(|e| io(&csv, e))?;
+    }
+    Ok(records)
+}
+
+fn frame(source: &dyn TileSource, path: &CameraPath, renderer: &mut Renderer, store: &mut TileStore, options: &FlyOptions, k: usize) -> Result<FrameRecord, FlyError> {
+    let start = Instant::now();
+    let bytes_before = source.bytes_fetched();
+    let camera = path.camera(k, options.frames, options.size);
+    let (tiles, error_px) = visible_tiles(source, store, &camera, options, renderer.cache_slots())?;
+    let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
+    let (canopy_ref_m, lo_px, hi_px) = options.fade;
+    let settings = FrameSettings {
+        traversal: options.traversal,
+        shadow_steps: options.shadow_steps,
+        sun_ecef: path.sun_ecef(),
+        fade: Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px },
+    };
+    let refs: Vec<&TileData> = tiles.iter().map(|t| t.as_ref()).collect();
+    let out = renderer.render(&camera, &refs, &settings, Readback::All)?;
+    if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
+        let file = dir.join(format!("frame_{k:05}.png"));
+        let bytes: Vec<u8> = out.colour.iter().flatten().copied().collect();
+        let png = crate::encode::png(&bytes, options.size.0 as usize, options.size.1 as usize, image::ExtendedColorType::Rgba8)
+            .map_err(|e| io(&file, std::io::Error::other(e.0)))?;
+        std::fs::write(&file, png).map_err(|e| io(&file, e))?;
+    }
+    let mut levels = BTreeMap::new();
+    for t in &tiles {
+        *levels.entry(t.id().level).or_insert(0) += 1;
+    }
+    let rays: Vec<&[u32; 2]> = out.fetches.iter().filter(|f| f[0] > 0).collect();
+    let n = rays.len().max(1) as f64;
+    Ok(FrameRecord {
+        frame: k,
+        cpu_ms,
+        gpu_ms: out.stats.gpu_ms,
+        render_ms: out.stats.wall_ms,
+        levels,
+        tiles_ray: out.stats.tiles_hull + out.stats.tiles_inside,
+        tiles_plain: out.stats.tiles_plain,
+        error_px,
+        ray_pixels: rays.len(),
+        view_fetches: (rays.iter().map(|f| f[0] as f64).sum::<f64>() / n, rays.iter().map(|f| f[0]).max().unwrap_or(0)),
+        shadow_fetches_mean: rays.iter().map(|f| f[1] as f64).sum::<f64>() / n,
+        bytes_fetched: source.bytes_fetched() - bytes_before,
+        gpu_bytes: out.stats.resident_bytes,
+        cpu_bytes: store.bytes(),
+        rss_mib: crate::bench::rss_mib().0,
+    })
+}
+
+/// The frame's tiles, coarsening the error threshold until they fit the
+/// GPU cache.
+fn visible_tiles(
+    source: &dyn TileSource,
+    store: &mut TileStore,
+    camera: &super::camera::Camera,
+    options: &FlyOptions,
+    slots: u32,
+) -> Result<(Vec<std::sync::Arc<TileData>>, f64), FlyError> {
+    let mut rule = options.lod;
+    loop {
+        let selection = quadtree::select(&source.grid(), &source.bounds(), camera, &|id| store.range(id), &rule);
+        if selection.tiles.len() <= slots as usize || rule.max_error_px > 1e6 {
+            let ids: Vec<_> = selection.tiles.iter().map(|s| s.id).collect();
+            return Ok((store.get(source, &ids)?, rule.max_error_px));
+        }
+        rule.max_error_px *= 1.25;
+    }
+}
+
+/// Bytes of one prepared tile, for the CPU store's budget.
+fn slot_estimate(source: &dyn TileSource, halo: usize) -> usize {
+    let side = source.grid().samples() as usize + 2 * halo;
+    side * side * 26
+}
+
+fn io(path: &std::path::Path, source: std::io::Error) -> FlyError {
+    FlyError::Io { path: path.display().to_string(), source }
+}
+
+/// The statistics as CSV, one row per frame.
+pub fn to_csv(records: &[FrameRecord]) -> String {
+    let mut out = Vec::new();
+    let _ = writeln!(
+        out,
+        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib"
+    );
+    for r in records {
+        let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
+        let gpu = r.gpu_ms.map_or(String::new(), |v| format!("{v:.3}"));
+        let _ = writeln!(
+            out,
+            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1}",
+            r.frame,
+            r.cpu_ms,
+            r.render_ms,
+            r.tiles_ray + r.tiles_plain,
+            levels.join(" "),
+            r.tiles_ray,
+            r.tiles_plain,
+            r.error_px,
+            r.ray_pixels,
+            r.view_fetches.0,
+            r.view_fetches.1,
+            r.shadow_fetches_mean,
+            r.bytes_fetched,
+            r.gpu_bytes,
+            r.cpu_bytes,
+            r.rss_mib
+        );
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// A one-paragraph summary of a flight: frames, mean and worst times,
+/// tiles, fetches, memory at the start and the end.
+pub fn summary(records: &[FrameRecord]) -> String {
+    let n = records.len().max(1) as f64;
+    let mean = |f: &dyn Fn(&FrameRecord) -> f64| records.iter().map(f).sum::<f64>() / n;
+    let gpu: Vec<f64> = records.iter().filter_map(|r| r.gpu_ms).collect();
+    let gpu_text = if gpu.is_empty() { "no timestamps".to_string() } else { format!("{:.2} ms GPU", gpu.iter().sum::<f64>() / gpu.len() as f64) };
+    let (first, last) = (records.first(), records.last());
+    format!(
+        "{} frames: {:.2} ms CPU (select + load), {:.2} ms render, {gpu_text} per frame; {:.1} tiles ({:.1} ray cast); view fetches/pixel mean {:.1}, max {}; {} bytes fetched; RSS {:.0} → {:.0} MiB",
+        records.len(),
+        mean(&|r| r.cpu_ms),
+        mean(&|r| r.render_ms),
+        mean(&|r| (r.tiles_ray + r.tiles_plain) as f64),
+        mean(&|r| r.tiles_ray as f64),
+        mean(&|r| r.view_fetches.0),
+        records.iter().map(|r| r.view_fetches.1).max().unwrap_or(0),
+        records.iter().map(|r| r.bytes_fetched).sum::<u64>(),
+        first.map_or(0.0, |r| r.rss_mib),
+        last.map_or(0.0, |r| r.rss_mib),
+    )
+}
+
+/// Parses `exact` or `linear:STEPS`.
+pub fn parse_traversal(text: &str) -> Option<Traversal> {
+    match text.split_once(':') {
+        None if text.eq_ignore_ascii_case("exact") => Some(Traversal::Exact),
+        Some((kind, steps)) if kind.eq_ignore_ascii_case("linear") => steps.parse().ok().filter(|&s| s > 0).map(Traversal::Linear),
+        _ => None,
+    }
+}
+
+/// Opens the GPU and flies: what `sylva fly` does.
+pub fn run(source: &dyn TileSource, path: &CameraPath, options: &FlyOptions, gpu_budget_bytes: usize) -> Result<Vec<FrameRecord>, RunError> {
+    let gpu = super::render::gpu::Gpu::open()?;
+    let grid = source.grid();
+    let mut renderer = Renderer::new(gpu, grid.samples(), options.halo as u32, gpu_budget_bytes);
+    Ok(fly(source, path, &mut renderer, options)?)
+}
+
+/// Why `sylva fly` failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// No GPU.
+    #[error(transparent)]
+    Gpu(#[from] super::render::gpu::GpuError),
+    /// The flight failed.
+    #[error(transparent)]
+    Fly(#[from] FlyError),
+}

@@ -1,0 +1,114 @@
+//! Tiles from a `sylva serve` over HTTP (dissertation 6.5: the client in
+//! front of the proxy server). The server's `/tiles.json` gives the tiling;
+//! each tile is four World Wind requests with the halo — `cem`, `dem` and
+//! `surface` as float32 BIL, `colour` as an RGBA PNG — through a [`Link`]
+//! (timeouts, retries with backoff, a circuit breaker). A 404 is a tile
+//! without data. The tile store runs fetches on a bounded pool, which bounds
+//! the requests in flight.
+
+use super::source::{FetchError, TileSource};
+use super::tile::TilePayload;
+use crate::encode::NODATA_HEIGHT;
+use crate::grid::{BBox, TileGrid, TileId};
+use crate::region::Tileset;
+use crate::source::link::{Link, LinkSettings};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Retries and timeouts of tile requests: a tile is up to ~1.3 MB and may
+/// be computed on demand (tens of ms), so 10 s is generous.
+const SETTINGS: LinkSettings = LinkSettings { timeout_ms: 10_000, retries: 2, backoff_ms: 100, breaker_failures: 5, breaker_cooldown_s: 5.0 };
+
+/// A tile server as a tile source.
+pub struct HttpSource {
+    base: String,
+    tileset: Tileset,
+    grid: TileGrid,
+    link: Link,
+    bytes: AtomicU64,
+}
+
+impl HttpSource {
+    /// Connects to the server at `base` (e.g. `http://127.0.0.1:8080`) and
+    /// reads its tileset.
+    pub fn connect(base: &str) -> Result<HttpSource, super::source::OpenError> {
+        let base = base.trim_end_matches('/').to_string();
+        let link = Link::new(&SETTINGS);
+        let url = format!("{base}/tiles.json");
+        let bad = |reason: String| super::source::OpenError::Server(format!("{url}: {reason}"));
+        let body = link.fetch(&url).map_err(|e| bad(e.to_string()))?.ok_or_else(|| bad("not found: is it a sylva server?".into()))?;
+        let tileset: Tileset = serde_json::from_slice(&body).map_err(|e| bad(format!("not a tileset: {e}")))?;
+        let grid = TileGrid::new(tileset.level0_delta_deg, tileset.samples).map_err(|e| bad(e.to_string()))?;
+        Ok(HttpSource { base, tileset, grid, link, bytes: AtomicU64::new(body.len() as u64) })
+    }
+
+    fn get(&self, id: TileId, url: String) -> Result<Option<Vec<u8>>, FetchError> {
+        let body = self.link.fetch(&url).map_err(|e| FetchError::Http { id, url: url.clone(), reason: e.to_string() })?;
+        if let Some(b) = &body {
+            self.bytes.fetch_add(b.len() as u64, Ordering::Relaxed);
+        }
+        Ok(body)
+    }
+
+    fn url(&self, layer: &str, id: TileId, ext: &str, halo: usize) -> String {
+        format!("{}/tiles/{layer}/{}/{}/{}_{}.{ext}?halo={halo}", self.base, id.level, id.row, id.row, id.col)
+    }
+}
+
+impl TileSource for HttpSource {
+    fn grid(&self) -> TileGrid {
+        self.grid
+    }
+
+    fn bounds(&self) -> BBox {
+        let [west, south, east, north] = self.tileset.bounds;
+        BBox { west, south, east, north }
+    }
+
+    fn fetch(&self, id: TileId, halo: usize) -> Result<Option<TilePayload>, FetchError> {
+        if halo > self.tileset.max_halo {
+            return Err(FetchError::Http { id, url: self.base.clone(), reason: format!("halo {halo} is above the server's {}", self.tileset.max_halo) });
+        }
+        let count = (self.grid.samples() as usize + 2 * halo).pow(2);
+        let floats = |layer: &str| -> Result<Option<Vec<f32>>, FetchError> {
+            let url = self.url(layer, id, "bil32", halo);
+            let Some(body) = self.get(id, url.clone())? else { return Ok(None) };
+            decode_bil32(&body, count).map(Some).map_err(|reason| FetchError::Http { id, url, reason })
+        };
+        let (Some(cem), Some(dem), Some(classes)) = (floats("cem")?, floats("dem")?, floats("surface")?) else {
+            return Ok(None);
+        };
+        let url = self.url("colour", id, "png", halo);
+        let Some(png) = self.get(id, url.clone())? else { return Ok(None) };
+        let colour = decode_rgba(&png, count).map_err(|reason| FetchError::Http { id, url, reason })?;
+        let surface = classes.iter().map(|&c| if c.is_nan() { crate::cem::surface::NODATA } else { c as u8 }).collect();
+        Ok(Some(TilePayload { id, halo, cem, dem, surface, colour }))
+    }
+
+    fn bytes_fetched(&self) -> u64 {
+        self.bytes.load(Ordering::Relaxed)
+    }
+
+    fn describe(&self) -> String {
+        format!("{} ({}), {} samples per tile", self.base, self.tileset.name, self.tileset.samples)
+    }
+}
+
+/// Little-endian float32 samples; the BIL nodata value becomes NaN.
+fn decode_bil32(body: &[u8], count: usize) -> Result<Vec<f32>, String> {
+    if body.len() != count * 4 {
+        return Err(format!("{} bytes, expected {} float32 samples", body.len(), count));
+    }
+    Ok(body
+        .chunks_exact(4)
+        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+        .map(|v| if v == NODATA_HEIGHT { f32::NAN } else { v })
+        .collect())
+}
+
+fn decode_rgba(body: &[u8], count: usize) -> Result<Vec<[u8; 4]>, String> {
+    let img = image::load_from_memory(body).map_err(|e| format!("not a PNG: {e}"))?.into_rgba8();
+    if (img.width() * img.height()) as usize != count {
+        return Err(format!("image is {}×{}, expected {count} pixels", img.width(), img.height()));
+    }
+    Ok(img.pixels().map(|p| p.0).collect())
+}

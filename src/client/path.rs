@@ -1,0 +1,210 @@
+//! Camera paths for flyovers: keyframes in a TOML file (position on the
+//! globe, heading, pitch, time), interpolated to any number of frames —
+//! positions by a uniform Catmull–Rom spline, headings
+//! the short way round, pitch linearly — and the sun.
+//!
+//! ```toml
+//! fov_deg = 60
+//! sun = { azimuth_deg = 135.0, elevation_deg = 35.0 }   # omit for no sun
+//! [[key]]
+//! t = 0.0
+//! lon = 10.05
+//! lat = 46.33
+//! height_m = 1800.0      # above the WGS84 ellipsoid
+//! heading_deg = 45.0     # clockwise from north
+//! pitch_deg = -10.0      # above the horizon
+//! ```
+
+use super::camera::Camera;
+use super::globe::{self, Geodetic};
+use glam::DVec3;
+use serde::Deserialize;
+use std::path::Path;
+
+/// A keyframe.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Key {
+    /// Time, seconds.
+    pub t: f64,
+    /// Longitude, degrees.
+    pub lon: f64,
+    /// Latitude, degrees.
+    pub lat: f64,
+    /// Height above the ellipsoid, metres.
+    pub height_m: f64,
+    /// Heading, degrees clockwise from north.
+    pub heading_deg: f64,
+    /// Pitch, degrees above the horizon.
+    pub pitch_deg: f64,
+}
+
+/// The sun's direction from the path's first keyframe.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Sun {
+    /// Azimuth, degrees clockwise from north.
+    pub azimuth_deg: f64,
+    /// Elevation above the horizon, degrees.
+    pub elevation_deg: f64,
+}
+
+/// A camera path.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CameraPath {
+    /// Vertical field of view, degrees.
+    #[serde(default = "default_fov")]
+    pub fov_deg: f64,
+    /// The sun, if any.
+    pub sun: Option<Sun>,
+    /// Keyframes in time order.
+    pub key: Vec<Key>,
+}
+
+fn default_fov() -> f64 {
+    60.0
+}
+
+/// Why a path file is unusable.
+#[derive(Debug, thiserror::Error)]
+pub enum PathError {
+    /// It cannot be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The failure.
+        source: std::io::Error,
+    },
+    /// It is not a valid path.
+    #[error("{path}: {reason}")]
+    Invalid {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+impl CameraPath {
+    /// Reads and checks a path file.
+    pub fn load(path: &Path) -> Result<CameraPath, PathError> {
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| PathError::Io { path: name.clone(), source })?;
+        CameraPath::parse(&text).map_err(|reason| PathError::Invalid { path: name, reason })
+    }
+
+    /// Parses and checks a path.
+    pub fn parse(text: &str) -> Result<CameraPath, String> {
+        let path: CameraPath = toml::from_str(text).map_err(|e| e.to_string())?;
+        if path.key.is_empty() {
+            return Err("a path needs at least one [[key]]".into());
+        }
+        if !(1.0..=170.0).contains(&path.fov_deg) {
+            return Err(format!("fov_deg {} is not within 1..170", path.fov_deg));
+        }
+        for (k, key) in path.key.iter().enumerate() {
+            let finite = [key.t, key.lon, key.lat, key.height_m, key.heading_deg, key.pitch_deg].iter().all(|v| v.is_finite());
+            if !finite || key.lat.abs() > 90.0 || key.pitch_deg.abs() > 90.0 {
+                return Err(format!("key {} is out of range: {key:?}", k + 1));
+            }
+            if k > 0 && key.t <= path.key[k - 1].t {
+                return Err(format!("key {} is not later than the one before", k + 1));
+            }
+        }
+        Ok(path)
+    }
+
+    /// The pose at time `t` (clamped to the keys' span).
+    pub fn at(&self, t: f64) -> Key {
+        let keys = &self.key;
+        let last = keys.len() - 1;
+        let k = keys.iter().rposition(|key| key.t <= t).unwrap_or(0).min(last.saturating_sub(1));
+        if last == 0 {
+            return keys[0];
+        }
+        let (a, b) = (keys[k], keys[k + 1]);
+        let u = ((t - a.t) / (b.t - a.t)).clamp(0.0, 1.0);
+        let before = keys[k.saturating_sub(1)];
+        let after = keys[(k + 2).min(last)];
+        let spline = |f: fn(&Key) -> f64| catmull_rom(f(&before), f(&a), f(&b), f(&after), u);
+        let turn = (b.heading_deg - a.heading_deg + 540.0).rem_euclid(360.0) - 180.0;
+        Key {
+            t,
+            lon: spline(|k| k.lon),
+            lat: spline(|k| k.lat).clamp(-90.0, 90.0),
+            height_m: spline(|k| k.height_m),
+            heading_deg: a.heading_deg + turn * u,
+            pitch_deg: a.pitch_deg + (b.pitch_deg - a.pitch_deg) * u,
+        }
+    }
+
+    /// The camera of frame `index` of `frames`, spread evenly over the path.
+    pub fn camera(&self, index: usize, frames: usize, size: (u32, u32)) -> Camera {
+        let (first, last) = (self.key[0].t, self.key[self.key.len() - 1].t);
+        let t = if frames > 1 { first + (last - first) * index as f64 / (frames - 1) as f64 } else { first };
+        let k = self.at(t);
+        Camera::looking(Geodetic::new(k.lon, k.lat, k.height_m), k.heading_deg, k.pitch_deg, self.fov_deg, size)
+    }
+
+    /// Unit direction to the sun (ECEF), if the path has one.
+    pub fn sun_ecef(&self) -> Option<DVec3> {
+        let sun = self.sun?;
+        let k = self.key[0];
+        let (sa, ca) = sun.azimuth_deg.to_radians().sin_cos();
+        let (se, ce) = sun.elevation_deg.to_radians().sin_cos();
+        Some(globe::enu_basis(k.lon, k.lat) * DVec3::new(sa * ce, ca * ce, se))
+    }
+}
+
+fn catmull_rom(p0: f64, p1: f64, p2: f64, p3: f64, u: f64) -> f64 {
+    let (u2, u3) = (u * u, u * u * u);
+    0.5 * (2.0 * p1 + (p2 - p0) * u + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * u2 + (3.0 * p1 - p0 - 3.0 * p2 + p3) * u3)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const PATH: &str = r#"
+fov_deg = 50
+sun = { azimuth_deg = 90.0, elevation_deg = 30.0 }
+[[key]]
+t = 0.0
+lon = 10.0
+lat = 46.0
+height_m = 1000.0
+heading_deg = 350.0
+pitch_deg = -10.0
+[[key]]
+t = 2.0
+lon = 10.2
+lat = 46.1
+height_m = 3000.0
+heading_deg = 10.0
+pitch_deg = -30.0
+"#;
+
+    #[test]
+    fn keys_are_met_and_headings_turn_the_short_way() {
+        let p = CameraPath::parse(PATH).unwrap();
+        assert_eq!(p.at(0.0), p.key[0]);
+        let end = p.at(2.0);
+        assert!((end.lon - 10.2).abs() < 1e-12 && (end.height_m - 3000.0).abs() < 1e-9);
+        let mid = p.at(1.0);
+        assert!((mid.heading_deg - 360.0).abs() < 1e-9, "through north, not south: {}", mid.heading_deg);
+        let sun = p.sun_ecef().unwrap();
+        let east = globe::enu_basis(10.0, 46.0).x_axis;
+        assert!((sun.dot(east) - 30f64.to_radians().cos()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_paths_say_what_is_wrong() {
+        assert!(CameraPath::parse("fov_deg = 60").unwrap_err().contains("key"));
+        let backwards = PATH.replace("t = 2.0", "t = -1.0");
+        assert!(CameraPath::parse(&backwards).unwrap_err().contains("not later"));
+        let typo = PATH.replace("pitch_deg = -30.0", "pitch = -30.0");
+        assert!(CameraPath::parse(&typo).is_err());
+    }
+}
