@@ -246,7 +246,7 @@ mod tests {
         // A plane h = 10 + 2x (per cell), ray going down from z = 20.
         let h = [10.0, 12.0, 10.0, 12.0];
         let d = DVec3::new(0.5, 0.0, -1.0).normalize();
-        let tau = patch_hit(h, DVec2::ZERO, d, 20.0, 5.0).unwrap();
+        let tau = patch_hit(h, DVec2::ZERO, d, 20.0, 10.0).unwrap();
         let (x, z) = (d.x * tau, 20.0 + d.z * tau);
         assert!((z - (10.0 + 2.0 * x)).abs() < 1e-12);
         // A saddle: the ray passes above the low diagonal.
@@ -270,4 +270,56 @@ mod tests {
         }
         assert_eq!(seen.last().map(|s| s.3), Some(10.0));
     }
+}
+
+/// How an image departs from the reference.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Departure {
+    /// Pixels compared.
+    pub pixels: usize,
+    /// Pixels the reference hits and the image does not.
+    pub misses: usize,
+    /// Pixels the image hits and the reference does not.
+    pub extras: usize,
+    /// Root-mean-square relative depth error over pixels both hit.
+    pub depth_rms_rel: f64,
+    /// Largest relative depth error over pixels both hit.
+    pub depth_max_rel: f64,
+    /// Colour PSNR over pixels both hit, dB (infinite when identical).
+    pub psnr_db: f64,
+}
+
+impl Departure {
+    /// Share of pixels whose hit differs.
+    pub fn mismatch_share(&self) -> f64 {
+        (self.misses + self.extras) as f64 / self.pixels.max(1) as f64
+    }
+}
+
+/// Compares an image (colour, view distance per pixel, 0 = no hit) with the
+/// reference.
+pub fn compare(colour: &[[u8; 4]], view_z_m: &[f32], reference: &Image) -> Departure {
+    let mut d = Departure { pixels: reference.view_z_m.len(), ..Default::default() };
+    let (mut sq_depth, mut sq_colour, mut both) = (0.0, 0.0, 0usize);
+    for (k, &z_ref) in reference.view_z_m.iter().enumerate() {
+        let z = view_z_m.get(k).copied().unwrap_or(0.0);
+        match (z_ref > 0.0, z > 0.0) {
+            (true, false) => d.misses += 1,
+            (false, true) => d.extras += 1,
+            (false, false) => {}
+            (true, true) => {
+                both += 1;
+                let rel = ((z - z_ref) / z_ref).abs() as f64;
+                sq_depth += rel * rel;
+                d.depth_max_rel = d.depth_max_rel.max(rel);
+                let (a, b) = (colour.get(k).copied().unwrap_or([0; 4]), reference.colour[k]);
+                sq_colour += (0..3).map(|c| (a[c] as f64 - b[c] as f64).powi(2)).sum::<f64>() / 3.0;
+            }
+        }
+    }
+    let n = both.max(1) as f64;
+    d.depth_rms_rel = (sq_depth / n).sqrt();
+    let mse = sq_colour / n;
+    d.psnr_db = if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0f64 * 255.0 / mse).log10() };
+    d
 }

@@ -68,6 +68,9 @@ pub struct TileData {
     pub frame: TileFrame,
     /// The base height: local heights are measured from it, metres.
     pub base_m: f64,
+    /// Unique to this preparation in this process: the GPU cache's key, so
+    /// two sources' tiles with one address are never confused.
+    pub serial: u64,
     /// Halo `B`.
     pub halo: usize,
     /// Texels per side, `N + 2B`.
@@ -148,7 +151,7 @@ impl TileData {
             canopy_max_m: canopy_max(&cast, &cast_window(&dem, halo, grid.samples() as usize)),
             mesh_error_m: hull.mesh_error_m,
         };
-        Ok(TileData { frame, base_m: base, halo, size, texels, colour, surface, mip, hull, range })
+        Ok(TileData { frame, base_m: base, serial: next_serial(), halo, size, texels, colour, surface, mip, hull, range })
     }
 
     /// The tile.
@@ -167,6 +170,11 @@ impl TileData {
         let mip: usize = (0..self.mip.levels()).map(|l| self.mip.level(l).data().len() * 4).sum();
         self.texels.len() * 16 + mip + self.colour.len() * 4 + self.surface.len()
     }
+}
+
+fn next_serial() -> u64 {
+    static SERIAL: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    SERIAL.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 /// The height the frame is raised to: the middle of the valid CEM range.

@@ -83,7 +83,7 @@ fn gdal_reads_the_capabilities_and_a_dem_map_that_matches_build() {
     let dir = TempDir::new("client-gdal");
     let server = rmnp_server(&dir);
     let info = run(Command::new("gdalinfo").arg(format!("WMS:{}/wms", server.base)), "gdalinfo");
-    for layer in ["dem", "cover", "canopy", "cem", "surface", "relief"] {
+    for layer in ["dem", "cover", "canopy", "cem", "surface", "colour", "relief"] {
         assert!(info.contains(&format!("LAYERS={layer}&")), "gdalinfo lists {layer}:\n{info}");
     }
     assert!(info.contains("SUBDATASET_1_DESC=Ground elevation (m)"), "{info}");
@@ -123,7 +123,7 @@ fn owslib_reads_the_capabilities_and_a_dem_map_that_matches_build() {
         let script = format!(
             "import sys\nfrom owslib.wms import WebMapService\n\
              wms = WebMapService('{base}/wms', version='{version}')\n\
-             assert list(wms.contents) == ['dem', 'cover', 'canopy', 'cem', 'surface', 'relief'], list(wms.contents)\n\
+             assert list(wms.contents) == ['dem', 'cover', 'canopy', 'cem', 'surface', 'colour', 'relief'], list(wms.contents)\n\
              assert wms['dem'].title == 'Ground elevation (m)'\n\
              img = wms.getmap(layers=['dem'], srs='EPSG:4326', bbox=({w}, {s}, {e}, {n}), size=({SIDE}, {SIDE}), format='image/tiff')\n\
              open(sys.argv[1], 'wb').write(img.read())\n",

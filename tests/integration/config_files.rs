@@ -9,7 +9,10 @@ fn toml_files(dir: &Path) -> Vec<std::path::PathBuf> {
     for entry in std::fs::read_dir(dir).expect("config dir").flatten() {
         let path = entry.path();
         if path.is_dir() {
-            out.extend(toml_files(&path));
+            // Camera paths are not regions (tested below).
+            if path.file_name().is_some_and(|n| n != "paths") {
+                out.extend(toml_files(&path));
+            }
         } else if path.extension().is_some_and(|e| e == "toml") {
             out.push(path);
         }
@@ -25,6 +28,18 @@ fn every_shipped_config_builds_its_region() {
         let region = sylva::config::load(Some(&file)).unwrap_or_else(|e| panic!("{e}"));
         assert!(!region.describe().is_empty());
     }
+}
+
+#[test]
+fn every_shipped_camera_path_parses() {
+    let dir = common::repo().join("config/paths");
+    let mut count = 0;
+    for entry in std::fs::read_dir(&dir).expect("config/paths").flatten() {
+        let path = sylva::client::path::CameraPath::load(&entry.path()).unwrap_or_else(|e| panic!("{e}"));
+        assert!(path.key.len() >= 2, "{}: a path moves", entry.path().display());
+        count += 1;
+    }
+    assert!(count >= 6, "demo and rmnp paths: valley, horizon, dive");
 }
 
 #[test]

@@ -8,7 +8,6 @@
 
 use super::super::hull::HullVertex;
 use super::super::tile::TileData;
-use crate::grid::TileId;
 use wgpu::util::DeviceExt;
 
 /// Texture arrays hold at most this many layers on every adapter.
@@ -16,7 +15,7 @@ const MAX_SLOTS: u32 = 256;
 
 /// A resident tile.
 struct Resident {
-    id: TileId,
+    serial: u64,
     last_frame: u64,
     vertices: wgpu::Buffer,
     indices: wgpu::Buffer,
@@ -106,9 +105,10 @@ impl TileCache {
         self.slots.iter().flatten().map(|r| self.slot_bytes + r.vertices.size() as usize + r.indices.size() as usize).sum()
     }
 
-    /// The slot of a resident tile, marking it used in `frame`.
-    pub fn lookup(&mut self, id: TileId, frame: u64) -> Option<u32> {
-        let k = self.slots.iter().position(|s| s.as_ref().is_some_and(|r| r.id == id))?;
+    /// The slot of a resident tile (by [`TileData::serial`]), marking it
+    /// used in `frame`.
+    pub fn lookup(&mut self, serial: u64, frame: u64) -> Option<u32> {
+        let k = self.slots.iter().position(|s| s.as_ref().is_some_and(|r| r.serial == serial))?;
         if let Some(r) = self.slots[k].as_mut() {
             r.last_frame = frame;
         }
@@ -124,7 +124,7 @@ impl TileCache {
     /// Makes `tile` resident (if it is not), evicting the least recently
     /// drawn tile not used in `frame`; returns its slot.
     pub fn insert(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, tile: &TileData, frame: u64) -> Result<u32, CacheFull> {
-        if let Some(slot) = self.lookup(tile.id(), frame) {
+        if let Some(slot) = self.lookup(tile.serial, frame) {
             return Ok(slot);
         }
         let slot = self.victim(frame).ok_or(CacheFull { slots: self.capacity() })?;
@@ -140,7 +140,7 @@ impl TileCache {
             usage: wgpu::BufferUsages::INDEX,
         });
         let index_count = tile.hull.indices.len() as u32;
-        self.slots[slot as usize] = Some(Resident { id: tile.id(), last_frame: frame, vertices, indices, index_count });
+        self.slots[slot as usize] = Some(Resident { serial: tile.serial, last_frame: frame, vertices, indices, index_count });
         Ok(slot)
     }
 
