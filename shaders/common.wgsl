@@ -14,7 +14,7 @@ struct Frame {
     sky: vec4<f32>,
     // canopy reference height (m), fade low (px), fade high (px), focal length (px).
     fade: vec4<f32>,
-    // width, height (px), near plane (m), unused.
+    // width, height (px), near plane (m), focal length (px).
     viewport: vec4<f32>,
     // shadow weight, shadow softness (m), unused, unused.
     shadow: vec4<f32>,

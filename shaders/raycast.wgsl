@@ -64,22 +64,32 @@ fn to_samples(p: vec3<f32>) -> vec3<f32> {
     return vec3<f32>(p.xy / tile.grid.xy + tile.grid.z, p.z);
 }
 
+// The unit direction, in the tile frame, of the ray through this pixel's
+// centre: from the pixel, not from the interpolated hull position, so it is
+// the reference's ray exactly (varyings over a 1,000 km triangle drift).
+fn pixel_ray(pixel: vec2<f32>) -> vec3<f32> {
+    let f = frame.viewport.w;
+    let camera_dir = vec3<f32>((pixel.x - 0.5 * frame.viewport.x) / f, (0.5 * frame.viewport.y - pixel.y) / f, -1.0);
+    let r = mat3x3<f32>(tile.model_view[0].xyz, tile.model_view[1].xyz, tile.model_view[2].xyz);
+    return normalize(transpose(r) * camera_dir);
+}
+
 @fragment
 fn fs_ray(in: VertexOut) -> FragmentOut {
     let camera = tile.camera.xyz;
-    let to_fragment = in.local - camera;
-    let dir = normalize(to_fragment);
+    let dir = pixel_ray(in.clip.xy);
     let ds = vec3<f32>(dir.xy / tile.grid.xy, dir.z);
-    // Rays start on the hull (measured from there, for precision), or at the
-    // camera when it is inside the hull; never before the near plane.
+    // Rays start where they cross the hull (backed off by 0.1 % for the
+    // rasteriser's rounding), or at the camera when it is inside the hull;
+    // never before the near plane. Their parameter is measured from there,
+    // for precision.
     let forward = -vec3<f32>(tile.model_view[0].z, tile.model_view[1].z, tile.model_view[2].z);
     let t_near = frame.viewport.z / dot(dir, forward);
-    var origin = in.local;
-    var t_base = length(to_fragment);
-    if tile.flags.x == MODE_INSIDE {
-        origin = camera;
-        t_base = 0.0;
+    var t_base = 0.0;
+    if tile.flags.x != MODE_INSIDE {
+        t_base = max(dot(in.local - camera, dir) * 0.999, 0.0);
     }
+    let origin = camera + dir * t_base;
     let os = to_samples(origin);
     let span = cast_box(os, ds);
     let t0 = max(max(span.x, 0.0), t_near - t_base);

@@ -86,7 +86,9 @@ fn patch_hit(h: vec4<f32>, f: vec2<f32>, d: vec3<f32>, z0: f32, len: f32) -> f32
     let b = hx * d.x + hy * d.y + e * (f.x * d.y + f.y * d.x) - d.z;
     let a = e * d.x * d.y;
     var root = NO_HIT;
-    if abs(a) <= 1.0e-6 * max(abs(b), 1.0e-30) {
+    // Linear where the quadratic term is negligible over the cell (compared
+    // at the cell's far end, so the test holds at any scale).
+    if abs(a * len) <= 1.0e-6 * max(abs(b), 1.0e-30) {
         if b > 0.0 {
             root = -c / b;
         }

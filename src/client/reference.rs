@@ -224,7 +224,8 @@ pub fn patch_hit(h: [f64; 4], f: DVec2, d: DVec3, z0: f64, len: f64) -> Option<f
 /// The smallest root in `[0, len]` of `a·τ² + b·τ + c` with `c < 0`.
 fn smallest_root(a: f64, b: f64, c: f64, len: f64) -> Option<f64> {
     let inside = |r: f64| (0.0..=len).contains(&r).then_some(r);
-    if a.abs() <= 1e-12 * b.abs().max(1e-300) {
+    // Linear where the quadratic term is negligible over the cell.
+    if (a * len).abs() <= 1e-12 * b.abs().max(1e-300) {
         return if b > 0.0 { inside(-c / b) } else { None };
     }
     let disc = b * b - 4.0 * a * c;

@@ -22,7 +22,7 @@ pub struct FrameUniform {
     pub sky: [f32; 4],
     /// Canopy reference height, fade low and high (px), focal length (px).
     pub fade: [f32; 4],
-    /// Width, height, near plane, unused.
+    /// Width, height, near plane, focal length (px).
     pub viewport: [f32; 4],
     /// Shadow weight, softness, unused, unused.
     pub shadow: [f32; 4],
@@ -96,7 +96,7 @@ impl FrameUniform {
             proj: camera.projection().to_cols_array_2d(),
             sky: rgb(raycast::SKY, raycast::AMBIENT),
             fade: [f.canopy_ref_m as f32, f.lo_px as f32, f.hi_px as f32, f.focal_px as f32],
-            viewport: [camera.width_px as f32, camera.height_px as f32, camera.near_m as f32, 0.0],
+            viewport: [camera.width_px as f32, camera.height_px as f32, camera.near_m as f32, camera.focal_px() as f32],
             shadow: [raycast::SHADOW_WEIGHT as f32, raycast::SHADOW_SOFT_M as f32, 0.0, 0.0],
             canopy_tint: rgb(raycast::CANOPY_TINT, 1.0),
             mode: [traversal, steps, settings.shadow_steps, settings.sun_ecef.is_some() as u32],
