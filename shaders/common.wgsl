@@ -35,7 +35,8 @@ struct Tile {
     sun: vec4<f32>,
     // metres per sample east, north; centre index c; samples per side N.
     grid: vec4<f32>,
-    // lowest ground, highest CEM (local m), unused, unused.
+    // lowest ground, highest CEM, hull bottom (local m), how far the terrain
+    // mesh is lowered (0 for tiles drawn plain, more under ray-cast ones).
     range: vec4<f32>,
     // halo B, texels per side, texture slot, top mipmap level.
     index: vec4<i32>,

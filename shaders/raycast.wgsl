@@ -2,10 +2,15 @@
 // on them (dissertation 6.4), and plain texture mapping of the terrain mesh
 // where no ray is cast.
 
-struct VertexIn {
+struct HullIn {
     @location(0) sample: vec2<f32>,
     @location(1) hull: vec2<f32>,
-    @location(2) terrain: f32,
+};
+
+struct TerrainIn {
+    @location(0) sample: vec2<f32>,
+    @location(1) height: f32,
+    @location(2) offset: vec3<f32>,
 };
 
 struct VertexOut {
@@ -19,6 +24,11 @@ struct FragmentOut {
     @builtin(frag_depth) depth: f32,
 };
 
+struct PlainVertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) sample: vec2<f32>,
+};
+
 struct PlainOut {
     @location(0) colour: vec4<f32>,
     @location(1) fetches: vec2<u32>,
@@ -29,7 +39,7 @@ fn project(local: vec3<f32>) -> vec4<f32> {
 }
 
 @vertex
-fn vs_hull(v: VertexIn) -> VertexOut {
+fn vs_hull(v: HullIn) -> VertexOut {
     let xy = (v.sample - vec2<f32>(tile.grid.z)) * tile.grid.xy;
     var f = 1.0;
     if tile.flags.y == 0u {
@@ -41,10 +51,12 @@ fn vs_hull(v: VertexIn) -> VertexOut {
     return VertexOut(project(local), local);
 }
 
+// The terrain mesh at its true place (the flat frame's point plus the
+// vertex's offset), lowered by tile.range.w under ray-cast tiles.
 @vertex
-fn vs_plain(v: VertexIn) -> VertexOut {
-    let local = vec3<f32>((v.sample - vec2<f32>(tile.grid.z)) * tile.grid.xy, v.terrain);
-    return VertexOut(project(local), local);
+fn vs_plain(v: TerrainIn) -> PlainVertexOut {
+    let flat = vec3<f32>((v.sample - vec2<f32>(tile.grid.z)) * tile.grid.xy, v.height - tile.range.w);
+    return PlainVertexOut(project(flat + v.offset), v.sample);
 }
 
 // The ray's parameter interval inside the cast box, in sample space.
@@ -114,12 +126,20 @@ fn fs_ray(in: VertexOut) -> FragmentOut {
 }
 
 @fragment
-fn fs_plain(in: VertexOut) -> PlainOut {
-    let s = to_samples(in.local);
-    let c = clamp(vec2<i32>(floor(s.xy)), vec2<i32>(-1), vec2<i32>(i32(tile.grid.w) - 1));
-    let f = clamp(s.xy - vec2<f32>(c), vec2<f32>(0.0), vec2<f32>(1.0));
-    let base = mix(mix(colour_at(c.x, c.y).rgb, colour_at(c.x + 1, c.y).rgb, f.x),
-                   mix(colour_at(c.x, c.y + 1).rgb, colour_at(c.x + 1, c.y + 1).rgb, f.x), f.y);
+fn fs_plain(in: PlainVertexOut) -> PlainOut {
+    let s = in.sample;
+    let c = clamp(vec2<i32>(floor(s)), vec2<i32>(0), vec2<i32>(i32(tile.grid.w) - 2));
+    let f = clamp(s - vec2<f32>(c), vec2<f32>(0.0), vec2<f32>(1.0));
+    let c00 = colour_at(c.x, c.y);
+    let c10 = colour_at(c.x + 1, c.y);
+    let c01 = colour_at(c.x, c.y + 1);
+    let c11 = colour_at(c.x + 1, c.y + 1);
+    // A cell with a corner without data (surface class 255) holds no
+    // ground, as for the ray caster.
+    if max(max(c00.a, c10.a), max(c01.a, c11.a)) * 255.0 > 254.5 {
+        discard;
+    }
+    let base = mix(mix(c00.rgb, c10.rgb, f.x), mix(c01.rgb, c11.rgb, f.x), f.y);
     var lit = base;
     if frame.mode.w == 1u {
         let g = vec4<f32>(texel(c.x, c.y).y, texel(c.x + 1, c.y).y, texel(c.x, c.y + 1).y, texel(c.x + 1, c.y + 1).y);

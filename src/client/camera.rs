@@ -116,10 +116,10 @@ impl Camera {
         let (r, u, back) = (self.rotation.x_axis, self.rotation.y_axis, self.rotation.z_axis);
         let fwd = -back;
         [
-            (fwd * hx + r).cross(u).normalize() * -1.0,
-            (fwd * hx - r).cross(u).normalize(),
-            (fwd * hy + u).cross(r).normalize(),
-            (fwd * hy - u).cross(r).normalize() * -1.0,
+            (fwd + r * hx).cross(u).normalize() * -1.0,
+            (fwd - r * hx).cross(u).normalize(),
+            (fwd + u * hy).cross(r).normalize(),
+            (fwd - u * hy).cross(r).normalize() * -1.0,
         ]
     }
 }
@@ -164,13 +164,20 @@ mod tests {
     }
 
     #[test]
-    fn side_planes_contain_the_view() {
+    fn side_planes_hug_the_view() {
         let c = cam();
-        for n in c.side_planes() {
+        let planes = c.side_planes();
+        for n in planes {
             assert!(n.dot(c.forward()) > 0.0);
             for (x, y) in [(0, 0), (319, 199), (0, 199), (319, 0)] {
                 assert!(n.dot(c.ray_dir(x, y)) > 0.0);
             }
+        }
+        // A ray two pixels beyond each edge is outside.
+        let f = c.focal_px();
+        for (cx, cy) in [(162.0, 0.0), (-162.0, 0.0), (0.0, 102.0), (0.0, -102.0)] {
+            let outside = c.rotation * DVec3::new(cx / f, cy / f, -1.0);
+            assert!(planes.iter().any(|n| n.dot(outside) < 0.0), "({cx}, {cy})");
         }
     }
 }

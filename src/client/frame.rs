@@ -110,6 +110,12 @@ impl TileFrame {
         self.to_local(p)
     }
 
+    /// The ellipsoid's unit normal under sample `(i, j)`, in the local frame.
+    pub fn normal_local(&self, i: f64, j: f64) -> DVec3 {
+        let (lon, lat) = self.lon_lat_rad(i, j);
+        self.basis.transpose() * globe::enu_basis(lon.to_degrees(), lat.to_degrees()).z_axis
+    }
+
     /// The drop of the ellipsoid below the tangent plane at every sample of
     /// a `(N + 2·halo)²` block, row 0 at the south: added to heights so that
     /// they are measured from the tangent plane. Separable in latitude and
@@ -148,9 +154,7 @@ impl TileFrame {
         for (i, j) in [(0.0, 0.0), (n1, 0.0), (0.0, n1), (n1, n1), (n1 / 2.0, 0.0), (n1 / 2.0, n1), (0.0, n1 / 2.0), (n1, n1 / 2.0)] {
             let truth = self.ellipsoid_local(i, j);
             let flat = self.local_xy(i, j);
-            let (lon, lat) = self.lon_lat_rad(i, j);
-            let normal = self.basis.transpose() * globe::enu_basis(lon.to_degrees(), lat.to_degrees()).z_axis;
-            let tilt = normal.truncate().length();
+            let tilt = self.normal_local(i, j).truncate().length();
             worst = worst.max((truth.truncate() - flat).length() + tilt * max_abs_height_m);
         }
         worst

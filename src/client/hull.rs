@@ -1,11 +1,10 @@
 //! A tile's hull: the coarse, closed mesh whose fragments start the rays
-//! (dissertation 6.4, "Choice of Rendering Primitives"), and the terrain
-//! mesh drawn where no ray is cast.
+//! (dissertation 6.4, "Choice of Rendering Primitives").
 //!
 //! The top is a `(K + 1)²` vertex grid over the cast range (samples −1 to N)
 //! with quads of ~16 samples. Each top vertex carries two hull heights — the
-//! maximum ground and the maximum CEM over the cells of the quads around it —
-//! and the ground height at its position. The vertex shader places the hull
+//! maximum ground and the maximum CEM over the cells of the quads around
+//! it. The vertex shader places the hull
 //! at `ground_max + f·(cem_max − ground_max)` for a canopy fade `f ∈ [0, 1]`,
 //! which bounds `ground + f·canopy` over those cells (a convex combination
 //! of two bounds); triangles interpolate vertices that all bound their quad,
@@ -29,8 +28,6 @@ pub struct HullVertex {
     pub sample: [f32; 2],
     /// Hull heights: maximum ground, maximum CEM (local metres).
     pub hull_m: [f32; 2],
-    /// Ground height at the vertex (local metres).
-    pub terrain_m: f32,
 }
 
 /// The mesh of one tile.
@@ -44,8 +41,6 @@ pub struct Hull {
     pub quads: usize,
     /// Height of the skirts' lower edge and the bottom face (local metres).
     pub bottom_m: f32,
-    /// Largest distance between a ground sample and the terrain mesh.
-    pub mesh_error_m: f32,
 }
 
 impl Hull {
@@ -79,11 +74,9 @@ impl Hull {
         let mut vertices = Vec::with_capacity((k + 1) * (k + 1) + 4 * k);
         for b in 0..=k {
             for a in 0..=k {
-                let terrain = bilinear(dem, pos[a], pos[b]);
                 vertices.push(HullVertex {
                     sample: [(pos[a] - 1.0) as f32, (pos[b] - 1.0) as f32],
                     hull_m: [around(dem, a, b), around(cem, a, b).max(around(dem, a, b))],
-                    terrain_m: if terrain.is_nan() { bottom_m } else { terrain },
                 });
             }
         }
@@ -91,17 +84,16 @@ impl Hull {
         let top_count = vertices.len() as u32;
         for &(a, b) in &ring {
             let v = vertices[b * (k + 1) + a];
-            vertices.push(HullVertex { sample: v.sample, hull_m: [bottom_m; 2], terrain_m: bottom_m });
+            vertices.push(HullVertex { sample: v.sample, hull_m: [bottom_m; 2] });
         }
-        let indices = indices(k, &ring, top_count);
-        let mesh_error_m = mesh_error(dem, &vertices, &pos, k);
-        Hull { vertices, indices, quads: k, bottom_m, mesh_error_m }
+        let indices = indices(k, &ring, top_count, true);
+        Hull { vertices, indices, quads: k, bottom_m }
     }
 }
 
 /// Top-grid positions `(a, b)` around the boundary, counter-clockwise seen
 /// from above, starting at the south-west corner.
-fn ring(k: usize) -> Vec<(usize, usize)> {
+pub(super) fn ring(k: usize) -> Vec<(usize, usize)> {
     let south = (0..k).map(|a| (a, 0));
     let east = (0..k).map(|b| (k, b));
     let north = (0..k).map(|a| (k - a, k));
@@ -109,7 +101,9 @@ fn ring(k: usize) -> Vec<(usize, usize)> {
     south.chain(east).chain(north).chain(west).collect()
 }
 
-fn indices(k: usize, ring: &[(usize, usize)], top_count: u32) -> Vec<u32> {
+/// Triangles of a `(k + 1)²` top grid, the skirts down to the ring of
+/// vertices from `top_count` on, and, if asked, the bottom face.
+pub(super) fn indices(k: usize, ring: &[(usize, usize)], top_count: u32, bottom: bool) -> Vec<u32> {
     let top = |a: usize, b: usize| (b * (k + 1) + a) as u32;
     let mut out = Vec::with_capacity(6 * (k * k + ring.len() + 1));
     for b in 0..k {
@@ -125,46 +119,12 @@ fn indices(k: usize, ring: &[(usize, usize)], top_count: u32) -> Vec<u32> {
         let (bp, bq) = (top_count + p as u32, top_count + q as u32);
         out.extend([tp, bp, bq, tp, bq, tq]);
     }
-    // The bottom face, seen from below.
-    let corner = |c: usize| top_count + (c * k) as u32;
-    out.extend([corner(0), corner(2), corner(1), corner(0), corner(3), corner(2)]);
-    out
-}
-
-/// Bilinear ground at fractional raster position `(x, y)`.
-fn bilinear(r: &Raster<f32>, x: f64, y: f64) -> f32 {
-    let (x0, y0) = ((x.floor() as usize).min(r.width() - 2), (y.floor() as usize).min(r.height() - 2));
-    let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
-    let top = r.get(x0, y0) * (1.0 - fx) + r.get(x0 + 1, y0) * fx;
-    let bot = r.get(x0, y0 + 1) * (1.0 - fx) + r.get(x0 + 1, y0 + 1) * fx;
-    top * (1.0 - fy) + bot * fy
-}
-
-/// The largest gap between ground samples and the triangulated terrain
-/// mesh (split along each quad's south-west to north-east diagonal).
-fn mesh_error(dem: &Raster<f32>, vertices: &[HullVertex], pos: &[f64], k: usize) -> f32 {
-    let h = |a: usize, b: usize| vertices[b * (k + 1) + a].terrain_m;
-    let mut worst: f32 = 0.0;
-    let mut b = 0;
-    for y in 0..dem.height() {
-        while b + 1 < k && y as f64 > pos[b + 1] {
-            b += 1;
-        }
-        let v = ((y as f64 - pos[b]) / (pos[b + 1] - pos[b])) as f32;
-        let mut a = 0;
-        for (x, &g) in dem.row(y).iter().enumerate() {
-            while a + 1 < k && x as f64 > pos[a + 1] {
-                a += 1;
-            }
-            let u = ((x as f64 - pos[a]) / (pos[a + 1] - pos[a])) as f32;
-            let (v00, v10, v11, v01) = (h(a, b), h(a + 1, b), h(a + 1, b + 1), h(a, b + 1));
-            let mesh = if u >= v { v00 + u * (v10 - v00) + v * (v11 - v10) } else { v00 + v * (v01 - v00) + u * (v11 - v01) };
-            if g.is_finite() {
-                worst = worst.max((g - mesh).abs());
-            }
-        }
+    if bottom {
+        // The bottom face, seen from below.
+        let corner = |c: usize| top_count + (c * k) as u32;
+        out.extend([corner(0), corner(2), corner(1), corner(0), corner(3), corner(2)]);
     }
-    worst
+    out
 }
 
 #[cfg(test)]
@@ -223,14 +183,5 @@ mod tests {
         let u = ((s.x - p.x) * (r.y - p.y) - (r.x - p.x) * (s.y - p.y)) / d;
         let v = ((q.x - p.x) * (s.y - p.y) - (s.x - p.x) * (q.y - p.y)) / d;
         (u >= -1e-6 && v >= -1e-6 && u + v <= 1.0 + 1e-6).then(|| p.z + u * (q.z - p.z) + v * (r.z - p.z))
-    }
-
-    #[test]
-    fn a_flat_tile_has_no_mesh_error_and_a_bumpy_one_reports_it() {
-        let flat = Raster::filled(67, 67, 500.0f32);
-        assert_eq!(Hull::build(&flat, &flat).mesh_error_m, 0.0);
-        let (cem, dem) = bumpy(67);
-        let e = Hull::build(&cem, &dem).mesh_error_m;
-        assert!(e > 10.0 && e < 160.0, "{e}");
     }
 }

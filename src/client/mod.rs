@@ -23,6 +23,7 @@ pub mod raycast;
 pub mod reference;
 pub mod source;
 pub mod store;
+pub mod terrain;
 #[cfg(feature = "client")]
 pub mod render;
 pub mod tile;

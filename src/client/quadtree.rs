@@ -3,6 +3,10 @@
 //! screen-space error exceeds a threshold (the first LOD rule; the mixed
 //! LOD optimiser refines it).
 //!
+//! Culling: a tile is dropped when its bounding box is outside a side plane
+//! of the view frustum, or entirely behind the horizon (every corner hidden
+//! by a sphere just inside the ellipsoid).
+//!
 //! A tile's error is its sample spacing plus its flat-frame error
 //! ([`super::frame`]) — so coarse tiles seen from low altitude are refined
 //! until the flat-tile approximation is invisible too — projected at the
@@ -98,13 +102,26 @@ pub fn local_box(frame: &TileFrame, lo_m: f64, hi_m: f64) -> (DVec3, DVec3) {
     (DVec3::new(a.x - slack, a.y - slack, lo_m + corner_drop - slack), DVec3::new(b.x + slack, b.y + slack, hi_m + slack))
 }
 
-/// False when the box is entirely outside one side plane of the frustum.
+/// A sphere inside the ellipsoid and below any ground (the polar radius
+/// less 11 km): what it hides, the Earth hides.
+const OCCLUDER_RADIUS_M: f64 = 6_356_752.0 - 11_000.0;
+
+/// False when the box is entirely outside one side plane of the frustum or
+/// entirely behind the horizon.
 fn visible(camera: &Camera, frame: &TileFrame, planes: &[DVec3; 4], lo: DVec3, hi: DVec3) -> bool {
     let corners: [DVec3; 8] = std::array::from_fn(|k| {
         let local = DVec3::new([lo.x, hi.x][k & 1], [lo.y, hi.y][(k >> 1) & 1], [lo.z, hi.z][k >> 2]);
         frame.to_ecef(local) - camera.position_ecef
     });
-    planes.iter().all(|n| corners.iter().any(|c| n.dot(*c) >= 0.0))
+    let in_frustum = planes.iter().all(|n| corners.iter().any(|c| n.dot(*c) >= 0.0));
+    in_frustum && !corners.iter().all(|&c| behind_horizon(camera.position_ecef, c))
+}
+
+/// Whether the sight line from `eye` to `eye + to` passes through the
+/// occluding sphere.
+fn behind_horizon(eye: DVec3, to: DVec3) -> bool {
+    let t = (-eye.dot(to) / to.length_squared()).clamp(0.0, 1.0);
+    (eye + to * t).length() < OCCLUDER_RADIUS_M
 }
 
 #[cfg(test)]
@@ -141,6 +158,18 @@ mod tests {
         assert!(nearest.id.level > farthest.id.level, "{nearest:?} {farthest:?}");
         for t in &s.tiles {
             assert!(t.error_px <= 1.5 || t.id.level == 14, "{t:?}");
+        }
+    }
+
+    #[test]
+    fn the_far_side_of_the_globe_is_culled() {
+        let camera = Camera::looking(Geodetic::new(10.0, 0.0, 2_000_000.0), 0.0, -90.0, 60.0, (640, 480));
+        let world = BBox { west: -180.0, south: -90.0, east: 180.0, north: 90.0 };
+        let s = select(&grid(), &world, &camera, &|_| Some((0.0, 1000.0)), &LodRule { max_error_px: 2.0, max_level: 8 });
+        assert!(!s.tiles.is_empty());
+        for t in &s.tiles {
+            let sector = grid().sector(t.id);
+            assert!(sector.max_lon > -80.0 && sector.min_lon < 100.0, "{t:?} is on the far side");
         }
     }
 

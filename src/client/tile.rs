@@ -21,6 +21,7 @@
 
 use super::frame::TileFrame;
 use super::hull::Hull;
+use super::terrain::TerrainMesh;
 use crate::cem::accel::{MaxMipmap, ZONE_FAR, ZONE_NEAR};
 use crate::grid::{TileGrid, TileId};
 use crate::raster::Raster;
@@ -83,8 +84,10 @@ pub struct TileData {
     pub surface: Vec<u8>,
     /// Maximum mipmap of the CEM over the cast cells.
     pub mip: MaxMipmap,
-    /// The hull and terrain mesh.
+    /// The hull the rays start on.
     pub hull: Hull,
+    /// The ground as a mesh at its true place on the ellipsoid.
+    pub terrain: TerrainMesh,
     /// Height statistics.
     pub range: TileRange,
 }
@@ -144,14 +147,17 @@ impl TileData {
         let surface = (0..expected).map(|k| payload.surface[reorder(k)]).collect();
         let cast = cast_window(&cem, halo, grid.samples() as usize);
         let mip = MaxMipmap::build(&cast);
-        let hull = Hull::build(&cast, &cast_window(&dem, halo, grid.samples() as usize));
+        let n = grid.samples() as usize;
+        let cast_dem = cast_window(&dem, halo, n);
+        let hull = Hull::build(&cast, &cast_dem);
+        let terrain = TerrainMesh::build(&frame, &dem.crop(crate::raster::Window::new(halo as i64, halo as i64, n, n), f32::NAN));
         let range = TileRange {
             min_m: hull.bottom_m,
             max_m: cast.min_max().map_or(0.0, |(_, hi)| hi),
-            canopy_max_m: canopy_max(&cast, &cast_window(&dem, halo, grid.samples() as usize)),
-            mesh_error_m: hull.mesh_error_m,
+            canopy_max_m: canopy_max(&cast, &cast_dem),
+            mesh_error_m: terrain.mesh_error_m,
         };
-        Ok(TileData { frame, base_m: base, serial: next_serial(), halo, size, texels, colour, surface, mip, hull, range })
+        Ok(TileData { frame, base_m: base, serial: next_serial(), halo, size, texels, colour, surface, mip, hull, terrain, range })
     }
 
     /// The tile.

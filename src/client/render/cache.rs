@@ -7,6 +7,7 @@
 //! Invariant: bytes resident ≤ the budget (slots are allocated up front).
 
 use super::super::hull::HullVertex;
+use super::super::terrain::TerrainVertex;
 use super::super::tile::TileData;
 use wgpu::util::DeviceExt;
 
@@ -17,21 +18,36 @@ const MAX_SLOTS: u32 = 256;
 struct Resident {
     serial: u64,
     last_frame: u64,
-    vertices: wgpu::Buffer,
-    indices: wgpu::Buffer,
-    index_count: u32,
+    hull: Mesh,
+    terrain: Mesh,
 }
 
-/// A resident tile's mesh, for drawing.
-pub struct MeshRef<'a> {
-    /// Texture slot.
-    pub slot: u32,
-    /// Hull vertices.
-    pub vertices: &'a wgpu::Buffer,
-    /// Hull triangles.
-    pub indices: &'a wgpu::Buffer,
+/// A mesh on the GPU.
+pub struct Mesh {
+    /// Vertices.
+    pub vertices: wgpu::Buffer,
+    /// Triangles.
+    pub indices: wgpu::Buffer,
     /// Number of indices.
     pub index_count: u32,
+    /// Indices of the grid alone, without skirts.
+    pub grid_count: u32,
+}
+
+impl Mesh {
+    fn new(device: &wgpu::Device, vertices: &[u8], indices: &[u32], grid_count: usize) -> Mesh {
+        let buffer = |label, contents, usage| device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage });
+        Mesh {
+            vertices: buffer("tile vertices", vertices, wgpu::BufferUsages::VERTEX),
+            indices: buffer("tile indices", bytemuck::cast_slice(indices), wgpu::BufferUsages::INDEX),
+            index_count: indices.len() as u32,
+            grid_count: grid_count as u32,
+        }
+    }
+
+    fn bytes(&self) -> usize {
+        (self.vertices.size() + self.indices.size()) as usize
+    }
 }
 
 /// The cache is smaller than one frame's tiles.
@@ -102,7 +118,7 @@ impl TileCache {
 
     /// Bytes of tiles resident now (textures and meshes).
     pub fn resident_bytes(&self) -> usize {
-        self.slots.iter().flatten().map(|r| self.slot_bytes + r.vertices.size() as usize + r.indices.size() as usize).sum()
+        self.slots.iter().flatten().map(|r| self.slot_bytes + r.hull.bytes() + r.terrain.bytes()).sum()
     }
 
     /// The slot of a resident tile (by [`TileData::serial`]), marking it
@@ -115,10 +131,10 @@ impl TileCache {
         Some(k as u32)
     }
 
-    /// The mesh of the tile in `slot`.
-    pub fn mesh(&self, slot: u32) -> Option<MeshRef<'_>> {
+    /// The hull and terrain meshes of the tile in `slot`.
+    pub fn meshes(&self, slot: u32) -> Option<(&Mesh, &Mesh)> {
         let r = self.slots.get(slot as usize)?.as_ref()?;
-        Some(MeshRef { slot, vertices: &r.vertices, indices: &r.indices, index_count: r.index_count })
+        Some((&r.hull, &r.terrain))
     }
 
     /// Makes `tile` resident (if it is not), evicting the least recently
@@ -129,18 +145,10 @@ impl TileCache {
         }
         let slot = self.victim(frame).ok_or(CacheFull { slots: self.capacity() })?;
         self.write(queue, tile, slot);
-        let vertices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("hull vertices"),
-            contents: bytemuck::cast_slice::<HullVertex, u8>(&tile.hull.vertices),
-            usage: wgpu::BufferUsages::VERTEX,
-        });
-        let indices = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("hull indices"),
-            contents: bytemuck::cast_slice(&tile.hull.indices),
-            usage: wgpu::BufferUsages::INDEX,
-        });
-        let index_count = tile.hull.indices.len() as u32;
-        self.slots[slot as usize] = Some(Resident { serial: tile.serial, last_frame: frame, vertices, indices, index_count });
+        let t = &tile.terrain;
+        let hull = Mesh::new(device, bytemuck::cast_slice::<HullVertex, u8>(&tile.hull.vertices), &tile.hull.indices, tile.hull.indices.len());
+        let terrain = Mesh::new(device, bytemuck::cast_slice::<TerrainVertex, u8>(&t.vertices), &t.indices, t.grid_indices);
+        self.slots[slot as usize] = Some(Resident { serial: tile.serial, last_frame: frame, hull, terrain });
         Ok(slot)
     }
 

@@ -191,17 +191,20 @@ impl Renderer {
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &self.frame_group, &[]);
-            for (k, &(slot, mode)) in draws.iter().enumerate() {
-                let Some(mesh) = self.cache.mesh(slot) else { continue };
-                pass.set_pipeline(match mode {
-                    DrawMode::Hull => &self.pipelines.hull,
-                    DrawMode::Inside => &self.pipelines.inside,
-                    DrawMode::Plain => &self.pipelines.plain,
-                });
+            // Ray-cast tiles first, then the terrain meshes: far tiles, and
+            // under ray-cast tiles the lowered crack fillers.
+            for (k, &(slot, mode)) in draws.iter().enumerate().filter(|(_, d)| d.1 != DrawMode::Plain) {
+                let Some((hull, _)) = self.cache.meshes(slot) else { continue };
+                pass.set_pipeline(if mode == DrawMode::Hull { &self.pipelines.hull } else { &self.pipelines.inside });
                 pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
-                pass.set_vertex_buffer(0, mesh.vertices.slice(..));
-                pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
-                pass.draw_indexed(0..mesh.index_count, 0, 0..1);
+                draw(&mut pass, hull, hull.index_count);
+            }
+            pass.set_pipeline(&self.pipelines.plain);
+            for (k, &(slot, mode)) in draws.iter().enumerate() {
+                let Some((_, terrain)) = self.cache.meshes(slot) else { continue };
+                pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
+                let count = if mode == DrawMode::Plain { terrain.index_count } else { terrain.grid_count };
+                draw(&mut pass, terrain, count);
             }
         }
         if let Some(t) = &self.timer {
@@ -235,6 +238,12 @@ fn depth_camera(camera: &Camera, tiles: &[&TileData]) -> Camera {
     let nearest = tiles.iter().map(|t| uniforms::tile_near_m(camera, t)).fold(f64::INFINITY, f64::min);
     let near_m = if nearest.is_finite() { (0.5 * nearest).max(camera.near_m) } else { camera.near_m };
     Camera { near_m, ..*camera }
+}
+
+fn draw(pass: &mut wgpu::RenderPass<'_>, mesh: &cache::Mesh, indices: u32) {
+    pass.set_vertex_buffer(0, mesh.vertices.slice(..));
+    pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
+    pass.draw_indexed(0..indices, 0, 0..1);
 }
 
 /// How a tile is drawn from `camera`.

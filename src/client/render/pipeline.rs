@@ -1,12 +1,14 @@
 //! The render pipelines and their bindings: hull fragments that ray cast
 //! (front faces), the same from a camera inside the hull (back faces), and
-//! plain texture mapping of the terrain mesh. All write colour, per-pixel
+//! plain texture mapping of the terrain mesh (far tiles, and crack filling
+//! under ray-cast ones). All write colour, per-pixel
 //! fetch counts and reversed-Z depth (greater is nearer).
 
 use super::cache::TileCache;
 use super::shaders;
 use super::uniforms::{FrameUniform, TILE_STRIDE, TileUniform};
 use super::super::hull::HullVertex;
+use super::super::terrain::TerrainVertex;
 
 /// Colour target format.
 pub const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -60,11 +62,23 @@ impl Pipelines {
             bind_group_layouts: &[Some(&frame_layout), Some(&tile_layout)],
             immediate_size: 0,
         });
-        let make = |vs, fs, cull| pipeline(device, &layout, &module, vs, fs, cull);
+        let hull_attributes = wgpu::vertex_attr_array![0 => Float32x2, 1 => Float32x2];
+        let terrain_attributes = wgpu::vertex_attr_array![0 => Float32x2, 1 => Float32, 2 => Float32x3];
+        let hull_vertex = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<HullVertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &hull_attributes,
+        };
+        let terrain_vertex = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<TerrainVertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &terrain_attributes,
+        };
+        let make = |vs, fs, cull, vertex: &wgpu::VertexBufferLayout| pipeline(device, &layout, &module, (vs, vertex.clone()), fs, cull);
         Pipelines {
-            hull: make("vs_hull", "fs_ray", wgpu::Face::Back),
-            inside: make("vs_hull", "fs_ray", wgpu::Face::Front),
-            plain: make("vs_plain", "fs_plain", wgpu::Face::Back),
+            hull: make("vs_hull", "fs_ray", wgpu::Face::Back, &hull_vertex),
+            inside: make("vs_hull", "fs_ray", wgpu::Face::Front, &hull_vertex),
+            plain: make("vs_plain", "fs_plain", wgpu::Face::Back, &terrain_vertex),
             frame_layout,
             tile_layout,
         }
@@ -140,11 +154,10 @@ fn pipeline(
     device: &wgpu::Device,
     layout: &wgpu::PipelineLayout,
     module: &wgpu::ShaderModule,
-    vs: &str,
+    (vs, vertex): (&str, wgpu::VertexBufferLayout),
     fs: &str,
     cull: wgpu::Face,
 ) -> wgpu::RenderPipeline {
-    let attributes = wgpu::vertex_attr_array![0 => Float32x2, 1 => Float32x2, 2 => Float32];
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(fs),
         layout: Some(layout),
@@ -152,11 +165,7 @@ fn pipeline(
             module,
             entry_point: Some(vs),
             compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<HullVertex>() as u64,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &attributes,
-            })],
+            buffers: &[Some(vertex)],
         },
         primitive: wgpu::PrimitiveState {
             topology: wgpu::PrimitiveTopology::TriangleList,

@@ -46,7 +46,7 @@ pub struct TileUniform {
     pub sun: [f32; 4],
     /// Spacing east and north, centre index, samples per side.
     pub grid: [f32; 4],
-    /// Lowest ground, highest CEM.
+    /// Lowest ground, highest CEM, hull bottom, terrain mesh drop.
     pub range: [f32; 4],
     /// Halo, texels per side, slot, top mipmap level.
     pub index: [i32; 4],
@@ -124,12 +124,21 @@ impl TileUniform {
             camera: [cam.x as f32, cam.y as f32, cam.z as f32, reach as f32],
             sun: [sun.x as f32, sun.y as f32, sun.z as f32, tile.halo as f32],
             grid: [frame.spacing_m.x as f32, frame.spacing_m.y as f32, frame.centre_index() as f32, frame.samples as f32],
-            range: [tile.range.min_m, tile.range.max_m, hull.bottom_m, 0.0],
+            range: [tile.range.min_m, tile.range.max_m, hull.bottom_m, if mode == DrawMode::Plain { 0.0 } else { filler_drop_m(tile) }],
             index: [tile.halo as i32, tile.size as i32, slot as i32, tile.mip.levels() as i32 - 1],
             flags: [mode as u32, whole as u32, 0, 0],
             _pad: [0.0; 24],
         }
     }
+}
+
+/// How far the terrain mesh is lowered under a ray-cast tile, so that it
+/// only shows through cracks between flat frames: its own error plus the
+/// flat frame's misplacement, which on slopes up to 3:1 moves heights by
+/// three times as much.
+fn filler_drop_m(tile: &TileData) -> f32 {
+    let heights = (tile.base_m.abs() + tile.range.max_m.abs().max(tile.range.min_m.abs()) as f64).max(1.0);
+    (tile.range.mesh_error_m as f64 + 3.0 * tile.frame.flat_error_m(heights) + 0.01 * tile.frame.spacing_m.min_element()) as f32
 }
 
 /// Side of a hull quad, metres (the larger axis).
