@@ -42,6 +42,8 @@ struct Tile {
     index: vec4<i32>,
     // draw mode (0 hull, 1 camera inside the hull, 2 plain), canopy whole (1), unused, unused.
     flags: vec4<u32>,
+    // highest CEM over all texels, halo included (local m), unused x3.
+    texels: vec4<f32>,
 };
 
 const MODE_HULL: u32 = 0u;

@@ -22,7 +22,7 @@ fn shadow(s: vec2<f32>, z: f32, sun: vec3<f32>) -> f32 {
         let kf = f32(k);
         let t = s0 * kf * (kf + 1.0) / 2.0 / horizontal;
         let zq = z + sun.z * t;
-        if zq > tile.range.y {
+        if zq > tile.texels.x {
             break;
         }
         let h = height_at(s + per_m * t, &shadow_fetches);

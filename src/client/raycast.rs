@@ -210,7 +210,7 @@ pub fn shadow(view: &TileView, s: DVec2, z: f64, sun: DVec3) -> f64 {
     }
     let reach = tile.halo as f64;
     let s0 = 2.0 * reach / (n as f64 * (n as f64 + 1.0));
-    let top = tile.range.max_m as f64;
+    let top = tile.range.texels_max_m as f64;
     let mut occlusion = 0.0;
     for k in 1..=n {
         let kf = k as f64;

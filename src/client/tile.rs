@@ -55,6 +55,9 @@ pub struct TileRange {
     pub min_m: f32,
     /// Highest CEM in the cast range, local metres.
     pub max_m: f32,
+    /// Highest CEM over all texels, halo included (what shadow rays can
+    /// meet), local metres.
+    pub texels_max_m: f32,
     /// Tallest canopy (CEM − ground) in the cast range, metres.
     pub canopy_max_m: f32,
     /// How far the coarse terrain mesh departs from the ground samples,
@@ -154,6 +157,7 @@ impl TileData {
         let range = TileRange {
             min_m: hull.bottom_m,
             max_m: cast.min_max().map_or(0.0, |(_, hi)| hi),
+            texels_max_m: cem.min_max().map_or(0.0, |(_, hi)| hi),
             canopy_max_m: canopy_max(&cast, &cast_dem),
             mesh_error_m: terrain.mesh_error_m,
         };

@@ -353,3 +353,92 @@ fn the_antimeridian_and_the_poles_have_no_seams() {
         assert_whole_view(name, &tiles, &camera);
     }
 }
+
+/// Luminance of a pixel, 0–255.
+fn luminance(c: [u8; 4]) -> f64 {
+    0.2126 * c[0] as f64 + 0.7152 * c[1] as f64 + 0.0722 * c[2] as f64
+}
+
+/// Image column of a world point seen by a camera looking down.
+fn column(camera: &Camera, p: Geodetic) -> f64 {
+    let v = camera.rotation.transpose() * (p.to_ecef() - camera.position_ecef);
+    camera.width_px as f64 / 2.0 + camera.focal_px() * v.x / -v.z
+}
+
+#[test]
+fn four_tiles_show_no_crack_and_shadows_cross_their_borders() {
+    let grid = small_grid();
+    let (lon0, lat0) = (7.3, 45.1);
+    let first = grid.tile_containing(lon0, lat0, 13);
+    let s = grid.sector(first);
+    let border = s.max_lon;
+    // A north–south ridge 100 m high, 30 m west of the border; the sun low
+    // in the west casts its shadow east, over the border.
+    let ridge = move |lon: f64, lat: f64| {
+        let (x, _) = metres(lon, lat, border, lat0);
+        (1000.0 + 100.0 * (-((x + 30.0) / 10.0).powi(2)).exp(), 0.0, 0)
+    };
+    let tiles = synthetic_block(&grid, lon0, lat0, 13, 32, &ridge);
+    let eye = Geodetic::new(border, s.max_lat, 1700.0);
+    let camera = Camera::looking(eye, 0.0, -90.0, 45.0, (160, 160));
+    let sun = Some(sun_at(border, s.max_lat, 270.0, 15.0));
+    let both = render_both(&tiles, &camera, &settings(Traversal::Exact, sun));
+    assert_close("four tiles", &both.departure);
+    assert!(both.gpu.view_z_m.iter().all(|&z| z > 0.0), "no crack between the four tiles");
+
+    // Where the tiles meet, each computes the same light from its own texels
+    // (the west tile's ridge is in the east tile's halo).
+    let lighting = Lighting { sun_ecef: sun, shadow_steps: 10, fade: Fade::NONE };
+    let (west, east) = (&tiles[0], &tiles[1]);
+    let n1 = grid.samples() as i64 - 1;
+    for j in [5, 30, 60] {
+        let light = |t: &TileData, i: i64| {
+            let view = reference::view_of(&camera, t, &lighting);
+            let z = view.corner(i, j).expect("data");
+            sylva::client::raycast::shadow(&view, glam::DVec2::new(i as f64, j as f64), z, view.sun.expect("sun"))
+        };
+        let (a, b) = (light(west, n1), light(east, 0));
+        eprintln!("shared sample j = {j}: light {a:.4} in the west tile, {b:.4} in the east tile");
+        assert!(a < 0.95, "the ridge shadows the border");
+        assert!((a - b).abs() < 0.01, "both tiles light the shared sample alike");
+    }
+    // And the image has no step at the border beyond its neighbours'.
+    let xb = column(&camera, Geodetic::new(border, s.max_lat, 1000.0)).floor() as usize;
+    for y in [20, 80, 140] {
+        let l: Vec<f64> = (0..160).map(|x| luminance(both.gpu.colour[y * 160 + x])).collect();
+        let step = |x: usize| (l[x + 1] - l[x]).abs();
+        let at = step(xb - 1).max(step(xb));
+        let around = [xb - 4, xb - 3, xb - 2, xb + 1, xb + 2, xb + 3].map(step).into_iter().fold(0.0, f64::max);
+        eprintln!("row {y}: step {at:.1} at the border (column {xb}), up to {around:.1} beside it");
+        assert!(at <= around + 2.0, "row {y}: the shadow steps at the border");
+    }
+}
+
+#[test]
+fn no_sun_casts_no_shadow_rays_and_far_tiles_cast_no_rays() {
+    let grid = small_grid();
+    let (lon0, lat0) = (7.3, 45.1);
+    let plain = move |lon: f64, lat: f64| {
+        let (x, y) = metres(lon, lat, lon0, lat0);
+        (1000.0 + 0.02 * x + 0.01 * y, 0.0, 0)
+    };
+    let tiles = synthetic_block(&grid, lon0, lat0, 13, 8, &plain);
+    let s = grid.sector(grid.tile_containing(lon0, lat0, 13));
+    let view = |height: f64| Camera::looking(Geodetic::new(s.max_lon, s.max_lat, height), 0.0, -90.0, 40.0, (96, 96));
+    let near = view(1400.0);
+    let with_sun = render_both(&tiles, &near, &settings(Traversal::Exact, Some(sun_at(lon0, lat0, 200.0, 30.0))));
+    let no_sun = render_both(&tiles, &near, &settings(Traversal::Exact, None));
+    let shadow_fetches = |r: &Rendered| r.fetches.iter().map(|f| f[1] as u64).sum::<u64>();
+    assert!(shadow_fetches(&with_sun.gpu) > 0);
+    assert_eq!(shadow_fetches(&no_sun.gpu), 0, "no sun, no shadow rays");
+
+    // Far enough that a 30 m canopy would look 1.5 px tall, below the
+    // fade's 2 px: no rays (the plane has no mesh error).
+    let far = view(1000.0 + 30.0 * near.focal_px() / 1.5);
+    let fade = Fade { focal_px: far.focal_px(), canopy_ref_m: 30.0, lo_px: 2.0, hi_px: 4.0 };
+    let faded = FrameSettings { fade, ..settings(Traversal::Exact, None) };
+    let out = render_both(&tiles, &far, &faded);
+    assert_eq!(out.gpu.stats.tiles_plain, 4, "{:?}", out.gpu.stats);
+    assert!(out.gpu.fetches.iter().all(|f| f[0] == 0), "no view rays on far tiles");
+    assert!(out.gpu.view_z_m.iter().filter(|&&z| z > 0.0).count() > 1000, "the tiles are drawn");
+}

@@ -52,7 +52,9 @@ pub struct TileUniform {
     pub index: [i32; 4],
     /// Draw mode, canopy whole.
     pub flags: [u32; 4],
-    _pad: [f32; 24],
+    /// Highest CEM over all texels (the halo too).
+    pub texels: [f32; 4],
+    _pad: [f32; 20],
 }
 
 /// How a tile is drawn.
@@ -127,7 +129,8 @@ impl TileUniform {
             range: [tile.range.min_m, tile.range.max_m, hull.bottom_m, if mode == DrawMode::Plain { 0.0 } else { filler_drop_m(tile) }],
             index: [tile.halo as i32, tile.size as i32, slot as i32, tile.mip.levels() as i32 - 1],
             flags: [mode as u32, whole as u32, 0, 0],
-            _pad: [0.0; 24],
+            texels: [tile.range.texels_max_m, 0.0, 0.0, 0.0],
+            _pad: [0.0; 20],
         }
     }
 }
