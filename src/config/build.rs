@@ -132,7 +132,8 @@ fn version_key(config: &Config, base: &Path) -> String {
     let files = [config.dem.path.as_ref(), config.landcover.as_ref().and_then(|l| l.path.as_ref())];
     for path in files.into_iter().flatten() {
         let meta = std::fs::metadata(base.join(path)).ok();
-        let stamp = meta.map(|m| (m.len(), m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())));
+        let stamp =
+            meta.map(|m| (m.len(), m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())));
         text.push_str(&format!("{path:?}{stamp:?}"));
     }
     format!("v{:016x}", crate::cache::digest(text.as_bytes()))
@@ -140,21 +141,27 @@ fn version_key(config: &Config, base: &Path) -> String {
 
 /// An upstream server as a source.
 #[cfg(feature = "http")]
-fn upstream(up: &UpstreamConfig, cache: &Arc<BlockCache>, _invalid: &dyn Fn(String) -> ConfigError) -> Result<GeoRaster, ConfigError> {
+fn upstream(
+    up: &UpstreamConfig,
+    cache: &Arc<BlockCache>,
+    _invalid: &dyn Fn(String) -> ConfigError,
+) -> Result<GeoRaster, ConfigError> {
     Ok(source::remote::open(up, cache)?)
 }
 
 /// Without the `http` feature there is no client to reach an upstream.
 #[cfg(not(feature = "http"))]
-fn upstream(up: &UpstreamConfig, _: &Arc<BlockCache>, invalid: &dyn Fn(String) -> ConfigError) -> Result<GeoRaster, ConfigError> {
+fn upstream(
+    up: &UpstreamConfig,
+    _: &Arc<BlockCache>,
+    invalid: &dyn Fn(String) -> ConfigError,
+) -> Result<GeoRaster, ConfigError> {
     Err(invalid(format!("upstream {} needs Sylva built with the `http` feature", up.url)))
 }
 
-/// `"EPSG:26910"` → 26910.
+/// The optional `crs = "EPSG:code"` of a source.
 fn parse_crs(text: &Option<String>) -> Result<Option<u32>, String> {
-    let Some(t) = text else { return Ok(None) };
-    let code = t.trim().strip_prefix("EPSG:").or_else(|| t.trim().strip_prefix("epsg:"));
-    code.and_then(|c| c.parse().ok()).map(Some).ok_or_else(|| format!("crs {t:?} is not of the form \"EPSG:code\""))
+    text.as_deref().map(crate::source::crs::parse_epsg).transpose()
 }
 
 /// The land-cover raster and, for a map, the map itself (its colours shade
@@ -192,7 +199,8 @@ fn landcover(
             input.source().name().display()
         )));
     }
-    let map = (lc.kind == LandcoverKind::Map).then(|| GeoRaster::new(input.clone(), georef.clone(), &[Reducer::Mean], cache));
+    let map =
+        (lc.kind == LandcoverKind::Map).then(|| GeoRaster::new(input.clone(), georef.clone(), &[Reducer::Mean], cache));
     Ok((derived(input, georef, rule, cache), map))
 }
 

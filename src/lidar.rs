@@ -1,0 +1,155 @@
+//! `sylva canopy`: LiDAR point clouds → canopy height model → Wang tile set
+//! (dissertation 6.6: the canopy proxy "derived from a LIDAR scan ...
+//! converted to an elevation map with 0.5m resolution and afterwards ...
+//! converted into a large, tileable texture", here without the manual step).
+//!
+//! Reads the clouds through `source::las`, does the work in `canopy`
+//! (pure), and encodes GeoTIFFs through `encode::geotiff`; writing files is
+//! the caller's. Also used by the configuration, which may name point clouds
+//! as a forest type's proxy.
+
+use crate::canopy::chm::{self, Chm, ChmError, ChmOptions};
+use crate::canopy::grid::MetricGrid;
+use crate::canopy::wang::{self, WangError, WangParams};
+use crate::canopy::{TileSet, TiledProxy};
+use crate::encode::{EncodeError, geotiff};
+use crate::source::{SourceError, las};
+use std::path::PathBuf;
+use thiserror::Error;
+
+/// What to build from which clouds.
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// LAS/LAZ files, read as one cloud.
+    pub files: Vec<PathBuf>,
+    /// CHM cell side, metres.
+    pub cell_m: f64,
+    /// EPSG code replacing the files' CRS.
+    pub crs: Option<u32>,
+    /// The CHM's grid (default: the cells of `cell_m` covering the cloud).
+    pub grid: Option<MetricGrid>,
+    /// Tile set parameters (default: [`WangParams::for_cell`]).
+    pub wang: Option<WangParams>,
+}
+
+impl Options {
+    /// Defaults for these files at this resolution.
+    pub fn new(files: Vec<PathBuf>, cell_m: f64) -> Options {
+        Options { files, cell_m, crs: None, grid: None, wang: None }
+    }
+}
+
+/// Why no proxy was built; every variant names the clouds.
+#[derive(Debug, Error)]
+pub enum LidarError {
+    /// A file could not be read.
+    #[error(transparent)]
+    Source(#[from] SourceError),
+    /// The cloud gives no canopy height model.
+    #[error("{name}: {source}")]
+    Chm {
+        /// The files.
+        name: String,
+        /// Why.
+        source: ChmError,
+    },
+    /// The CHM gives no tile set.
+    #[error("{name}: {source}")]
+    Wang {
+        /// The files.
+        name: String,
+        /// Why.
+        source: WangError,
+    },
+    /// A GeoTIFF could not be encoded.
+    #[error(transparent)]
+    Encode(#[from] EncodeError),
+}
+
+/// A CHM made from clouds.
+#[derive(Clone, Debug)]
+pub struct Model {
+    /// The files, for messages.
+    pub name: String,
+    /// Their CRS.
+    pub epsg: u32,
+    /// Points read.
+    pub points: usize,
+    /// The canopy height model.
+    pub chm: Chm,
+}
+
+/// The CHM of the clouds.
+pub fn model(options: &Options) -> Result<Model, LidarError> {
+    let cloud = las::read(&options.files, options.crs)?;
+    let name = cloud.name();
+    let chm_options = ChmOptions { cell_m: options.cell_m, ..ChmOptions::default() };
+    let chm = chm::build(&cloud, options.grid, &chm_options)
+        .map_err(|source| LidarError::Chm { name: name.clone(), source })?;
+    Ok(Model { name, epsg: cloud.epsg, points: cloud.len(), chm })
+}
+
+/// The CHM and the tile set made from it.
+pub fn build(options: &Options) -> Result<(Model, TileSet), LidarError> {
+    let model = model(options)?;
+    let params = options.wang.unwrap_or_else(|| WangParams::for_cell(model.chm.grid.cell_m));
+    let set = wang::build(&model.chm.heights, model.chm.grid.cell_m, &params)
+        .map_err(|source| LidarError::Wang { name: model.name.clone(), source })?;
+    Ok((model, set))
+}
+
+/// A proxy for the CEM from clouds (a configuration's `lidar = [...]`).
+pub fn proxy(options: &Options, seed: u64) -> Result<TiledProxy, LidarError> {
+    let (model, set) = build(options)?;
+    Ok(TiledProxy::new(model.name, set, seed))
+}
+
+impl Model {
+    /// The CHM as a GeoTIFF on its grid (nodata −32768 outside the scan).
+    pub fn chm_tiff(&self) -> Result<Vec<u8>, EncodeError> {
+        geotiff::write_metric(&self.chm.heights, &self.chm.grid, self.epsg, None)
+    }
+
+    /// The tile set's atlas as a GeoTIFF, its layout in the description; it
+    /// is placed at the CHM's north-west corner (a texture has no place of
+    /// its own; there it opens over the forest it came from).
+    pub fn proxy_tiff(&self, set: &TileSet) -> Result<Vec<u8>, EncodeError> {
+        let atlas = set.atlas();
+        let grid = MetricGrid { width: atlas.width(), height: atlas.height(), ..self.chm.grid };
+        geotiff::write_metric(&atlas, &grid, self.epsg, Some(&set.layout().tag()))
+    }
+
+    /// What was made, for people.
+    pub fn report(&self, set: &TileSet) -> String {
+        let c = &self.chm;
+        let g = &c.grid;
+        let heights =
+            if c.normalised { "heights as given (normalised)" } else { "heights above the ground TIN of class 2" };
+        let l = set.layout();
+        [
+            format!("cloud   {}: {} points, EPSG:{}, {heights}", self.name, self.points, self.epsg),
+            format!(
+                "noise   {} in noise classes, {} isolated, {} outside the ground model",
+                c.dropped.noise_class, c.dropped.isolated, c.off_ground
+            ),
+            format!(
+                "chm     {}×{} cells of {} m, {} voids filled; {}",
+                g.width,
+                g.height,
+                g.cell_m,
+                c.filled,
+                crate::canopy::stats::HeightStats::of(c.heights.data().iter().copied())
+            ),
+            format!(
+                "proxy   {} Wang tiles of {}² texels ({:.0} m), {} colours, {} variants; {}",
+                l.count(),
+                l.tile_px,
+                l.tile_m(),
+                l.colours,
+                l.variants,
+                set.stats()
+            ),
+        ]
+        .join("\n")
+    }
+}
