@@ -28,14 +28,18 @@ pub struct Options {
     pub crs: Option<u32>,
     /// The CHM's grid (default: the cells of `cell_m` covering the cloud).
     pub grid: Option<MetricGrid>,
-    /// Tile set parameters (default: [`WangParams::for_cell`]).
-    pub wang: Option<WangParams>,
+    /// Texels per tile side (default: [`WangParams::tile_px_for`] the CHM).
+    pub tile_px: Option<usize>,
+    /// Colours per tile edge.
+    pub colours: usize,
+    /// Tiles per colour combination.
+    pub variants: usize,
 }
 
 impl Options {
     /// Defaults for these files at this resolution.
     pub fn new(files: Vec<PathBuf>, cell_m: f64) -> Options {
-        Options { files, cell_m, crs: None, grid: None, wang: None }
+        Options { files, cell_m, crs: None, grid: None, tile_px: None, colours: 2, variants: 2 }
     }
 }
 
@@ -92,7 +96,10 @@ pub fn model(options: &Options) -> Result<Model, LidarError> {
 /// The CHM and the tile set made from it.
 pub fn build(options: &Options) -> Result<(Model, TileSet), LidarError> {
     let model = model(options)?;
-    let params = options.wang.unwrap_or_else(|| WangParams::for_cell(model.chm.grid.cell_m));
+    let (g, heights) = (&model.chm.grid, &model.chm.heights);
+    let tile_px =
+        options.tile_px.unwrap_or_else(|| WangParams::tile_px_for(g.cell_m, heights.width(), heights.height()));
+    let params = WangParams::new(tile_px, options.colours, options.variants);
     let set = wang::build(&model.chm.heights, model.chm.grid.cell_m, &params)
         .map_err(|source| LidarError::Wang { name: model.name.clone(), source })?;
     Ok((model, set))

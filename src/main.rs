@@ -238,8 +238,7 @@ fn run(command: Command) -> Result<()> {
         Command::Canopy { las, resolution, output, chm, crs, tile_px, colours, variants } => {
             let mut options = sylva::lidar::Options::new(las, resolution);
             options.crs = crs.as_deref().map(sylva::source::crs::parse_epsg).transpose().map_err(anyhow::Error::msg)?;
-            let tile_px = tile_px.unwrap_or(sylva::canopy::wang::WangParams::for_cell(resolution).tile_px);
-            options.wang = Some(sylva::canopy::wang::WangParams::new(tile_px, colours, variants));
+            (options.tile_px, options.colours, options.variants) = (tile_px, colours, variants);
             let (model, set) = sylva::lidar::build(&options)?;
             write_file(&output, &model.proxy_tiff(&set)?)?;
             if let Some(path) = chm {

@@ -1,9 +1,11 @@
 //! Choosing where in a canopy height model the pieces of Wang tiles come
-//! from (image quilting after Efros and Freeman 2001, as Cohen et al. 2003
-//! build Wang tiles): the corner patch and the edge strips are placed where
-//! the canopy crosses their edge lines most smoothly, so no tile edge shows
-//! a step; the interiors are placed where they best continue the strips
-//! around them.
+//! from. The corner patch and the edge strips (the pieces tiles share) are
+//! placed, as image quilting (Efros and Freeman 2001) places its patches, by
+//! how well they join: among the places where the canopy crosses the edge
+//! line with no step above [`Source::smooth_step`] (the CHM's 90th
+//! percentile), the one whose mean height is nearest the CHM's, so that
+//! shared pieces are not all drawn from gaps, which are smooth too; failing
+//! that, the smoothest place. Interiors are windows drawn by a hash.
 //!
 //! Invariant: choices depend only on the CHM and the seed (scans in a fixed
 //! order, candidates from a hash), so a proxy is reproducible.
@@ -16,6 +18,11 @@ pub struct Source<'a> {
     chm: &'a Raster<f32>,
     /// `nodata[(r · (w + 1)) + c]`: nodata cells above and left of `(c, r)`.
     nodata: Vec<u32>,
+    /// The same for the sum of heights.
+    sum: Vec<f64>,
+    mean: f32,
+    /// Steps between neighbours up to this are smooth (the 90th percentile).
+    smooth_step: f32,
 }
 
 /// Where a piece's texel `(0, 0)` lies in the CHM (row, column).
@@ -32,14 +39,50 @@ impl<'a> Source<'a> {
     pub fn new(chm: &'a Raster<f32>) -> Source<'a> {
         let (w, h) = (chm.width(), chm.height());
         let mut nodata = vec![0u32; (w + 1) * (h + 1)];
+        let mut sum = vec![0f64; (w + 1) * (h + 1)];
         for r in 0..h {
-            let mut row_sum = 0;
+            let (mut row_nodata, mut row_sum) = (0, 0.0);
             for c in 0..w {
-                row_sum += u32::from(chm.get(c, r).is_nan());
-                nodata[(r + 1) * (w + 1) + c + 1] = nodata[r * (w + 1) + c + 1] + row_sum;
+                let v = chm.get(c, r);
+                row_nodata += u32::from(v.is_nan());
+                row_sum += if v.is_nan() { 0.0 } else { f64::from(v) };
+                let (at, above) = ((r + 1) * (w + 1) + c + 1, r * (w + 1) + c + 1);
+                nodata[at] = nodata[above] + row_nodata;
+                sum[at] = sum[above] + row_sum;
             }
         }
-        Source { chm, nodata }
+        let valid = (w * h) as f64 - f64::from(nodata[(w + 1) * (h + 1) - 1]);
+        let mean = (sum[(w + 1) * (h + 1) - 1] / valid.max(1.0)) as f32;
+        let steps =
+            super::stats::sorted((1..w).flat_map(|c| (0..h).map(move |r| (chm.get(c, r) - chm.get(c - 1, r)).abs())));
+        let smooth_step = super::stats::sorted_quantile(&steps, 0.9);
+        Source { chm, nodata, sum, mean, smooth_step }
+    }
+
+    /// Mean height of the valid cells.
+    pub fn mean(&self) -> f32 {
+        self.mean
+    }
+
+    /// The sum over rows `row .. row + h`, columns `col .. col + w` of a
+    /// summed table (the window must be inside).
+    fn window_sum<T: Copy + std::ops::Add<Output = T> + std::ops::Sub<Output = T>>(
+        &self,
+        table: &[T],
+        row: i64,
+        col: i64,
+        h: usize,
+        w: usize,
+    ) -> T {
+        let (r0, c0, stride) = (row as usize, col as usize, self.chm.width() + 1);
+        let at = |r: usize, c: usize| table[r * stride + c];
+        at(r0 + h, c0 + w) + at(r0, c0) - at(r0, c0 + w) - at(r0 + h, c0)
+    }
+
+    /// How far the window's mean height is from the CHM's (the window must
+    /// be valid).
+    fn unrepresentative(&self, row: i64, col: i64, h: usize, w: usize) -> f32 {
+        ((self.window_sum(&self.sum, row, col, h, w) / (h * w) as f64) as f32 - self.mean).abs()
     }
 
     /// Columns and rows.
@@ -54,9 +97,7 @@ impl<'a> Source<'a> {
         if row < 0 || col < 0 || row as usize + h > ch || col as usize + w > cw {
             return false;
         }
-        let (r0, c0, stride) = (row as usize, col as usize, cw + 1);
-        let at = |r: usize, c: usize| self.nodata[r * stride + c];
-        at(r0 + h, c0 + w) + at(r0, c0) == at(r0, c0 + w) + at(r0 + h, c0)
+        self.window_sum(&self.nodata, row, col, h, w) == 0
     }
 
     /// The height at `(row, col)` (inside a valid window).
@@ -76,36 +117,47 @@ impl<'a> Source<'a> {
         (0..len as i64).map(|i| (self.at(row + i, col) - self.at(row + i, col - 1)).abs()).fold(0.0, f32::max)
     }
 
-    /// The corner patch: texels within `margin` of a corner point whose two
-    /// lines cross the canopy most smoothly.
+    /// The corner patch: texels within `margin` of a corner point, placed
+    /// by the rule above (steps across both of its lines).
     pub fn corner(&self, margin: usize) -> Option<Anchor> {
-        let m = margin as i64;
-        let span = 2 * margin;
-        self.best(m, m, |a| {
+        let (m, span) = (margin as i64, 2 * margin);
+        self.place(m, m, |a| {
             self.valid(a.row - m, a.col - m, span, span).then(|| {
-                self.step_across_row(a.row, a.col - m, span).max(self.step_across_column(a.row - m, a.col, span))
+                let step =
+                    self.step_across_row(a.row, a.col - m, span).max(self.step_across_column(a.row - m, a.col, span));
+                (step, self.unrepresentative(a.row - m, a.col - m, span, span))
             })
         })
     }
 
     /// An edge strip `len` texels long reaching `margin` texels to either
     /// side of its line (horizontal: the line lies between rows `row − 1`
-    /// and `row`), away from the anchors `taken` when possible.
+    /// and `row`), placed by the rule above, and away from the anchors
+    /// `taken` when possible.
     pub fn strip(&self, horizontal: bool, len: usize, margin: usize, taken: &[Anchor]) -> Option<Anchor> {
         let m = margin as i64;
+        let (r0, c0, h, w) = if horizontal { (-m, 0, 2 * margin, len) } else { (0, -m, len, 2 * margin) };
         let cost = |a: Anchor| {
-            if horizontal {
-                self.valid(a.row - m, a.col, 2 * margin, len).then(|| self.step_across_row(a.row, a.col, len))
-            } else {
-                self.valid(a.row, a.col - m, len, 2 * margin).then(|| self.step_across_column(a.row, a.col, len))
-            }
+            self.valid(a.row + r0, a.col + c0, h, w).then(|| {
+                let step = if horizontal {
+                    self.step_across_row(a.row, a.col, len)
+                } else {
+                    self.step_across_column(a.row, a.col, len)
+                };
+                (step, self.unrepresentative(a.row + r0, a.col + c0, h, w))
+            })
         };
         // Different places for different colours: none within half a strip of another piece.
-        let apart = |a: Anchor| {
-            taken.iter().all(|t| (t.row - a.row).abs() >= len as i64 / 2 || (t.col - a.col).abs() >= len as i64 / 2)
-        };
-        let (r0, c0) = if horizontal { (m, 0) } else { (0, m) };
-        self.best(r0, c0, |a| if apart(a) { cost(a) } else { None }).or_else(|| self.best(r0, c0, cost))
+        let half = len as i64 / 2;
+        let apart = |a: Anchor| taken.iter().all(|t| (t.row - a.row).abs() >= half || (t.col - a.col).abs() >= half);
+        self.place(-r0, -c0, |a| if apart(a) { cost(a) } else { None }).or_else(|| self.place(-r0, -c0, cost))
+    }
+
+    /// The place of least unrepresentativeness among the smooth ones, else
+    /// the one of least step; `cost` gives (step, unrepresentativeness).
+    fn place(&self, row0: i64, col0: i64, cost: impl Fn(Anchor) -> Option<(f32, f32)>) -> Option<Anchor> {
+        let smooth = |a: Anchor| cost(a).filter(|c| c.0 <= self.smooth_step).map(|c| c.1);
+        self.best(row0, col0, smooth).or_else(|| self.best(row0, col0, |a| cost(a).map(|c| c.0)))
     }
 
     /// The anchor with the least cost, scanning every second row and column
@@ -124,22 +176,23 @@ impl<'a> Source<'a> {
         best.map(|b| b.1)
     }
 
-    /// Up to `n` windows of `size²` texels with data, drawn by a hash of
-    /// `seed` and `key` (at most `8 n` draws).
-    pub fn windows(&self, size: usize, n: usize, seed: u64, key: i64) -> Vec<Anchor> {
+    /// The `key`-th window of `size²` texels with data drawn by a hash of
+    /// `seed` (at most 64 draws), and an orientation (0–7).
+    pub fn window(&self, size: usize, seed: u64, key: i64) -> Option<(Anchor, usize)> {
         let (w, h) = self.size();
         if w < size || h < size {
-            return Vec::new();
+            return None;
         }
-        (0..8 * n as i64)
+        (0..64)
             .map(|k| {
                 let bits = hash2(key, k, seed);
                 let pick = |u: f64, range: usize| ((u * (range + 1) as f64) as i64).min(range as i64);
-                Anchor { row: pick(unit(bits, 0), h - size), col: pick(unit(bits, 1), w - size) }
+                (
+                    Anchor { row: pick(unit(bits, 0), h - size), col: pick(unit(bits, 1), w - size) },
+                    (bits >> 61) as usize,
+                )
             })
-            .filter(|a| self.valid(a.row, a.col, size, size))
-            .take(n)
-            .collect()
+            .find(|(a, _)| self.valid(a.row, a.col, size, size))
     }
 }
 
@@ -159,8 +212,9 @@ mod tests {
         assert!(s.valid(0, 0, 30, 40) && !s.valid(0, 0, 31, 31));
         let a = s.strip(true, 16, 3, &[]).unwrap();
         assert_eq!(a.row, 21, "{a:?}");
-        for w in s.windows(12, 20, 7, 1) {
-            assert!(s.valid(w.row, w.col, 12, 12));
+        for key in 0..20 {
+            let (w, o) = s.window(12, 7, key).unwrap();
+            assert!(s.valid(w.row, w.col, 12, 12) && o < 8);
         }
     }
 }

@@ -5,7 +5,8 @@
 //!
 //! Each tile blends four fields of the CHM ([`super::quilt`] chooses where
 //! they come from):
-//! - its **interior**, a window of its own (in one of eight orientations);
+//! - its **interior**, a window of its own drawn by a hash (in one of eight
+//!   orientations);
 //! - the **edge strips** of its four edge colours: one strip per colour,
 //!   anchored to the edge line, so the tiles on both sides of an edge read
 //!   the same strip, continuing across the line;
@@ -18,13 +19,13 @@
 //! (vertical strip) and `(1 − a)(1 − b)` (corner): a partition of unity that
 //! is symmetric about every edge and gives the interior no weight on an edge
 //! texel, so tiles whose colours agree continue each other exactly. Fields
-//! are blended variance-preserving ([`super::blend`]) and, last, the heights
-//! of the whole set are mapped through one monotone curve onto the CHM's
-//! height distribution (histogram matching, Heeger and Bergen 1995): blends
-//! and window choices shift the distribution, and a monotone map of every
-//! texel by the same curve keeps edges matched and continuous.
+//! are blended variance-preserving in Gaussian space ([`super::blend`]) and,
+//! last, the heights of the whole set are mapped through one monotone curve
+//! onto the CHM's height distribution (histogram matching, Heeger and Bergen
+//! 1995): window choices shift the distribution a little, and a monotone map
+//! of every texel by the same curve keeps edges matched and continuous.
 
-use super::blend::{blend, smoothstep};
+use super::blend::{Gaussian, blend, smoothstep};
 use super::quilt::{Anchor, Source};
 use super::stats;
 use super::tileset::{Edges, Layout, TileSet};
@@ -47,19 +48,20 @@ pub struct WangParams {
 }
 
 impl WangParams {
-    /// Defaults for texels of `cell_m`: tiles of about 64 m (a power of two
-    /// of texels; the dissertation's proxy covered 500 m, one tile 64 m wide
-    /// leaves room for several disjoint windows in a 200 m scan), two colours
-    /// (16 tiles, Cohen et al.'s smallest set without visible repetition) and
-    /// two variants.
-    pub fn for_cell(cell_m: f64) -> WangParams {
-        let log2 = ((64.0 / cell_m).max(8.0).log2().round() as u32).clamp(3, 12);
-        WangParams::new(1 << log2, 2, 2)
+    /// The default tile for a CHM of `w × h` cells of `cell_m`: about 64 m
+    /// (a power of two of texels; the dissertation's proxy covered 500 m,
+    /// a 64 m tile leaves room for several disjoint windows in a 200 m
+    /// scan), at most half the CHM's shorter side.
+    pub fn tile_px_for(cell_m: f64, w: usize, h: usize) -> usize {
+        let wanted = ((64.0 / cell_m).max(8.0).log2().round() as u32).clamp(3, 12);
+        let fits = ((w.min(h) / 2).max(8).ilog2()).max(3);
+        1 << wanted.min(fits)
     }
 
     /// Tiles of `tile_px` texels with a border of 1/16 of a tile (4 m of a
     /// 64 m tile: wide enough to blend a crown, narrow enough that most of
-    /// a tile is its interior).
+    /// a tile is its interior). Two colours (16 tiles) are Cohen et al.'s
+    /// smallest set without visible repetition.
     pub fn new(tile_px: usize, colours: usize, variants: usize) -> WangParams {
         WangParams { tile_px, border_px: (tile_px / 16).max(2), colours, variants, seed: 0x5EED_CA40_F1E5 }
     }
@@ -85,9 +87,6 @@ pub enum WangError {
     Layout(String),
 }
 
-/// Interior windows tried per tile (each in eight orientations).
-const CANDIDATES: usize = 48;
-
 /// Knots of the histogram-matching curve.
 const KNOTS: usize = 256;
 
@@ -102,22 +101,25 @@ pub fn build(chm: &Raster<f32>, cell_m: f64, p: &WangParams) -> Result<TileSet, 
         )));
     }
     let source = Source::new(chm);
-    let pieces = Pieces::choose(&source, p).ok_or(WangError::TooSmall {
-        need: p.tile_px + 2 * p.border_px + 2,
-        w: chm.width(),
-        h: chm.height(),
-    })?;
+    let too_small = || WangError::TooSmall { need: p.tile_px + 2 * p.border_px + 2, w: chm.width(), h: chm.height() };
+    let pieces = Pieces::choose(&source, p).ok_or_else(too_small)?;
     let sorted = stats::sorted(chm.data().iter().copied());
-    let mean = (sorted.iter().map(|&v| f64::from(v)).sum::<f64>() / sorted.len() as f64) as f32;
+    let gauss = Gaussian::new(sorted.clone());
+    let normal = chm.map(|h| if h.is_nan() { h } else { gauss.forward(h) });
     let weights = Weights::new(p.tile_px, p.border_px);
-    let mut tiles: Vec<Raster<f32>> = (0..layout.count())
-        .map(|i| {
-            let edges = layout.edges(i);
-            let frame = pieces.frame(&source, &weights, edges, mean);
-            let interior = pieces.interior(&source, &weights, &frame, p, i as i64);
-            compose(&weights, &frame, &interior, mean)
-        })
-        .collect();
+    let mut tiles = Vec::with_capacity(layout.count());
+    for i in 0..layout.count() {
+        let (anchor, orientation) = source.window(p.tile_px, p.seed, i as i64).ok_or_else(too_small)?;
+        let frame = pieces.frame(&normal, &weights, layout.edges(i));
+        let tile = Raster::from_fn(p.tile_px, p.tile_px, |x, y| {
+            let (ox, oy) = orient(orientation, x, y, p.tile_px);
+            let inside = normal.get(anchor.col as usize + ox, anchor.row as usize + oy);
+            let wi = weights.ramp[x] * weights.ramp[y];
+            let g = if wi == 1.0 { inside } else { blend(&[(wi, inside), (1.0 - wi, frame.get(x, y))], 0.0) };
+            gauss.back(g)
+        });
+        tiles.push(tile);
+    }
     match_histogram(&mut tiles, &sorted);
     TileSet::new(layout, tiles).map_err(WangError::Layout)
 }
@@ -146,14 +148,13 @@ impl Pieces {
         };
         let horizontal = strips(true)?;
         let vertical = strips(false)?;
-        source.windows(p.tile_px, 1, p.seed, -1).first()?;
         Some(Pieces { tile_px: p.tile_px, corner, horizontal, vertical })
     }
 
     /// The tile without its interior: at every texel the blend of the strips
-    /// and the corner with their weights (NaN where the interior has all the
-    /// weight).
-    fn frame(&self, source: &Source, w: &Weights, e: Edges, mean: f32) -> Raster<f32> {
+    /// and the corner of `normal` (the CHM in Gaussian space) with their
+    /// weights (NaN where the interior has all the weight).
+    fn frame(&self, normal: &Raster<f32>, w: &Weights, e: Edges) -> Raster<f32> {
         let t = self.tile_px as i64;
         Raster::from_fn(self.tile_px, self.tile_px, |x, y| {
             let (a, b) = (w.ramp[x], w.ramp[y]);
@@ -166,45 +167,14 @@ impl Pieces {
             let (oy, ox) = (if top { 0 } else { -t }, if left { 0 } else { -t });
             // Only fields with weight are read: the others may lie outside the CHM.
             let read = |weight: f32, a: Anchor, dy: i64, dx: i64| {
-                (weight, if weight > 0.0 { source.at(a.row + yi + dy, a.col + xi + dx) } else { 0.0 })
+                let (row, col) = (a.row + yi + dy, a.col + xi + dx);
+                (weight, if weight > 0.0 { normal.get(col as usize, row as usize) } else { 0.0 })
             };
             let h = read(a * (1.0 - b), self.horizontal[if top { e.n } else { e.s }], oy, 0);
             let v = read((1.0 - a) * b, self.vertical[if left { e.w } else { e.e }], 0, ox);
             let k = read((1.0 - a) * (1.0 - b), self.corner, oy, ox);
-            blend(&[h, v, k], mean)
+            blend(&[h, v, k], 0.0)
         })
-    }
-
-    /// The interior window (and orientation) that best continues `frame`
-    /// where both have weight.
-    fn interior(&self, source: &Source, w: &Weights, frame: &Raster<f32>, p: &WangParams, key: i64) -> Raster<f32> {
-        let t = self.tile_px;
-        let read = |a: Anchor, o: usize| {
-            Raster::from_fn(t, t, |x, y| {
-                let (ox, oy) = orient(o, x, y, t);
-                source.at(a.row + oy as i64, a.col + ox as i64)
-            })
-        };
-        let cost = |a: Anchor, o: usize| {
-            let mut sum = 0.0f64;
-            for &(x, y, weight) in &w.overlap {
-                let (ox, oy) = orient(o, x, y, t);
-                let d = source.at(a.row + oy as i64, a.col + ox as i64) - frame.get(x, y);
-                sum += f64::from(weight * d * d);
-            }
-            sum
-        };
-        let mut best: Option<(f64, Anchor, usize)> = None;
-        for a in source.windows(t, CANDIDATES, p.seed, key) {
-            for o in 0..8 {
-                let c = cost(a, o);
-                if best.is_none_or(|b| c < b.0) {
-                    best = Some((c, a, o));
-                }
-            }
-        }
-        // `choose` made sure there is at least one window.
-        best.map_or_else(|| Raster::filled(t, t, 0.0), |(_, a, o)| read(a, o))
     }
 }
 
@@ -212,39 +182,18 @@ impl Pieces {
 struct Weights {
     /// `a(d)` of every column (and row).
     ramp: Vec<f32>,
-    /// Texels where both the interior and the frame weigh, with the product
-    /// of their weights.
-    overlap: Vec<(usize, usize, f32)>,
 }
 
 impl Weights {
     fn new(tile_px: usize, border_px: usize) -> Weights {
-        let ramp: Vec<f32> = (0..tile_px)
+        let ramp = (0..tile_px)
             .map(|x| {
                 let d = (x as f64 + 0.5).min(tile_px as f64 - x as f64 - 0.5);
                 smoothstep((d - 0.5) / border_px as f64) as f32
             })
             .collect();
-        let mut overlap = Vec::new();
-        for y in 0..tile_px {
-            for x in 0..tile_px {
-                let wi = ramp[x] * ramp[y];
-                if wi > 0.0 && wi < 1.0 {
-                    overlap.push((x, y, wi * (1.0 - wi)));
-                }
-            }
-        }
-        Weights { ramp, overlap }
+        Weights { ramp }
     }
-}
-
-/// Interior and frame blended with the interior's weight.
-fn compose(w: &Weights, frame: &Raster<f32>, interior: &Raster<f32>, mean: f32) -> Raster<f32> {
-    Raster::from_fn(interior.width(), interior.height(), |x, y| {
-        let wi = w.ramp[x] * w.ramp[y];
-        let f = frame.get(x, y);
-        if f.is_nan() { interior.get(x, y) } else { blend(&[(wi, interior.get(x, y)), (1.0 - wi, f)], mean) }
-    })
 }
 
 /// Texel `(x, y)` of a `t`-texel window in orientation `o` (the eight
