@@ -76,8 +76,10 @@ pub fn read(paths: &[PathBuf], crs_override: Option<u32>) -> Result<PointCloud, 
 fn read_file(path: &Path, crs_override: Option<u32>, cloud: &mut PointCloud) -> Result<(), SourceError> {
     let bad = |problem: String| SourceError::Malformed { path: path.into(), problem };
     let file = std::fs::File::open(path).map_err(|source| SourceError::Open { path: path.into(), source })?;
-    let mut reader = las::Reader::new(std::io::BufReader::new(file))
-        .map_err(|e| bad(format!("not a readable LAS/LAZ file: {e}")))?;
+    let mut reader = las::Reader::new(std::io::BufReader::new(file)).map_err(|e| match ends_early(&e) {
+        true => bad(format!("truncated: the file ends inside its header or LAZ chunk table ({e})")),
+        false => bad(format!("not a readable LAS/LAZ file: {e}")),
+    })?;
     let header = reader.header().clone();
     let epsg = match crs_override {
         Some(code) => code,
@@ -112,6 +114,13 @@ fn read_file(path: &Path, crs_override: Option<u32>, cloud: &mut PointCloud) -> 
         done += n;
     }
     Ok(())
+}
+
+/// True when reading stopped at the end of the file (the `laz` crate
+/// reports it only in its message).
+fn ends_early(e: &las::Error) -> bool {
+    matches!(e, las::Error::Io(io) if io.kind() == std::io::ErrorKind::UnexpectedEof)
+        || e.to_string().contains("failed to fill whole buffer")
 }
 
 /// The EPSG code in the header's GeoTIFF keys: the projected CRS, else the

@@ -139,3 +139,63 @@ fn proxies_wrap_match_along_edges_and_keep_the_chm_histogram() {
         println!("{name}: quantiles 5 %..95 % of the proxy within {:.1} % of the CHM's", 100.0 * worst);
     }
 }
+
+/// A LAS file of `points` (x, y, z) at `path`, with a GeoKey VLR for
+/// `epsg` when given.
+fn write_las(path: &std::path::Path, epsg: Option<u16>, points: &[(f64, f64, f64)]) {
+    let mut builder = las::Builder::from((1, 2));
+    if let Some(code) = epsg {
+        let keys: [u16; 8] = [1, 1, 0, 1, 3072, 0, 1, code];
+        let data = keys.iter().flat_map(|k| k.to_le_bytes()).collect();
+        builder.vlrs.push(las::Vlr {
+            user_id: "LASF_Projection".into(),
+            record_id: 34735,
+            description: String::new(),
+            data,
+        });
+    }
+    let mut writer = las::Writer::from_path(path, builder.into_header().expect("header")).expect("writer");
+    for &(x, y, z) in points {
+        writer.write_point(las::Point { x, y, z, ..Default::default() }).expect("point");
+    }
+    writer.close().expect("close");
+}
+
+#[test]
+fn bad_clouds_give_errors_that_name_the_file_and_the_problem() {
+    let dir = TempDir::new("bad-las");
+    let bytes = std::fs::read(data("nz_pycrown/POINTS.laz")).expect("laz");
+    let truncated = dir.join("truncated.laz");
+    std::fs::write(&truncated, &bytes[..bytes.len() * 3 / 5]).expect("write");
+    let empty = dir.join("empty.las");
+    write_las(&empty, Some(2193), &[]);
+    // A 10 × 10 m stand: ground and crowns 10 m up, every half metre.
+    let stand: Vec<(f64, f64, f64)> =
+        (0..400).map(|i| (f64::from(i % 20) * 0.5, f64::from(i / 20) * 0.5, f64::from(i % 2) * 10.0)).collect();
+    let no_crs = dir.join("no_crs.las");
+    write_las(&no_crs, None, &stand);
+    let short = dir.join("short.las");
+    write_las(&short, Some(2193), &stand);
+    let len = std::fs::metadata(&short).expect("las").len();
+    std::fs::OpenOptions::new().write(true).open(&short).and_then(|f| f.set_len(len - 100)).expect("truncate");
+    let geographic = dir.join("geographic.las");
+    write_las(&geographic, Some(4326), &[(170.0, -40.0, 3.0)]);
+    let not_las = dir.join("not_las.laz");
+    std::fs::write(&not_las, b"this is not a point cloud").expect("write");
+    for (path, problem) in [
+        (&truncated, "truncated"),
+        (&short, "truncated or corrupt point data after 0 of 400 points"),
+        (&empty, "empty (0 points)"),
+        (&no_crs, "no CRS"),
+        (&geographic, "is geographic"),
+        (&not_las, "not a readable LAS/LAZ file"),
+        (&dir.join("missing.laz"), "cannot open"),
+    ] {
+        let err = lidar::model(&Options::new(vec![path.clone()], 0.5)).expect_err(problem).to_string();
+        println!("{err}");
+        assert!(err.contains(path.to_str().unwrap()) && err.contains(problem), "{err}");
+    }
+    // A CRS given by hand makes the cloud without one usable.
+    let options = Options { crs: Some(2193), ..Options::new(vec![no_crs], 0.5) };
+    assert!(lidar::model(&options).is_ok());
+}
