@@ -199,3 +199,119 @@ fn bad_clouds_give_errors_that_name_the_file_and_the_problem() {
     let options = Options { crs: Some(2193), ..Options::new(vec![no_crs], 0.5) };
     assert!(lidar::model(&options).is_ok());
 }
+
+#[test]
+fn a_proxy_written_by_sylva_canopy_is_read_by_a_config_and_described_by_info() {
+    let dir = TempDir::new("canopy-cli");
+    let run = |args: &[&str]| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_sylva")).args(args).output().expect("run sylva");
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let (proxy, chm) = (dir.join("conifer.tif"), dir.join("chm.tif"));
+    let laz = data("lidar_lidR/MixedConifer.laz");
+    let report =
+        run(&["canopy", "--las", laz.to_str().unwrap(), "-o", proxy.to_str().unwrap(), "--chm", chm.to_str().unwrap()]);
+    assert!(report.contains("EPSG:26912") && report.contains("Wang tiles"), "{report}");
+    // A region whose forest is all of type "conifer", with that proxy (relative to the config).
+    let config = dir.join("region.toml");
+    let text = format!(
+        "[dem]\npath = {dtm:?}\n[landcover]\nkind = \"canopy_height\"\npath = {chm:?}\nforest = \"conifer\"\n[[forest]]\nname = \"conifer\"\nproxy = \"conifer.tif\"\n",
+        dtm = data("nz_pycrown/DTM.tif"),
+        chm = data("nz_pycrown/CHM.tif"),
+    );
+    std::fs::write(&config, text).expect("config");
+    let info = run(&["info", "--config", config.to_str().unwrap()]);
+    let line = info.lines().find(|l| l.starts_with("forest")).unwrap_or_default();
+    assert!(line.contains("conifer") && line.contains("at 0.50 m") && line.contains("heights mean"), "{info}");
+    // The same proxy read back holds the same tiles as a fresh build.
+    let (_, set) = lidar::build(&Options::new(vec![laz], 0.5)).expect("build");
+    let read = sylva::source::proxy::open(&proxy).expect("proxy file");
+    assert_eq!(read.tiles(), set.tiles());
+    std::fs::remove_file(&proxy).expect("remove");
+    let err = sylva::config::load(Some(&config)).expect_err("missing proxy").to_string();
+    assert!(err.contains("conifer.tif") && err.contains("cannot open"), "{err}");
+}
+
+/// Correlation of two equally long series.
+fn correlation(a: &[f32], b: &[f32]) -> f64 {
+    let n = a.len() as f64;
+    let mean = |v: &[f32]| v.iter().map(|&x| f64::from(x)).sum::<f64>() / n;
+    let (ma, mb) = (mean(a), mean(b));
+    let (mut ab, mut aa, mut bb) = (0.0, 0.0, 0.0);
+    for (&x, &y) in a.iter().zip(b) {
+        let (dx, dy) = (f64::from(x) - ma, f64::from(y) - mb);
+        (ab, aa, bb) = (ab + dx * dy, aa + dx * dx, bb + dy * dy);
+    }
+    ab / (aa * bb).sqrt()
+}
+
+#[test]
+fn wang_tiles_do_not_repeat_over_kilometres_where_one_periodic_tile_does() {
+    let files = vec![data("nz_pycrown/POINTS.laz")];
+    let heights = |colours: usize, variants: usize| {
+        let options = Options { colours, variants, ..Options::new(files.clone(), 0.5) };
+        let (_, set) = lidar::build(&options).expect("proxy");
+        let tile_m = set.layout().tile_m();
+        let proxy = TiledProxy::new("nz", set, 1);
+        // 4 km east along 46.2° N, every 0.5 m, and the same shifted by one tile.
+        let metres_per_deg = sylva::geo::METRES_PER_DEGREE * 46.2f64.to_radians().cos();
+        let along = |shift_m: f64| -> Vec<f32> {
+            (0..8000).map(|i| proxy.height(10.1 + (i as f64 * 0.5 + shift_m) / metres_per_deg, 46.2, 0.25)).collect()
+        };
+        correlation(&along(0.0), &along(tile_m))
+    };
+    let (periodic, wang) = (heights(1, 1), heights(2, 2));
+    println!(
+        "correlation of the canopy with itself one tile east, over 4 km: periodic tile {periodic:.3}, Wang tiles {wang:.3}"
+    );
+    assert!(periodic > 0.99, "{periodic}");
+    assert!(wang < 0.3, "{wang}");
+}
+
+/// A tile of `level` around a pixel of Mt Hood's fuel models inside a
+/// 7 × 7 block of TL9 (broadleaf litter).
+fn broadleaf_tile(region: &sylva::region::Region, level: u32) -> sylva::grid::TileId {
+    let options =
+        OpenOptions { classes: true, nodata: sylva::source::NodataPolicy::Propagate, ..OpenOptions::default() };
+    let fuel =
+        open_file(&data("mt_hood/lf_fbfm40_220_mt_hood_utm.tif"), &options, &BlockCache::new(1 << 26)).expect("fuel");
+    let (w, h) = fuel.size();
+    let px = fuel.base().read(Window::new(0, 0, w, h)).expect("pixels").remove(0);
+    let pure = |c: usize, r: usize| (c - 3..=c + 3).all(|x| (r - 3..=r + 3).all(|y| px.get(x, y) == 189.0));
+    let (c, r) =
+        (3..h - 3).flat_map(|r| (3..w - 3).map(move |c| (c, r))).find(|&(c, r)| pure(c, r)).expect("TL9 block");
+    let g = fuel.georef();
+    let (lon, lat) = g.crs.to_lon_lat(g.x0 + c as f64 * g.dx, g.y0 + r as f64 * g.dy).expect("lon lat");
+    region.tiles.tile_containing(lon, lat, level)
+}
+
+#[test]
+fn each_forest_type_gets_its_own_proxy_and_tiles_stay_seamless() {
+    use sylva::cem::{self, Layer};
+    let region = crate::common::region("examples/mt_hood_forest_types.toml");
+    assert_eq!(region.forests.len(), 2);
+    let tile = broadleaf_tile(&region, 12);
+    let grid = region.tiles.tile_samples(tile, 0);
+    let p = cem::compute(&region, &grid, &[Layer::Cover, Layer::Canopy]).expect("tile");
+    let (cover, canopy) = (p.cover.expect("cover"), p.canopy.expect("canopy"));
+    let all = |_: usize, _: usize| true;
+    let conifer = region.forests[0].proxy.heights(&grid, &all);
+    let broadleaf = region.forests[1].proxy.heights(&grid, &all);
+    let (mut as_conifer, mut as_broadleaf) = (0, 0);
+    for i in 0..canopy.data().len() {
+        let (c, h, a, b) = (cover.data()[i], canopy.data()[i], conifer.data()[i], broadleaf.data()[i]);
+        // A mix of the two where the types meet: between cover × one and cover × the other.
+        assert!(
+            h >= c * a.min(b) - 1e-3 && h <= c * a.max(b) + 1e-3,
+            "sample {i}: {h} from cover {c}, proxies {a} {b}"
+        );
+        if (a - b).abs() > 1.0 && c > 0.5 {
+            as_conifer += usize::from((h - c * a).abs() < 1e-3);
+            as_broadleaf += usize::from((h - c * b).abs() < 1e-3);
+        }
+    }
+    println!("mt_hood tile {tile}: {as_conifer} samples of the conifer proxy, {as_broadleaf} of the broadleaf one");
+    assert!(as_conifer > 1000 && as_broadleaf > 1000, "{as_conifer} {as_broadleaf}");
+    crate::seamless::check_tile(&region, tile, 7);
+}
