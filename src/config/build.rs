@@ -300,7 +300,7 @@ fn forest_types(config: &Config) -> Result<ForestTypes, String> {
         if entry.surface != SurfaceType::Forest {
             return Err(format!(
                 "[[landcover.classes]]: forest = {:?} on {} classes",
-                entry.forest,
+                entry.forest.as_deref().unwrap_or_default(),
                 entry.surface.name()
             ));
         }

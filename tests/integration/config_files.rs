@@ -62,7 +62,7 @@ fn bad_configs_name_the_file_and_the_problem() {
         (
             "typed_water.toml",
             "[landcover]\nkind = \"classes\"\npath = \"c.tif\"\n[[landcover.classes]]\nvalues = [1]\nsurface = \"water\"\nforest = \"pine\"\n[[forest]]\nname = \"pine\"\n",
-            "forest = Some(\"pine\") on water classes",
+            "forest = \"pine\" on water classes",
         ),
     ];
     for (name, text, needle) in cases {
