@@ -12,7 +12,8 @@ use crate::canopy::chm::{self, Chm, ChmError, ChmOptions};
 use crate::canopy::grid::MetricGrid;
 use crate::canopy::wang::{self, WangError, WangParams};
 use crate::canopy::{TileSet, TiledProxy};
-use crate::encode::{EncodeError, geotiff};
+use crate::encode::{EncodeError, geotiff, relief};
+use crate::raster::{Raster, Window};
 use crate::source::{SourceError, las};
 use std::path::PathBuf;
 use thiserror::Error;
@@ -70,6 +71,11 @@ pub enum LidarError {
     Encode(#[from] EncodeError),
 }
 
+/// Pits deeper than this below their neighbours' median are filled before
+/// a CHM becomes tiles: 2 m is below the height of a crown's shoulder over
+/// its neighbour at 0.5 m, far above LiDAR's 15 cm noise.
+pub const PIT_M: f32 = 2.0;
+
 /// A CHM made from clouds.
 #[derive(Clone, Debug)]
 pub struct Model {
@@ -93,6 +99,16 @@ pub fn model(options: &Options) -> Result<Model, LidarError> {
     Ok(Model { name, epsg: cloud.epsg, points: cloud.len(), chm })
 }
 
+/// `r` averaged over blocks of `2^level` cells (NaN where a block has no data).
+fn box_reduce(r: &Raster<f32>, level: usize) -> Raster<f32> {
+    let f = 1usize << level;
+    Raster::from_fn(r.width() / f, r.height() / f, |x, y| {
+        let cells = (0..f * f).map(|i| r.get(x * f + i % f, y * f + i / f)).filter(|v| !v.is_nan());
+        let (sum, n) = cells.fold((0.0, 0), |(s, n), v| (s + v, n + 1));
+        if n == 0 { f32::NAN } else { sum / n as f32 }
+    })
+}
+
 /// The CHM and the tile set made from it.
 pub fn build(options: &Options) -> Result<(Model, TileSet), LidarError> {
     let model = model(options)?;
@@ -100,7 +116,9 @@ pub fn build(options: &Options) -> Result<(Model, TileSet), LidarError> {
     let tile_px =
         options.tile_px.unwrap_or_else(|| WangParams::tile_px_for(g.cell_m, heights.width(), heights.height()));
     let params = WangParams::new(tile_px, options.colours, options.variants);
-    let set = wang::build(&model.chm.heights, model.chm.grid.cell_m, &params)
+    let smooth = chm::fill_pits(heights, PIT_M);
+    let target = crate::canopy::stats::sorted(heights.data().iter().copied());
+    let set = wang::build(&smooth, &target, g.cell_m, &params)
         .map_err(|source| LidarError::Wang { name: model.name.clone(), source })?;
     Ok((model, set))
 }
@@ -124,6 +142,29 @@ impl Model {
         let atlas = set.atlas();
         let grid = MetricGrid { width: atlas.width(), height: atlas.height(), ..self.chm.grid };
         geotiff::write_metric(&atlas, &grid, self.epsg, Some(&set.layout().tag()))
+    }
+
+    /// A picture for people: the CHM (left) beside the proxy's tiles as the
+    /// hash lays them out over `cells × cells` cells (right), both a square
+    /// of `cells` tiles at mip level `level` (each level halves the pixels),
+    /// shaded grey.
+    pub fn preview_png(&self, set: &TileSet, cells: usize, level: usize) -> Result<Vec<u8>, EncodeError> {
+        let mosaic = TiledProxy::new("", set.clone(), 0).mosaic(cells, cells, level);
+        let side = mosaic.width();
+        let chm = box_reduce(&self.chm.heights, level);
+        // The middle of the CHM, as large as the mosaic (NaN beyond a small CHM).
+        let at = |n: usize| (n as i64 - side as i64) / 2;
+        let chm = chm.crop(Window::new(at(chm.width()), at(chm.height()), side, side), f32::NAN);
+        let gap = 6;
+        let mut both = Raster::filled(2 * side + gap, side, f32::NAN);
+        both.paste(&chm, Window::new(0, 0, side, side), 0, 0);
+        both.paste(&mosaic, Window::new(0, 0, side, side), side + gap, 0);
+        let max = set.stats().max.max(1.0);
+        relief::grey(
+            &both.crop(Window::new(-1, -1, both.width() + 2, side + 2), f32::NAN),
+            self.chm.grid.cell_m * (1 << level) as f64,
+            max,
+        )
     }
 
     /// What was made, for people.

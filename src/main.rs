@@ -112,6 +112,9 @@ enum Command {
         /// Also write the canopy height model (GeoTIFF).
         #[arg(long)]
         chm: Option<PathBuf>,
+        /// Also write a picture of the CHM beside 3 × 3 tiles of the proxy (PNG).
+        #[arg(long)]
+        preview: Option<PathBuf>,
         /// `EPSG:code` replacing the files' CRS.
         #[arg(long)]
         crs: Option<String>,
@@ -235,7 +238,7 @@ fn run(command: Command) -> Result<()> {
             println!("{}", sylva::bench::serve::soak(config.as_deref(), minutes, every)?);
             Ok(())
         }
-        Command::Canopy { las, resolution, output, chm, crs, tile_px, colours, variants } => {
+        Command::Canopy { las, resolution, output, chm, preview, crs, tile_px, colours, variants } => {
             let mut options = sylva::lidar::Options::new(las, resolution);
             options.crs = crs.as_deref().map(sylva::source::crs::parse_epsg).transpose().map_err(anyhow::Error::msg)?;
             (options.tile_px, options.colours, options.variants) = (tile_px, colours, variants);
@@ -243,6 +246,9 @@ fn run(command: Command) -> Result<()> {
             write_file(&output, &model.proxy_tiff(&set)?)?;
             if let Some(path) = chm {
                 write_file(&path, &model.chm_tiff()?)?;
+            }
+            if let Some(path) = preview {
+                write_file(&path, &model.preview_png(&set, 3, 0)?)?;
             }
             println!("{}", model.report(&set));
             Ok(())

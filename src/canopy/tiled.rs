@@ -22,7 +22,7 @@ use super::tileset::{Edges, TileSet};
 use crate::geo::METRES_PER_DEGREE;
 use crate::grid::SampleGrid;
 use crate::noise::hash2;
-use crate::raster::Raster;
+use crate::raster::{Raster, Window};
 
 /// A tile-set canopy proxy.
 pub struct TiledProxy {
@@ -64,6 +64,20 @@ impl TiledProxy {
             e: colour(ci + 1, cj, VERTICAL),
             variant,
         })
+    }
+
+    /// The texture of `cols × rows` cells of one zone at mip level `k`, as
+    /// the hash lays the tiles out (for previews and checks).
+    pub fn mosaic(&self, cols: usize, rows: usize, k: usize) -> Raster<f32> {
+        let t = self.set.layout().tile_px >> k.min(self.set.levels() - 1);
+        let mut out = Raster::filled(cols * t, rows * t, 0.0);
+        for cj in 0..rows {
+            for ci in 0..cols {
+                let tile = self.set.level(k.min(self.set.levels() - 1), self.tile(0, ci as i64, cj as i64));
+                out.paste(tile, Window::new(0, 0, t, t), ci * t, cj * t);
+            }
+        }
+        out
     }
 
     /// Level `k`, bilinear, at a position.

@@ -24,6 +24,11 @@
 //! onto the CHM's height distribution (histogram matching, Heeger and Bergen
 //! 1995): window choices shift the distribution a little, and a monotone map
 //! of every texel by the same curve keeps edges matched and continuous.
+//!
+//! Blending doubles the sparse extremes of a texture where two fields
+//! overlap (both fields' pits show), which draws the tile grid as dark lines;
+//! `sylva canopy` therefore builds tiles from the pit-filled CHM
+//! ([`super::chm::fill_pits`]) and matches their heights to the CHM's.
 
 use super::blend::{Gaussian, blend, smoothstep};
 use super::quilt::{Anchor, Source};
@@ -58,12 +63,14 @@ impl WangParams {
         1 << wanted.min(fits)
     }
 
-    /// Tiles of `tile_px` texels with a border of 1/16 of a tile (4 m of a
-    /// 64 m tile: wide enough to blend a crown, narrow enough that most of
-    /// a tile is its interior). Two colours (16 tiles) are Cohen et al.'s
+    /// Tiles of `tile_px` texels with a border of 1/8 of a tile (8 m of a
+    /// 64 m tile). A cross-fade over `b` texels adds a slope of about
+    /// `(h₁ − h₂) / b` across it, which shading draws as lines along the
+    /// edges: at 1/16 the tile grid showed in `--preview`, at 1/8 it does
+    /// not, and three quarters of a tile are still its interior alone. Two colours (16 tiles) are Cohen et al.'s
     /// smallest set without visible repetition.
     pub fn new(tile_px: usize, colours: usize, variants: usize) -> WangParams {
-        WangParams { tile_px, border_px: (tile_px / 16).max(2), colours, variants, seed: 0x5EED_CA40_F1E5 }
+        WangParams { tile_px, border_px: (tile_px / 8).max(2), colours, variants, seed: 0x5EED_CA40_F1E5 }
     }
 }
 
@@ -90,8 +97,10 @@ pub enum WangError {
 /// Knots of the histogram-matching curve.
 const KNOTS: usize = 256;
 
-/// The tile set made from `chm` (texels of `cell_m`; NaN = outside the scan).
-pub fn build(chm: &Raster<f32>, cell_m: f64, p: &WangParams) -> Result<TileSet, WangError> {
+/// The tile set made from `chm` (texels of `cell_m`; NaN = outside the
+/// scan), its heights matched to the distribution of `target` (sorted; the
+/// CHM's own, or that of the CHM it was smoothed from).
+pub fn build(chm: &Raster<f32>, target: &[f32], cell_m: f64, p: &WangParams) -> Result<TileSet, WangError> {
     let layout = Layout { tile_px: p.tile_px, colours: p.colours, variants: p.variants, cell_m };
     layout.check().map_err(WangError::Layout)?;
     if p.border_px == 0 || 2 * p.border_px + 2 > p.tile_px {
@@ -104,7 +113,7 @@ pub fn build(chm: &Raster<f32>, cell_m: f64, p: &WangParams) -> Result<TileSet, 
     let too_small = || WangError::TooSmall { need: p.tile_px + 2 * p.border_px + 2, w: chm.width(), h: chm.height() };
     let pieces = Pieces::choose(&source, p).ok_or_else(too_small)?;
     let sorted = stats::sorted(chm.data().iter().copied());
-    let gauss = Gaussian::new(sorted.clone());
+    let gauss = Gaussian::new(sorted);
     let normal = chm.map(|h| if h.is_nan() { h } else { gauss.forward(h) });
     let weights = Weights::new(p.tile_px, p.border_px);
     let mut tiles = Vec::with_capacity(layout.count());
@@ -120,7 +129,7 @@ pub fn build(chm: &Raster<f32>, cell_m: f64, p: &WangParams) -> Result<TileSet, 
         });
         tiles.push(tile);
     }
-    match_histogram(&mut tiles, &sorted);
+    match_histogram(&mut tiles, target);
     TileSet::new(layout, tiles).map_err(WangError::Layout)
 }
 
@@ -247,7 +256,8 @@ mod tests {
     #[test]
     fn tiles_whose_colours_agree_continue_each_other() {
         let p = WangParams { tile_px: 32, border_px: 4, colours: 2, variants: 1, seed: 1 };
-        let set = build(&canopy(160, 120), 0.5, &p).unwrap();
+        let chm = canopy(160, 120);
+        let set = build(&chm, &stats::sorted(chm.data().iter().copied()), 0.5, &p).unwrap();
         let l = *set.layout();
         for (i, a) in set.tiles().iter().enumerate() {
             for (j, b) in set.tiles().iter().enumerate() {
@@ -266,7 +276,8 @@ mod tests {
     #[test]
     fn a_chm_too_small_for_a_tile_is_refused() {
         let p = WangParams { tile_px: 64, border_px: 4, colours: 1, variants: 1, seed: 1 };
-        assert!(matches!(build(&canopy(50, 50), 0.5, &p), Err(WangError::TooSmall { .. })));
-        assert!(matches!(build(&canopy(50, 50), 0.5, &WangParams { tile_px: 48, ..p }), Err(WangError::Layout(_))));
+        let (chm, target) = (canopy(50, 50), [0.0, 30.0]);
+        assert!(matches!(build(&chm, &target, 0.5, &p), Err(WangError::TooSmall { .. })));
+        assert!(matches!(build(&chm, &target, 0.5, &WangParams { tile_px: 48, ..p }), Err(WangError::Layout(_))));
     }
 }
