@@ -71,7 +71,7 @@ fn bcts_ground_and_chm_are_continuous_across_the_seam_of_the_two_files() {
 
 /// The clouds of `../shared/data` and the resolutions their densities
 /// allow (Topography has 0.9 points per m²).
-fn clouds() -> Vec<(&'static str, Vec<std::path::PathBuf>, f64)> {
+pub fn clouds() -> Vec<(&'static str, Vec<std::path::PathBuf>, f64)> {
     vec![
         ("nz_pycrown", vec![data("nz_pycrown/POINTS.laz")], 0.5),
         ("MixedConifer", vec![data("lidar_lidR/MixedConifer.laz")], 0.5),
