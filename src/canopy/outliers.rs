@@ -43,11 +43,10 @@ pub fn keep(x: &[f64], y: &[f64], z: &[f64], class: &[u8]) -> (Vec<bool>, Droppe
     for i in (0..z.len()).filter(|&i| keep[i]) {
         *counts.entry(voxel(i)).or_default() += 1;
     }
-    for i in 0..z.len() {
-        // A point whose own voxel has more than ISOLATED others is not isolated.
-        if !keep[i] || counts.get(&voxel(i)).is_some_and(|&n| n > ISOLATED + 1) {
-            continue;
-        }
+    // Only a point whose own voxel holds at most ISOLATED others can be isolated.
+    let candidates: Vec<usize> =
+        (0..z.len()).filter(|&i| keep[i] && counts.get(&voxel(i)).is_none_or(|&n| n <= ISOLATED + 1)).collect();
+    for i in candidates {
         let (a, b, c) = voxel(i);
         let mut around = 0u32;
         for da in -1..=1 {

@@ -119,7 +119,7 @@ fn edge_steps(set: &TileSet) -> (f32, f32) {
 fn proxies_wrap_match_along_edges_and_keep_the_chm_histogram() {
     for (name, files, cell_m) in clouds() {
         let (model, set) = lidar::build(&Options::new(files, cell_m)).expect("proxy");
-        let inner = stats::sorted(set.tiles().iter().flat_map(|t| steps(t)));
+        let inner = stats::sorted(set.tiles().iter().flat_map(steps));
         let p99 = stats::sorted_quantile(&inner, 0.99);
         let (shared, wrapped) = edge_steps(&set);
         println!(

@@ -36,7 +36,13 @@ fn write_canopy_report() {
     let mut demo = common::demo();
     let grid = demo_forest_edge(&demo);
     let (w, h) = (grid.width() - 1, grid.height() - 1);
-    println!("demo grid: lon {:.6}..{:.6}, lat {:.6}..{:.6}", grid.lon.coord(0), grid.lon.coord(w), grid.lat.coord(h), grid.lat.coord(0));
+    println!(
+        "demo grid: lon {:.6}..{:.6}, lat {:.6}..{:.6}",
+        grid.lon.coord(0),
+        grid.lon.coord(w),
+        grid.lat.coord(h),
+        grid.lat.coord(0)
+    );
     let relief = |region: &sylva::region::Region, name: &str| {
         let product = Product::Image { layer: MapLayer::Relief, grid, encoding: Encoding::Relief };
         let png = products::compute(region, &product).expect("relief").bytes;
