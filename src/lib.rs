@@ -8,8 +8,9 @@
 //! added to the ground ([`canopy`], [`cem::combine`]); a surface-type channel
 //! ([`cem::surface`]); and conservative ray-casting acceleration data
 //! ([`cem::accel`]). [`grid`] holds the World Wind tile math, [`source`] the
-//! raster readers, [`encode`] the tile formats and [`demo`] the embedded
-//! procedural region used when no configuration is given.
+//! raster and point-cloud readers, [`encode`] the tile formats, [`lidar`]
+//! the canopy proxies built from LiDAR (`sylva canopy`) and [`demo`] the
+//! embedded procedural region used when no configuration is given.
 //!
 //! See `ARCHITECTURE.md` for the code map and the invariants.
 
@@ -23,6 +24,7 @@ pub mod demo;
 pub mod encode;
 pub mod geo;
 pub mod grid;
+pub mod lidar;
 pub mod noise;
 pub mod produce;
 pub mod raster;

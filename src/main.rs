@@ -138,6 +138,36 @@ enum Command {
         #[command(subcommand)]
         what: Bench,
     },
+    /// Build a canopy proxy (Wang tiles) from LiDAR point clouds.
+    Canopy {
+        /// LAS or LAZ files, read as one cloud (repeat for more).
+        #[arg(long = "las", required = true)]
+        las: Vec<PathBuf>,
+        /// Cell side of the canopy height model, metres.
+        #[arg(long, default_value_t = 0.5)]
+        resolution: f64,
+        /// The proxy (a GeoTIFF atlas of Wang tiles).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Also write the canopy height model (GeoTIFF).
+        #[arg(long)]
+        chm: Option<PathBuf>,
+        /// Also write a picture of the CHM beside 3 × 3 tiles of the proxy (PNG).
+        #[arg(long)]
+        preview: Option<PathBuf>,
+        /// `EPSG:code` replacing the files' CRS.
+        #[arg(long)]
+        crs: Option<String>,
+        /// Tile side in texels, a power of two (default: about 64 m).
+        #[arg(long)]
+        tile_px: Option<usize>,
+        /// Colours per tile edge (1: one periodic tile).
+        #[arg(long, default_value_t = 2)]
+        colours: usize,
+        /// Tiles per colour combination.
+        #[arg(long, default_value_t = 2)]
+        variants: usize,
+    },
     /// Describe the region a configuration makes.
     Info {
         /// Region configuration (default: the embedded demo region).
@@ -237,7 +267,8 @@ fn run(command: Command) -> Result<()> {
         }
         #[cfg(feature = "server")]
         Command::Bench { what: Bench::Serve { configs, mapserver, mapproxy, n, uncached, wrk_seconds } } => {
-            let configs: [PathBuf; 3] = configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
+            let configs: [PathBuf; 3] =
+                configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
             let bench = sylva::bench::serve::ServeBench { configs, mapserver, mapproxy, n, uncached, wrk_seconds };
             println!("{}", sylva::bench::serve::report(&bench)?);
             Ok(())
@@ -266,6 +297,21 @@ fn run(command: Command) -> Result<()> {
             println!("{}", sylva::client::fly::summary(&records));
             Ok(())
         }
+        Command::Canopy { las, resolution, output, chm, preview, crs, tile_px, colours, variants } => {
+            let mut options = sylva::lidar::Options::new(las, resolution);
+            options.crs = crs.as_deref().map(sylva::source::crs::parse_epsg).transpose().map_err(anyhow::Error::msg)?;
+            (options.tile_px, options.colours, options.variants) = (tile_px, colours, variants);
+            let (model, set) = sylva::lidar::build(&options)?;
+            write_file(&output, &model.proxy_tiff(&set)?)?;
+            if let Some(path) = chm {
+                write_file(&path, &model.chm_tiff()?)?;
+            }
+            if let Some(path) = preview {
+                write_file(&path, &model.preview_png(&set, 3, 0)?)?;
+            }
+            println!("{}", model.report(&set));
+            Ok(())
+        }
         Command::Info { config } => {
             println!("{}", sylva::config::load(config.as_deref())?.describe());
             Ok(())
@@ -277,7 +323,8 @@ fn run(command: Command) -> Result<()> {
 /// `SYLVA_LOG_FORMAT=json`), then serves until SIGTERM.
 #[cfg(feature = "server")]
 fn serve(config: Option<PathBuf>, options: sylva::server::ServeOptions) -> Result<()> {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info,tower_http=warn".into());
+    let filter =
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info,tower_http=warn".into());
     let logs = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
     if std::env::var("SYLVA_LOG_FORMAT").is_ok_and(|f| f.eq_ignore_ascii_case("json")) {
         logs.json().init();
@@ -312,11 +359,16 @@ fn parse_format(text: &str) -> Result<Format> {
     }
 }
 
-/// Writes the product atomically (temporary file, then rename) and reports it.
-fn write(path: &Path, product: &Product) -> Result<()> {
+/// Writes bytes atomically: a temporary file, then a rename.
+fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = path.with_extension("partial");
-    std::fs::write(&tmp, &product.encoded.bytes).with_context(|| format!("{}: cannot write", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot rename into place", path.display()))?;
+    std::fs::write(&tmp, bytes).with_context(|| format!("{}: cannot write", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot rename into place", path.display()))
+}
+
+/// Writes the product atomically and reports it.
+fn write(path: &Path, product: &Product) -> Result<()> {
+    write_file(path, &product.encoded.bytes)?;
     let g = &product.grid;
     eprintln!(
         "{}: {}×{} samples, {} bytes, {:.1} ms",

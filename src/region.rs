@@ -10,6 +10,15 @@ use crate::raster::resample::Resampling;
 use crate::source::{BlockCache, GeoRaster};
 use std::sync::Arc;
 
+/// A named forest type and its canopy proxy.
+#[derive(Clone)]
+pub struct Forest {
+    /// The name in the configuration.
+    pub name: String,
+    /// Its proxy.
+    pub proxy: Arc<dyn CanopyProxy>,
+}
+
 /// The sources and settings of one region.
 #[derive(Clone)]
 pub struct Region {
@@ -32,8 +41,11 @@ pub struct Region {
     /// The RGB map the land cover was keyed from, if it was (for the relief
     /// preview's colours).
     pub map: Option<GeoRaster>,
-    /// The canopy proxy.
+    /// The canopy proxy of forest of no named type.
     pub proxy: Arc<dyn CanopyProxy>,
+    /// Named forest types and their proxies; land-cover band `2 + k` is the
+    /// cover of type `k` (`forests[k − 1]`, type 0 being `proxy`'s).
+    pub forests: Vec<Forest>,
     /// 16-bit encodings of heights.
     pub heights_16: Quantization,
     /// The block cache every source of the region reads through.
@@ -69,6 +81,11 @@ impl Region {
         }
     }
 
+    /// The proxy of each forest type, type 0 (no name) first.
+    pub fn proxies(&self) -> Vec<&dyn CanopyProxy> {
+        std::iter::once(self.proxy.as_ref()).chain(self.forests.iter().map(|f| f.proxy.as_ref())).collect()
+    }
+
     /// A multi-line summary for `sylva info`.
     pub fn describe(&self) -> String {
         let b = &self.bounds;
@@ -88,6 +105,9 @@ impl Region {
             lines.push("landcover  none (no forest anywhere)".into());
         }
         lines.push(format!("canopy     {}", self.proxy.describe()));
+        for f in &self.forests {
+            lines.push(format!("forest     {}: {}", f.name, f.proxy.describe()));
+        }
         lines.push(format!(
             "png16      h = {} + {} · v (v = 0 is nodata)",
             self.heights_16.offset, self.heights_16.scale

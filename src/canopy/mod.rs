@@ -6,10 +6,33 @@
 //! its own traversal; the value at a sample must depend only on the sample's
 //! lattice coordinate and the grid's spacing (never on the grid's extent), so
 //! tiles stay seamless.
+//!
+//! Two kinds: the built-in [`ProceduralProxy`] (one hashed tree per world
+//! cell) and the [`TiledProxy`], Wang tiles made from a LiDAR canopy height
+//! model (`sylva canopy`): [`chm`] rasterises a point cloud (with
+//! [`outliers`] and [`ground`]), [`wang`] turns the CHM into a tile set
+//! ([`quilt`] picks the pieces, [`blend`] joins them), [`frame`] lays tiles
+//! over the globe.
+//!
+//! Invariant: nothing here reads or writes files (`source::las` reads point
+//! clouds, `source::proxy` and `encode::geotiff` read and write tile sets).
 
+pub mod blend;
+pub mod chm;
+pub mod frame;
+pub mod grid;
+pub mod ground;
+pub mod outliers;
 pub mod procedural;
+pub mod quilt;
+pub mod stats;
+pub mod tiled;
+pub mod tileset;
+pub mod wang;
 
 pub use procedural::{ProceduralProxy, ProxyParams};
+pub use tiled::TiledProxy;
+pub use tileset::{Layout, TileSet};
 
 use crate::grid::SampleGrid;
 use crate::raster::Raster;

@@ -12,6 +12,12 @@
 //! - **linear**: a canopy-cover percentage (or canopy height) scaled to
 //!   [0, 1] between two values.
 //!
+//! With forest types (one canopy proxy each, dissertation 6.3: "several
+//! distinct canopy proxies for different surfaces"), bands `2 + k` hold the
+//! cover of type `k`'s forest (0 elsewhere; type 0 is forest of no named
+//! type), so that cover = Σ band `2 + k`, and resampling each band
+//! bilinearly blends the proxies where types meet.
+//!
 //! Working on native pixels makes the close's radius a fixed ground distance
 //! (the width of the map's lines) at every tile level. Blocks are computed
 //! with a margin of the close and blur radii, so they are exact.
@@ -60,18 +66,48 @@ impl Rule {
     }
 }
 
+/// Which forest type each forest pixel is.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ForestTypes {
+    /// Number of types, the unnamed type 0 included; 0 = no type bands.
+    pub count: usize,
+    /// Type of the forest pixels the table below does not name.
+    pub default: u8,
+    /// Types by class value (class rules).
+    pub by_class: HashMap<i64, u8>,
+}
+
+impl ForestTypes {
+    /// The type of a pixel of input value `v`.
+    fn of(&self, v: f32) -> u8 {
+        if v.is_nan() { self.default } else { self.by_class.get(&(v as i64)).copied().unwrap_or(self.default) }
+    }
+}
+
 /// The derived land-cover raster over an input raster.
 pub struct Landcover {
     name: PathBuf,
     input: Blocks,
     rule: Rule,
+    types: ForestTypes,
 }
 
 impl Landcover {
-    /// Land cover from `input` by `rule`.
+    /// Land cover from `input` by `rule`, without forest types.
     pub fn new(input: Blocks, rule: Rule) -> Landcover {
+        Landcover::with_types(input, rule, ForestTypes::default())
+    }
+
+    /// Land cover with one cover band per forest type.
+    pub fn with_types(input: Blocks, rule: Rule, types: ForestTypes) -> Landcover {
         let name = PathBuf::from(format!("{} (land cover)", input.source().name().display()));
-        Landcover { name, input, rule }
+        Landcover { name, input, rule, types }
+    }
+
+    /// Cover of each type: `cover` where the pixel's type is `k`, else 0.
+    fn type_bands(&self, input: &Raster<f32>, cover: &Raster<f32>) -> Vec<Raster<f32>> {
+        let types = input.map(|v| self.types.of(v));
+        (0..self.types.count).map(|k| cover.zip_map(&types, |c, t| if usize::from(t) == k { c } else { 0.0 })).collect()
     }
 }
 
@@ -85,7 +121,7 @@ impl PixelSource for Landcover {
     }
 
     fn bands(&self) -> usize {
-        2
+        2 + self.types.count
     }
 
     fn block_size(&self) -> (usize, usize) {
@@ -102,7 +138,9 @@ impl PixelSource for Landcover {
             Rule::Linear { zero_at, full_at } => from_linear(&input[0], *zero_at, *full_at),
         };
         let inner = Window::new(margin as i64, margin as i64, block.width, block.height);
-        Ok(vec![cover.crop(inner, 0.0), classes.crop(inner, f32::NAN)])
+        let mut bands = vec![cover.crop(inner, 0.0), classes.crop(inner, f32::NAN)];
+        bands.extend(self.type_bands(&input[0], &cover).iter().map(|b| b.crop(inner, 0.0)));
+        Ok(bands)
     }
 }
 
@@ -152,8 +190,9 @@ impl ColourMemo {
     #[inline]
     fn class(&mut self, rgb: [f32; 3], classify: impl FnOnce() -> f32) -> f32 {
         let key = rgb.map(f32::to_bits);
-        let mix = (key[0].wrapping_mul(0x9E37_79B1) ^ key[1].wrapping_mul(0x85EB_CA77) ^ key[2].wrapping_mul(0xC2B2_AE3D))
-            .wrapping_mul(0x27D4_EB2F);
+        let mix =
+            (key[0].wrapping_mul(0x9E37_79B1) ^ key[1].wrapping_mul(0x85EB_CA77) ^ key[2].wrapping_mul(0xC2B2_AE3D))
+                .wrapping_mul(0x27D4_EB2F);
         let slot = &mut self.slots[(mix >> (32 - Self::BITS)) as usize];
         if slot.0 != key {
             *slot = (key, classify());
@@ -218,5 +257,26 @@ mod tests {
         let (cover, classes) = from_linear(&pct, 0.0, 100.0);
         assert_eq!(cover.data(), &[0.0, 0.71, 0.0]);
         assert_eq!(classes.data(), &[0.0, 1.0, 0.0]);
+    }
+
+    #[test]
+    fn type_bands_split_the_cover_by_class() {
+        use crate::source::memory::MemorySource;
+        let values = Raster::from_vec(4, 1, vec![165.0, 183.0, 98.0, 161.0]).unwrap();
+        let table = HashMap::from([
+            (161, (SurfaceType::Forest, 1.0)),
+            (165, (SurfaceType::Forest, 1.0)),
+            (183, (SurfaceType::Forest, 0.5)),
+            (98, (SurfaceType::Water, 0.0)),
+        ]);
+        let types = ForestTypes { count: 3, default: 1, by_class: HashMap::from([(183, 2)]) };
+        let cache = crate::source::BlockCache::new(1 << 20);
+        let input = Blocks::new(std::sync::Arc::new(MemorySource::new("t", vec![values]).unwrap()), &cache);
+        let lc = Landcover::with_types(input, Rule::Classes(table), types);
+        let b = lc.read_block(0, 0).unwrap();
+        assert_eq!(b.len(), 5);
+        assert_eq!(b[2].data(), &[0.0, 0.0, 0.0, 0.0]);
+        assert_eq!(b[3].data(), &[1.0, 0.0, 0.0, 1.0]);
+        assert_eq!(b[4].data(), &[0.0, 0.5, 0.0, 0.0]);
     }
 }

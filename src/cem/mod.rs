@@ -160,10 +160,18 @@ pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<P
     let no_ground = need.ground && ground.all_nodata();
 
     // (a) Identification of arboreous regions: the cover map on the grid.
+    // Forest types: the canopy reads the cover of each type (bands 2 ..).
+    let typed = need.canopy && !region.forests.is_empty();
     let landcover = match (need.cover && !no_ground, &region.landcover) {
         (true, Some(lc)) => {
             // Band 1 (classes) only for the surface layer.
-            let bands = if need.surface { 2 } else { 1 };
+            let bands = if typed {
+                3 + region.forests.len()
+            } else if need.surface {
+                2
+            } else {
+                1
+            };
             stats.time(Stage::Landcover, || lc.read(&work, Resampling::Bilinear, bands))?
         }
         _ => None,
@@ -175,8 +183,11 @@ pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<P
     };
 
     // (c) Height map texture: canopy proxy × cover, added to the ground.
-    let canopy = match &cover {
-        Some(c) if need.canopy => Some(stats.time(Stage::Canopy, || combine::canopy(region.proxy.as_ref(), &work, c))),
+    let canopy = match (&cover, &landcover) {
+        (Some(c), Some(f)) if need.canopy => Some(stats.time(Stage::Canopy, || match typed {
+            true => combine::canopy_by_type(&region.proxies(), &work, |k| f.resample(2 + k, Resampling::Bilinear)),
+            false => combine::canopy(region.proxy.as_ref(), &work, c),
+        })),
         _ => None,
     };
     let cem = match (&canopy, need.cem) {

@@ -2,15 +2,15 @@
 //! producing a [`Region`]. Errors name the file and the problem.
 
 use super::{Config, LandcoverConfig, LandcoverKind, UpstreamConfig};
-use crate::canopy::ProceduralProxy;
+use crate::canopy::{CanopyProxy, ProceduralProxy, TiledProxy};
 use crate::cem::colorkey::{ColorKey, LabKey};
-use crate::cem::landcover::{Landcover, Rule};
+use crate::cem::landcover::{ForestTypes, Landcover, Rule};
 use crate::cem::surface::SurfaceType;
 use crate::demo;
 use crate::encode::Quantization;
 use crate::grid::{BBox, TileGrid};
 use crate::raster::morphology::MorphOp;
-use crate::region::Region;
+use crate::region::{Forest, Region};
 use crate::source::{
     self, BlockCache, Blocks, GeoRaster, Georef, NodataPolicy, OpenOptions, PixelSource, Reducer, SourceError,
 };
@@ -41,6 +41,9 @@ pub enum ConfigError {
     /// A source named by the configuration cannot be opened.
     #[error(transparent)]
     Source(#[from] SourceError),
+    /// A forest type's point clouds give no proxy.
+    #[error(transparent)]
+    Lidar(#[from] crate::lidar::LidarError),
 }
 
 /// Loads the region of a configuration file, or the demo region without one.
@@ -74,6 +77,7 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
     // Check every value before opening any file.
     let landcover_rule =
         config.landcover.as_ref().map(rule).transpose().map_err(|m| invalid(format!("[landcover] {m}")))?;
+    let types = forest_types(config).map_err(invalid)?;
     let resolve = |p: &PathBuf| if p.is_absolute() { p.clone() } else { base.join(p) };
     let (dem, bounds, name) = match (&config.dem.path, &config.dem.upstream) {
         (Some(_), Some(_)) => return Err(invalid("[dem] give a path or an upstream, not both".into())),
@@ -99,7 +103,7 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
     let demo = config.dem.path.is_none() && config.dem.upstream.is_none();
     let (landcover, map) = match (&config.landcover, landcover_rule, demo) {
         (Some(lc), Some(rule), _) => {
-            let (l, m) = landcover(lc, rule, &resolve, &cache, &|m| invalid(format!("[landcover] {m}")))?;
+            let (l, m) = landcover(lc, (rule, types), &resolve, &cache, &|m| invalid(format!("[landcover] {m}")))?;
             (Some(l), m)
         }
         (None, _, true) => {
@@ -108,6 +112,7 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
         }
         _ => (None, None),
     };
+    let fallback: Arc<dyn CanopyProxy> = Arc::new(ProceduralProxy::new(config.canopy.clone()));
     Ok(Region {
         name: config.name.clone().unwrap_or(name),
         version: version_key(config, base),
@@ -118,7 +123,8 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
         dem_resampling: config.dem.resampling,
         landcover,
         map,
-        proxy: Arc::new(ProceduralProxy::new(config.canopy.clone())),
+        proxy: fallback.clone(),
+        forests: forests(config, &fallback, &resolve, &invalid)?,
         heights_16: Quantization { offset: enc.png16_offset_m, scale: enc.png16_scale_m },
         cache,
     })
@@ -130,9 +136,11 @@ fn version_key(config: &Config, base: &Path) -> String {
     let mut text = toml::to_string(config).unwrap_or_default();
     text.push_str(env!("CARGO_PKG_VERSION"));
     let files = [config.dem.path.as_ref(), config.landcover.as_ref().and_then(|l| l.path.as_ref())];
-    for path in files.into_iter().flatten() {
+    let proxies = config.forest.iter().flat_map(|f| f.proxy.iter().chain(&f.lidar));
+    for path in files.into_iter().flatten().chain(proxies) {
         let meta = std::fs::metadata(base.join(path)).ok();
-        let stamp = meta.map(|m| (m.len(), m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())));
+        let stamp =
+            meta.map(|m| (m.len(), m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())));
         text.push_str(&format!("{path:?}{stamp:?}"));
     }
     format!("v{:016x}", crate::cache::digest(text.as_bytes()))
@@ -140,28 +148,34 @@ fn version_key(config: &Config, base: &Path) -> String {
 
 /// An upstream server as a source.
 #[cfg(feature = "http")]
-fn upstream(up: &UpstreamConfig, cache: &Arc<BlockCache>, _invalid: &dyn Fn(String) -> ConfigError) -> Result<GeoRaster, ConfigError> {
+fn upstream(
+    up: &UpstreamConfig,
+    cache: &Arc<BlockCache>,
+    _invalid: &dyn Fn(String) -> ConfigError,
+) -> Result<GeoRaster, ConfigError> {
     Ok(source::remote::open(up, cache)?)
 }
 
 /// Without the `http` feature there is no client to reach an upstream.
 #[cfg(not(feature = "http"))]
-fn upstream(up: &UpstreamConfig, _: &Arc<BlockCache>, invalid: &dyn Fn(String) -> ConfigError) -> Result<GeoRaster, ConfigError> {
+fn upstream(
+    up: &UpstreamConfig,
+    _: &Arc<BlockCache>,
+    invalid: &dyn Fn(String) -> ConfigError,
+) -> Result<GeoRaster, ConfigError> {
     Err(invalid(format!("upstream {} needs Sylva built with the `http` feature", up.url)))
 }
 
-/// `"EPSG:26910"` → 26910.
+/// The optional `crs = "EPSG:code"` of a source.
 fn parse_crs(text: &Option<String>) -> Result<Option<u32>, String> {
-    let Some(t) = text else { return Ok(None) };
-    let code = t.trim().strip_prefix("EPSG:").or_else(|| t.trim().strip_prefix("epsg:"));
-    code.and_then(|c| c.parse().ok()).map(Some).ok_or_else(|| format!("crs {t:?} is not of the form \"EPSG:code\""))
+    text.as_deref().map(crate::source::crs::parse_epsg).transpose()
 }
 
 /// The land-cover raster and, for a map, the map itself (its colours shade
 /// the relief preview); `invalid` turns a message into a configuration error.
 fn landcover(
     lc: &LandcoverConfig,
-    rule: Rule,
+    (rule, types): (Rule, ForestTypes),
     resolve: &impl Fn(&PathBuf) -> PathBuf,
     cache: &Arc<BlockCache>,
     invalid: &dyn Fn(String) -> ConfigError,
@@ -192,13 +206,15 @@ fn landcover(
             input.source().name().display()
         )));
     }
-    let map = (lc.kind == LandcoverKind::Map).then(|| GeoRaster::new(input.clone(), georef.clone(), &[Reducer::Mean], cache));
-    Ok((derived(input, georef, rule, cache), map))
+    let map =
+        (lc.kind == LandcoverKind::Map).then(|| GeoRaster::new(input.clone(), georef.clone(), &[Reducer::Mean], cache));
+    Ok((derived(input, georef, rule, types, cache), map))
 }
 
-fn derived(input: Blocks, georef: Georef, rule: Rule, cache: &Arc<BlockCache>) -> GeoRaster {
-    let pixels: Arc<dyn PixelSource> = Arc::new(Landcover::new(input, rule));
-    GeoRaster::new(Blocks::new(pixels, cache), georef, &[Reducer::Mean, Reducer::Decimate], cache)
+/// Cover (mean), classes (decimated), covers of forest types (mean).
+fn derived(input: Blocks, georef: Georef, rule: Rule, types: ForestTypes, cache: &Arc<BlockCache>) -> GeoRaster {
+    let pixels: Arc<dyn PixelSource> = Arc::new(Landcover::with_types(input, rule, types));
+    GeoRaster::new(Blocks::new(pixels, cache), georef, &[Reducer::Mean, Reducer::Decimate, Reducer::Mean], cache)
 }
 
 /// The demo's map with the demo's keys and the dissertation's close, and the
@@ -215,7 +231,7 @@ fn demo_landcover(cache: &Arc<BlockCache>) -> Result<(GeoRaster, Option<GeoRaste
     };
     let input = Blocks::new(d.map, cache);
     let map = GeoRaster::new(input.clone(), d.map_georef.clone(), &[Reducer::Mean], cache);
-    Ok((derived(input, d.map_georef, rule, cache), Some(map)))
+    Ok((derived(input, d.map_georef, rule, ForestTypes::default(), cache), Some(map)))
 }
 
 /// Colour keys of the demo map's palette.
@@ -255,6 +271,77 @@ fn rule(lc: &LandcoverConfig) -> Result<Rule, String> {
         // Canopy height models: below 1 m is ground or shrubs; trees from 3 m.
         LandcoverKind::CanopyHeight => linear(lc, 1.0, 3.0),
     }
+}
+
+/// Forest types: index 0 is forest of no named type, `k` the `k`-th
+/// `[[forest]]`; none without `[[forest]]` entries.
+fn forest_types(config: &Config) -> Result<ForestTypes, String> {
+    let mut names: HashMap<&str, u8> = HashMap::new();
+    for (k, f) in config.forest.iter().enumerate() {
+        let index = u8::try_from(k + 1).map_err(|_| "at most 255 [[forest]] types".to_string())?;
+        if names.insert(f.name.as_str(), index).is_some() {
+            return Err(format!("[[forest]] {:?} appears twice", f.name));
+        }
+    }
+    let lookup = |name: &Option<String>, place: &str| match name {
+        None => Ok(None),
+        Some(n) => names.get(n.as_str()).copied().map(Some).ok_or_else(|| {
+            format!(
+                "{place}: forest = {n:?} names no [[forest]] type (known: {:?})",
+                config.forest.iter().map(|f| &f.name).collect::<Vec<_>>()
+            )
+        }),
+    };
+    let Some(lc) = &config.landcover else { return Ok(ForestTypes::default()) };
+    let default = lookup(&lc.forest, "[landcover]")?.unwrap_or(0);
+    let mut by_class = HashMap::new();
+    for entry in &lc.classes {
+        let Some(t) = lookup(&entry.forest, "[[landcover.classes]]")? else { continue };
+        if entry.surface != SurfaceType::Forest {
+            return Err(format!(
+                "[[landcover.classes]]: forest = {:?} on {} classes",
+                entry.forest.as_deref().unwrap_or_default(),
+                entry.surface.name()
+            ));
+        }
+        let ranged = entry.ranges.iter().flat_map(|&[a, b]| a..=b);
+        by_class.extend(entry.values.iter().copied().chain(ranged).map(|v| (v, t)));
+    }
+    let count = if config.forest.is_empty() { 0 } else { config.forest.len() + 1 };
+    Ok(ForestTypes { count, default, by_class })
+}
+
+/// The proxies of the `[[forest]]` types: a file, point clouds, or the
+/// procedural `fallback`.
+fn forests(
+    config: &Config,
+    fallback: &Arc<dyn CanopyProxy>,
+    resolve: &impl Fn(&PathBuf) -> PathBuf,
+    invalid: &dyn Fn(String) -> ConfigError,
+) -> Result<Vec<Forest>, ConfigError> {
+    config
+        .forest
+        .iter()
+        .map(|f| {
+            // Each type its own arrangement of tiles.
+            let seed = crate::cache::digest(f.name.as_bytes());
+            let proxy: Arc<dyn CanopyProxy> = match (&f.proxy, f.lidar.is_empty()) {
+                (Some(_), false) => {
+                    return Err(invalid(format!("[[forest]] {:?}: give a proxy or lidar files, not both", f.name)));
+                }
+                (Some(path), true) => {
+                    let path = resolve(path);
+                    Arc::new(TiledProxy::new(path.display().to_string(), source::proxy::open(&path)?, seed))
+                }
+                (None, false) => {
+                    let files = f.lidar.iter().map(resolve).collect();
+                    Arc::new(crate::lidar::proxy(&crate::lidar::Options::new(files, f.resolution_m), seed)?)
+                }
+                (None, true) => fallback.clone(),
+            };
+            Ok(Forest { name: f.name.clone(), proxy })
+        })
+        .collect()
 }
 
 fn linear(lc: &LandcoverConfig, zero_at: f32, full_at: f32) -> Result<Rule, String> {

@@ -33,12 +33,38 @@ pub struct Config {
     pub dem: DemConfig,
     /// Where forest and surface classes come from.
     pub landcover: Option<LandcoverConfig>,
-    /// The procedural canopy proxy.
+    /// The procedural canopy proxy (forest of no named type, and types
+    /// without a proxy of their own).
     pub canopy: ProxyParams,
+    /// Forest types and their canopy proxies.
+    pub forest: Vec<ForestConfig>,
     /// 16-bit encodings.
     pub encoding: EncodingConfig,
     /// The tile server.
     pub server: ServerConfig,
+}
+
+/// A forest type and its canopy proxy (dissertation 6.3: "several distinct
+/// canopy proxies for different surfaces, e.g., for deciduous or coniferous
+/// forests"). Land cover names the type of its forest with `forest = "…"`.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ForestConfig {
+    /// The type's name.
+    pub name: String,
+    /// A proxy made by `sylva canopy` (GeoTIFF).
+    #[serde(default)]
+    pub proxy: Option<PathBuf>,
+    /// Or LAS/LAZ files to build the proxy from when the region loads.
+    #[serde(default)]
+    pub lidar: Vec<PathBuf>,
+    /// Cell side of the canopy height model built from `lidar`, metres.
+    #[serde(default = "half_metre")]
+    pub resolution_m: f64,
+}
+
+fn half_metre() -> f64 {
+    0.5
 }
 
 /// `sylva serve`.
@@ -138,7 +164,13 @@ pub struct DemConfig {
 
 impl Default for DemConfig {
     fn default() -> Self {
-        DemConfig { path: None, upstream: None, crs: None, resampling: Resampling::Bilinear, nodata: NodataPolicy::default() }
+        DemConfig {
+            path: None,
+            upstream: None,
+            crs: None,
+            resampling: Resampling::Bilinear,
+            nodata: NodataPolicy::default(),
+        }
     }
 }
 
@@ -177,6 +209,9 @@ pub struct LandcoverConfig {
     /// percent / canopy_height: input value with cover 1.
     #[serde(default)]
     pub full_at: Option<f32>,
+    /// The forest type (a `[[forest]]` name) of forest that names none.
+    #[serde(default)]
+    pub forest: Option<String>,
 }
 
 fn default_close() -> String {
@@ -216,6 +251,9 @@ pub struct ClassEntry {
     pub surface: SurfaceType,
     /// Their vegetation cover in [0, 1] (default 1 for forest, else 0).
     pub cover: Option<f32>,
+    /// Their forest type (a `[[forest]]` name).
+    #[serde(default)]
+    pub forest: Option<String>,
 }
 
 /// 16-bit encodings of heights.

@@ -1,4 +1,6 @@
-//! GeoTIFF output in EPSG:4326 that GDAL reads with the right geotransform.
+//! GeoTIFF output that GDAL reads with the right geotransform: tiles and
+//! builds in EPSG:4326 (or 3857), and rasters on a metric grid in a projected
+//! CRS (canopy height models and proxies, [`write_metric`]).
 //!
 //! Sylva's samples are points; GeoTIFF is written as `PixelIsArea` with each
 //! pixel centred on its sample (origin half a step west and north of the
@@ -6,8 +8,10 @@
 //! float32 with the GDAL nodata tag; surface classes are 8-bit.
 
 use super::{EncodeError, NODATA_HEIGHT, Samples};
+use crate::canopy::grid::MetricGrid;
 use crate::grid::SampleGrid;
 use crate::grid::lattice::Mapping;
+use crate::raster::Raster;
 use std::io::Cursor;
 use tiff::encoder::{TiffEncoder, colortype};
 use tiff::tags::Tag;
@@ -21,12 +25,39 @@ const GEOKEYS_3857: [u16; 16] = [1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072,
 /// Writes the samples as a one-band GeoTIFF over `grid`, in EPSG:4326 or,
 /// for grids regular in Web Mercator metres, EPSG:3857.
 pub fn write(samples: Samples, grid: &SampleGrid) -> Result<Vec<u8>, EncodeError> {
-    let err = |e: tiff::TiffError| EncodeError(e.to_string());
-    let (w, h) = (grid.width() as u32, grid.height() as u32);
     let (dx, dy) = (grid.lon.step.abs(), grid.lat.step.abs());
-    let scale = [dx, dy, 0.0];
     let tiepoint = [0.0, 0.0, 0.0, grid.lon.value(0) - 0.5 * dx, grid.lat.value(0) + 0.5 * dy, 0.0];
-    let geokeys = if grid.lat.mapping == Mapping::Degrees { &GEOKEYS_4326 } else { &GEOKEYS_3857 };
+    let geokeys = if grid.lat.mapping == Mapping::Degrees { GEOKEYS_4326 } else { GEOKEYS_3857 };
+    encode(samples, [dx, dy, 0.0], tiepoint, &geokeys, None)
+}
+
+/// Writes heights on a metric grid in the projected CRS `epsg`, with an
+/// optional ImageDescription (tile sets record their layout there).
+pub fn write_metric(
+    heights: &Raster<f32>,
+    grid: &MetricGrid,
+    epsg: u32,
+    description: Option<&str>,
+) -> Result<Vec<u8>, EncodeError> {
+    let code = u16::try_from(epsg).map_err(|_| EncodeError(format!("EPSG:{epsg} does not fit a GeoKey")))?;
+    let mut geokeys = GEOKEYS_3857;
+    geokeys[15] = code;
+    let tiepoint = [0.0, 0.0, 0.0, grid.x0, grid.y0, 0.0];
+    encode(Samples::Float(heights), [grid.cell_m, grid.cell_m, 0.0], tiepoint, &geokeys, description)
+}
+
+fn encode(
+    samples: Samples,
+    scale: [f64; 3],
+    tiepoint: [f64; 6],
+    geokeys: &[u16],
+    description: Option<&str>,
+) -> Result<Vec<u8>, EncodeError> {
+    let err = |e: tiff::TiffError| EncodeError(e.to_string());
+    let (w, h) = match samples {
+        Samples::Float(r) => (r.width() as u32, r.height() as u32),
+        Samples::Class(r) => (r.width() as u32, r.height() as u32),
+    };
     let mut out = Cursor::new(Vec::new());
     let mut enc = TiffEncoder::new(&mut out).map_err(err)?;
     macro_rules! image {
@@ -35,8 +66,11 @@ pub fn write(samples: Samples, grid: &SampleGrid) -> Result<Vec<u8>, EncodeError
             let dir = img.encoder();
             dir.write_tag(Tag::ModelPixelScaleTag, &scale[..]).map_err(err)?;
             dir.write_tag(Tag::ModelTiepointTag, &tiepoint[..]).map_err(err)?;
-            dir.write_tag(Tag::GeoKeyDirectoryTag, &geokeys[..]).map_err(err)?;
+            dir.write_tag(Tag::GeoKeyDirectoryTag, geokeys).map_err(err)?;
             dir.write_tag(Tag::GdalNodata, $nodata).map_err(err)?;
+            if let Some(text) = description {
+                dir.write_tag(Tag::ImageDescription, text).map_err(err)?;
+            }
             img.write_data($data).map_err(err)?;
         }};
     }
@@ -54,7 +88,6 @@ pub fn write(samples: Samples, grid: &SampleGrid) -> Result<Vec<u8>, EncodeError
 mod tests {
     use super::*;
     use crate::grid::{BBox, TileGrid};
-    use crate::raster::Raster;
     use crate::source::{BlockCache, OpenOptions, open_file};
 
     #[test]

@@ -91,11 +91,34 @@ pub fn encode(r: &Relief) -> Result<Vec<u8>, EncodeError> {
     super::png(&rgba, w, h, image::ExtendedColorType::Rgba8)
 }
 
+/// A grey shaded relief of heights on a square grid of `cell_m` (canopy
+/// height models and proxies): Horn's shade, brighter the higher
+/// (`shade · (0.3 + 0.7 · h / max_m)`), so crowns stand out from gaps; the
+/// outer samples are the margin of the shading, NaN is black. An 8-bit
+/// greyscale PNG of `(w − 2) × (h − 2)` pixels.
+pub fn grey(heights: &Raster<f32>, cell_m: f64, max_m: f32) -> Result<Vec<u8>, EncodeError> {
+    let (w, h) = (heights.width().saturating_sub(2), heights.height().saturating_sub(2));
+    let mut grey = Vec::with_capacity(w * h);
+    for y in 1..=h {
+        for x in 1..=w {
+            let (v, s) = (heights.get(x, y), shade(heights, x, y, (cell_m, cell_m)));
+            let level =
+                if v.is_nan() || s.is_nan() { 0.0 } else { 255.0 * s * (0.3 + 0.7 * (v / max_m).clamp(0.0, 1.0)) };
+            grey.push(level as u8);
+        }
+    }
+    super::png(&grey, w, h, image::ExtendedColorType::L8)
+}
+
 /// Lambertian shade in [0, 1] at `(x, y)` of `cem` from Horn's 3×3 gradient.
 fn shade(cem: &Raster<f32>, x: usize, y: usize, (dx, dy): (f64, f64)) -> f32 {
     let z = |i: usize, j: usize| f64::from(cem.get(i, j));
-    let gx = ((z(x + 1, y - 1) + 2.0 * z(x + 1, y) + z(x + 1, y + 1)) - (z(x - 1, y - 1) + 2.0 * z(x - 1, y) + z(x - 1, y + 1))) / (8.0 * dx);
-    let gy = ((z(x - 1, y + 1) + 2.0 * z(x, y + 1) + z(x + 1, y + 1)) - (z(x - 1, y - 1) + 2.0 * z(x, y - 1) + z(x + 1, y - 1))) / (8.0 * dy);
+    let gx = ((z(x + 1, y - 1) + 2.0 * z(x + 1, y) + z(x + 1, y + 1))
+        - (z(x - 1, y - 1) + 2.0 * z(x - 1, y) + z(x - 1, y + 1)))
+        / (8.0 * dx);
+    let gy = ((z(x - 1, y + 1) + 2.0 * z(x, y + 1) + z(x + 1, y + 1))
+        - (z(x - 1, y - 1) + 2.0 * z(x, y - 1) + z(x + 1, y - 1)))
+        / (8.0 * dy);
     // Light from azimuth 315°, altitude 45°: direction (−½, ½, √½) with y to the south.
     let (lx, ly, lz) = (-0.5, -0.5, std::f64::consts::FRAC_1_SQRT_2);
     let n = (gx * gx + gy * gy + 1.0).sqrt();

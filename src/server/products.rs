@@ -147,7 +147,8 @@ pub fn compute(region: &Region, product: &Product) -> Result<Computed, ProduceEr
 
 fn data(region: &Region, grid: &SampleGrid, layer: Layer, encoding: Encoding) -> Result<Computed, ProduceError> {
     let products = cem::compute(region, grid, &[layer])?;
-    let samples = products.samples(layer).ok_or_else(|| EncodeError(format!("layer {} was not computed", layer.name())))?;
+    let samples =
+        products.samples(layer).ok_or_else(|| EncodeError(format!("layer {} was not computed", layer.name())))?;
     if no_data(&samples) {
         return Ok(Computed { bytes: Vec::new(), stats: products.stats, encode: Duration::ZERO });
     }
@@ -184,7 +185,8 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
     let (dx, dy) = (grid.lon.step_deg(), grid.lat.step_deg());
     let mid_lat = grid.lat.coord_at((grid.height() as f64 - 1.0) / 2.0).to_radians();
     let spacing_m = (dx * mid_lat.cos() * crate::geo::METRES_PER_DEGREE, dy * crate::geo::METRES_PER_DEGREE);
-    let bytes = encode::relief::encode(&encode::relief::Relief { cem, surface: &surface, map: map.as_deref(), spacing_m })?;
+    let bytes =
+        encode::relief::encode(&encode::relief::Relief { cem, surface: &surface, map: map.as_deref(), spacing_m })?;
     Ok(Computed { bytes, stats: products.stats, encode: start.elapsed() })
 }
 
@@ -206,7 +208,12 @@ mod tests {
 
     #[test]
     fn keys_follow_the_world_wind_layout_under_the_version() {
-        let t = Product::Tile { layer: MapLayer::Data(Layer::Cem), id: TileId::new(9, 1939, 2704), halo: 0, encoding: Encoding::Data(Format::Bil16) };
+        let t = Product::Tile {
+            layer: MapLayer::Data(Layer::Cem),
+            id: TileId::new(9, 1939, 2704),
+            halo: 0,
+            encoding: Encoding::Data(Format::Bil16),
+        };
         assert_eq!(t.key("v1").as_deref(), Some("v1/cem/9/1939/1939_2704.bil"));
         let h = Product::Tile { layer: MapLayer::Relief, id: TileId::new(9, 1, 2), halo: 32, encoding: Encoding::Rgba };
         assert_eq!(h.key("v1").as_deref(), Some("v1/relief/9/1/1_2_h32.png"));

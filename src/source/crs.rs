@@ -26,6 +26,13 @@ pub enum CrsError {
     },
 }
 
+/// `"EPSG:26910"` (or `epsg:26910`) → 26910.
+pub fn parse_epsg(text: &str) -> Result<u32, String> {
+    let t = text.trim();
+    let code = t.strip_prefix("EPSG:").or_else(|| t.strip_prefix("epsg:"));
+    code.and_then(|c| c.parse().ok()).ok_or_else(|| format!("crs {t:?} is not of the form \"EPSG:code\""))
+}
+
 /// A source CRS: geographic (degrees) or projected (metres).
 pub struct Crs {
     epsg: u32,
@@ -71,6 +78,15 @@ impl Crs {
     /// True for latitude/longitude systems.
     pub fn is_geographic(&self) -> bool {
         matches!(self.kind, Kind::Geographic)
+    }
+
+    /// Metres per horizontal unit of a projected CRS (1 for metres, 0.3048
+    /// for feet); `None` for a geographic one.
+    pub fn metres_per_unit(&self) -> Option<f64> {
+        match &self.kind {
+            Kind::Geographic => None,
+            Kind::Projected { proj, .. } => Some(proj.to_meter()),
+        }
     }
 
     /// Projects `(lon, lat)` degrees into this CRS; `None` where the projection

@@ -18,9 +18,11 @@ pub mod crs;
 pub mod georaster;
 pub mod geotiff;
 pub mod hgt;
+pub mod las;
 pub mod memory;
 pub mod nodata;
 mod palette;
+pub mod proxy;
 pub mod pyramid;
 #[cfg(feature = "http")]
 pub mod link;

@@ -121,6 +121,7 @@ pub fn synthetic(dem: Raster<f32>, cover_percent: Option<Raster<f32>>, lon0: f64
         landcover,
         map: None,
         proxy: Arc::new(sylva::canopy::ProceduralProxy::new(Default::default())),
+        forests: Vec::new(),
         heights_16: sylva::encode::Quantization::PNG16_HEIGHTS,
         cache,
     }

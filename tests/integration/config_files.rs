@@ -62,6 +62,23 @@ fn bad_configs_name_the_file_and_the_problem() {
             "[dem]\npath = \"x.hgt\"\n[landcover]\nkind = \"classes\"\npath = \"c.tif\"\n",
             "[[landcover.classes]]",
         ),
+        ("proxy.toml", "[[forest]]\nname = \"pine\"\nproxy = \"pine.tif\"\n", "pine.tif: cannot open"),
+        ("lidar.toml", "[[forest]]\nname = \"pine\"\nlidar = [\"pine.laz\"]\n", "pine.laz: cannot open"),
+        (
+            "both.toml",
+            "[[forest]]\nname = \"pine\"\nproxy = \"p.tif\"\nlidar = [\"p.laz\"]\n",
+            "a proxy or lidar files, not both",
+        ),
+        (
+            "unknown_type.toml",
+            "[landcover]\nkind = \"map\"\nforest = \"oak\"\n[[forest]]\nname = \"pine\"\n",
+            "forest = \"oak\" names no [[forest]] type",
+        ),
+        (
+            "typed_water.toml",
+            "[landcover]\nkind = \"classes\"\npath = \"c.tif\"\n[[landcover.classes]]\nvalues = [1]\nsurface = \"water\"\nforest = \"pine\"\n[[forest]]\nname = \"pine\"\n",
+            "forest = \"pine\" on water classes",
+        ),
     ];
     for (name, text, needle) in cases {
         let path = dir.join(name);

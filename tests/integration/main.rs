@@ -5,6 +5,8 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod canopy; // LiDAR canopy proxies: CHM vs a published one, seams, tileability, bad input
+mod canopy_report; // the pictures of docs/canopy.md (ignored: writes files)
 mod cli; // the `sylva` binary: tile, build, info, errors that name the file
 mod clients; // GDAL's WMS driver and OWSLib against the server, values against build
 mod common; // shared helpers: data paths, regions, comparisons

@@ -34,23 +34,28 @@ fn build_around(region: &Region, centre: TileId) -> Products {
 fn check(region: &Region, level: u32, cases: usize, seed: u64) {
     let mut rng = Rng(seed);
     let b = region.bounds;
-    let n = region.tiles.samples() as usize;
     for _ in 0..cases {
         let lon = b.west + (b.east - b.west) * (0.3 + 0.4 * rng.below(1000) as f64 / 1000.0);
         let lat = b.south + (b.north - b.south) * (0.3 + 0.4 * rng.below(1000) as f64 / 1000.0);
         let centre = region.tiles.tile_containing(lon, lat, level);
-        let halo = [0usize, 1, 7, 32, 100][rng.below(5) as usize];
-        let build = build_around(region, centre);
-        let tile = cem::compute(region, &region.tiles.tile_samples(centre, halo), &Layer::ALL).expect("tile");
-        let window = Window::new((n - 1 - halo) as i64, (n - 1 - halo) as i64, n + 2 * halo, n + 2 * halo);
-        for layer in FLOAT_LAYERS {
-            let what = format!("{} tile {centre} halo {halo} layer {}", region.name, layer.name());
-            assert_same(float(&tile, layer), &float(&build, layer).crop(window, f32::NAN), &what);
-        }
-        let surface = build.surface.as_ref().expect("surface").crop(window, 0);
-        assert_eq!(tile.surface.as_ref(), Some(&surface), "{} tile {centre} surface", region.name);
-        assert!(float(&tile, Layer::Cover).data().iter().any(|&c| c > 0.0), "{}: pick tiles with forest", region.name);
+        check_tile(region, centre, [0usize, 1, 7, 32, 100][rng.below(5) as usize]);
     }
+}
+
+/// The tile `centre` with `halo` equals the same window of the build of the
+/// 3 × 3 tiles around it, in every layer; the tile has forest.
+pub fn check_tile(region: &Region, centre: TileId, halo: usize) {
+    let n = region.tiles.samples() as usize;
+    let build = build_around(region, centre);
+    let tile = cem::compute(region, &region.tiles.tile_samples(centre, halo), &Layer::ALL).expect("tile");
+    let window = Window::new((n - 1 - halo) as i64, (n - 1 - halo) as i64, n + 2 * halo, n + 2 * halo);
+    for layer in FLOAT_LAYERS {
+        let what = format!("{} tile {centre} halo {halo} layer {}", region.name, layer.name());
+        assert_same(float(&tile, layer), &float(&build, layer).crop(window, f32::NAN), &what);
+    }
+    let surface = build.surface.as_ref().expect("surface").crop(window, 0);
+    assert_eq!(tile.surface.as_ref(), Some(&surface), "{} tile {centre} surface", region.name);
+    assert!(float(&tile, Layer::Cover).data().iter().any(|&c| c > 0.0), "{}: pick tiles with forest", region.name);
 }
 
 #[test]
@@ -65,6 +70,14 @@ fn rmnp_tiles_equal_windows_of_a_build() {
     let rmnp = common::region("examples/rmnp.toml");
     check(&rmnp, 6, 1, 21);
     check(&rmnp, 9, 2, 22);
+}
+
+#[test]
+fn tiles_with_a_lidar_proxy_equal_windows_of_a_build() {
+    // Texels bilinear at 0.24 m spacing (level 15), mip levels blended at 1.9 m (level 12).
+    let nz = common::region("examples/nz_lidar.toml");
+    check(&nz, 15, 1, 31);
+    check(&nz, 12, 1, 32);
 }
 
 #[test]

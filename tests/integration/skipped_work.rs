@@ -50,3 +50,13 @@ fn only_the_stages_a_layer_needs_run() {
     assert_eq!(ran(&[Layer::Cem]), ["elevation", "landcover", "cover", "canopy", "combine"]);
     assert_eq!(ran(&[Layer::Max4]), ["elevation", "landcover", "cover", "canopy", "combine", "zones"]);
 }
+
+#[test]
+fn forest_types_add_no_canopy_work_where_there_is_no_forest() {
+    // Mt Hood's summit is rock and ice; the region has two forest types.
+    let hood = common::region("examples/mt_hood_forest_types.toml");
+    let tile = hood.tiles.tile_containing(-121.6960, 45.3736, 14);
+    let stats = cem::compute(&hood, &hood.tiles.tile_samples(tile, 16), &Layer::ALL).expect("tile").stats;
+    assert_eq!((stats.runs(Stage::Elevation), stats.runs(Stage::Landcover)), (1, 1));
+    assert_eq!((stats.runs(Stage::Cover), stats.runs(Stage::Canopy), stats.runs(Stage::Combine)), (0, 0, 0));
+}
