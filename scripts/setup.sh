@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Installs what Sylva needs on a fresh Debian machine: a C toolchain and
 # certificates for cargo, GDAL's command-line tools and OWSLib (the tests read
-# our GeoTIFFs and our WMS with them), and Rust through rustup when cargo is
-# missing.
+# our GeoTIFFs and our WMS with them), Mesa's software Vulkan for the
+# renderer, and Rust through rustup when cargo is missing.
 # Safe to run again: it installs only what is absent.
 set -euo pipefail
 sudo=""
@@ -12,6 +12,9 @@ command -v cc >/dev/null || need+=(gcc libc6-dev)
 command -v curl >/dev/null || need+=(curl ca-certificates)
 command -v gdalinfo >/dev/null || need+=(gdal-bin)
 /usr/bin/python3 -c 'import owslib' 2>/dev/null || need+=(python3-owslib)
+# The renderer's tests run wgpu on Mesa's software Vulkan (lavapipe) when
+# the machine has no GPU.
+[ -e /usr/share/vulkan/icd.d/lvp_icd.x86_64.json ] || need+=(mesa-vulkan-drivers libvulkan1)
 if [ ${#need[@]} -gt 0 ]; then
   $sudo apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}"
