@@ -12,7 +12,8 @@ mod clients; // GDAL's WMS driver and OWSLib against the server, values against 
 mod common; // shared helpers: data paths, regions, comparisons
 mod config_files; // every file in config/ parses and builds its region
 mod conservative; // acceleration bounds never below the surface, exhaustively
-mod extreme; // stiff and extreme inputs: huge ranges, cliffs, nodata, poles, sizes
+mod extreme;
+mod fly; // `sylva fly` in process and against a server; tiles over HTTP equal tiles in process // stiff and extreme inputs: huge ranges, cliffs, nodata, poles, sizes
 mod http; // a `sylva serve` process for tests, and an HTTP client
 mod real_data;
 mod render; // the GPU ray caster against the exact CPU reference // rmnp, mt_hood, storm_lake, nz_forest against their sources

@@ -1,0 +1,95 @@
+//! `sylva fly` as a user runs it, in process and against a `sylva serve`;
+//! tiles over HTTP equal tiles computed in process.
+
+use crate::common::{self, TempDir};
+use crate::http::Server;
+use std::sync::Arc;
+use sylva::client::http::HttpSource;
+use sylva::client::source::{RegionSource, TileSource};
+use sylva::grid::TileId;
+
+fn fly(args: &[&str], out: &std::path::Path) -> String {
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .arg("fly")
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .expect("run sylva fly");
+    assert!(output.status.success(), "sylva fly failed: {}", String::from_utf8_lossy(&output.stderr));
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+/// The rows of `stats.csv` as name → value maps.
+fn stats(out: &std::path::Path) -> Vec<std::collections::HashMap<String, String>> {
+    let text = std::fs::read_to_string(out.join("stats.csv")).expect("stats.csv");
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    lines.map(|l| header.iter().map(|h| h.to_string()).zip(l.split(',').map(str::to_string)).collect()).collect()
+}
+
+#[test]
+fn a_flight_over_the_demo_writes_frames_and_statistics() {
+    let dir = TempDir::new("fly-demo");
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    let summary = fly(&["--path", path.to_str().unwrap(), "--frames", "3", "--size", "96x64"], &dir.join("out"));
+    assert!(summary.contains("3 frames"), "{summary}");
+    let rows = stats(&dir.join("out"));
+    assert_eq!(rows.len(), 3);
+    for (k, row) in rows.iter().enumerate() {
+        let png = dir.join("out").join(format!("frame_{k:05}.png"));
+        let img = image::open(&png).expect("a PNG frame").to_rgba8();
+        assert_eq!(img.dimensions(), (96, 64));
+        let number = |c: &str| row[c].parse::<f64>().unwrap_or_else(|_| panic!("{c} = {:?}", row[c]));
+        assert!(number("tiles") >= 1.0 && number("ray_pixels") > 100.0, "{row:?}");
+        assert!(number("view_fetches_mean") > 0.0 && number("view_fetches_max") >= number("view_fetches_mean"));
+        assert!(!row["levels"].is_empty());
+        // Low over a valley: the ground fills the lower half of the frame.
+        let ground = img.pixels().skip(96 * 40).filter(|p| p.0[..3] != [158, 189, 224]).count();
+        assert!(ground > 96 * 20, "frame {k} shows the ground");
+    }
+}
+
+#[test]
+fn tiles_over_http_equal_tiles_in_process_and_a_flight_uses_them() {
+    let dir = TempDir::new("fly-http");
+    let server = Server::start(None, &dir.join("cache"));
+    let remote = HttpSource::connect(&server.base).expect("connect");
+    let local = RegionSource::new(Arc::new(common::demo()));
+    assert_eq!(remote.grid(), local.grid());
+    let id = local.grid().tile_containing(10.12, 46.37, 10);
+    let (a, b) = (remote.fetch(id, 8).unwrap().expect("data"), local.fetch(id, 8).unwrap().expect("data"));
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&a.cem), bits(&b.cem));
+    assert_eq!(bits(&a.dem), bits(&b.dem));
+    assert_eq!(a.surface, b.surface);
+    assert_eq!(a.colour, b.colour);
+    assert!(remote.bytes_fetched() > 4 * 529 * 529);
+    // Far from the region, no data: the server answers 404.
+    assert!(remote.fetch(TileId::new(10, 100, 100), 8).unwrap().is_none());
+
+    let path = common::repo().join("config/paths/demo_dive.toml");
+    fly(&["--server", &server.base, "--path", path.to_str().unwrap(), "--frames", "2", "--size", "64x48"], &dir.join("out"));
+    let rows = stats(&dir.join("out"));
+    assert!(rows.iter().map(|r| r["bytes_fetched"].parse::<u64>().unwrap()).sum::<u64>() > 0, "tiles came over HTTP");
+}
+
+#[test]
+fn bad_flight_input_is_explained() {
+    let dir = TempDir::new("fly-bad");
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "fov_deg = 60\n").unwrap();
+    let run = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_sylva")).arg("fly").args(args).output().expect("run")
+    };
+    let out_dir = dir.join("o");
+    let o = out_dir.to_str().unwrap();
+    let e = run(&["--path", bad.to_str().unwrap(), "--out", o]);
+    assert!(!e.status.success() && String::from_utf8_lossy(&e.stderr).contains("bad.toml"));
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--traversal", "linear:0"]);
+    assert!(String::from_utf8_lossy(&e.stderr).contains("linear:STEPS"));
+    let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--server", "http://127.0.0.1:9"]);
+    assert!(String::from_utf8_lossy(&e.stderr).contains("tiles.json"), "{}", String::from_utf8_lossy(&e.stderr));
+}
