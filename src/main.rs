@@ -214,6 +214,21 @@ enum Bench {
         #[arg(long, default_value_t = 10)]
         wrk_seconds: u32,
     },
+    /// The ray caster's error against run time: each traversal and shadow
+    /// setting on fixed views of the demo and rmnp, against the exact CPU
+    /// reference.
+    #[cfg(feature = "client")]
+    Raycast {
+        /// The real-data region.
+        #[arg(long, default_value = "config/examples/rmnp.toml")]
+        rmnp: PathBuf,
+        /// Image size, WxH.
+        #[arg(long, default_value = "1280x1024")]
+        size: String,
+        /// GPU tile cache budget, MiB.
+        #[arg(long, default_value_t = 1024)]
+        gpu_budget_mib: usize,
+    },
     /// Mixed load on one server for a while, printing resident memory.
     #[cfg(feature = "server")]
     Soak {
@@ -310,6 +325,17 @@ fn run(command: Command) -> Result<()> {
                 write_file(&path, &model.preview_png(&set, 3, 0)?)?;
             }
             println!("{}", model.report(&set));
+            Ok(())
+        }
+        #[cfg(feature = "client")]
+        Command::Bench { what: Bench::Raycast { rmnp, size, gpu_budget_mib } } => {
+            let size = parse_size(&size)?;
+            let gpu = sylva::client::render::gpu::Gpu::open()?;
+            let name = gpu.describe();
+            let mut renderer = sylva::client::render::Renderer::new(gpu, 513, 32, gpu_budget_mib << 20);
+            let views = sylva::bench::raycast::default_views(&rmnp);
+            let rows = sylva::bench::raycast::run(&views, size, &mut renderer).map_err(anyhow::Error::msg)?;
+            println!("{}", sylva::bench::raycast::report(&rows, size, &name));
             Ok(())
         }
         Command::Info { config } => {

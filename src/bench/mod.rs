@@ -4,6 +4,8 @@
 
 pub mod pipeline;
 pub mod quality;
+#[cfg(feature = "client")]
+pub mod raycast;
 #[cfg(feature = "server")]
 pub mod serve;
 

@@ -182,7 +182,7 @@ fn frame(source: &dyn TileSource, path: &CameraPath, renderer: &mut Renderer, st
 
 /// The frame's tiles, coarsening the error threshold until they fit the
 /// GPU cache.
-fn visible_tiles(
+pub fn visible_tiles(
     source: &dyn TileSource,
     store: &mut TileStore,
     camera: &super::camera::Camera,

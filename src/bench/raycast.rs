@@ -1,0 +1,174 @@
+//! `sylva bench raycast`: error against run time of the ray caster's knobs
+//! (dissertation Table 6.1 and Figure 6.16). Fixed views of the demo and of
+//! rmnp — a low flight and a grazing view to the horizon each — are
+//! rendered with the linear march at 30/50/70/90 steps and the exact
+//! traversal, each with 10/20/30 shadow steps, plus the exact traversal with
+//! the canopy fade (the default) and without sun. Each setting reports GPU
+//! time per frame, texture fetches per pixel, and its departure from the
+//! exact CPU reference (with 30 shadow steps): pixels missed, depth error,
+//! colour PSNR.
+//!
+//! The canopy fade is off except in its own row, so that every other row
+//! measures the traversal and shadows alone against the reference.
+
+use super::table;
+use crate::client::camera::Camera;
+use crate::client::fly::{self, FlyOptions};
+use crate::client::path::CameraPath;
+use crate::client::raycast::{Fade, Traversal};
+use crate::client::reference::{self, Image, Lighting};
+use crate::client::render::uniforms::FrameSettings;
+use crate::client::render::{Readback, Rendered, Renderer};
+use crate::client::source::RegionSource;
+use crate::client::store::TileStore;
+use crate::client::tile::TileData;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Shadow steps of the reference image.
+const REFERENCE_SHADOW_STEPS: u32 = 30;
+
+/// One fixed view: a region, a camera path and the time on it.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// A name for the tables.
+    pub name: String,
+    /// Region configuration (`None`: the demo).
+    pub config: Option<PathBuf>,
+    /// Camera path file.
+    pub path: PathBuf,
+    /// Time on the path, seconds.
+    pub t_s: f64,
+}
+
+/// One setting's measurements on one view.
+#[derive(Clone, Debug)]
+pub struct Row {
+    /// View name.
+    pub view: String,
+    /// Setting name, e.g. `linear 30 + 10`.
+    pub setting: String,
+    /// GPU (or, without timestamps, wall) time per frame, ms.
+    pub ms: f64,
+    /// Mean and 99th-percentile view-ray fetches per ray-cast pixel.
+    pub fetches: (f64, u32),
+    /// Mean shadow and shading fetches per ray-cast pixel.
+    pub shadow_fetches: f64,
+    /// Share of the reference's surface pixels missed, percent.
+    pub missed_pct: f64,
+    /// RMS relative depth error over pixels both hit.
+    pub depth_rms_rel: f64,
+    /// Colour PSNR over pixels both hit, dB.
+    pub psnr_db: f64,
+}
+
+/// The settings: name, traversal, shadow steps, sun on, canopy fade on.
+fn settings() -> Vec<(String, Traversal, u32, bool, bool)> {
+    let mut out = Vec::new();
+    for steps in [30, 50, 70, 90] {
+        for shadows in [10, 20, 30] {
+            out.push((format!("linear {steps} + {shadows}"), Traversal::Linear(steps), shadows, true, false));
+        }
+    }
+    for shadows in [10, 20, 30] {
+        out.push((format!("exact + {shadows}"), Traversal::Exact, shadows, true, false));
+    }
+    out.push(("exact + 10, canopy fade".into(), Traversal::Exact, 10, true, true));
+    out.push(("exact, no sun".into(), Traversal::Exact, 0, false, false));
+    out
+}
+
+/// The default views: a low flight and a grazing view over each region.
+pub fn default_views(rmnp: &Path) -> Vec<View> {
+    let paths = |name: &str| PathBuf::from("config/paths").join(name);
+    vec![
+        View { name: "demo valley".into(), config: None, path: paths("demo_valley.toml"), t_s: 12.0 },
+        View { name: "demo horizon".into(), config: None, path: paths("demo_horizon.toml"), t_s: 8.0 },
+        View { name: "rmnp valley".into(), config: Some(rmnp.to_path_buf()), path: paths("rmnp_valley.toml"), t_s: 10.0 },
+        View { name: "rmnp horizon".into(), config: Some(rmnp.to_path_buf()), path: paths("rmnp_horizon.toml"), t_s: 0.0 },
+    ]
+}
+
+/// Runs every setting on every view at `size`.
+pub fn run(views: &[View], size: (u32, u32), renderer: &mut Renderer) -> Result<Vec<Row>, String> {
+    let mut rows = Vec::new();
+    for view in views {
+        let region = crate::config::load(view.config.as_deref()).map_err(|e| e.to_string())?;
+        let source = RegionSource::new(Arc::new(region));
+        let path = CameraPath::load(&view.path).map_err(|e| e.to_string())?;
+        let camera = camera_at(&path, view.t_s, size);
+        let options = FlyOptions::default();
+        let mut store = TileStore::new(options.halo, usize::MAX, 2).map_err(|e| e.to_string())?;
+        let (tiles, _) = fly::visible_tiles(&source, &mut store, &camera, &options, renderer.cache_slots()).map_err(|e| e.to_string())?;
+        let tiles: Vec<TileData> = tiles.iter().map(|t| t.as_ref().clone()).collect();
+        let lighting = Lighting { sun_ecef: path.sun_ecef(), shadow_steps: REFERENCE_SHADOW_STEPS, fade: Fade::NONE };
+        let truth = reference::render(&camera, &tiles, &lighting);
+        for (name, traversal, shadows, sun, fade) in settings() {
+            let fade = if fade { default_fade(&camera) } else { Fade::NONE };
+            let frame = FrameSettings { traversal, shadow_steps: shadows, sun_ecef: path.sun_ecef().filter(|_| sun), fade };
+            let refs: Vec<&TileData> = tiles.iter().collect();
+            // A first frame uploads the tiles and warms the pipeline.
+            renderer.render(&camera, &refs, &frame, Readback::None).map_err(|e| e.to_string())?;
+            let out = renderer.render(&camera, &refs, &frame, Readback::All).map_err(|e| e.to_string())?;
+            rows.push(row(&view.name, &name, &out, &truth));
+        }
+    }
+    Ok(rows)
+}
+
+fn camera_at(path: &CameraPath, t_s: f64, size: (u32, u32)) -> Camera {
+    let k = path.at(t_s);
+    Camera::looking(crate::client::globe::Geodetic::new(k.lon, k.lat, k.height_m), k.heading_deg, k.pitch_deg, path.fov_deg, size)
+}
+
+/// The fade `sylva fly` uses.
+fn default_fade(camera: &Camera) -> Fade {
+    let (canopy_ref_m, lo_px, hi_px) = FlyOptions::default().fade;
+    Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px }
+}
+
+fn row(view: &str, setting: &str, out: &Rendered, truth: &Image) -> Row {
+    let d = reference::compare(&out.colour, &out.view_z_m, truth);
+    let mut rays: Vec<[u32; 2]> = out.fetches.iter().copied().filter(|f| f[0] > 0).collect();
+    let n = rays.len().max(1) as f64;
+    rays.sort_by_key(|f| f[0]);
+    let p99 = rays.get(rays.len() * 99 / 100).map_or(0, |f| f[0]);
+    let hits = truth.view_z_m.iter().filter(|&&z| z > 0.0).count().max(1);
+    Row {
+        view: view.into(),
+        setting: setting.into(),
+        ms: out.stats.gpu_ms.unwrap_or(out.stats.wall_ms),
+        fetches: (rays.iter().map(|f| f[0] as f64).sum::<f64>() / n, p99),
+        shadow_fetches: rays.iter().map(|f| f[1] as f64).sum::<f64>() / n,
+        missed_pct: 100.0 * d.misses as f64 / hits as f64,
+        depth_rms_rel: d.depth_rms_rel,
+        psnr_db: d.psnr_db,
+    }
+}
+
+/// The table of one run.
+pub fn report(rows: &[Row], size: (u32, u32), gpu: &str) -> String {
+    let header = ["view", "setting", "ms/frame", "fetches mean", "fetches p99", "shadow fetches", "% missed", "depth RMS rel", "PSNR dB"];
+    let cells: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            vec![
+                r.view.clone(),
+                r.setting.clone(),
+                format!("{:.1}", r.ms),
+                format!("{:.1}", r.fetches.0),
+                r.fetches.1.to_string(),
+                format!("{:.1}", r.shadow_fetches),
+                format!("{:.3}", r.missed_pct),
+                format!("{:.1e}", r.depth_rms_rel),
+                if r.psnr_db.is_finite() { format!("{:.1}", r.psnr_db) } else { "∞".into() },
+            ]
+        })
+        .collect();
+    format!(
+        "sylva bench raycast — {}×{} on {gpu}; reference: exact CPU ray caster with {REFERENCE_SHADOW_STEPS} shadow steps\n{}",
+        size.0,
+        size.1,
+        table(&header, &cells)
+    )
+}
