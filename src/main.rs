@@ -1,6 +1,6 @@
 //! The `sylva` command line: parses arguments, calls the library, writes
 //! files, and maps errors to messages and exit codes (1: bad input or data,
-//! 2: bad usage, from clap).
+//! 2: bad usage, from clap; 3: a seed finished with failed tiles).
 
 use anyhow::{Context, Result, bail};
 
@@ -89,10 +89,13 @@ enum Command {
         /// Address to listen on (default: `[server] bind`).
         #[arg(long)]
         bind: Option<String>,
-        /// Tile cache directory (default: `[server] cache_dir`).
+        /// Tile cache directory (default: `[tile_cache]`).
         #[arg(long)]
         cache_dir: Option<PathBuf>,
     },
+    /// Pregenerate tiles into the tile cache (resumable, parallel, sharded).
+    #[cfg(feature = "server")]
+    Seed(Box<SeedArgs>),
     /// Print benchmark tables.
     Bench {
         #[command(subcommand)]
@@ -104,6 +107,73 @@ enum Command {
         #[arg(long)]
         config: Option<PathBuf>,
     },
+}
+
+/// `sylva seed`.
+#[cfg(feature = "server")]
+#[derive(clap::Args)]
+struct SeedArgs {
+    /// Region and tile cache configuration (default: the embedded demo region).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Tile cache directory (default: `[tile_cache]`).
+    #[arg(long)]
+    cache_dir: Option<PathBuf>,
+    /// Layers, comma-separated: dem, cover, canopy, cem, surface, max4, max32.
+    #[arg(long, default_value = "cem")]
+    layers: String,
+    /// Formats, comma-separated: bil16 (.bil), bil32, png16 (.png), tiff (.tif).
+    #[arg(long, default_value = "bil16")]
+    formats: String,
+    /// Levels, FROM-TO or one level.
+    #[arg(long)]
+    levels: Option<String>,
+    /// W,S,E,N in degrees (default: the region's bounds).
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "coverage")]
+    bbox: Option<String>,
+    /// GeoJSON Polygons or MultiPolygons (holes allowed) instead of a box.
+    #[arg(long)]
+    coverage: Option<PathBuf>,
+    /// Seed the tiles listed in FILE (layer/level/row/col per line), e.g. a failed-tiles file.
+    #[arg(long, conflicts_with_all = ["levels", "bbox", "coverage", "resume"])]
+    tiles_from: Option<PathBuf>,
+    /// Print the tiles per level and stop.
+    #[arg(long)]
+    dry_run: bool,
+    /// Worker threads (0 = one per core).
+    #[arg(long, default_value_t = 0)]
+    concurrency: usize,
+    /// Continue the job recorded in the progress file.
+    #[arg(long)]
+    resume: bool,
+    /// Progress file (default: seed-progress.json, seed-progress-I-of-N.json with --shard).
+    #[arg(long)]
+    progress_file: Option<PathBuf>,
+    /// Failed-tiles file (default: seed-failed.txt, seed-failed-I-of-N.txt with --shard).
+    #[arg(long)]
+    failed_file: Option<PathBuf>,
+    /// Remake tiles written before DATE (2026-12-01 or 2026-12-01T12:00:00Z);
+    /// default: before this job started.
+    #[arg(long, conflicts_with = "skip_existing")]
+    refresh_before: Option<String>,
+    /// Keep every valid tile already in the cache.
+    #[arg(long)]
+    skip_existing: bool,
+    /// Retries of a failing tile before it is listed as failed.
+    #[arg(long, default_value_t = 2)]
+    retries: u32,
+    /// Stop (non-zero exit) after more than N failed tile files.
+    #[arg(long, default_value_t = 1000)]
+    max_failures: u64,
+    /// Seed part I (0-based) of N disjoint parts.
+    #[arg(long)]
+    shard: Option<String>,
+    /// Compute every tile rather than building parents from their children.
+    #[arg(long)]
+    no_from_children: bool,
+    /// Plain log lines instead of a progress bar, or nothing.
+    #[arg(long, value_parser = ["auto", "plain", "quiet"], default_value = "auto")]
+    progress: String,
 }
 
 #[derive(Subcommand)]
@@ -191,13 +261,16 @@ fn run(command: Command) -> Result<()> {
         }
         #[cfg(feature = "server")]
         Command::Serve { config, bind, cache_dir } => serve(config, sylva::server::ServeOptions { bind, cache_dir }),
+        #[cfg(feature = "server")]
+        Command::Seed(args) => seed(*args),
         Command::Bench { what: Bench::Pipeline { rmnp, labels, build_side } } => {
             println!("{}", sylva::bench::pipeline_report(&rmnp, &labels, build_side)?);
             Ok(())
         }
         #[cfg(feature = "server")]
         Command::Bench { what: Bench::Serve { configs, mapserver, mapproxy, n, uncached, wrk_seconds } } => {
-            let configs: [PathBuf; 3] = configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
+            let configs: [PathBuf; 3] =
+                configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
             let bench = sylva::bench::serve::ServeBench { configs, mapserver, mapproxy, n, uncached, wrk_seconds };
             println!("{}", sylva::bench::serve::report(&bench)?);
             Ok(())
@@ -218,7 +291,8 @@ fn run(command: Command) -> Result<()> {
 /// `SYLVA_LOG_FORMAT=json`), then serves until SIGTERM.
 #[cfg(feature = "server")]
 fn serve(config: Option<PathBuf>, options: sylva::server::ServeOptions) -> Result<()> {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info,tower_http=warn".into());
+    let filter =
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info,tower_http=warn".into());
     let logs = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
     if std::env::var("SYLVA_LOG_FORMAT").is_ok_and(|f| f.eq_ignore_ascii_case("json")) {
         logs.json().init();
@@ -227,6 +301,45 @@ fn serve(config: Option<PathBuf>, options: sylva::server::ServeOptions) -> Resul
     }
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     runtime.block_on(sylva::server::serve(config.as_deref(), options))
+}
+
+/// Runs a seed; a run with failed tiles exits with status 3.
+#[cfg(feature = "server")]
+fn seed(a: SeedArgs) -> Result<()> {
+    use sylva::seed::display::Mode;
+    let display = match a.progress.as_str() {
+        "plain" => Mode::Plain,
+        "quiet" => Mode::Quiet,
+        _ => Mode::Auto,
+    };
+    let options = sylva::seed::SeedOptions {
+        config: a.config,
+        cache_dir: a.cache_dir,
+        layers: a.layers,
+        formats: a.formats,
+        levels: a.levels,
+        bbox: a.bbox,
+        coverage: a.coverage,
+        tiles_from: a.tiles_from,
+        dry_run: a.dry_run,
+        concurrency: a.concurrency,
+        resume: a.resume,
+        progress_file: a.progress_file,
+        failed_file: a.failed_file,
+        refresh_before: a.refresh_before,
+        skip_existing: a.skip_existing,
+        retries: a.retries,
+        max_failures: a.max_failures,
+        shard: a.shard,
+        from_children: !a.no_from_children,
+        display,
+    };
+    let report = sylva::seed::run(&options, &sylva::seed::Counters::default())?;
+    println!("{}", report.text);
+    if report.failed > 0 {
+        std::process::exit(3);
+    }
+    Ok(())
 }
 
 fn parse_layer(text: &str) -> Result<Layer> {

@@ -45,10 +45,17 @@ pub enum ConfigError {
 
 /// Loads the region of a configuration file, or the demo region without one.
 pub fn load(path: Option<&Path>) -> Result<Region, ConfigError> {
-    let Some(path) = path else {
-        return region_from(&Config::default(), Path::new("."), Path::new("<built-in defaults>"));
+    load_with_config(path).map(|(_, region)| region)
+}
+
+/// Loads a configuration file (or the defaults without one) and its region.
+pub fn load_with_config(path: Option<&Path>) -> Result<(Config, Region), ConfigError> {
+    let (config, base, label) = match path {
+        Some(path) => (parse_file(path)?, path.parent().unwrap_or(Path::new(".")), path),
+        None => (Config::default(), Path::new("."), Path::new("<built-in defaults>")),
     };
-    region_from(&parse_file(path)?, path.parent().unwrap_or(Path::new(".")), path)
+    let region = region_from(&config, base, label)?;
+    Ok((config, region))
 }
 
 /// Reads and parses a configuration file (stage one only).
@@ -127,12 +134,15 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
 /// A key that changes with anything that changes a tile's bytes: every
 /// setting, the size and time of every source file, and Sylva's version.
 fn version_key(config: &Config, base: &Path) -> String {
-    let mut text = toml::to_string(config).unwrap_or_default();
+    // Only what changes a tile's bytes: not where tiles are kept or served.
+    let bytes_only = Config { server: Default::default(), tile_cache: Default::default(), ..config.clone() };
+    let mut text = toml::to_string(&bytes_only).unwrap_or_default();
     text.push_str(env!("CARGO_PKG_VERSION"));
     let files = [config.dem.path.as_ref(), config.landcover.as_ref().and_then(|l| l.path.as_ref())];
     for path in files.into_iter().flatten() {
         let meta = std::fs::metadata(base.join(path)).ok();
-        let stamp = meta.map(|m| (m.len(), m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())));
+        let stamp =
+            meta.map(|m| (m.len(), m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())));
         text.push_str(&format!("{path:?}{stamp:?}"));
     }
     format!("v{:016x}", crate::cache::digest(text.as_bytes()))
@@ -140,13 +150,21 @@ fn version_key(config: &Config, base: &Path) -> String {
 
 /// An upstream server as a source.
 #[cfg(feature = "http")]
-fn upstream(up: &UpstreamConfig, cache: &Arc<BlockCache>, _invalid: &dyn Fn(String) -> ConfigError) -> Result<GeoRaster, ConfigError> {
+fn upstream(
+    up: &UpstreamConfig,
+    cache: &Arc<BlockCache>,
+    _invalid: &dyn Fn(String) -> ConfigError,
+) -> Result<GeoRaster, ConfigError> {
     Ok(source::remote::open(up, cache)?)
 }
 
 /// Without the `http` feature there is no client to reach an upstream.
 #[cfg(not(feature = "http"))]
-fn upstream(up: &UpstreamConfig, _: &Arc<BlockCache>, invalid: &dyn Fn(String) -> ConfigError) -> Result<GeoRaster, ConfigError> {
+fn upstream(
+    up: &UpstreamConfig,
+    _: &Arc<BlockCache>,
+    invalid: &dyn Fn(String) -> ConfigError,
+) -> Result<GeoRaster, ConfigError> {
     Err(invalid(format!("upstream {} needs Sylva built with the `http` feature", up.url)))
 }
 
@@ -192,7 +210,8 @@ fn landcover(
             input.source().name().display()
         )));
     }
-    let map = (lc.kind == LandcoverKind::Map).then(|| GeoRaster::new(input.clone(), georef.clone(), &[Reducer::Mean], cache));
+    let map =
+        (lc.kind == LandcoverKind::Map).then(|| GeoRaster::new(input.clone(), georef.clone(), &[Reducer::Mean], cache));
     Ok((derived(input, georef, rule, cache), map))
 }
 
