@@ -2,7 +2,8 @@
 # Installs what Sylva needs on a fresh Debian machine: a C toolchain and
 # certificates for cargo, GDAL's command-line tools and OWSLib (the tests read
 # our GeoTIFFs and our WMS with them), and Rust through rustup when cargo is
-# missing.
+# missing, and redis-server (the tests start one for the shared Redis tile
+# cache).
 # Safe to run again: it installs only what is absent.
 set -euo pipefail
 sudo=""
@@ -12,6 +13,7 @@ command -v cc >/dev/null || need+=(gcc libc6-dev)
 command -v curl >/dev/null || need+=(curl ca-certificates)
 command -v gdalinfo >/dev/null || need+=(gdal-bin)
 /usr/bin/python3 -c 'import owslib' 2>/dev/null || need+=(python3-owslib)
+command -v redis-server >/dev/null || need+=(redis-server)
 if [ ${#need[@]} -gt 0 ]; then
   $sudo apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}"

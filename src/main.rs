@@ -214,6 +214,23 @@ enum Bench {
         #[arg(long, default_value_t = 10)]
         wrk_seconds: u32,
     },
+    /// Seeding speed (1 and 2 workers, parents from children or not) and
+    /// memory over a ~100,000-tile job.
+    #[cfg(feature = "server")]
+    Seed {
+        /// The region.
+        #[arg(long, default_value = "config/examples/rmnp.toml")]
+        config: PathBuf,
+        /// Levels of the speed runs.
+        #[arg(long, default_value = "0-12")]
+        levels: String,
+        /// Levels of the memory run.
+        #[arg(long, default_value = "5-12")]
+        memory_levels: String,
+        /// mapproxy-seed's tiles per second in this sitting (benches/seed.sh), for the ratio.
+        #[arg(long)]
+        mapproxy_rate: Option<f64>,
+    },
     /// Mixed load on one server for a while, printing resident memory.
     #[cfg(feature = "server")]
     Soak {
@@ -273,6 +290,12 @@ fn run(command: Command) -> Result<()> {
                 configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
             let bench = sylva::bench::serve::ServeBench { configs, mapserver, mapproxy, n, uncached, wrk_seconds };
             println!("{}", sylva::bench::serve::report(&bench)?);
+            Ok(())
+        }
+        #[cfg(feature = "server")]
+        Command::Bench { what: Bench::Seed { config, levels, memory_levels, mapproxy_rate } } => {
+            let bench = sylva::bench::seed::SeedBench { config, levels, mapproxy_rate, memory_levels };
+            println!("{}", sylva::bench::seed::report(&bench)?);
             Ok(())
         }
         #[cfg(feature = "server")]

@@ -5,6 +5,8 @@
 pub mod pipeline;
 pub mod quality;
 #[cfg(feature = "server")]
+pub mod seed;
+#[cfg(feature = "server")]
 pub mod serve;
 
 use std::time::Duration;
