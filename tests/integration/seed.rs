@@ -133,8 +133,12 @@ fn seeded_tiles_are_cache_hits_identical_to_on_demand_tiles() {
         "6-9",
     ];
     let (_, files) = dry_total(&ok(&seed(&dir.0, &[&args[..], &["--dry-run"]].concat())));
-    let summary = ok(&seed(&dir.0, &args));
+    let run = seed(&dir.0, &args);
+    let summary = ok(&run);
     assert!(count(&summary, "from their children") > 0, "{summary}");
+    // Off a terminal, progress is plain log lines with the rate and the ETA.
+    let log = String::from_utf8_lossy(&run.stderr);
+    assert!(log.lines().any(|l| l.starts_with("seed: ") && l.contains("tiles/s, ETA")), "{log}");
     let seeded = tiles(&cache);
     assert_eq!(seeded.len() as u64, files);
     // Byte-identical to what the server computes on demand (parents built
