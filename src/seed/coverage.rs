@@ -204,7 +204,10 @@ mod tests {
     use proptest::prelude::*;
 
     fn square_with_hole() -> Coverage {
-        let path = std::env::temp_dir().join(format!("sylva-coverage-{}.geojson", std::process::id()));
+        // A name per call: the tests run in parallel.
+        static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let n = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let path = std::env::temp_dir().join(format!("sylva-coverage-{}-{n}.geojson", std::process::id()));
         std::fs::write(
             &path,
             r#"{"type":"FeatureCollection","features":[{"type":"Feature","properties":{},"geometry":{"type":"Polygon","coordinates":[

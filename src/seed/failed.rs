@@ -5,7 +5,7 @@
 
 use super::progress::parse_tile;
 use crate::cem::Layer;
-use crate::grid::TileId;
+use crate::grid::{TileGrid, TileId};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -25,8 +25,8 @@ pub struct ListError {
     pub message: String,
 }
 
-/// Reads a tile list.
-pub fn read(path: &Path) -> Result<Vec<Entry>, ListError> {
+/// Reads a tile list; every tile must exist in `tiles`.
+pub fn read(path: &Path, tiles: &TileGrid) -> Result<Vec<Entry>, ListError> {
     let fail = |line: usize, message: String| ListError { path: path.to_path_buf(), line, message };
     let text = std::fs::read_to_string(path).map_err(|e| fail(0, format!("cannot read: {e}")))?;
     let mut out = Vec::new();
@@ -38,6 +38,7 @@ pub fn read(path: &Path) -> Result<Vec<Entry>, ListError> {
         let parsed = entry.split_once('/').and_then(|(layer, tile)| Some((Layer::parse(layer)?, parse_tile(tile)?)));
         let e = parsed
             .ok_or_else(|| fail(i + 1, format!("{entry:?}: expected layer/level/row/col, e.g. cem/12/2254/3108")))?;
+        tiles.check(e.1).map_err(|why| fail(i + 1, why.to_string()))?;
         out.push(e);
     }
     Ok(out)
@@ -82,10 +83,16 @@ mod tests {
         let f = Failed::open(&path, false).unwrap();
         f.record((Layer::Cem, TileId::new(12, 3, 4)), "upstream: 500\nInternal").unwrap();
         f.record((Layer::Dem, TileId::new(5, 1, 2)), "x").unwrap();
-        assert_eq!(read(&path).unwrap(), vec![(Layer::Cem, TileId::new(12, 3, 4)), (Layer::Dem, TileId::new(5, 1, 2))]);
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        assert_eq!(
+            read(&path, &grid).unwrap(),
+            vec![(Layer::Cem, TileId::new(12, 3, 4)), (Layer::Dem, TileId::new(5, 1, 2))]
+        );
         std::fs::write(&path, "# a comment\n\ncem/1/2/3\ntrees/1/2/3\n").unwrap();
-        let err = read(&path).unwrap_err().to_string();
+        let err = read(&path, &grid).unwrap_err().to_string();
         assert!(err.contains(":4:") && err.contains("trees/1/2/3"), "{err}");
+        std::fs::write(&path, "cem/1/99/3\n").unwrap();
+        assert!(read(&path, &grid).unwrap_err().to_string().contains(":1: tile 1/99/3 does not exist"));
         std::fs::remove_file(&path).unwrap();
     }
 }

@@ -98,17 +98,14 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     }
     let store = crate::cache::open(&job.config.tile_cache.backend(options.cache_dir.as_deref()))?;
     let (progress_path, failed_path) = &job.files;
-    let io = |path: &std::path::Path| {
-        let path = path.to_path_buf();
-        move |source| SeedError::Io { path, source }
-    };
     // A list is read before the failed-tiles file (perhaps the same) is emptied.
-    let list = options.tiles_from.as_deref().map(failed::read).transpose()?;
+    let list = options.tiles_from.as_deref().map(|p| failed::read(p, &job.region.tiles)).transpose()?;
     let progress = match options.resume && list.is_none() {
         true => Progress::resume(progress_path, &job.fingerprint)?,
         false => Progress::start(progress_path, &job.fingerprint),
     };
-    let failed = failed::Failed::open(failed_path, options.resume).map_err(io(failed_path))?;
+    let failed = failed::Failed::open(failed_path, options.resume)
+        .map_err(|source| SeedError::Io { path: failed_path.clone(), source })?;
     let threads =
         rayon::ThreadPoolBuilder::new().num_threads(options.concurrency).thread_name(|i| format!("sylva-seed-{i}"));
     let pool = threads.build().map_err(|e| SeedError::Usage(format!("--concurrency {}: {e}", options.concurrency)))?;
@@ -126,7 +123,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
         warned: Mutex::new(false),
     };
     match list {
-        Some(entries) => pool.install(|| run.list(&entries))?,
+        Some(entries) => pool.install(|| run.list(&entries)),
         None => pool.install(|| run.walk(job.walk.as_ref()))?,
     }
     let n = counters.failed.load(Ordering::Relaxed);
@@ -236,15 +233,7 @@ impl Run<'_> {
     }
 
     /// Seeds the tiles of a list, each layer with its own seeder.
-    fn list(&self, entries: &[failed::Entry]) -> Result<(), SeedError> {
-        for &(_, tile) in entries {
-            self.job.region.tiles.check(tile).map_err(|e| {
-                SeedError::Usage(format!(
-                    "{}: {e}",
-                    self.options.tiles_from.as_ref().map_or(String::new(), |p| p.display().to_string())
-                ))
-            })?;
-        }
+    fn list(&self, entries: &[failed::Entry]) {
         let display =
             display::Display::new(self.options.display, entries.len() as u64 * self.job.formats.len() as u64, 0);
         let mut layers: Vec<_> = entries.iter().map(|e| e.0).collect();
@@ -261,7 +250,6 @@ impl Run<'_> {
             });
         }
         display.finish(self.counters.failed.load(Ordering::Relaxed));
-        Ok(())
     }
 
     fn record(&self, failures: Vec<(failed::Entry, String)>) {
