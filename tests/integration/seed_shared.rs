@@ -105,6 +105,12 @@ fn files(prefix: &str) -> Vec<String> {
     vec!["--progress-file".into(), format!("{prefix}.json"), "--failed-file".into(), format!("{prefix}.txt")]
 }
 
+/// One of two seeders on the same job: it keeps what the other finished
+/// (whenever it started); what the other is making, it waits for.
+fn twin(prefix: &str) -> Vec<String> {
+    [files(prefix), vec!["--skip-existing".into()]].concat()
+}
+
 #[test]
 fn seeders_sharing_a_directory_cache_match_one_process() {
     let dir = TempDir::new("seed-dir-shared");
@@ -114,7 +120,7 @@ fn seeders_sharing_a_directory_cache_match_one_process() {
     let same: PathBuf = dir.join("same");
     let cache = |p: &Path| vec!["--cache-dir".to_string(), p.display().to_string()];
     let twins =
-        together(&dir.0, &job(&config), &[[cache(&same), files("a")].concat(), [cache(&same), files("b")].concat()]);
+        together(&dir.0, &job(&config), &[[cache(&same), twin("a")].concat(), [cache(&same), twin("b")].concat()]);
     assert_eq!(made(&twins), expected.len() as u64, "each tile made once by the two");
     assert!(tiles(&same) == expected, "two seeders on one job differ from one");
     // Four shards at once.
@@ -151,7 +157,7 @@ fn seeders_and_servers_sharing_redis_match_one_process() {
         &format!("[tile_cache]\nbackend = \"redis\"\nredis_url = \"{}\"\nlock_ttl_s = 5", redis.url),
     );
     // Two processes on the same job.
-    let twins = together(&dir.0, &job(&config), &[files("a"), files("b")]);
+    let twins = together(&dir.0, &job(&config), &[twin("a"), twin("b")]);
     assert_eq!(made(&twins), expected.len() as u64, "each tile made once by the two");
     assert_redis_holds(&redis, &expected);
     // Two server replicas answer the seeded tiles from Redis, computing none.
