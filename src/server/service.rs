@@ -103,7 +103,8 @@ impl TileService {
     /// The tile from the shared cache, or computed here if no other process
     /// is computing it (else waited for).
     async fn load(&self, key: String, product: Product) -> Result<Arc<Tile>, ServeError> {
-        for attempt in 0.. {
+        let mut attempt = 0;
+        loop {
             let (store, k, ttl, upstream_ttl) =
                 (self.store.clone(), key.clone(), self.lock_ttl, self.region.upstream_ttl);
             let claim = tokio::task::spawn_blocking(move || {
@@ -117,20 +118,24 @@ impl TileService {
                     self.metrics.cache(CacheResult::Hit);
                     return Ok(Arc::new(Tile::new(stored.bytes, "cache;desc=\"disk\"".into())));
                 }
-                Claim::Busy => tokio::time::sleep(flight::pause(attempt)).await,
+                Claim::Busy => {
+                    tokio::time::sleep(flight::pause(attempt)).await;
+                    attempt += 1;
+                }
                 Claim::Compute { lock, found } => {
                     let result = self.fill(&key, product, found).await;
                     let store = self.store.clone();
-                    match tokio::task::spawn_blocking(move || store.unlock(&lock)).await {
-                        Ok(Ok(())) => {}
-                        Ok(Err(e)) => tracing::warn!(error = %e, "tile lock not released; it expires"),
-                        Err(e) => tracing::warn!(error = %e, "tile lock not released; it expires"),
+                    let unlocked = tokio::task::spawn_blocking(move || store.unlock(&lock).map_err(|e| e.to_string()))
+                        .await
+                        .map_err(|e| e.to_string())
+                        .and_then(|r| r);
+                    if let Err(e) = unlocked {
+                        tracing::warn!(error = %e, "tile lock not released; it expires");
                     }
                     return result;
                 }
             }
         }
-        Err(ServeError::Internal("tile cache lock wait ended".into()))
     }
 
     /// Computes and stores a tile this process holds the lock of; `found` is
