@@ -138,8 +138,10 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
 }
 
 /// Cache entries written up to this long before a job started count as the
-/// job's own (file times are kept at the kernel's coarse clock).
-const CLOCK_SLACK: Duration = Duration::from_secs(2);
+/// job's own: file times come from the kernel's coarse clock, up to one tick
+/// (1–10 ms) behind the clock the job's start is read from, and Redis and
+/// the progress file keep milliseconds.
+const CLOCK_SLACK: Duration = Duration::from_millis(50);
 
 /// True if `every` has passed since `last` (then `last` becomes now).
 fn due(last: &Mutex<Instant>, every: Duration) -> bool {

@@ -395,3 +395,33 @@ fn failing_tiles_are_retried_listed_and_rerun_and_uniform_tiles_are_stored_once(
     let sea = &repaired[&links[0].strip_prefix(&cache).unwrap().to_string_lossy().into_owned()];
     assert!(sea.chunks_exact(2).all(|c| c == [0, 0]), "a sea tile is 0 m everywhere");
 }
+
+#[test]
+fn existing_tiles_are_remade_or_kept_as_asked() {
+    let dir = TempDir::new("seed-refresh");
+    let config = rmnp_config(&dir, "rmnp.toml", "");
+    let cache = dir.join("cache");
+    let job = [
+        "--config",
+        config.to_str().unwrap(),
+        "--cache-dir",
+        cache.to_str().unwrap(),
+        "--layers",
+        "dem",
+        "--levels",
+        "6-7",
+    ];
+    let run = |extra: &[&str]| {
+        // Entries up to 50 ms older than a job count as its own (coarse file times).
+        std::thread::sleep(Duration::from_millis(100));
+        let summary = ok(&seed(&dir.0, &[&job[..], extra].concat()));
+        (count(&summary, "tile files made"), count(&summary, "already there"))
+    };
+    let (n, _) = run(&[]);
+    assert!(n > 0);
+    // By default a job remakes what was there before it started.
+    assert_eq!(run(&[]), (n, 0));
+    assert_eq!(run(&["--skip-existing"]), (0, n));
+    assert_eq!(run(&["--refresh-before", "2000-01-01"]), (0, n));
+    assert_eq!(run(&["--refresh-before", "2999-01-01T00:00:00Z"]), (n, 0));
+}
