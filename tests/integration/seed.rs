@@ -105,6 +105,19 @@ pub fn rmnp_config(dir: &TempDir, name: &str, extra: &str) -> PathBuf {
     path
 }
 
+/// Seed arguments: `config`, `cache`, `layers` at `levels`, then `extra`.
+pub fn job_args(config: &Path, cache: &Path, layers: &str, levels: &str, extra: &[&str]) -> Vec<String> {
+    let head =
+        ["--config", &config.display().to_string(), "--cache-dir", &cache.display().to_string()].map(String::from);
+    let tail = ["--layers", layers, "--levels", levels].into_iter().chain(extra.iter().copied()).map(String::from);
+    head.into_iter().chain(tail).collect()
+}
+
+/// `&str`s of owned arguments.
+pub fn strs(args: &[String]) -> Vec<&str> {
+    args.iter().map(String::as_str).collect()
+}
+
 /// The "all" row of a dry run: (tiles, files).
 fn dry_total(out: &str) -> (u64, u64) {
     let row = out
@@ -120,18 +133,8 @@ fn seeded_tiles_are_cache_hits_identical_to_on_demand_tiles() {
     let dir = TempDir::new("seed-hits");
     let config = rmnp_config(&dir, "rmnp.toml", "[tile_cache]\nlock_ttl_s = 2");
     let cache = dir.join("cache");
-    let args = [
-        "--config",
-        config.to_str().unwrap(),
-        "--cache-dir",
-        cache.to_str().unwrap(),
-        "--layers",
-        "dem,cem",
-        "--formats",
-        "bil16,png16",
-        "--levels",
-        "6-9",
-    ];
+    let owned = job_args(&config, &cache, "dem,cem", "6-9", &["--formats", "bil16,png16"]);
+    let args = strs(&owned);
     let (_, files) = dry_total(&ok(&seed(&dir.0, &[&args[..], &["--dry-run"]].concat())));
     let run = seed(&dir.0, &args);
     let summary = ok(&run);
@@ -401,16 +404,8 @@ fn existing_tiles_are_remade_or_kept_as_asked() {
     let dir = TempDir::new("seed-refresh");
     let config = rmnp_config(&dir, "rmnp.toml", "");
     let cache = dir.join("cache");
-    let job = [
-        "--config",
-        config.to_str().unwrap(),
-        "--cache-dir",
-        cache.to_str().unwrap(),
-        "--layers",
-        "dem",
-        "--levels",
-        "6-7",
-    ];
+    let owned = job_args(&config, &cache, "dem", "6-7", &[]);
+    let job = strs(&owned);
     let run = |extra: &[&str]| {
         // Entries up to 50 ms older than a job count as its own (coarse file times).
         std::thread::sleep(Duration::from_millis(100));
