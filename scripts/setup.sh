@@ -2,7 +2,8 @@
 # Installs what Sylva needs on a fresh Debian machine: a C toolchain and
 # certificates for cargo, GDAL's command-line tools and OWSLib (the tests read
 # our GeoTIFFs and our WMS with them), Mesa's software Vulkan for the
-# renderer, and Rust through rustup when cargo is missing.
+# renderer, redis-server (the tests start one for the shared Redis tile
+# cache), and Rust through rustup when cargo is missing.
 # Safe to run again: it installs only what is absent.
 set -euo pipefail
 sudo=""
@@ -15,6 +16,7 @@ command -v gdalinfo >/dev/null || need+=(gdal-bin)
 # The renderer's tests run wgpu on Mesa's software Vulkan (lavapipe) when
 # the machine has no GPU.
 [ -e /usr/share/vulkan/icd.d/lvp_icd.x86_64.json ] || need+=(mesa-vulkan-drivers libvulkan1)
+command -v redis-server >/dev/null || need+=(redis-server)
 if [ ${#need[@]} -gt 0 ]; then
   $sudo apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}"

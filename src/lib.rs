@@ -30,5 +30,7 @@ pub mod produce;
 pub mod raster;
 pub mod region;
 #[cfg(feature = "server")]
+pub mod seed;
+#[cfg(feature = "server")]
 pub mod server;
 pub mod source;

@@ -1,6 +1,6 @@
 //! The `sylva` command line: parses arguments, calls the library, writes
 //! files, and maps errors to messages and exit codes (1: bad input or data,
-//! 2: bad usage, from clap).
+//! 2: bad usage, from clap; 3: a seed finished with failed tiles).
 
 use anyhow::{Context, Result, bail};
 
@@ -89,7 +89,7 @@ enum Command {
         /// Address to listen on (default: `[server] bind`).
         #[arg(long)]
         bind: Option<String>,
-        /// Tile cache directory (default: `[server] cache_dir`).
+        /// Tile cache directory (default: `[tile_cache]`).
         #[arg(long)]
         cache_dir: Option<PathBuf>,
     },
@@ -133,6 +133,9 @@ enum Command {
         #[arg(long)]
         no_frames: bool,
     },
+    /// Pregenerate tiles into the tile cache (resumable, parallel, sharded).
+    #[cfg(feature = "server")]
+    Seed(Box<SeedArgs>),
     /// Print benchmark tables.
     Bench {
         #[command(subcommand)]
@@ -174,6 +177,73 @@ enum Command {
         #[arg(long)]
         config: Option<PathBuf>,
     },
+}
+
+/// `sylva seed`.
+#[cfg(feature = "server")]
+#[derive(clap::Args)]
+struct SeedArgs {
+    /// Region and tile cache configuration (default: the embedded demo region).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Tile cache directory (default: `[tile_cache]`).
+    #[arg(long)]
+    cache_dir: Option<PathBuf>,
+    /// Layers, comma-separated: dem, cover, canopy, cem, surface, max4, max32.
+    #[arg(long, default_value = "cem")]
+    layers: String,
+    /// Formats, comma-separated: bil16 (.bil), bil32, png16 (.png), tiff (.tif).
+    #[arg(long, default_value = "bil16")]
+    formats: String,
+    /// Levels, FROM-TO or one level.
+    #[arg(long)]
+    levels: Option<String>,
+    /// W,S,E,N in degrees (default: the region's bounds).
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "coverage")]
+    bbox: Option<String>,
+    /// GeoJSON Polygons or MultiPolygons (holes allowed) instead of a box.
+    #[arg(long)]
+    coverage: Option<PathBuf>,
+    /// Seed the tiles listed in FILE (layer/level/row/col per line), e.g. a failed-tiles file.
+    #[arg(long, conflicts_with_all = ["levels", "bbox", "coverage", "resume"])]
+    tiles_from: Option<PathBuf>,
+    /// Print the tiles per level and stop.
+    #[arg(long)]
+    dry_run: bool,
+    /// Worker threads (0 = one per core).
+    #[arg(long, default_value_t = 0)]
+    concurrency: usize,
+    /// Continue the job recorded in the progress file.
+    #[arg(long)]
+    resume: bool,
+    /// Progress file (default: seed-progress.json, seed-progress-I-of-N.json with --shard).
+    #[arg(long)]
+    progress_file: Option<PathBuf>,
+    /// Failed-tiles file (default: seed-failed.txt, seed-failed-I-of-N.txt with --shard).
+    #[arg(long)]
+    failed_file: Option<PathBuf>,
+    /// Remake tiles written before DATE (2026-12-01 or 2026-12-01T12:00:00Z);
+    /// default: before this job started.
+    #[arg(long, conflicts_with = "skip_existing")]
+    refresh_before: Option<String>,
+    /// Keep every valid tile already in the cache.
+    #[arg(long)]
+    skip_existing: bool,
+    /// Retries of a failing tile before it is listed as failed.
+    #[arg(long, default_value_t = 2)]
+    retries: u32,
+    /// Stop (non-zero exit) after more than N failed tile files.
+    #[arg(long, default_value_t = 1000)]
+    max_failures: u64,
+    /// Seed part I (0-based) of N disjoint parts.
+    #[arg(long)]
+    shard: Option<String>,
+    /// Compute every tile rather than building parents from their children.
+    #[arg(long)]
+    no_from_children: bool,
+    /// Plain log lines instead of a progress bar, or nothing.
+    #[arg(long, value_parser = ["auto", "plain", "quiet"], default_value = "auto")]
+    progress: String,
 }
 
 #[derive(Subcommand)]
@@ -229,6 +299,23 @@ enum Bench {
         #[arg(long, default_value_t = 1024)]
         gpu_budget_mib: usize,
     },
+    /// Seeding speed (1 and 2 workers, parents from children or not) and
+    /// memory over a ~100,000-tile job.
+    #[cfg(feature = "server")]
+    Seed {
+        /// The region.
+        #[arg(long, default_value = "config/examples/rmnp.toml")]
+        config: PathBuf,
+        /// Levels of the speed runs.
+        #[arg(long, default_value = "0-12")]
+        levels: String,
+        /// Levels of the memory run.
+        #[arg(long, default_value = "5-12")]
+        memory_levels: String,
+        /// mapproxy-seed's tiles per second in this sitting (benches/seed.sh), for the ratio.
+        #[arg(long)]
+        mapproxy_rate: Option<f64>,
+    },
     /// Mixed load on one server for a while, printing resident memory.
     #[cfg(feature = "server")]
     Soak {
@@ -276,6 +363,8 @@ fn run(command: Command) -> Result<()> {
         }
         #[cfg(feature = "server")]
         Command::Serve { config, bind, cache_dir } => serve(config, sylva::server::ServeOptions { bind, cache_dir }),
+        #[cfg(feature = "server")]
+        Command::Seed(args) => seed(*args),
         Command::Bench { what: Bench::Pipeline { rmnp, labels, build_side } } => {
             println!("{}", sylva::bench::pipeline_report(&rmnp, &labels, build_side)?);
             Ok(())
@@ -286,6 +375,12 @@ fn run(command: Command) -> Result<()> {
                 configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
             let bench = sylva::bench::serve::ServeBench { configs, mapserver, mapproxy, n, uncached, wrk_seconds };
             println!("{}", sylva::bench::serve::report(&bench)?);
+            Ok(())
+        }
+        #[cfg(feature = "server")]
+        Command::Bench { what: Bench::Seed { config, levels, memory_levels, mapproxy_rate } } => {
+            let bench = sylva::bench::seed::SeedBench { config, levels, mapproxy_rate, memory_levels };
+            println!("{}", sylva::bench::seed::report(&bench)?);
             Ok(())
         }
         #[cfg(feature = "server")]
@@ -369,6 +464,45 @@ fn parse_size(text: &str) -> Result<(u32, u32)> {
         Some((w, h)) if (1..=16384).contains(&w) && (1..=16384).contains(&h) => Ok((w, h)),
         _ => bail!("bad size {text:?}; expected WxH, e.g. 640x480"),
     }
+}
+
+/// Runs a seed; a run with failed tiles exits with status 3.
+#[cfg(feature = "server")]
+fn seed(a: SeedArgs) -> Result<()> {
+    use sylva::seed::display::Mode;
+    let display = match a.progress.as_str() {
+        "plain" => Mode::Plain,
+        "quiet" => Mode::Quiet,
+        _ => Mode::Auto,
+    };
+    let options = sylva::seed::SeedOptions {
+        config: a.config,
+        cache_dir: a.cache_dir,
+        layers: a.layers,
+        formats: a.formats,
+        levels: a.levels,
+        bbox: a.bbox,
+        coverage: a.coverage,
+        tiles_from: a.tiles_from,
+        dry_run: a.dry_run,
+        concurrency: a.concurrency,
+        resume: a.resume,
+        progress_file: a.progress_file,
+        failed_file: a.failed_file,
+        refresh_before: a.refresh_before,
+        skip_existing: a.skip_existing,
+        retries: a.retries,
+        max_failures: a.max_failures,
+        shard: a.shard,
+        from_children: !a.no_from_children,
+        display,
+    };
+    let report = sylva::seed::run(&options, &sylva::seed::Counters::default())?;
+    println!("{}", report.text);
+    if report.failed > 0 {
+        std::process::exit(3);
+    }
+    Ok(())
 }
 
 fn parse_layer(text: &str) -> Result<Layer> {

@@ -7,6 +7,8 @@ pub mod quality;
 #[cfg(feature = "client")]
 pub mod raycast;
 #[cfg(feature = "server")]
+pub mod seed;
+#[cfg(feature = "server")]
 pub mod serve;
 
 use std::time::Duration;

@@ -44,6 +44,13 @@ pub trait CanopyProxy: Send + Sync {
     /// grid's sample spacing.
     fn heights(&self, grid: &SampleGrid, wanted: &(dyn Fn(usize, usize) -> bool + Sync)) -> Raster<f32>;
 
+    /// True if the proxy is filtered the same way at both sample spacings
+    /// (metres), so a sample shared by grids of both has one value. The
+    /// default is the safe answer.
+    fn alike_at(&self, _spacing_a_m: f64, _spacing_b_m: f64) -> bool {
+        false
+    }
+
     /// The largest height the proxy can return (m).
     fn max_height_m(&self) -> f32;
 

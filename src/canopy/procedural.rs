@@ -317,6 +317,11 @@ impl CanopyProxy for ProceduralProxy {
         out
     }
 
+    fn alike_at(&self, spacing_a_m: f64, spacing_b_m: f64) -> bool {
+        // Crowns alone (blend 0) or the mean alone (blend 1) on both.
+        self.blend(spacing_a_m) == self.blend(spacing_b_m)
+    }
+
     fn max_height_m(&self) -> f32 {
         self.params.height_m
     }

@@ -112,6 +112,41 @@ impl Products {
     }
 }
 
+/// One layer's samples, owned.
+#[derive(Clone, Debug)]
+pub enum LayerSamples {
+    /// Continuous values, NaN = nodata.
+    Float(Raster<f32>),
+    /// Class ids.
+    Class(Raster<u8>),
+}
+
+impl LayerSamples {
+    /// The samples as the encoders take them.
+    pub fn view(&self) -> crate::encode::Samples<'_> {
+        match self {
+            LayerSamples::Float(r) => crate::encode::Samples::Float(r),
+            LayerSamples::Class(r) => crate::encode::Samples::Class(r),
+        }
+    }
+}
+
+impl Products {
+    /// Moves one layer's samples out, if computed.
+    pub fn take(&mut self, layer: Layer) -> Option<LayerSamples> {
+        use LayerSamples::{Class, Float};
+        match layer {
+            Layer::Dem => self.dem.take().map(Float),
+            Layer::Cover => self.cover.take().map(Float),
+            Layer::Canopy => self.canopy.take().map(Float),
+            Layer::Cem => self.cem.take().map(Float),
+            Layer::Surface => self.surface.take().map(Class),
+            Layer::Max4 => self.max4.take().map(Float),
+            Layer::Max32 => self.max32.take().map(Float),
+        }
+    }
+}
+
 /// Which stages the requested layers need.
 #[derive(Clone, Copy, Debug)]
 struct Needs {
@@ -141,6 +176,20 @@ impl Needs {
             far,
         }
     }
+}
+
+/// True if `layer` has one value at a sample that `fine` and `coarse` (two
+/// tile grids of nested lattices) share, so that a coarse tile equals its
+/// four children decimated, bit for bit: every stage the layer needs reads
+/// its sources alike on both grids. Neighbourhood layers (the safety zones,
+/// in samples) never qualify.
+pub fn alike_across(region: &Region, layer: Layer, fine: &SampleGrid, coarse: &SampleGrid) -> bool {
+    let need = Needs::of(&[layer]);
+    let metres = |g: &SampleGrid| g.lat.step_deg() * crate::geo::METRES_PER_DEGREE;
+    !(need.near || need.far)
+        && (!need.ground || region.dem.samples_alike(fine, coarse))
+        && (!need.cover || region.landcover.as_ref().is_none_or(|l| l.samples_alike(fine, coarse)))
+        && (!need.canopy || region.landcover.is_none() || region.proxy.alike_at(metres(fine), metres(coarse)))
 }
 
 /// Runs the pipeline for `layers` on `grid`.

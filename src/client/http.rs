@@ -17,9 +17,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// Retries and timeouts of tile requests. A tile is up to ~1.3 MB and is
 /// computed on demand: tens of ms warm, but the first tiles of a region
 /// wait for its sources to load, and a busy server answers 503 until its
-/// pool has room — so a minute per request, and four retries backing off
-/// from a quarter second (3.75 s in all).
-const SETTINGS: LinkSettings = LinkSettings { timeout_ms: 60_000, retries: 4, backoff_ms: 250, breaker_failures: 5, breaker_cooldown_s: 5.0 };
+/// pool has room — so a minute per request, and six retries backing off
+/// from a quarter second (16 s in all).
+const SETTINGS: LinkSettings = LinkSettings { timeout_ms: 60_000, retries: 6, backoff_ms: 250, breaker_failures: 5, breaker_cooldown_s: 5.0 };
 
 /// A tile server as a tile source.
 pub struct HttpSource {

@@ -48,10 +48,17 @@ pub enum ConfigError {
 
 /// Loads the region of a configuration file, or the demo region without one.
 pub fn load(path: Option<&Path>) -> Result<Region, ConfigError> {
-    let Some(path) = path else {
-        return region_from(&Config::default(), Path::new("."), Path::new("<built-in defaults>"));
+    load_with_config(path).map(|(_, region)| region)
+}
+
+/// Loads a configuration file (or the defaults without one) and its region.
+pub fn load_with_config(path: Option<&Path>) -> Result<(Config, Region), ConfigError> {
+    let (config, base, label) = match path {
+        Some(path) => (parse_file(path)?, path.parent().unwrap_or(Path::new(".")), path),
+        None => (Config::default(), Path::new("."), Path::new("<built-in defaults>")),
     };
-    region_from(&parse_file(path)?, path.parent().unwrap_or(Path::new(".")), path)
+    let region = region_from(&config, base, label)?;
+    Ok((config, region))
 }
 
 /// Reads and parses a configuration file (stage one only).
@@ -133,7 +140,9 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
 /// A key that changes with anything that changes a tile's bytes: every
 /// setting, the size and time of every source file, and Sylva's version.
 fn version_key(config: &Config, base: &Path) -> String {
-    let mut text = toml::to_string(config).unwrap_or_default();
+    // Only what changes a tile's bytes: not where tiles are kept or served.
+    let bytes_only = Config { server: Default::default(), tile_cache: Default::default(), ..config.clone() };
+    let mut text = toml::to_string(&bytes_only).unwrap_or_default();
     text.push_str(env!("CARGO_PKG_VERSION"));
     let files = [config.dem.path.as_ref(), config.landcover.as_ref().and_then(|l| l.path.as_ref())];
     let proxies = config.forest.iter().flat_map(|f| f.proxy.iter().chain(&f.lidar));

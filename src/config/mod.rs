@@ -8,7 +8,7 @@
 mod build;
 mod upstream;
 
-pub use build::{ConfigError, load, parse_file, region_from};
+pub use build::{ConfigError, load, load_with_config, parse_file, region_from};
 pub use upstream::{UpstreamConfig, UpstreamService};
 
 use crate::canopy::ProxyParams;
@@ -42,6 +42,68 @@ pub struct Config {
     pub encoding: EncodingConfig,
     /// The tile server.
     pub server: ServerConfig,
+    /// Where encoded tiles are cached (shared by `serve` and `seed`).
+    pub tile_cache: TileCacheConfig,
+}
+
+/// Where encoded tiles are cached.
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TileCacheConfig {
+    /// `directory` or `redis`.
+    pub backend: TileCacheBackend,
+    /// directory: where (relative to the working directory).
+    pub dir: PathBuf,
+    /// redis: the server, `redis://host:port/db` or `redis+unix:///path`.
+    pub redis_url: String,
+    /// redis: prefix of every key.
+    pub redis_prefix: String,
+    /// A process computing a tile holds its lock at most this long, seconds;
+    /// after that (its holder died) another process may take it over.
+    pub lock_ttl_s: f64,
+}
+
+impl Default for TileCacheConfig {
+    fn default() -> Self {
+        TileCacheConfig {
+            backend: TileCacheBackend::Directory,
+            dir: PathBuf::from("cache"),
+            redis_url: "redis://127.0.0.1:6379/0".into(),
+            redis_prefix: "sylva:".into(),
+            // A tile takes 5-50 ms; 30 s covers a loaded machine's worst case
+            // while a crashed holder delays its tiles by at most that long.
+            lock_ttl_s: 30.0,
+        }
+    }
+}
+
+impl TileCacheConfig {
+    /// The backend, with the directory `dir_override` instead if given.
+    pub fn backend(&self, dir_override: Option<&std::path::Path>) -> crate::cache::Backend {
+        match (dir_override, self.backend) {
+            (Some(dir), _) => crate::cache::Backend::Directory(dir.to_path_buf()),
+            (None, TileCacheBackend::Directory) => crate::cache::Backend::Directory(self.dir.clone()),
+            (None, TileCacheBackend::Redis) => {
+                crate::cache::Backend::Redis { url: self.redis_url.clone(), prefix: self.redis_prefix.clone() }
+            }
+        }
+    }
+
+    /// The lock expiry (nonsense values become the default).
+    pub fn lock_ttl(&self) -> std::time::Duration {
+        let s = self.lock_ttl_s;
+        std::time::Duration::from_secs_f64(if s.is_finite() && s > 0.0 { s.min(86_400.0) } else { 30.0 })
+    }
+}
+
+/// Tile cache backends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TileCacheBackend {
+    /// A local (or network) directory.
+    Directory,
+    /// A Redis server.
+    Redis,
 }
 
 /// A forest type and its canopy proxy (dissertation 6.3: "several distinct
@@ -73,8 +135,6 @@ fn half_metre() -> f64 {
 pub struct ServerConfig {
     /// Address to listen on.
     pub bind: String,
-    /// Tile cache directory (relative to the working directory).
-    pub cache_dir: PathBuf,
     /// Encoded tiles kept in memory, MiB.
     pub memory_cache_mb: u64,
     /// Threads computing tiles; 0 = one per core.
@@ -98,7 +158,6 @@ impl Default for ServerConfig {
     fn default() -> Self {
         ServerConfig {
             bind: "127.0.0.1:8080".into(),
-            cache_dir: PathBuf::from("cache"),
             memory_cache_mb: 32,
             workers: 0,
             // A few tiles per worker: deep enough to keep workers busy,

@@ -20,7 +20,8 @@ mod routes;
 pub mod service;
 pub mod wms;
 
-use crate::config::{Config, ServerConfig};
+use crate::cache::TileStore;
+use crate::config::ServerConfig;
 use crate::produce::ProduceError;
 use crate::region::Region;
 use axum::Router;
@@ -82,13 +83,18 @@ pub struct AppState {
 }
 
 impl AppState {
-    /// State over a region, its tile directory and settings.
-    pub fn new(region: Region, cache_dir: &Path, settings: ServerConfig) -> std::io::Result<Arc<AppState>> {
+    /// State over a region, its tile cache and settings; tile locks expire
+    /// after `lock_ttl`.
+    pub fn new(
+        region: Region,
+        store: Arc<dyn TileStore>,
+        lock_ttl: Duration,
+        settings: ServerConfig,
+    ) -> std::io::Result<Arc<AppState>> {
         let metrics = Arc::new(Metrics::new());
         let pool = Arc::new(Pool::new(settings.workers, settings.queue)?);
-        let store = Arc::new(crate::cache::DirStore::new(cache_dir));
         let memory = settings.memory_cache_mb.max(1) * 1024 * 1024;
-        let tiles = TileService::new(Arc::new(region), store, memory, pool, metrics.clone());
+        let tiles = TileService::new(Arc::new(region), store, lock_ttl, memory, pool, metrics.clone());
         Ok(Arc::new(AppState { tiles, metrics, settings }))
     }
 
@@ -108,7 +114,7 @@ pub fn router(state: Arc<AppState>) -> Router {
 pub struct ServeOptions {
     /// Listen here instead of `[server] bind`.
     pub bind: Option<String>,
-    /// Cache tiles here instead of `[server] cache_dir`.
+    /// Cache tiles in this directory instead of `[tile_cache]`.
     pub cache_dir: Option<PathBuf>,
 }
 
@@ -118,8 +124,8 @@ pub struct Bound {
     pub listener: tokio::net::TcpListener,
     /// What the handlers share.
     pub state: Arc<AppState>,
-    /// Where tiles are cached.
-    pub cache_dir: PathBuf,
+    /// Where tiles are cached, for logs.
+    pub cache: String,
 }
 
 impl Bound {
@@ -136,35 +142,29 @@ impl Bound {
 
 /// Loads the configuration (off the executor: it opens files) and binds.
 pub async fn bind(config: Option<&Path>, options: ServeOptions) -> anyhow::Result<Bound> {
-    let (cfg, base, label) = match config {
-        Some(path) => (
-            crate::config::parse_file(path)?,
-            path.parent().unwrap_or(Path::new(".")).to_path_buf(),
-            path.to_path_buf(),
-        ),
-        None => (Config::default(), PathBuf::from("."), PathBuf::from("<built-in defaults>")),
-    };
-    let (region, cfg) =
-        tokio::task::spawn_blocking(move || crate::config::region_from(&cfg, &base, &label).map(|r| (r, cfg)))
-            .await??;
+    let config = config.map(Path::to_path_buf);
+    let (cfg, region) =
+        tokio::task::spawn_blocking(move || crate::config::load_with_config(config.as_deref())).await??;
     let settings = cfg.server.clone();
     let bind = options.bind.unwrap_or_else(|| settings.bind.clone());
-    let cache_dir = options.cache_dir.unwrap_or_else(|| settings.cache_dir.clone());
-    let state = AppState::new(region, &cache_dir, settings)?;
+    let backend = cfg.tile_cache.backend(options.cache_dir.as_deref());
+    let store = tokio::task::spawn_blocking(move || crate::cache::open(&backend)).await??;
+    let cache = store.describe();
+    let state = AppState::new(region, store, cfg.tile_cache.lock_ttl(), settings)?;
     let listener =
         tokio::net::TcpListener::bind(&bind).await.map_err(|e| anyhow::anyhow!("cannot listen on {bind}: {e}"))?;
-    Ok(Bound { listener, state, cache_dir })
+    Ok(Bound { listener, state, cache })
 }
 
 /// Loads the configuration, binds, serves until SIGTERM or SIGINT, then
 /// finishes the requests in flight.
 pub async fn serve(config: Option<&Path>, options: ServeOptions) -> anyhow::Result<()> {
     let bound = bind(config, options).await?;
-    let (state, cache_dir) = (bound.state.clone(), bound.cache_dir.clone());
+    let (state, cache) = (bound.state.clone(), bound.cache.clone());
     tracing::info!(
         address = %bound.listener.local_addr()?,
         region = %state.region().name,
-        cache = %cache_dir.display(),
+        cache = %cache,
         version = %state.region().version,
         workers = state.settings.workers,
         "serving"

@@ -2,7 +2,7 @@
 //! tile, an XYZ tile, or a WMS image — their cache keys, and how each is
 //! computed (synchronously, on a worker).
 
-use crate::cem::{self, Layer, Stats};
+use crate::cem::{self, Layer, LayerSamples, Stats};
 use crate::encode::{self, EncodeError, Format, Samples};
 use crate::grid::mercator::MercatorBox;
 use crate::grid::{GridError, SampleGrid, TileId};
@@ -94,13 +94,15 @@ impl Product {
         }
     }
 
-    fn layer(&self) -> MapLayer {
+    /// The layer.
+    pub fn layer(&self) -> MapLayer {
         match self {
             Product::Tile { layer, .. } | Product::Xyz { layer, .. } | Product::Image { layer, .. } => *layer,
         }
     }
 
-    fn encoding(&self) -> Encoding {
+    /// The encoding.
+    pub fn encoding(&self) -> Encoding {
         match self {
             Product::Tile { encoding, .. } | Product::Image { encoding, .. } => *encoding,
             Product::Xyz { layer, .. } if layer.is_picture() => Encoding::Rgba,
@@ -126,45 +128,91 @@ impl Product {
 pub struct Computed {
     /// The bytes; empty when the grid holds no data (an absent tile).
     pub bytes: Vec<u8>,
+    /// Every sample alike (or no data), in an encoding that does not depend
+    /// on the tile's position: the bytes are stored once for all such tiles.
+    pub uniform: bool,
     /// Stage times.
     pub stats: Stats,
     /// Encoding time.
     pub encode: Duration,
 }
 
-/// Computes a product. An empty result means "no data here".
-pub fn compute(region: &Region, product: &Product) -> Result<Computed, ProduceError> {
-    let grid = product.grid(region)?;
-    if !region.dem.may_cover(&grid) {
-        return Ok(Computed { bytes: Vec::new(), stats: Stats::default(), encode: Duration::ZERO });
-    }
-    match product.layer() {
-        MapLayer::Relief => relief(region, &grid),
-        MapLayer::Colour => colour(region, &grid),
-        MapLayer::Data(layer) => data(region, &grid, layer, product.encoding()),
+impl Computed {
+    /// "No data here".
+    fn absent(stats: Stats) -> Computed {
+        Computed { bytes: Vec::new(), uniform: true, stats, encode: Duration::ZERO }
     }
 }
 
-fn data(region: &Region, grid: &SampleGrid, layer: Layer, encoding: Encoding) -> Result<Computed, ProduceError> {
-    let products = cem::compute(region, grid, &[layer])?;
-    let samples =
-        products.samples(layer).ok_or_else(|| EncodeError(format!("layer {} was not computed", layer.name())))?;
-    if no_data(&samples) {
-        return Ok(Computed { bytes: Vec::new(), stats: products.stats, encode: Duration::ZERO });
+/// Computes a product. An empty result means "no data here".
+pub fn compute(region: &Region, product: &Product) -> Result<Computed, ProduceError> {
+    let grid = product.grid(region)?;
+    match product.layer() {
+        MapLayer::Relief if region.dem.may_cover(&grid) => relief(region, &grid),
+        MapLayer::Relief => Ok(Computed::absent(Stats::default())),
+        MapLayer::Colour => colour(region, &grid),
+        MapLayer::Data(layer) => {
+            let (samples, stats) = samples(region, &grid, layer)?;
+            encode_samples(region, &grid, layer, product.encoding(), samples.as_ref(), stats)
+        }
     }
+}
+
+/// The samples of `layer` on `grid`, or `None` where the grid misses the
+/// region's data (nothing is computed there).
+pub fn samples(
+    region: &Region,
+    grid: &SampleGrid,
+    layer: Layer,
+) -> Result<(Option<LayerSamples>, Stats), ProduceError> {
+    if !region.dem.may_cover(grid) {
+        return Ok((None, Stats::default()));
+    }
+    let mut products = cem::compute(region, grid, &[layer])?;
+    let samples =
+        products.take(layer).ok_or_else(|| EncodeError(format!("layer {} was not computed", layer.name())))?;
+    Ok((Some(samples), products.stats))
+}
+
+/// Encodes a layer's samples on `grid` (empty bytes for no data); `stats`
+/// are the stage times that made them.
+pub fn encode_samples(
+    region: &Region,
+    grid: &SampleGrid,
+    layer: Layer,
+    encoding: Encoding,
+    samples: Option<&LayerSamples>,
+    stats: Stats,
+) -> Result<Computed, ProduceError> {
+    let Some(samples) = samples.map(LayerSamples::view).filter(|s| !no_data(s)) else {
+        return Ok(Computed::absent(stats));
+    };
     let start = Instant::now();
     let bytes = match (encoding, samples) {
         (Encoding::Terrarium, Samples::Float(r)) => encode::terrarium::encode(r)?,
         (Encoding::Data(format), samples) => encode::encode(layer, samples, grid, format, region.heights_16)?.bytes,
         _ => return Err(EncodeError(format!("layer {} cannot be encoded as {encoding:?}", layer.name())).into()),
     };
-    Ok(Computed { bytes, stats: products.stats, encode: start.elapsed() })
+    // GeoTIFFs carry their position; the other encodings only the samples.
+    let uniform = encoding != Encoding::Data(Format::Tiff) && uniform(&samples);
+    Ok(Computed { bytes, uniform, stats, encode: start.elapsed() })
 }
 
 fn no_data(samples: &Samples) -> bool {
     match samples {
         Samples::Float(r) => r.all_nodata(),
         Samples::Class(r) => r.data().iter().all(|&c| c == cem::surface::NODATA),
+    }
+}
+
+/// Every sample the same (bitwise).
+fn uniform(samples: &Samples) -> bool {
+    fn same<T: Copy>(data: &[T], eq: impl Fn(T, T) -> bool) -> bool {
+        data.first().is_none_or(|&a| data.iter().all(|&b| eq(a, b)))
+    }
+    match samples {
+        Samples::Float(r) => same(r.data(), |a, b| a.to_bits() == b.to_bits()),
+        Samples::Class(r) => same(r.data(), |a, b| a == b),
     }
 }
 
@@ -176,7 +224,7 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
         return Err(EncodeError("relief needs the CEM and the surface".into()).into());
     };
     if cem.all_nodata() {
-        return Ok(Computed { bytes: Vec::new(), stats: products.stats, encode: Duration::ZERO });
+        return Ok(Computed::absent(products.stats));
     }
     let map = crate::produce::map_colours(region, grid)?;
     let inner = Window::new(1, 1, grid.width(), grid.height());
@@ -187,19 +235,19 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
     let spacing_m = (dx * mid_lat.cos() * crate::geo::METRES_PER_DEGREE, dy * crate::geo::METRES_PER_DEGREE);
     let bytes =
         encode::relief::encode(&encode::relief::Relief { cem, surface: &surface, map: map.as_deref(), spacing_m })?;
-    Ok(Computed { bytes, stats: products.stats, encode: start.elapsed() })
+    Ok(Computed { bytes, uniform: false, stats: products.stats, encode: start.elapsed() })
 }
 
 /// The unshaded map colours.
 fn colour(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> {
     let products = cem::compute(region, grid, &[Layer::Surface])?;
     let Some(surface) = products.surface.filter(|s| s.data().iter().any(|&c| c != cem::surface::NODATA)) else {
-        return Ok(Computed { bytes: Vec::new(), stats: products.stats, encode: Duration::ZERO });
+        return Ok(Computed::absent(products.stats));
     };
     let map = crate::produce::map_colours(region, grid)?;
     let start = Instant::now();
     let bytes = encode::relief::encode_colours(&surface, map.as_deref())?;
-    Ok(Computed { bytes, stats: products.stats, encode: start.elapsed() })
+    Ok(Computed { bytes, uniform: false, stats: products.stats, encode: start.elapsed() })
 }
 
 #[cfg(test)]
@@ -215,7 +263,8 @@ mod tests {
             encoding: Encoding::Data(Format::Bil16),
         };
         assert_eq!(t.key("v1").as_deref(), Some("v1/cem/9/1939/1939_2704.bil"));
-        let h = Product::Tile { layer: MapLayer::Relief, id: TileId::new(9, 1, 2), halo: 32, encoding: Encoding::Rgba };
+        let h =
+            Product::Tile { layer: MapLayer::Relief, id: TileId::new(9, 1, 2), halo: 32, encoding: Encoding::Rgba };
         assert_eq!(h.key("v1").as_deref(), Some("v1/relief/9/1/1_2_h32.png"));
         let x = Product::Xyz { layer: MapLayer::Data(Layer::Dem), zxy: (11, 400, 780) };
         assert_eq!(x.key("v2").as_deref(), Some("v2/xyz/dem/11/400/780.png"));

@@ -1,18 +1,22 @@
-//! The tile service: memory cache over the directory cache over the
-//! pipeline, with one computation per tile however many requests ask for it
-//! at once (the memory cache coalesces concurrent loads of a key), and the
-//! pipeline run on the bounded worker pool, never on the async executor.
+//! The tile service: memory cache over the shared tile cache (directory or
+//! Redis) over the pipeline, with one computation per tile however many
+//! requests ask for it at once — the memory cache coalesces concurrent loads
+//! of a key in this process, the cache's locks ([`crate::cache::flight`])
+//! across processes — and the pipeline run on the bounded worker pool, never
+//! on the async executor.
 
 use super::ServeError;
 use super::metrics::{CacheResult, Metrics};
 use super::pool::Pool;
 use super::products::{self, Computed, Product};
-use crate::cache::{DirStore, Lookup};
+use crate::cache::flight::{self, Claim};
+use crate::cache::{Lookup, TileStore};
 use crate::cem::Stage;
 use crate::region::Region;
 use bytes::Bytes;
 use moka::future::Cache;
 use std::sync::Arc;
+use std::time::Duration;
 
 /// An encoded product ready to send.
 #[derive(Debug)]
@@ -39,17 +43,20 @@ impl Tile {
 /// Tiles for one region.
 pub struct TileService {
     region: Arc<Region>,
-    store: Arc<DirStore>,
+    store: Arc<dyn TileStore>,
+    lock_ttl: Duration,
     memory: Cache<String, Arc<Tile>>,
     pool: Arc<Pool>,
     metrics: Arc<Metrics>,
 }
 
 impl TileService {
-    /// A service over `store`, keeping up to `memory_bytes` of tiles in memory.
+    /// A service over `store` (whose tile locks expire after `lock_ttl`),
+    /// keeping up to `memory_bytes` of tiles in memory.
     pub fn new(
         region: Arc<Region>,
-        store: Arc<DirStore>,
+        store: Arc<dyn TileStore>,
+        lock_ttl: Duration,
         memory_bytes: u64,
         pool: Arc<Pool>,
         metrics: Arc<Metrics>,
@@ -62,7 +69,7 @@ impl TileService {
             Some(ttl) => builder.time_to_live(ttl).build(),
             None => builder.build(),
         };
-        TileService { region, store, memory, pool, metrics }
+        TileService { region, store, lock_ttl, memory, pool, metrics }
     }
 
     /// Bytes of tiles held in memory (after pending evictions).
@@ -93,20 +100,58 @@ impl TileService {
         Ok(entry.into_value())
     }
 
+    /// The tile from the shared cache, or computed here if no other process
+    /// is computing it (else waited for).
     async fn load(&self, key: String, product: Product) -> Result<Arc<Tile>, ServeError> {
-        let store = self.store.clone();
-        let k = key.clone();
-        let found = tokio::task::spawn_blocking(move || store.get(&k)).await.map_err(ServeError::internal)?;
-        let mut stale = None;
-        match found.map_err(ServeError::internal)? {
-            Lookup::Hit(stored) if !self.expired(stored.written) => {
-                self.metrics.cache(CacheResult::Hit);
-                return Ok(Arc::new(Tile::new(stored.bytes, "cache;desc=\"disk\"".into())));
+        let mut attempt = 0;
+        loop {
+            let (store, k, ttl, upstream_ttl) =
+                (self.store.clone(), key.clone(), self.lock_ttl, self.region.upstream_ttl);
+            let claim = tokio::task::spawn_blocking(move || {
+                flight::claim(&*store, &k, &|s| !flight::expired(upstream_ttl, s), ttl)
+            })
+            .await
+            .map_err(ServeError::internal)?
+            .map_err(ServeError::internal)?;
+            match claim {
+                Claim::Ready(stored) => {
+                    self.metrics.cache(CacheResult::Hit);
+                    return Ok(Arc::new(Tile::new(stored.bytes, "cache;desc=\"disk\"".into())));
+                }
+                Claim::Busy => {
+                    tokio::time::sleep(flight::pause(attempt)).await;
+                    attempt += 1;
+                }
+                Claim::Compute { lock, found } => {
+                    let result = self.fill(&key, product, found).await;
+                    let store = self.store.clone();
+                    let unlocked = tokio::task::spawn_blocking(move || store.unlock(&lock).map_err(|e| e.to_string()))
+                        .await
+                        .map_err(|e| e.to_string())
+                        .and_then(|r| r);
+                    if let Err(e) = unlocked {
+                        tracing::warn!(error = %e, "tile lock not released; it expires");
+                    }
+                    return result;
+                }
             }
-            Lookup::Hit(stored) => stale = Some(stored),
-            Lookup::Corrupt => self.metrics.cache(CacheResult::Corrupt),
-            Lookup::Miss => self.metrics.cache(CacheResult::Miss),
         }
+    }
+
+    /// Computes and stores a tile this process holds the lock of; `found` is
+    /// what the cache held (served, stale, if the upstream fails).
+    async fn fill(&self, key: &str, product: Product, found: Lookup) -> Result<Arc<Tile>, ServeError> {
+        let stale = match found {
+            Lookup::Hit(stored) => Some(stored),
+            Lookup::Corrupt => {
+                self.metrics.cache(CacheResult::Corrupt);
+                None
+            }
+            Lookup::Miss => {
+                self.metrics.cache(CacheResult::Miss);
+                None
+            }
+        };
         let computed = match (self.compute(product).await, stale) {
             (Ok(c), _) => c,
             // The upstream failed: the stale tile is better than none.
@@ -119,20 +164,16 @@ impl TileService {
             }
             (Err(e), _) => return Err(e),
         };
+        let uniform = computed.uniform;
         let tile = Arc::new(tile_of(computed));
-        let store = self.store.clone();
-        let bytes = tile.bytes.clone();
-        let written =
-            tokio::task::spawn_blocking(move || store.put(&key, &bytes)).await.map_err(ServeError::internal)?;
+        let (store, key, bytes) = (self.store.clone(), key.to_string(), tile.bytes.clone());
+        let written = tokio::task::spawn_blocking(move || flight::save(&*store, &key, &bytes, uniform))
+            .await
+            .map_err(ServeError::internal)?;
         if let Err(e) = written {
             tracing::warn!(error = %e, "tile cache write failed; serving the computed tile anyway");
         }
         Ok(tile)
-    }
-
-    /// True if a tile written at `written` is past the region's time to live.
-    fn expired(&self, written: std::time::SystemTime) -> bool {
-        self.region.upstream_ttl.is_some_and(|ttl| written.elapsed().is_ok_and(|age| age > ttl))
     }
 
     async fn compute(&self, product: Product) -> Result<Computed, ServeError> {

@@ -113,6 +113,15 @@ impl GeoRaster {
         if ratio < 2.0 { 0 } else { (ratio.log2().floor() as usize).min(self.levels.len() - 1) }
     }
 
+    /// True if a sample that grids `a` and `b` share (nested lattices of two
+    /// levels) reads the same pixels with the same weights on both: the same
+    /// overview, and positions computed per sample (geographic sources), not
+    /// interpolated on a projection mesh whose nodes follow each grid's
+    /// spacing.
+    pub fn samples_alike(&self, a: &SampleGrid, b: &SampleGrid) -> bool {
+        self.georef.crs.is_geographic() && self.level_for(a) == self.level_for(b)
+    }
+
     /// Evaluates band `band` at every sample of `grid`; NaN where the source
     /// has no data.
     pub fn sample(&self, grid: &SampleGrid, band: usize, kind: Resampling) -> Result<Raster<f32>, SourceError> {

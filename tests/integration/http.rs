@@ -34,10 +34,22 @@ impl Server {
     /// Starts `sylva serve` with `config` (or the demo) and `cache_dir`.
     pub fn start(config: Option<&Path>, cache_dir: &Path) -> Server {
         let mut cmd = Command::new(env!("CARGO_BIN_EXE_sylva"));
-        cmd.arg("serve").arg("--bind").arg("127.0.0.1:0").arg("--cache-dir").arg(cache_dir);
+        cmd.arg("serve").arg("--cache-dir").arg(cache_dir);
         if let Some(c) = config {
             cmd.arg("--config").arg(c);
         }
+        Server::spawn(cmd)
+    }
+
+    /// Starts `sylva serve` with the tile cache of `config`.
+    pub fn start_on_config_cache(config: &Path) -> Server {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_sylva"));
+        cmd.arg("serve").arg("--config").arg(config);
+        Server::spawn(cmd)
+    }
+
+    fn spawn(mut cmd: Command) -> Server {
+        cmd.arg("--bind").arg("127.0.0.1:0");
         let mut child = cmd.stderr(Stdio::piped()).stdout(Stdio::null()).spawn().expect("start sylva serve");
         let stderr = child.stderr.take().expect("stderr");
         let (tx, rx) = std::sync::mpsc::channel();

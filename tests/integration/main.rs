@@ -18,6 +18,8 @@ mod http; // a `sylva serve` process for tests, and an HTTP client
 mod real_data;
 mod render; // the GPU ray caster against the exact CPU reference // rmnp, mt_hood, storm_lake, nz_forest against their sources
 mod seamless; // tiles equal windows of whole-area builds; neighbours agree
+mod seed; // sylva seed: cache hits identical to the server's, dry runs, coverages, kill and resume, failures
+mod seed_shared; // many seeders and servers on one directory or Redis cache, shards
 mod server; // the server over HTTP: WMS, tiles, cache, concurrency, bad input, shutdown
 mod skipped_work; // stages nobody needs do not run (counted)
 mod sources; // broken and hostile files give errors that name them

@@ -1,0 +1,146 @@
+//! The Redis backend: one value per entry under `{prefix}{key}`, so several
+//! servers and seeders on different machines share one cache. A value is a
+//! 4-byte tag, the time it was written (Unix ms, little-endian u64), then
+//! either the payload in its [`envelope`] (`TILE`) or the key of a shared
+//! entry (`LINK`). Locks are `SET {prefix}lock:{key} token NX PX ttl`,
+//! released by a script that deletes the lock only if it still holds the
+//! holder's token.
+//!
+//! Connections are kept in a small pool of idle ones; each has connect, read
+//! and write timeouts, so an unreachable server is an error, not a hang.
+
+use super::{CacheError, Lock, Lookup, Stored, TileStore, envelope};
+use redis::{Client, Connection, RedisError};
+use std::sync::Mutex;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+const TILE: &[u8; 4] = b"TILE";
+const LINK: &[u8; 4] = b"LINK";
+/// Tag and time.
+const HEADER: usize = 12;
+/// Connecting, reading or writing longer than this is a failure.
+const TIMEOUT: Duration = Duration::from_secs(5);
+/// Deletes the lock only if it is still the caller's.
+const UNLOCK: &str =
+    "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('del', KEYS[1]) else return 0 end";
+
+/// Encoded tiles in a Redis server.
+pub struct RedisStore {
+    client: Client,
+    url: String,
+    prefix: String,
+    idle: Mutex<Vec<Connection>>,
+}
+
+impl RedisStore {
+    /// Connects to `url` (`redis://host:port/db`, `redis+unix:///path`) and
+    /// checks that the server answers.
+    pub fn open(url: &str, prefix: &str) -> Result<RedisStore, CacheError> {
+        let client = Client::open(url).map_err(|e| CacheError::Redis { url: url.into(), message: e.to_string() })?;
+        let store = RedisStore { client, url: url.into(), prefix: prefix.into(), idle: Mutex::new(Vec::new()) };
+        store.with(|c| redis::cmd("PING").query::<String>(c))?;
+        Ok(store)
+    }
+
+    /// Runs `op` on a pooled connection (a failed connection is dropped).
+    fn with<T>(&self, op: impl FnOnce(&mut Connection) -> Result<T, RedisError>) -> Result<T, CacheError> {
+        let pooled = self.idle.lock().ok().and_then(|mut idle| idle.pop());
+        let mut conn = match pooled {
+            Some(c) => c,
+            None => self.connect()?,
+        };
+        let out = op(&mut conn).map_err(|e| self.error(e))?;
+        if let Ok(mut idle) = self.idle.lock() {
+            idle.push(conn);
+        }
+        Ok(out)
+    }
+
+    fn connect(&self) -> Result<Connection, CacheError> {
+        let conn = self.client.get_connection_with_timeout(TIMEOUT).map_err(|e| self.error(e))?;
+        conn.set_read_timeout(Some(TIMEOUT)).map_err(|e| self.error(e))?;
+        conn.set_write_timeout(Some(TIMEOUT)).map_err(|e| self.error(e))?;
+        Ok(conn)
+    }
+
+    fn error(&self, e: RedisError) -> CacheError {
+        CacheError::Redis { url: self.url.clone(), message: e.to_string() }
+    }
+
+    fn set(&self, key: &str, tag: &[u8; 4], body: &[u8]) -> Result<(), CacheError> {
+        let now = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64);
+        let mut value = Vec::with_capacity(HEADER + body.len());
+        value.extend_from_slice(tag);
+        value.extend_from_slice(&now.to_le_bytes());
+        value.extend_from_slice(body);
+        self.with(|c| redis::cmd("SET").arg(format!("{}{key}", self.prefix)).arg(value).query::<()>(c))
+    }
+
+    fn raw(&self, key: &str) -> Result<Option<Vec<u8>>, CacheError> {
+        self.with(|c| redis::cmd("GET").arg(format!("{}{key}", self.prefix)).query::<Option<Vec<u8>>>(c))
+    }
+}
+
+/// Splits a value into its tag, time and body.
+fn parse(value: &[u8]) -> Option<(&[u8], SystemTime, &[u8])> {
+    let header = value.get(..HEADER)?;
+    let ms = u64::from_le_bytes(header[4..].try_into().ok()?);
+    Some((&header[..4], UNIX_EPOCH + Duration::from_millis(ms), &value[HEADER..]))
+}
+
+impl TileStore for RedisStore {
+    fn get(&self, key: &str) -> Result<Lookup, CacheError> {
+        let Some(value) = self.raw(key)? else { return Ok(Lookup::Miss) };
+        let Some((tag, written, body)) = parse(&value) else { return Ok(Lookup::Corrupt) };
+        let sealed = match (tag, std::str::from_utf8(body)) {
+            (t, _) if t == TILE => body.to_vec(),
+            (t, Ok(blob)) if t == LINK => match self.raw(blob)? {
+                Some(shared) => match parse(&shared) {
+                    Some((t, _, body)) if t == TILE => body.to_vec(),
+                    _ => return Ok(Lookup::Corrupt),
+                },
+                None => return Ok(Lookup::Miss),
+            },
+            _ => return Ok(Lookup::Corrupt),
+        };
+        Ok(envelope::open(sealed).map_or(Lookup::Corrupt, |bytes| Lookup::Hit(Stored { bytes, written })))
+    }
+
+    fn put(&self, key: &str, payload: &[u8]) -> Result<(), CacheError> {
+        let mut sealed = payload.to_vec();
+        sealed.extend_from_slice(&envelope::trailer(payload));
+        self.set(key, TILE, &sealed)
+    }
+
+    fn put_shared(&self, key: &str, blob: &str, payload: &[u8]) -> Result<(), CacheError> {
+        match self.get(blob)? {
+            Lookup::Hit(s) if s.bytes == payload => {}
+            _ => self.put(blob, payload)?,
+        }
+        self.set(key, LINK, blob.as_bytes())
+    }
+
+    fn try_lock(&self, key: &str, ttl: Duration) -> Result<Option<Lock>, CacheError> {
+        let lock = Lock { key: key.to_string(), token: super::token() };
+        let ms = ttl.as_millis().clamp(1, u128::from(u32::MAX)) as u64;
+        let set = self.with(|c| {
+            redis::cmd("SET")
+                .arg(format!("{}lock:{key}", self.prefix))
+                .arg(&lock.token)
+                .arg("NX")
+                .arg("PX")
+                .arg(ms)
+                .query::<Option<String>>(c)
+        })?;
+        Ok(set.map(|_| lock))
+    }
+
+    fn unlock(&self, lock: &Lock) -> Result<(), CacheError> {
+        let key = format!("{}lock:{}", self.prefix, lock.key);
+        self.with(|c| redis::cmd("EVAL").arg(UNLOCK).arg(1).arg(key).arg(&lock.token).query::<i64>(c)).map(|_| ())
+    }
+
+    fn describe(&self) -> String {
+        format!("Redis {} (keys {}…)", self.url, self.prefix)
+    }
+}

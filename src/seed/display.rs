@@ -1,0 +1,76 @@
+//! What the operator sees: a progress bar with rate and ETA (indicatif) on
+//! a terminal, plain log lines every few seconds otherwise (a Kubernetes
+//! Job's log, CI), or nothing.
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::io::IsTerminal;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+/// Plain lines at most this often.
+const LOG_EVERY: Duration = Duration::from_secs(5);
+
+/// How progress is shown.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// A bar if stderr is a terminal, else plain lines.
+    Auto,
+    /// Plain lines on stderr.
+    Plain,
+    /// Nothing.
+    Quiet,
+}
+
+/// Progress of tile files (made, found or failed) out of a total.
+pub struct Display {
+    bar: ProgressBar,
+    plain: bool,
+    logged: Mutex<Instant>,
+}
+
+impl Display {
+    /// A display for `total` files of which `already` were done by earlier runs.
+    pub fn new(mode: Mode, total: u64, already: u64) -> Display {
+        let bar_wanted = mode == Mode::Auto && std::io::stderr().is_terminal();
+        let target = if bar_wanted { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() };
+        let bar = ProgressBar::with_draw_target(Some(total), target);
+        let style = ProgressStyle::with_template("{wide_bar} {pos}/{len} tiles {per_sec} ETA {eta} {msg}");
+        if let Ok(style) = style {
+            bar.set_style(style);
+        }
+        bar.set_position(already.min(total));
+        bar.reset_eta();
+        let plain = mode == Mode::Plain || (mode == Mode::Auto && !bar_wanted);
+        Display { bar, plain, logged: Mutex::new(Instant::now()) }
+    }
+
+    /// `n` more files; `failed` so far.
+    pub fn advance(&self, n: u64, failed: u64) {
+        self.bar.inc(n);
+        if failed > 0 {
+            self.bar.set_message(format!("{failed} failed"));
+        }
+        if self.plain && super::due(&self.logged, LOG_EVERY) {
+            eprintln!("{}", self.line(failed));
+        }
+    }
+
+    /// The plain progress line.
+    fn line(&self, failed: u64) -> String {
+        let (pos, len) = (self.bar.position(), self.bar.length().unwrap_or(0));
+        let pct = if len > 0 { 100.0 * pos as f64 / len as f64 } else { 100.0 };
+        format!(
+            "seed: {pos}/{len} tiles ({pct:.1} %), {:.1} tiles/s, ETA {}, {failed} failed",
+            self.bar.per_sec(),
+            indicatif::HumanDuration(self.bar.eta())
+        )
+    }
+
+    /// Ends the bar (or logs the last line).
+    pub fn finish(&self, failed: u64) {
+        if self.plain {
+            eprintln!("{}", self.line(failed));
+        }
+        self.bar.abandon();
+    }
+}

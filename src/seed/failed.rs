@@ -1,0 +1,98 @@
+//! Tiles that failed after their retries: one line each,
+//! `layer/level/row/col`, then a tab and `# why`. The same format is read by
+//! `--tiles-from`, so the failures of a run are re-run with
+//! `--tiles-from FILE`. Blank lines and `#` comments are ignored.
+
+use super::progress::parse_tile;
+use crate::cem::Layer;
+use crate::grid::{TileGrid, TileId};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// A tile of a list, with its layer.
+pub type Entry = (Layer, TileId);
+
+/// A tile list that cannot be read.
+#[derive(Debug, thiserror::Error)]
+#[error("{path}:{line}: {message}")]
+pub struct ListError {
+    /// The file.
+    pub path: PathBuf,
+    /// Line number (1-based; 0 = the whole file).
+    pub line: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// Reads a tile list; every tile must exist in `tiles`.
+pub fn read(path: &Path, tiles: &TileGrid) -> Result<Vec<Entry>, ListError> {
+    let fail = |line: usize, message: String| ListError { path: path.to_path_buf(), line, message };
+    let text = std::fs::read_to_string(path).map_err(|e| fail(0, format!("cannot read: {e}")))?;
+    let mut out = Vec::new();
+    for (i, line) in text.lines().enumerate() {
+        let entry = line.split('#').next().unwrap_or("").trim();
+        if entry.is_empty() {
+            continue;
+        }
+        let parsed = entry.split_once('/').and_then(|(layer, tile)| Some((Layer::parse(layer)?, parse_tile(tile)?)));
+        let e = parsed
+            .ok_or_else(|| fail(i + 1, format!("{entry:?}: expected layer/level/row/col, e.g. cem/12/2254/3108")))?;
+        tiles.check(e.1).map_err(|why| fail(i + 1, why.to_string()))?;
+        out.push(e);
+    }
+    Ok(out)
+}
+
+/// The failed-tiles file of a run.
+pub struct Failed {
+    path: PathBuf,
+    file: Mutex<std::fs::File>,
+}
+
+impl Failed {
+    /// Opens `path`, emptied unless `append`.
+    pub fn open(path: &Path, append: bool) -> std::io::Result<Failed> {
+        let file = std::fs::OpenOptions::new().create(true).append(true).truncate(false).open(path)?;
+        if !append {
+            file.set_len(0)?;
+        }
+        Ok(Failed { path: path.to_path_buf(), file: Mutex::new(file) })
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Records a failed tile.
+    pub fn record(&self, (layer, tile): Entry, why: &str) -> std::io::Result<()> {
+        let why = why.replace(['\n', '\r'], " ");
+        let mut file = self.file.lock().map_err(|_| std::io::Error::other("failed-tiles file lock poisoned"))?;
+        writeln!(file, "{}/{tile}\t# {why}", layer.name())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recorded_failures_read_back_and_bad_lines_are_named() {
+        let path = std::env::temp_dir().join(format!("sylva-failed-{}.txt", std::process::id()));
+        let f = Failed::open(&path, false).unwrap();
+        f.record((Layer::Cem, TileId::new(12, 3, 4)), "upstream: 500\nInternal").unwrap();
+        f.record((Layer::Dem, TileId::new(5, 1, 2)), "x").unwrap();
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        assert_eq!(
+            read(&path, &grid).unwrap(),
+            vec![(Layer::Cem, TileId::new(12, 3, 4)), (Layer::Dem, TileId::new(5, 1, 2))]
+        );
+        std::fs::write(&path, "# a comment\n\ncem/1/2/3\ntrees/1/2/3\n").unwrap();
+        let err = read(&path, &grid).unwrap_err().to_string();
+        assert!(err.contains(":4:") && err.contains("trees/1/2/3"), "{err}");
+        std::fs::write(&path, "cem/1/99/3\n").unwrap();
+        assert!(read(&path, &grid).unwrap_err().to_string().contains(":1: tile 1/99/3 does not exist"));
+        std::fs::remove_file(&path).unwrap();
+    }
+}

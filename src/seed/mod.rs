@@ -1,0 +1,344 @@
+//! `sylva seed`: batch pregeneration of a region's tiles into the tile cache
+//! the servers read, so clients never wait (DESIGN.md, use 3).
+//!
+//! A job is layers × formats × the tiles of a level range over a box or
+//! polygons ([`coverage`]), walked depth first ([`walk`]) on a pool of
+//! workers; each tile file is claimed, made with the server's own product
+//! code (so the bytes are the server's) or, where exact, from its finished
+//! children ([`decimate`]), and stored ([`tile`]). Progress is shown
+//! ([`display`]) and saved for `--resume` ([`progress`]); tiles that still
+//! fail after their retries are listed for `--tiles-from` ([`failed`]).
+//! `--shard I/N` seeds one of N disjoint parts; any number of seeders and
+//! servers can share one cache, directory or Redis, and compute each tile
+//! once ([`crate::cache::flight`]).
+//!
+//! Invariant: a seeded tile file is byte-identical to the one the server
+//! would compute for the same key.
+
+pub mod coverage;
+pub mod decimate;
+pub mod display;
+pub mod failed;
+pub mod options;
+pub mod progress;
+pub mod tile;
+pub mod walk;
+
+pub use options::SeedOptions;
+pub use tile::Counters;
+
+use crate::grid::TileId;
+use options::Job;
+use progress::Progress;
+use rayon::prelude::*;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use thiserror::Error;
+use tile::{Halves, Seeder};
+use walk::{Node, Walk};
+
+/// Why a seed did not run or stopped.
+#[derive(Debug, Error)]
+pub enum SeedError {
+    /// A bad flag.
+    #[error("{0}")]
+    Usage(String),
+    /// The configuration.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// The tile cache.
+    #[error(transparent)]
+    Cache(#[from] crate::cache::CacheError),
+    /// The coverage file.
+    #[error(transparent)]
+    Coverage(#[from] coverage::CoverageError),
+    /// The tile list.
+    #[error(transparent)]
+    List(#[from] failed::ListError),
+    /// The progress file.
+    #[error(transparent)]
+    Progress(#[from] progress::ProgressError),
+    /// A file of the run.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// More tiles failed than allowed; the progress was saved.
+    #[error(
+        "stopped: {failed} tile files failed (more than --max-failures {max}); they are listed in {list}; resume with --resume"
+    )]
+    TooManyFailures {
+        /// Failed so far.
+        failed: u64,
+        /// The threshold.
+        max: u64,
+        /// The failed-tiles file.
+        list: String,
+    },
+}
+
+/// What a run did.
+#[derive(Debug)]
+pub struct Report {
+    /// A summary for people.
+    pub text: String,
+    /// Tile files that failed (listed in the failed-tiles file).
+    pub failed: u64,
+}
+
+/// Runs `sylva seed`; `counters` count the tile files as they come.
+pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedError> {
+    let job = Job::new(options)?;
+    if options.dry_run {
+        return Ok(dry_run(&job));
+    }
+    let store = crate::cache::open(&job.config.tile_cache.backend(options.cache_dir.as_deref()))?;
+    let (progress_path, failed_path) = &job.files;
+    // A list is read before the failed-tiles file (perhaps the same) is emptied.
+    let list = options.tiles_from.as_deref().map(|p| failed::read(p, &job.region.tiles)).transpose()?;
+    let progress = match options.resume && list.is_none() {
+        true => Progress::resume(progress_path, &job.fingerprint)?,
+        false => Progress::start(progress_path, &job.fingerprint),
+    };
+    let failed = failed::Failed::open(failed_path, options.resume)
+        .map_err(|source| SeedError::Io { path: failed_path.clone(), source })?;
+    let threads =
+        rayon::ThreadPoolBuilder::new().num_threads(options.concurrency).thread_name(|i| format!("sylva-seed-{i}"));
+    let pool = threads.build().map_err(|e| SeedError::Usage(format!("--concurrency {}: {e}", options.concurrency)))?;
+    let refresh_before = job.refresh_before.unwrap_or_else(|| progress.started() - CLOCK_SLACK);
+    let started = Instant::now();
+    let run = Run {
+        job: &job,
+        store: &*store,
+        counters,
+        progress: &progress,
+        failed: &failed,
+        options,
+        stop: AtomicBool::new(false),
+        refresh_before,
+        warned: Mutex::new(false),
+    };
+    match list {
+        Some(entries) => pool.install(|| run.list(&entries)),
+        None => pool.install(|| run.walk(job.walk.as_ref()))?,
+    }
+    let n = counters.failed.load(Ordering::Relaxed);
+    if run.stop.load(Ordering::Relaxed) {
+        return Err(SeedError::TooManyFailures {
+            failed: n,
+            max: options.max_failures,
+            list: failed.path().display().to_string(),
+        });
+    }
+    Ok(Report { text: summary(&job, &*store, counters, started.elapsed(), failed.path()), failed: n })
+}
+
+/// Cache entries written up to this long before a job started count as the
+/// job's own: file times come from the kernel's coarse clock, up to one tick
+/// (1–10 ms) behind the clock the job's start is read from, and Redis and
+/// the progress file keep milliseconds.
+const CLOCK_SLACK: Duration = Duration::from_millis(50);
+
+/// True if `every` has passed since `last` (then `last` becomes now).
+fn due(last: &Mutex<Instant>, every: Duration) -> bool {
+    last.lock().is_ok_and(|mut t| {
+        let due = t.elapsed() >= every;
+        if due {
+            *t = Instant::now();
+        }
+        due
+    })
+}
+
+/// One run's shared state.
+struct Run<'a> {
+    job: &'a Job,
+    store: &'a dyn crate::cache::TileStore,
+    counters: &'a Counters,
+    progress: &'a Progress,
+    failed: &'a failed::Failed,
+    options: &'a SeedOptions,
+    stop: AtomicBool,
+    refresh_before: std::time::SystemTime,
+    warned: Mutex<bool>,
+}
+
+impl Run<'_> {
+    fn seeder(&self, layers: Vec<crate::cem::Layer>) -> Seeder<'_> {
+        let region = &self.job.region;
+        let from_children = match (&self.job.walk, self.options.from_children) {
+            (Some(walk), true) => exact_levels(region, &layers, *walk.levels().end()),
+            _ => Vec::new(),
+        };
+        Seeder {
+            region,
+            store: self.store,
+            layers,
+            formats: self.job.formats.clone(),
+            refresh_before: self.refresh_before,
+            lock_ttl: self.job.config.tile_cache.lock_ttl(),
+            retries: self.options.retries,
+            from_children,
+            counters: self.counters,
+        }
+    }
+
+    /// Walks the job's tiles.
+    fn walk(&self, walk: Option<&Walk>) -> Result<(), SeedError> {
+        let Some(walk) = walk else { return Ok(()) };
+        let total: u64 = walk.count_per_level().iter().sum::<u64>() * self.files_per_tile();
+        let display = display::Display::new(self.options.display, total, self.progress.earlier);
+        if !self.progress.complete {
+            let seeder = self.seeder(self.job.layers.clone());
+            walk.roots().par_iter().for_each(|&root| {
+                self.visit(walk, &seeder, &display, root);
+            });
+        }
+        display.finish(self.counters.failed.load(Ordering::Relaxed));
+        let complete = !self.stop.load(Ordering::Relaxed);
+        let path = &self.job.files.0;
+        self.progress
+            .save(self.counters.total(), complete)
+            .map_err(|source| SeedError::Io { path: path.clone(), source })
+    }
+
+    /// Seeds a subtree (children first); the halves its parent can use.
+    fn visit(&self, walk: &Walk, seeder: &Seeder, display: &display::Display, node: Node) -> Option<Halves> {
+        let tile = node.0;
+        if self.stop.load(Ordering::Relaxed) || self.progress.is_done(tile) {
+            return None;
+        }
+        let children = walk.children(node);
+        let kids: Vec<Option<Halves>> = children.par_iter().map(|&c| self.visit(walk, seeder, display, c)).collect();
+        if self.stop.load(Ordering::Relaxed) {
+            return None;
+        }
+        let mut halves = None;
+        if walk.seeds(tile) {
+            let four: Option<[Halves; 4]> =
+                kids.into_iter().collect::<Option<Vec<_>>>().and_then(|k| k.try_into().ok());
+            let for_parent = tile.parent().is_some_and(|p| walk.seeds(p));
+            let (h, failures) = seeder.tile(tile, four.as_ref(), for_parent);
+            self.record(failures);
+            display.advance(self.files_per_tile(), self.counters.failed.load(Ordering::Relaxed));
+            halves = h.iter().any(Option::is_some).then_some(h);
+        }
+        let ids: Vec<TileId> = children.iter().map(|c| c.0).collect();
+        if let Err(e) = self.progress.finish(tile, &ids, self.counters.total()) {
+            self.warn_once(&format!("cannot save the progress file {}: {e}", self.job.files.0.display()));
+        }
+        halves
+    }
+
+    /// Seeds the tiles of a list, each layer with its own seeder.
+    fn list(&self, entries: &[failed::Entry]) {
+        let display =
+            display::Display::new(self.options.display, entries.len() as u64 * self.job.formats.len() as u64, 0);
+        let mut layers: Vec<_> = entries.iter().map(|e| e.0).collect();
+        layers.sort_by_key(|l| l.name());
+        layers.dedup();
+        for layer in layers {
+            let seeder = self.seeder(vec![layer]);
+            entries.par_iter().filter(|e| e.0 == layer).for_each(|&(_, tile)| {
+                if !self.stop.load(Ordering::Relaxed) {
+                    let (_, failures) = seeder.tile(tile, None, false);
+                    self.record(failures);
+                    display.advance(self.job.formats.len() as u64, self.counters.failed.load(Ordering::Relaxed));
+                }
+            });
+        }
+        display.finish(self.counters.failed.load(Ordering::Relaxed));
+    }
+
+    fn record(&self, failures: Vec<(failed::Entry, String)>) {
+        for (entry, why) in failures {
+            if let Err(e) = self.failed.record(entry, &why) {
+                self.warn_once(&format!("cannot write {}: {e}", self.failed.path().display()));
+            }
+        }
+        if self.counters.failed.load(Ordering::Relaxed) > self.options.max_failures {
+            self.stop.store(true, Ordering::Relaxed);
+        }
+    }
+
+    fn warn_once(&self, message: &str) {
+        if self.warned.lock().is_ok_and(|mut w| !std::mem::replace(&mut *w, true)) {
+            eprintln!("sylva seed: warning: {message}");
+        }
+    }
+
+    fn files_per_tile(&self) -> u64 {
+        (self.job.layers.len() * self.job.formats.len()) as u64
+    }
+}
+
+/// `[level][layer]`: whether a tile of that level is exactly its children
+/// decimated (levels 0 to `last`; tiles need an even number of cells).
+fn exact_levels(region: &crate::region::Region, layers: &[crate::cem::Layer], last: u32) -> Vec<Vec<bool>> {
+    let even = (region.tiles.samples() - 1).is_multiple_of(2);
+    (0..last)
+        .map(|level| {
+            let coarse = region.tiles.tile_samples(TileId::new(level, 0, 0), 0);
+            let fine = region.tiles.tile_samples(TileId::new(level + 1, 0, 0), 0);
+            layers.iter().map(|&l| even && crate::cem::alike_across(region, l, &fine, &coarse)).collect()
+        })
+        .collect()
+}
+
+/// The dry run: tiles per level for this shard.
+fn dry_run(job: &Job) -> Report {
+    let Some(walk) = &job.walk else {
+        return Report { text: "a tile list has no levels to count".into(), failed: 0 };
+    };
+    let counts = walk.count_per_level();
+    let files = (job.layers.len() * job.formats.len()) as u64;
+    let rows: Vec<Vec<String>> = walk
+        .levels()
+        .zip(&counts)
+        .map(|(level, n)| vec![level.to_string(), n.to_string(), (n * files).to_string()])
+        .chain(std::iter::once(vec![
+            "all".into(),
+            counts.iter().sum::<u64>().to_string(),
+            (counts.iter().sum::<u64>() * files).to_string(),
+        ]))
+        .collect();
+    let head = format!(
+        "{} — shard {}/{}, {} layer(s) × {} format(s)",
+        job.region.name,
+        job.shard.index,
+        job.shard.count,
+        job.layers.len(),
+        job.formats.len()
+    );
+    Report { text: format!("{head}\n{}", crate::bench::table(&["level", "tiles", "files"], &rows)), failed: 0 }
+}
+
+fn summary(
+    job: &Job,
+    store: &dyn crate::cache::TileStore,
+    c: &Counters,
+    took: Duration,
+    failed: &std::path::Path,
+) -> String {
+    let get = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
+    let made = get(&c.computed) + get(&c.derived);
+    let mut text = format!(
+        "seeded {} into {}: {made} tile files made ({} computed, {} from their children), {} already there, {} failed, in {:.1} s ({:.1} files/s)",
+        job.region.name,
+        store.describe(),
+        get(&c.computed),
+        get(&c.derived),
+        get(&c.existing),
+        get(&c.failed),
+        took.as_secs_f64(),
+        made as f64 / took.as_secs_f64().max(1e-9)
+    );
+    if get(&c.failed) > 0 {
+        text.push_str(&format!("\nfailed tiles are listed in {}; re-run them with --tiles-from {0}", failed.display()));
+    }
+    text
+}

@@ -1,0 +1,236 @@
+//! The seed command's options as given, and their checking into a job:
+//! every string parsed with an error that names the flag or file and the
+//! problem, the configuration and region loaded, the coverage read.
+
+use super::SeedError;
+use super::coverage::Coverage;
+use super::display::Mode;
+use super::walk::{Shard, Walk};
+use crate::cem::Layer;
+use crate::config::Config;
+use crate::encode::Format;
+use crate::grid::{BBox, TileGrid};
+use crate::region::Region;
+use std::ops::RangeInclusive;
+use std::path::PathBuf;
+use std::time::SystemTime;
+
+/// `sylva seed` as given on the command line.
+#[derive(Clone, Debug)]
+pub struct SeedOptions {
+    /// Region configuration (default: the embedded demo region).
+    pub config: Option<PathBuf>,
+    /// Cache tiles in this directory instead of `[tile_cache]`.
+    pub cache_dir: Option<PathBuf>,
+    /// Comma-separated layers, e.g. `cem,dem`.
+    pub layers: String,
+    /// Comma-separated formats, e.g. `bil16,png16`.
+    pub formats: String,
+    /// `FROM-TO` or one level (required unless `tiles_from`).
+    pub levels: Option<String>,
+    /// `W,S,E,N` (default: the region's bounds).
+    pub bbox: Option<String>,
+    /// A GeoJSON file of polygons instead of a box.
+    pub coverage: Option<PathBuf>,
+    /// Seed the tiles listed in this file instead of walking.
+    pub tiles_from: Option<PathBuf>,
+    /// Print the tiles per level and stop.
+    pub dry_run: bool,
+    /// Worker threads (0 = one per core).
+    pub concurrency: usize,
+    /// Continue the job recorded in the progress file.
+    pub resume: bool,
+    /// The progress file (default `seed-progress.json`, per shard).
+    pub progress_file: Option<PathBuf>,
+    /// The failed-tiles file (default `seed-failed.txt`, per shard).
+    pub failed_file: Option<PathBuf>,
+    /// Remake tiles written before this date (RFC 3339, or `YYYY-MM-DD`).
+    pub refresh_before: Option<String>,
+    /// Keep every valid tile already there.
+    pub skip_existing: bool,
+    /// Retries of a failing tile.
+    pub retries: u32,
+    /// Stop after more failed tiles than this.
+    pub max_failures: u64,
+    /// `I/N`: seed part I (0-based) of N.
+    pub shard: Option<String>,
+    /// Build parents from their children where that is exact.
+    pub from_children: bool,
+    /// How progress is shown.
+    pub display: Mode,
+}
+
+impl Default for SeedOptions {
+    fn default() -> Self {
+        SeedOptions {
+            config: None,
+            cache_dir: None,
+            layers: "cem".into(),
+            formats: "bil16".into(),
+            levels: None,
+            bbox: None,
+            coverage: None,
+            tiles_from: None,
+            dry_run: false,
+            concurrency: 0,
+            resume: false,
+            progress_file: None,
+            failed_file: None,
+            refresh_before: None,
+            skip_existing: false,
+            retries: 2,
+            max_failures: 1000,
+            shard: None,
+            from_children: true,
+            display: Mode::Auto,
+        }
+    }
+}
+
+/// A checked job.
+pub struct Job {
+    /// The configuration.
+    pub config: Config,
+    /// Its region.
+    pub region: Region,
+    /// Layers.
+    pub layers: Vec<Layer>,
+    /// Formats.
+    pub formats: Vec<Format>,
+    /// The walk (absent for a tile list).
+    pub walk: Option<Walk>,
+    /// This shard.
+    pub shard: Shard,
+    /// Entries written before this are remade (`None`: before the job's start).
+    pub refresh_before: Option<SystemTime>,
+    /// Progress and failed-tiles files.
+    pub files: (PathBuf, PathBuf),
+    /// Digest of everything that defines the job.
+    pub fingerprint: String,
+}
+
+impl Job {
+    /// Checks the options, loads the region and reads the coverage.
+    pub fn new(o: &SeedOptions) -> Result<Job, SeedError> {
+        let layers = list(&o.layers, "--layers", Layer::parse, "dem, cover, canopy, cem, surface, max4, max32")?;
+        let formats = list(&o.formats, "--formats", Format::parse, "bil16, bil32, png16, tiff")?;
+        let shard = o.shard.as_deref().map(parse_shard).transpose()?.unwrap_or(Shard::ALL);
+        let refresh_before = match (&o.refresh_before, o.skip_existing) {
+            (Some(date), false) => Some(parse_date(date)?),
+            (None, true) => Some(SystemTime::UNIX_EPOCH),
+            (None, false) => None,
+            (Some(_), true) => {
+                return Err(SeedError::Usage("--refresh-before and --skip-existing exclude each other".into()));
+            }
+        };
+        let (config, region) = crate::config::load_with_config(o.config.as_deref())?;
+        let (walk, area) = match &o.tiles_from {
+            Some(list) => (None, format!("list {}", list.display())),
+            None => {
+                let levels = parse_levels(
+                    o.levels
+                        .as_deref()
+                        .ok_or_else(|| SeedError::Usage("give --levels FROM-TO (or --tiles-from FILE)".into()))?,
+                )?;
+                let (coverage, area) = coverage(o, &region)?;
+                (Some(Walk::new(region.tiles, coverage, levels.clone(), shard)), format!("{area} levels {levels:?}"))
+            }
+        };
+        let suffix = if shard.count > 1 { format!("-{}-of-{}", shard.index, shard.count) } else { String::new() };
+        let files = (
+            o.progress_file.clone().unwrap_or_else(|| PathBuf::from(format!("seed-progress{suffix}.json"))),
+            o.failed_file.clone().unwrap_or_else(|| PathBuf::from(format!("seed-failed{suffix}.txt"))),
+        );
+        let what = format!("{} {layers:?} {formats:?} {area} {shard:?}", region.version);
+        let fingerprint = format!("{:016x}", crate::cache::digest(what.as_bytes()));
+        Ok(Job { config, region, layers, formats, walk, shard, refresh_before, files, fingerprint })
+    }
+}
+
+/// The coverage and a description that changes with it.
+fn coverage(o: &SeedOptions, region: &Region) -> Result<(Coverage, String), SeedError> {
+    match (&o.bbox, &o.coverage) {
+        (Some(_), Some(_)) => Err(SeedError::Usage("give --bbox or --coverage, not both".into())),
+        (Some(text), None) => {
+            let b = BBox::parse(text).map_err(|e| SeedError::Usage(format!("--bbox: {e}")))?;
+            Ok((Coverage::Box(b), format!("bbox {text}")))
+        }
+        (None, Some(path)) => {
+            let text = std::fs::read(path).unwrap_or_default();
+            Ok((Coverage::from_geojson(path)?, format!("coverage {:016x}", crate::cache::digest(&text))))
+        }
+        (None, None) => Ok((Coverage::Box(region.bounds), format!("region bounds {:?}", region.bounds))),
+    }
+}
+
+/// A comma-separated list of names.
+fn list<T: PartialEq>(
+    text: &str,
+    flag: &str,
+    parse: impl Fn(&str) -> Option<T>,
+    known: &str,
+) -> Result<Vec<T>, SeedError> {
+    let mut out = Vec::new();
+    for name in text.split(',').map(str::trim) {
+        let v = parse(name)
+            .ok_or_else(|| SeedError::Usage(format!("{flag}: unknown {name:?}; expected some of {known}")))?;
+        if !out.contains(&v) {
+            out.push(v);
+        }
+    }
+    Ok(out)
+}
+
+/// `FROM-TO` or `LEVEL`.
+pub fn parse_levels(text: &str) -> Result<RangeInclusive<u32>, SeedError> {
+    let bad = |why: &str| SeedError::Usage(format!("--levels {text:?}: {why}"));
+    let number = |s: &str| s.trim().parse::<u32>().map_err(|_| bad("expected FROM-TO or one level, e.g. 0-12"));
+    let (from, to) = match text.split_once('-') {
+        Some((a, b)) => (number(a)?, number(b)?),
+        None => (number(text)?, number(text)?),
+    };
+    if from > to {
+        return Err(bad("FROM is above TO"));
+    }
+    if to > TileGrid::MAX_LEVEL {
+        return Err(bad(&format!("levels go up to {}", TileGrid::MAX_LEVEL)));
+    }
+    Ok(from..=to)
+}
+
+/// `I/N`, 0 ≤ I < N.
+pub fn parse_shard(text: &str) -> Result<Shard, SeedError> {
+    let bad = || SeedError::Usage(format!("--shard {text:?}: expected I/N with 0 <= I < N, e.g. 0/4"));
+    let (i, n) = text.split_once('/').ok_or_else(bad)?;
+    let (index, count) = (i.trim().parse::<u32>().map_err(|_| bad())?, n.trim().parse::<u32>().map_err(|_| bad())?);
+    if index >= count { Err(bad()) } else { Ok(Shard { index, count }) }
+}
+
+/// RFC 3339 (`2026-12-01T12:00:00Z`, or with a space) or a day (`2026-12-01`, midnight UTC).
+pub fn parse_date(text: &str) -> Result<SystemTime, SeedError> {
+    let full = if text.len() == 10 { format!("{text}T00:00:00Z") } else { text.to_string() };
+    humantime::parse_rfc3339_weak(full.trim_end_matches('Z')).map_err(|e| {
+        SeedError::Usage(format!("--refresh-before {text:?}: {e}; expected e.g. 2026-12-01 or 2026-12-01T12:00:00Z"))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flags_parse_and_bad_ones_say_why() {
+        assert_eq!(parse_levels("0-12").unwrap(), 0..=12);
+        assert_eq!(parse_levels("7").unwrap(), 7..=7);
+        for bad in ["12-3", "a-b", "0-99", ""] {
+            assert!(parse_levels(bad).unwrap_err().to_string().contains("--levels"), "{bad}");
+        }
+        assert_eq!(parse_shard("2/4").unwrap(), Shard { index: 2, count: 4 });
+        assert!(parse_shard("4/4").is_err() && parse_shard("1").is_err());
+        let day = parse_date("2026-12-01").unwrap();
+        assert_eq!(day.duration_since(SystemTime::UNIX_EPOCH).unwrap().as_secs(), 1_796_083_200);
+        assert!(parse_date("2026-12-01T12:00:00Z").unwrap() > day);
+        assert!(parse_date("yesterday").unwrap_err().to_string().contains("--refresh-before"));
+        assert!(list("cem,trees", "--layers", Layer::parse, "…").unwrap_err().to_string().contains("\"trees\""));
+    }
+}

@@ -1,0 +1,200 @@
+//! Seeding one tile: for each layer and format, claim its cache key (skip it
+//! if a usable entry is there, wait if another process is making it), make
+//! the samples once — from the four children's halves where that is exact,
+//! else with the server's own product code — encode, store, release. Each
+//! failure is retried a bounded number of times.
+
+use super::decimate;
+use super::failed::Entry;
+use crate::cache::flight::{self, Claim};
+use crate::cache::{Stored, TileStore};
+use crate::cem::{Layer, LayerSamples, Stats};
+use crate::encode::Format;
+use crate::grid::TileId;
+use crate::region::Region;
+use crate::server::products::{self, Encoding, Product};
+use crate::server::wms::request::MapLayer;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, SystemTime};
+
+/// Halved samples of a finished tile per layer (index as in the job's
+/// layers), kept for its parent; `None` where the parent will not use them.
+pub type Halves = Vec<Option<LayerSamples>>;
+
+/// Tile files seen so far.
+#[derive(Debug, Default)]
+pub struct Counters {
+    /// Computed with the pipeline.
+    pub computed: AtomicU64,
+    /// Built from their children.
+    pub derived: AtomicU64,
+    /// Found in the cache, usable.
+    pub existing: AtomicU64,
+    /// Failed after their retries.
+    pub failed: AtomicU64,
+}
+
+impl Counters {
+    /// Every file counted.
+    pub fn total(&self) -> u64 {
+        [&self.computed, &self.derived, &self.existing, &self.failed].iter().map(|c| c.load(Ordering::Relaxed)).sum()
+    }
+}
+
+/// How one tile file came about.
+enum Made {
+    Computed,
+    Derived,
+    Existing,
+}
+
+/// What seeding needs to know, shared by every worker.
+pub struct Seeder<'a> {
+    /// The region.
+    pub region: &'a Region,
+    /// The tile cache.
+    pub store: &'a dyn TileStore,
+    /// Layers seeded.
+    pub layers: Vec<Layer>,
+    /// Formats of each layer.
+    pub formats: Vec<Format>,
+    /// Entries written before this are remade.
+    pub refresh_before: SystemTime,
+    /// Lock expiry.
+    pub lock_ttl: Duration,
+    /// Retries of a failed tile.
+    pub retries: u32,
+    /// `[level][layer]`: a tile of the level is exactly its children decimated.
+    pub from_children: Vec<Vec<bool>>,
+    /// Counts.
+    pub counters: &'a Counters,
+}
+
+impl Seeder<'_> {
+    /// Seeds every layer of `tile`; `kids` are its children's halves (when
+    /// all four were made here), `for_parent` whether to keep this tile's.
+    /// Returns the halves and the layers that failed, with why.
+    pub fn tile(&self, tile: TileId, kids: Option<&[Halves; 4]>, for_parent: bool) -> (Halves, Vec<(Entry, String)>) {
+        let mut halves = Vec::with_capacity(self.layers.len());
+        let mut failures = Vec::new();
+        for i in 0..self.layers.len() {
+            match self.layer(tile, i, kids) {
+                Ok(samples) => {
+                    let keep = for_parent && self.exact(tile.level.wrapping_sub(1), i);
+                    halves.push(samples.filter(|_| keep).map(|s| decimate::half(&s)));
+                }
+                Err(why) => {
+                    self.counters.failed.fetch_add(self.formats.len() as u64, Ordering::Relaxed);
+                    failures.push(((self.layers[i], tile), why));
+                    halves.push(None);
+                }
+            }
+        }
+        (halves, failures)
+    }
+
+    /// True if a tile of `level` is its children decimated for layer `i`.
+    fn exact(&self, level: u32, i: usize) -> bool {
+        self.from_children.get(level as usize).and_then(|l| l.get(i)).copied().unwrap_or(false)
+    }
+
+    /// Seeds one layer of a tile in every format; its samples if they were made.
+    fn layer(&self, tile: TileId, i: usize, kids: Option<&[Halves; 4]>) -> Result<Option<LayerSamples>, String> {
+        let layer = self.layers[i];
+        let grid = self.region.tiles.tile_samples(tile, 0);
+        let mut samples: Option<(Option<LayerSamples>, bool)> = None;
+        for &format in &self.formats {
+            let product =
+                Product::Tile { layer: MapLayer::Data(layer), id: tile, halo: 0, encoding: Encoding::Data(format) };
+            let key = product.key(&self.region.version).ok_or("tiles have cache keys")?;
+            let made = self.file(&key, || {
+                if samples.is_none() {
+                    samples = Some(self.samples(tile, i, kids)?);
+                }
+                let (s, derived) = samples.as_ref().ok_or("samples were just made")?;
+                let c = products::encode_samples(
+                    self.region,
+                    &grid,
+                    layer,
+                    Encoding::Data(format),
+                    s.as_ref(),
+                    Stats::default(),
+                )
+                .map_err(|e| e.to_string())?;
+                Ok((c.bytes, c.uniform, *derived))
+            })?;
+            let counter = match made {
+                Made::Computed => &self.counters.computed,
+                Made::Derived => &self.counters.derived,
+                Made::Existing => &self.counters.existing,
+            };
+            counter.fetch_add(1, Ordering::Relaxed);
+        }
+        Ok(samples.and_then(|(s, _)| s))
+    }
+
+    /// The samples of layer `i`: assembled from the children if exact, else
+    /// computed; the flag says they were assembled.
+    fn samples(
+        &self,
+        tile: TileId,
+        i: usize,
+        kids: Option<&[Halves; 4]>,
+    ) -> Result<(Option<LayerSamples>, bool), String> {
+        let quarters = kids.filter(|_| self.exact(tile.level, i)).and_then(|k| {
+            let [a, b, c, d] = [&k[0][i], &k[1][i], &k[2][i], &k[3][i]];
+            decimate::assemble([a.as_ref()?, b.as_ref()?, c.as_ref()?, d.as_ref()?])
+        });
+        if let Some(parent) = quarters {
+            return Ok((Some(parent), true));
+        }
+        let grid = self.region.tiles.tile_samples(tile, 0);
+        let (s, _) = products::samples(self.region, &grid, self.layers[i]).map_err(|e| e.to_string())?;
+        Ok((s, false))
+    }
+
+    /// Makes one tile file under `key` unless a usable one is there, with
+    /// retries; `make` gives the bytes, whether they are uniform, and whether
+    /// they were derived from children.
+    fn file(&self, key: &str, mut make: impl FnMut() -> Result<(Vec<u8>, bool, bool), String>) -> Result<Made, String> {
+        let usable = |s: &Stored| s.written >= self.refresh_before && !flight::expired(self.region.upstream_ttl, s);
+        let mut busy = 0;
+        loop {
+            match flight::claim(self.store, key, &usable, self.lock_ttl).map_err(|e| e.to_string())? {
+                Claim::Ready(_) => return Ok(Made::Existing),
+                Claim::Busy => {
+                    std::thread::sleep(flight::pause(busy));
+                    busy += 1;
+                }
+                Claim::Compute { lock, .. } => {
+                    let result = self.attempts(key, &mut make);
+                    let released = self.store.unlock(&lock).map_err(|e| e.to_string());
+                    return result.and_then(|made| released.map(|()| made));
+                }
+            }
+        }
+    }
+
+    /// Up to `1 + retries` attempts, 100 ms apart, doubling.
+    fn attempts(
+        &self,
+        key: &str,
+        make: &mut impl FnMut() -> Result<(Vec<u8>, bool, bool), String>,
+    ) -> Result<Made, String> {
+        let mut last = String::new();
+        for attempt in 0..=self.retries {
+            if attempt > 0 {
+                std::thread::sleep(Duration::from_millis(100 << (attempt - 1).min(6)));
+            }
+            let saved = make().and_then(|(bytes, uniform, derived)| {
+                flight::save(self.store, key, &bytes, uniform).map_err(|e| e.to_string())?;
+                Ok(if derived { Made::Derived } else { Made::Computed })
+            });
+            match saved {
+                Ok(made) => return Ok(made),
+                Err(e) => last = e,
+            }
+        }
+        Err(format!("{} attempts failed; last: {last}", self.retries + 1))
+    }
+}

@@ -1,0 +1,422 @@
+//! `sylva seed` as an operator runs it: seeded tiles are the server's cache
+//! hits, byte for byte; dry runs count what a seed writes and polygons prune
+//! it; a seeder killed with SIGKILL resumes to the same cache; a source that
+//! fails for some tiles gets them retried, listed and re-run from the list;
+//! uniform tiles are stored once; bad input is named.
+
+use crate::common::{self, TempDir};
+use crate::http::Server;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+use sylva::cache::{DirStore, Lookup, TileStore};
+use sylva::server::products::{self, Encoding, Product};
+use sylva::server::wms::request::MapLayer;
+
+/// `sylva seed ARGS` run in `dir` (where its progress and failed files go).
+pub fn seed(dir: &Path, args: &[&str]) -> Output {
+    seed_command(dir, args).output().expect("run sylva seed")
+}
+
+/// The command of [`seed`], not started.
+pub fn seed_command(dir: &Path, args: &[&str]) -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_sylva"));
+    cmd.current_dir(dir).arg("seed").arg("--progress").arg("plain").args(args);
+    cmd
+}
+
+/// Asserts success and returns stdout.
+pub fn ok(out: &Output) -> String {
+    assert!(
+        out.status.success(),
+        "{:?}\nstdout: {}\nstderr: {}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// The number before `what` in a seed summary, e.g. "12 from their children".
+pub fn count(summary: &str, what: &str) -> u64 {
+    let before = summary.split(what).next().unwrap_or("");
+    before
+        .rsplit(|c: char| !c.is_ascii_digit())
+        .find(|w| !w.is_empty())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no count of {what:?} in {summary:?}"))
+}
+
+/// Every tile entry of a directory cache (key → payload), each checked: a
+/// truncated or corrupt entry fails the test. Temporaries and locks are not
+/// entries.
+pub fn tiles(cache: &Path) -> BTreeMap<String, Vec<u8>> {
+    let store = DirStore::new(cache);
+    let mut out = BTreeMap::new();
+    for path in walk(cache) {
+        let key = path.strip_prefix(cache).unwrap().to_string_lossy().into_owned();
+        let name = path.file_name().unwrap().to_string_lossy();
+        if name.starts_with('.') || name.ends_with(".lock") {
+            continue;
+        }
+        match store.get(&key).unwrap() {
+            Lookup::Hit(s) => out.insert(key, s.bytes),
+            other => panic!("{key}: {other:?}: a damaged tile in the cache"),
+        };
+    }
+    out
+}
+
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let p = entry.path();
+        if entry.file_type().is_ok_and(|t| t.is_dir()) { out.extend(walk(&p)) } else { out.push(p) }
+    }
+    out
+}
+
+/// `version/layer/level/row/row_col.ext` → the server's product and URL path.
+pub fn product_of(key: &str) -> Option<(Product, String)> {
+    let parts: Vec<&str> = key.split('/').collect();
+    let [_, layer, level, row, file] = parts[..] else { return None };
+    let (stem, ext) = file.split_once('.')?;
+    let col = stem.split_once('_')?.1;
+    let layer = sylva::cem::Layer::parse(layer)?;
+    let format = match ext {
+        "bil" => sylva::encode::Format::Bil16,
+        "bil32" => sylva::encode::Format::Bil32,
+        "png" => sylva::encode::Format::Png16,
+        _ => sylva::encode::Format::Tiff,
+    };
+    let id = sylva::grid::TileId::new(level.parse().ok()?, row.parse().ok()?, col.parse().ok()?);
+    let product = Product::Tile { layer: MapLayer::Data(layer), id, halo: 0, encoding: Encoding::Data(format) };
+    Some((product, format!("/tiles/{}/{level}/{row}/{stem}.{ext}", layer.name())))
+}
+
+/// The rmnp configuration, copied into `dir` with absolute data paths and
+/// `extra` appended (e.g. a `[tile_cache]` table).
+pub fn rmnp_config(dir: &TempDir, name: &str, extra: &str) -> PathBuf {
+    let text = std::fs::read_to_string(common::repo().join("config/examples/rmnp.toml")).unwrap();
+    let data = common::data("rmnp").parent().unwrap().display().to_string();
+    let path = dir.join(name);
+    std::fs::write(&path, format!("{}\n{extra}\n", text.replace("../../../shared/data", &data))).unwrap();
+    path
+}
+
+/// Seed arguments: `config`, `cache`, `layers` at `levels`, then `extra`.
+pub fn job_args(config: &Path, cache: &Path, layers: &str, levels: &str, extra: &[&str]) -> Vec<String> {
+    let head =
+        ["--config", &config.display().to_string(), "--cache-dir", &cache.display().to_string()].map(String::from);
+    let tail = ["--layers", layers, "--levels", levels].into_iter().chain(extra.iter().copied()).map(String::from);
+    head.into_iter().chain(tail).collect()
+}
+
+/// `&str`s of owned arguments.
+pub fn strs(args: &[String]) -> Vec<&str> {
+    args.iter().map(String::as_str).collect()
+}
+
+/// The "all" row of a dry run: (tiles, files).
+fn dry_total(out: &str) -> (u64, u64) {
+    let row = out
+        .lines()
+        .find(|l| l.contains("| all |") || l.trim_start().starts_with("|   all"))
+        .unwrap_or_else(|| panic!("{out}"));
+    let cells: Vec<u64> = row.split('|').filter_map(|c| c.trim().parse().ok()).collect();
+    (cells[0], cells[1])
+}
+
+#[test]
+fn seeded_tiles_are_cache_hits_identical_to_on_demand_tiles() {
+    let dir = TempDir::new("seed-hits");
+    let config = rmnp_config(&dir, "rmnp.toml", "[tile_cache]\nlock_ttl_s = 2");
+    let cache = dir.join("cache");
+    let owned = job_args(&config, &cache, "dem,cem", "6-9", &["--formats", "bil16,png16"]);
+    let args = strs(&owned);
+    let (_, files) = dry_total(&ok(&seed(&dir.0, &[&args[..], &["--dry-run"]].concat())));
+    let run = seed(&dir.0, &args);
+    let summary = ok(&run);
+    assert!(count(&summary, "from their children") > 0, "{summary}");
+    // Off a terminal, progress is plain log lines with the rate and the ETA.
+    let log = String::from_utf8_lossy(&run.stderr);
+    assert!(log.lines().any(|l| l.starts_with("seed: ") && l.contains("tiles/s, ETA")), "{log}");
+    let seeded = tiles(&cache);
+    assert_eq!(seeded.len() as u64, files);
+    // Byte-identical to what the server computes on demand (parents built
+    // from their children included).
+    let region = sylva::config::load(Some(&config)).unwrap();
+    for (key, bytes) in &seeded {
+        let (product, _) = product_of(key).unwrap_or_else(|| panic!("{key}"));
+        assert!(products::compute(&region, &product).unwrap().bytes == *bytes, "{key} differs from the on-demand tile");
+    }
+    // The server answers every one from the cache.
+    let server = Server::start(Some(&config), &cache);
+    for (key, bytes) in &seeded {
+        let (_, path) = product_of(key).unwrap();
+        let reply = server.get(&path);
+        assert_eq!(reply.status, if bytes.is_empty() { 404 } else { 200 }, "{path}");
+        assert!(reply.body == *bytes, "{path}");
+    }
+    assert_eq!(server.metric("sylva_tile_computations_total"), 0.0);
+    assert_eq!(server.metric("sylva_tile_cache_total{result=\"hit\"}"), seeded.len() as f64);
+}
+
+#[test]
+fn dry_runs_count_what_a_seed_writes_and_polygons_with_holes_prune() {
+    let dir = TempDir::new("seed-dry");
+    let config = rmnp_config(&dir, "rmnp.toml", "");
+    let cfg = config.to_str().unwrap();
+    let (bbox_tiles, _) =
+        dry_total(&ok(&seed(&dir.0, &["--config", cfg, "--layers", "dem", "--levels", "6-10", "--dry-run"])));
+    // A triangle over the region with a square hole.
+    let geojson = dir.join("area.geojson");
+    std::fs::write(
+        &geojson,
+        r#"{"type":"Feature","properties":{},"geometry":{"type":"Polygon","coordinates":[
+        [[-105.9,40.17],[-105.5,40.17],[-105.9,40.55],[-105.9,40.17]],
+        [[-105.85,40.2],[-105.75,40.2],[-105.75,40.3],[-105.85,40.3],[-105.85,40.2]]]}}"#,
+    )
+    .unwrap();
+    let area = ["--config", cfg, "--layers", "dem", "--levels", "6-10", "--coverage", geojson.to_str().unwrap()];
+    let (polygon_tiles, files) = dry_total(&ok(&seed(&dir.0, &[&area[..], &["--dry-run"]].concat())));
+    assert!(polygon_tiles < bbox_tiles * 2 / 3, "{polygon_tiles} of {bbox_tiles}");
+    let cache = dir.join("cache");
+    ok(&seed(&dir.0, &[&area[..], &["--cache-dir", cache.to_str().unwrap()]].concat()));
+    let seeded = tiles(&cache);
+    assert_eq!(seeded.len() as u64, files);
+    // Nothing inside the hole at level 10: a tile whose centre is there.
+    let hole = sylva::grid::TileGrid::new(36.0, 513).unwrap().tile_containing(-105.8, 40.25, 10);
+    assert!(!seeded.keys().any(|k| k.ends_with(&format!("dem/10/{}/{}_{}.bil", hole.row, hole.row, hole.col))));
+}
+
+#[test]
+fn bad_input_is_named_with_the_problem() {
+    let dir = TempDir::new("seed-bad");
+    let geojson = dir.join("points.geojson");
+    std::fs::write(&geojson, r#"{"type":"Point","coordinates":[1,2]}"#).unwrap();
+    let redis = dir.join("redis.toml");
+    std::fs::write(&redis, "[tile_cache]\nbackend = \"redis\"\nredis_url = \"redis://127.0.0.1:1/0\"\n").unwrap();
+    let list = dir.join("list.txt");
+    std::fs::write(&list, "dem/3/1/1\ncem/nine/1/1\n").unwrap();
+    let cases: [(&[&str], &str); 6] = [
+        (&["--levels", "12-3"], "--levels \"12-3\": FROM is above TO"),
+        (
+            &["--levels", "0-5", "--coverage", geojson.to_str().unwrap()],
+            "points.geojson: Point geometries cannot be seeded",
+        ),
+        (&["--levels", "0-5", "--config", redis.to_str().unwrap()], "Redis at redis://127.0.0.1:1/0"),
+        (&["--levels", "0-5", "--shard", "4/4"], "--shard \"4/4\""),
+        (&["--tiles-from", list.to_str().unwrap()], "list.txt:2"),
+        (&["--levels", "0-5", "--layers", "trees"], "unknown \"trees\""),
+    ];
+    for (args, needle) in cases {
+        let out = seed(&dir.0, args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn a_seeder_killed_mid_run_resumes_to_the_same_cache() {
+    let dir = TempDir::new("seed-kill");
+    let config = rmnp_config(&dir, "rmnp.toml", "[tile_cache]\nlock_ttl_s = 1");
+    let job = ["--config", config.to_str().unwrap(), "--layers", "dem", "--levels", "6-11", "--concurrency", "2"];
+    let reference = dir.join("reference");
+    ok(&seed(
+        &dir.0,
+        &[&job[..], &["--cache-dir", reference.to_str().unwrap(), "--progress-file", "ref.json"]].concat(),
+    ));
+    let expected = tiles(&reference);
+
+    let cache = dir.join("cache");
+    let mut child = seed_command(&dir.0, &[&job[..], &["--cache-dir", cache.to_str().unwrap()]].concat())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill it once it has saved its progress, well before the end.
+    let progress = dir.join("seed-progress.json");
+    let start = Instant::now();
+    while !progress.exists() {
+        assert!(child.try_wait().unwrap().is_none(), "the seed finished before it could be killed");
+        assert!(start.elapsed() < Duration::from_secs(120), "no progress file");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    let partial = walk(&cache).len();
+    assert!(partial < expected.len(), "killed after the end: {partial} files");
+
+    let summary = ok(&seed(&dir.0, &[&job[..], &["--cache-dir", cache.to_str().unwrap(), "--resume"]].concat()));
+    let resumed = tiles(&cache);
+    assert_eq!(resumed.keys().collect::<Vec<_>>(), expected.keys().collect::<Vec<_>>());
+    assert!(resumed == expected, "the resumed cache differs from an uninterrupted run");
+    let made = count(&summary, "tile files made");
+    assert!(made < expected.len() as u64, "the resumed run remade everything: {summary}");
+}
+
+/// A Terrarium upstream on loopback: sea (0 m) west of `SEA_EAST`, hills
+/// east of it; the zoom-13 tile holding `(BAD_LON, BAD_LAT)` answers 500
+/// until healed. Counts requests per path.
+struct Upstream {
+    base: String,
+    healed: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    requests: std::sync::Arc<std::sync::Mutex<BTreeMap<String, u32>>>,
+    bad: String,
+}
+
+const SEA_EAST: f64 = 10.04;
+const BAD_LON: f64 = 10.07;
+const BAD_LAT: f64 = 46.37;
+
+impl Upstream {
+    fn start() -> Upstream {
+        use std::io::{Read, Write};
+        use std::sync::atomic::Ordering;
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let base = format!("http://{}", listener.local_addr().unwrap());
+        let n = f64::from(1u32 << 13);
+        let (bx, by) = (
+            ((BAD_LON + 180.0) / 360.0 * n) as u64,
+            ((1.0 - BAD_LAT.to_radians().tan().asinh() / std::f64::consts::PI) / 2.0 * n) as u64,
+        );
+        let bad = format!("/13/{bx}/{by}.png");
+        let up = Upstream { base, healed: Default::default(), requests: Default::default(), bad: bad.clone() };
+        let (healed, requests) = (up.healed.clone(), up.requests.clone());
+        std::thread::spawn(move || {
+            for mut stream in listener.incoming().flatten() {
+                let mut buf = [0u8; 2048];
+                let n = stream.read(&mut buf).unwrap_or(0);
+                let path = String::from_utf8_lossy(&buf[..n]).split_whitespace().nth(1).unwrap_or("").to_string();
+                *requests.lock().unwrap().entry(path.clone()).or_default() += 1;
+                let reply = match (path == bad && !healed.load(Ordering::SeqCst), terrarium_tile(&path)) {
+                    (false, Some(png)) => [format!("HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nContent-Length: {}\r\nConnection: close\r\n\r\n", png.len()).into_bytes(), png].concat(),
+                    _ => b"HTTP/1.1 500 Internal Server Error\r\nContent-Length: 4\r\nConnection: close\r\n\r\nboom".to_vec(),
+                };
+                let _ = stream.write_all(&reply);
+            }
+        });
+        up
+    }
+}
+
+/// The Terrarium PNG of `/z/x/y.png`.
+fn terrarium_tile(path: &str) -> Option<Vec<u8>> {
+    let parts: Vec<u64> =
+        path.trim_start_matches('/').trim_end_matches(".png").split('/').filter_map(|p| p.parse().ok()).collect();
+    let [z, x, y] = parts[..] else { return None };
+    let n = (256u64 << z) as f64;
+    let heights = sylva::raster::Raster::from_fn(256, 256, |px, py| {
+        let lon = ((x * 256 + px as u64) as f64 + 0.5) / n * 360.0 - 180.0;
+        let lat =
+            (std::f64::consts::PI * (1.0 - 2.0 * ((y * 256 + py as u64) as f64 + 0.5) / n)).sinh().atan().to_degrees();
+        if lon < SEA_EAST { 0.0 } else { (1500.0 + 300.0 * (lon * 90.0).sin() * (lat * 70.0).cos()) as f32 }
+    });
+    sylva::encode::terrarium::encode(&heights).ok()
+}
+
+#[test]
+fn failing_tiles_are_retried_listed_and_rerun_and_uniform_tiles_are_stored_once() {
+    let dir = TempDir::new("seed-fail");
+    let up = Upstream::start();
+    let config = dir.join("up.toml");
+    std::fs::write(&config, format!(
+        "name = \"upstream\"\n[dem.upstream]\nservice = \"terrarium\"\nurl = \"{}/{{z}}/{{x}}/{{y}}.png\"\nzoom = 13\nbounds = [9.9, 46.2, 10.2, 46.5]\nretries = 0\nbreaker_failures = 1000000\n[tile_cache]\nlock_ttl_s = 2\n",
+        up.base
+    )).unwrap();
+    let cache = dir.join("cache");
+    let job = [
+        "--config",
+        config.to_str().unwrap(),
+        "--cache-dir",
+        cache.to_str().unwrap(),
+        "--layers",
+        "dem",
+        "--levels",
+        "9-10",
+        "--bbox",
+        "10.0,46.3,10.1,46.4",
+        "--retries",
+        "1",
+    ];
+    // Too many failures stop the run.
+    let stopped = seed(&dir.0, &[&job[..], &["--max-failures", "0"]].concat());
+    assert_eq!(stopped.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&stopped.stderr).contains("more than --max-failures 0"),
+        "{}",
+        String::from_utf8_lossy(&stopped.stderr)
+    );
+    // Otherwise failed tiles are skipped and listed, with exit status 3.
+    let out = seed(&dir.0, &job);
+    assert_eq!(out.status.code(), Some(3), "{}", String::from_utf8_lossy(&out.stderr));
+    let listed = std::fs::read_to_string(dir.join("seed-failed.txt")).unwrap();
+    let failed: Vec<&str> = listed.lines().map(|l| l.split('\t').next().unwrap()).collect();
+    assert!(!failed.is_empty() && listed.contains("HTTP 500"), "{listed}");
+    assert!(up.requests.lock().unwrap()[&up.bad] >= 2 * failed.len() as u32, "each failed tile was tried twice");
+    let partial = tiles(&cache);
+    for f in &failed {
+        let p: Vec<&str> = f.split('/').collect();
+        let key = format!("{}/{}/{}/{}_{}.bil", p[0], p[1], p[2], p[2], p[3]);
+        assert!(!partial.keys().any(|k| k.ends_with(&key)), "{f} was stored");
+    }
+    // Healed, the list is re-run: the cache is complete and equals one healthy run.
+    up.healed.store(true, std::sync::atomic::Ordering::SeqCst);
+    let list = dir.join("failed-first.txt");
+    std::fs::copy(dir.join("seed-failed.txt"), &list).unwrap();
+    let rerun = ok(&seed(
+        &dir.0,
+        &[
+            "--config",
+            config.to_str().unwrap(),
+            "--cache-dir",
+            cache.to_str().unwrap(),
+            "--formats",
+            "bil16",
+            "--tiles-from",
+            list.to_str().unwrap(),
+        ],
+    ));
+    assert_eq!(count(&rerun, "tile files made"), failed.len() as u64, "{rerun}");
+    let healthy = dir.join("healthy");
+    ok(&seed(
+        &dir.0,
+        &[&job[..2], &["--cache-dir", healthy.to_str().unwrap()], &job[4..], &["--progress-file", "h.json"]].concat(),
+    ));
+    let (repaired, expected) = (tiles(&cache), tiles(&healthy));
+    assert!(repaired == expected, "the repaired cache differs from a healthy run");
+    // The sea tiles are one stored file and links to it.
+    let links: Vec<PathBuf> =
+        walk(&cache).into_iter().filter(|p| std::fs::symlink_metadata(p).unwrap().file_type().is_symlink()).collect();
+    assert!(links.len() >= 4, "{} links", links.len());
+    let targets: std::collections::BTreeSet<PathBuf> =
+        links.iter().map(|l| std::fs::canonicalize(l).unwrap()).collect();
+    assert_eq!(targets.len(), 1, "{targets:?}");
+    let sea = &repaired[&links[0].strip_prefix(&cache).unwrap().to_string_lossy().into_owned()];
+    assert!(sea.chunks_exact(2).all(|c| c == [0, 0]), "a sea tile is 0 m everywhere");
+}
+
+#[test]
+fn existing_tiles_are_remade_or_kept_as_asked() {
+    let dir = TempDir::new("seed-refresh");
+    let config = rmnp_config(&dir, "rmnp.toml", "");
+    let cache = dir.join("cache");
+    let owned = job_args(&config, &cache, "dem", "6-7", &[]);
+    let job = strs(&owned);
+    let run = |extra: &[&str]| {
+        // Entries up to 50 ms older than a job count as its own (coarse file times).
+        std::thread::sleep(Duration::from_millis(100));
+        let summary = ok(&seed(&dir.0, &[&job[..], extra].concat()));
+        (count(&summary, "tile files made"), count(&summary, "already there"))
+    };
+    let (n, _) = run(&[]);
+    assert!(n > 0);
+    // By default a job remakes what was there before it started.
+    assert_eq!(run(&[]), (n, 0));
+    assert_eq!(run(&["--skip-existing"]), (0, n));
+    assert_eq!(run(&["--refresh-before", "2000-01-01"]), (0, n));
+    assert_eq!(run(&["--refresh-before", "2999-01-01T00:00:00Z"]), (n, 0));
+}
