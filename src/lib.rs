@@ -22,6 +22,7 @@ pub mod demo;
 pub mod encode;
 pub mod geo;
 pub mod grid;
+pub mod lod;
 pub mod noise;
 pub mod produce;
 pub mod raster;

@@ -197,7 +197,8 @@ fn run(command: Command) -> Result<()> {
         }
         #[cfg(feature = "server")]
         Command::Bench { what: Bench::Serve { configs, mapserver, mapproxy, n, uncached, wrk_seconds } } => {
-            let configs: [PathBuf; 3] = configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
+            let configs: [PathBuf; 3] =
+                configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
             let bench = sylva::bench::serve::ServeBench { configs, mapserver, mapproxy, n, uncached, wrk_seconds };
             println!("{}", sylva::bench::serve::report(&bench)?);
             Ok(())
@@ -218,7 +219,8 @@ fn run(command: Command) -> Result<()> {
 /// `SYLVA_LOG_FORMAT=json`), then serves until SIGTERM.
 #[cfg(feature = "server")]
 fn serve(config: Option<PathBuf>, options: sylva::server::ServeOptions) -> Result<()> {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info,tower_http=warn".into());
+    let filter =
+        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info,tower_http=warn".into());
     let logs = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
     if std::env::var("SYLVA_LOG_FORMAT").is_ok_and(|f| f.eq_ignore_ascii_case("json")) {
         logs.json().init();

@@ -41,10 +41,7 @@ pub fn resampling(region: &Region) -> Option<String> {
     );
     // The fine pixels inside the coarse lattice's hull.
     let (fw, fh) = (4 * (cw - 1) + 1, 4 * (ch - 1) + 1);
-    let grid = SampleGrid {
-        lon: Axis::degrees(g.x0, g.dx, 0, fw),
-        lat: Axis::degrees(g.y0, g.dy, 0, fh),
-    };
+    let grid = SampleGrid { lon: Axis::degrees(g.x0, g.dx, 0, fw), lat: Axis::degrees(g.y0, g.dy, 0, fh) };
     let mut rows = Vec::new();
     for kind in [Resampling::Nearest, Resampling::Bilinear, Resampling::Bicubic] {
         let mut times = Vec::new();

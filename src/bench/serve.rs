@@ -9,8 +9,8 @@
 //! per region), so resident memory is this process's.
 
 use super::table;
-use crate::grid::mercator::MercatorBox;
 use crate::grid::TileId;
+use crate::grid::mercator::MercatorBox;
 use crate::server::{Bound, ServeOptions};
 use anyhow::{Context, Result, anyhow};
 use std::io::{Read, Write};
@@ -71,7 +71,8 @@ pub fn fetch(url: &str) -> Result<(u16, usize, Duration)> {
     stream.read_to_end(&mut all)?;
     let took = start.elapsed();
     let head_end = all.windows(4).position(|w| w == b"\r\n\r\n").ok_or_else(|| anyhow!("{url}: no HTTP header"))?;
-    let status = std::str::from_utf8(&all[..head_end])?.split_whitespace().nth(1).and_then(|s| s.parse().ok()).unwrap_or(0);
+    let status =
+        std::str::from_utf8(&all[..head_end])?.split_whitespace().nth(1).and_then(|s| s.parse().ok()).unwrap_or(0);
     Ok((status, all.len() - head_end - 4, took))
 }
 
@@ -164,7 +165,12 @@ impl Drop for Servers {
 pub fn rss_mib() -> (f64, f64) {
     let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
     let field = |name: &str| {
-        status.lines().find(|l| l.starts_with(name)).and_then(|l| l.split_whitespace().nth(1)).and_then(|v| v.parse::<f64>().ok()).map_or(f64::NAN, |kib| kib / 1024.0)
+        status
+            .lines()
+            .find(|l| l.starts_with(name))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|v| v.parse::<f64>().ok())
+            .map_or(f64::NAN, |kib| kib / 1024.0)
     };
     (field("VmRSS:"), field("VmHWM:"))
 }
@@ -207,7 +213,8 @@ fn reachable(url: &str) -> bool {
 /// Runs the benchmark and returns its report.
 pub fn report(b: &ServeBench) -> Result<String> {
     let servers = Servers::start(&b.configs.each_ref().map(|c| Some(c.as_path())))?;
-    let mut out = vec![format!("sylva bench serve — {} cores, servers in-process on loopback\n", rayon::current_num_threads())];
+    let mut out =
+        vec![format!("sylva bench serve — {} cores, servers in-process on loopback\n", rayon::current_num_threads())];
     out.push(get_map_section(b, &servers)?);
     let (uncached, tile_url) = uncached_section(b, &servers.bases[0], servers.states[0].region())?;
     out.push(uncached);
@@ -230,7 +237,9 @@ fn get_map_section(b: &ServeBench, servers: &Servers) -> Result<String> {
     let mut rows = Vec::new();
     let mut medians = Vec::new();
     for (label, urls) in [("sylva", &sylva), ("mapserver", &mapserver)] {
-        if label == "mapserver" && !reachable(&format!("{}SERVICE=WMS&REQUEST=GetCapabilities&VERSION=1.3.0", b.mapserver)) {
+        if label == "mapserver"
+            && !reachable(&format!("{}SERVICE=WMS&REQUEST=GetCapabilities&VERSION=1.3.0", b.mapserver))
+        {
             rows.push(vec![format!("{label}: not running at {}", b.mapserver)]);
             continue;
         }
@@ -275,7 +284,8 @@ fn uncached_section(b: &ServeBench, base: &str, region: &crate::region::Region) 
         let tiles = nearest_tiles(region, level, b.uncached);
         let Some(&nearest) = tiles.first() else { continue };
         first = first.or(Some(nearest));
-        let urls: Vec<String> = tiles.iter().map(|t| format!("{base}/tiles/cem/{}/{}/{}_{}.{ext}", t.level, t.row, t.row, t.col)).collect();
+        let urls: Vec<String> =
+            tiles.iter().map(|t| format!("{base}/tiles/cem/{}/{}/{}_{}.{ext}", t.level, t.row, t.row, t.col)).collect();
         let spacing = region.tiles.tile_samples(nearest, 0).spacing_m();
         rows.push(Latency::measure(&urls, urls.len())?.row(&format!("level {level} ({spacing:.0} m) .{ext}")));
     }
@@ -292,9 +302,11 @@ fn uncached_section(b: &ServeBench, base: &str, region: &crate::region::Region) 
 fn nearest_tiles(region: &crate::region::Region, level: u32, n: usize) -> Vec<TileId> {
     let b = region.bounds;
     let (cx, cy) = (0.5 * (b.west + b.east), 0.5 * (b.south + b.north));
-    let (sw, ne) = (region.tiles.tile_containing(b.west, b.south, level), region.tiles.tile_containing(b.east, b.north, level));
+    let (sw, ne) =
+        (region.tiles.tile_containing(b.west, b.south, level), region.tiles.tile_containing(b.east, b.north, level));
     let centre = region.tiles.tile_containing(cx, cy, level);
-    let mut all: Vec<TileId> = (sw.row..=ne.row).flat_map(|r| (sw.col..=ne.col).map(move |c| TileId::new(level, r, c))).collect();
+    let mut all: Vec<TileId> =
+        (sw.row..=ne.row).flat_map(|r| (sw.col..=ne.col).map(move |c| TileId::new(level, r, c))).collect();
     let d = |t: &TileId| (t.row as i64 - centre.row as i64).pow(2) + (t.col as i64 - centre.col as i64).pow(2);
     all.sort_by_key(d);
     all.truncate(n);
@@ -310,7 +322,11 @@ fn cached_section(b: &ServeBench, tile_url: &str) -> String {
     let (name, lon, lat, z) = PEER_DEMS[1];
     let (z, x, y) = peer_tiles(lon, lat, z)[0];
     let mapproxy = format!("{}/wmts/{name}/webmercator_512/{z}/{x}/{y}.png", b.mapproxy);
-    let targets = [("sylva .bil", format!("{tile_url}.bil")), ("sylva .png", format!("{tile_url}.png")), ("mapproxy png16 512", mapproxy)];
+    let targets = [
+        ("sylva .bil", format!("{tile_url}.bil")),
+        ("sylva .png", format!("{tile_url}.png")),
+        ("mapproxy png16 512", mapproxy),
+    ];
     for (label, url) in targets {
         if !reachable(&url) {
             rows.push(vec![label.to_string(), format!("not reachable: {url}")]);
@@ -320,12 +336,20 @@ fn cached_section(b: &ServeBench, tile_url: &str) -> String {
         match wrk(&url, b.wrk_seconds) {
             Ok((rate, p50, p99)) => {
                 rates.push((if label.starts_with("sylva") { label } else { "mapproxy" }, rate));
-                rows.push(vec![label.to_string(), format!("{rate:.0}"), format!("{p50:.2}"), format!("{p99:.2}"), bytes.to_string()]);
+                rows.push(vec![
+                    label.to_string(),
+                    format!("{rate:.0}"),
+                    format!("{p50:.2}"),
+                    format!("{p99:.2}"),
+                    bytes.to_string(),
+                ]);
             }
             Err(e) => rows.push(vec![label.to_string(), e.to_string()]),
         }
     }
-    let ratio = ["sylva .bil", "sylva .png"].map(|s| ratio_line(&rates, s, "mapproxy", &format!("{s} req/s / MapProxy's"))).join("\n");
+    let ratio = ["sylva .bil", "sylva .png"]
+        .map(|s| ratio_line(&rates, s, "mapproxy", &format!("{s} req/s / MapProxy's")))
+        .join("\n");
     format!(
         "Cached tile, wrk -t1 -c4 -d{}s on one URL\n{}\n{ratio}\n",
         b.wrk_seconds,
@@ -367,7 +391,14 @@ pub fn soak(config: Option<&Path>, minutes: f64, every_s: f64) -> Result<String>
             let n = done.load(std::sync::atomic::Ordering::Relaxed);
             let tiles = servers.runtime.block_on(state.tiles.memory_bytes());
             let blocks = state.region().cache.bytes();
-            vec![format!("{:.0}", start.elapsed().as_secs_f64()), format!("{rss:.0}"), format!("{peak:.0}"), mib(blocks), mib(tiles), n.to_string()]
+            vec![
+                format!("{:.0}", start.elapsed().as_secs_f64()),
+                format!("{rss:.0}"),
+                format!("{peak:.0}"),
+                mib(blocks),
+                mib(tiles),
+                n.to_string(),
+            ]
         };
         loop {
             rows.push(reading());
@@ -396,14 +427,17 @@ fn soak_request(region: &crate::region::Region, base: &str, rng: &mut Draws) -> 
         0..=3 => {
             let level = top + rng.below(6) as u32;
             let t = region.tiles.tile_containing(b.west + w * rng.unit(), b.south + h * rng.unit(), level);
-            let (layer, ext) = [("cem", "bil"), ("cem", "png"), ("dem", "bil"), ("relief", "png"), ("canopy", "bil32")][rng.below(5) as usize];
+            let (layer, ext) = [("cem", "bil"), ("cem", "png"), ("dem", "bil"), ("relief", "png"), ("canopy", "bil32")]
+                [rng.below(5) as usize];
             format!("{base}/tiles/{layer}/{}/{}/{}_{}.{ext}", t.level, t.row, t.row, t.col)
         }
         4..=6 => {
             let (x0, y0) = (b.west + w * rng.unit(), b.south + h * rng.unit());
             let size = 0.05 + 0.5 * rng.unit();
             let (px, py) = (64 + rng.below(960), 64 + rng.below(960));
-            let (layer, format) = [("dem", "application/bil16"), ("cem", "image/tiff"), ("relief", "image/png"), ("cover", "image/png")][rng.below(4) as usize];
+            let (layer, format) =
+                [("dem", "application/bil16"), ("cem", "image/tiff"), ("relief", "image/png"), ("cover", "image/png")]
+                    [rng.below(4) as usize];
             format!(
                 "{base}/wms?SERVICE=WMS&VERSION=1.1.1&REQUEST=GetMap&LAYERS={layer}&STYLES=&SRS=EPSG:4326&BBOX={x0},{y0},{},{}&WIDTH={px}&HEIGHT={py}&FORMAT={format}",
                 x0 + w * size,
@@ -411,7 +445,11 @@ fn soak_request(region: &crate::region::Region, base: &str, rng: &mut Draws) -> 
             )
         }
         _ => {
-            let t = region.tiles.tile_containing(b.west + w * (0.3 + 0.1 * rng.below(4) as f64), b.south + 0.5 * h, top + 3);
+            let t = region.tiles.tile_containing(
+                b.west + w * (0.3 + 0.1 * rng.below(4) as f64),
+                b.south + 0.5 * h,
+                top + 3,
+            );
             format!("{base}/tiles/cem/{}/{}/{}_{}.bil", t.level, t.row, t.row, t.col)
         }
     }

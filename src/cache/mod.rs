@@ -86,7 +86,11 @@ impl DirStore {
         let dir = path.parent().ok_or_else(|| io::Error::other(format!("{key}: no parent directory")))?;
         fs::create_dir_all(dir)?;
         let n = self.counter.fetch_add(1, Ordering::Relaxed);
-        let tmp = dir.join(format!(".{}.{}.{n}.tmp", path.file_name().and_then(|f| f.to_str()).unwrap_or("tile"), std::process::id()));
+        let tmp = dir.join(format!(
+            ".{}.{}.{n}.tmp",
+            path.file_name().and_then(|f| f.to_str()).unwrap_or("tile"),
+            std::process::id()
+        ));
         let result = (|| {
             let mut file = fs::File::create(&tmp)?;
             file.write_all(payload)?;
@@ -147,7 +151,15 @@ mod tests {
         // Truncated, flipped, or foreign files are not served.
         let path = s.path("v1/cem/1/2/2_3.png");
         let whole = fs::read(&path).unwrap();
-        for damaged in [whole[..whole.len() - 3].to_vec(), { let mut d = whole.clone(); d[2] ^= 1; d }, b"junk".to_vec()] {
+        for damaged in [
+            whole[..whole.len() - 3].to_vec(),
+            {
+                let mut d = whole.clone();
+                d[2] ^= 1;
+                d
+            },
+            b"junk".to_vec(),
+        ] {
             fs::write(&path, damaged).unwrap();
             assert!(matches!(s.get("v1/cem/1/2/2_3.png").unwrap(), Lookup::Corrupt));
         }

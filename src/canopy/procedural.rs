@@ -251,10 +251,7 @@ impl ProceduralProxy {
         // 50 × 50 cells at a quarter-cell spacing, away from any pole.
         let n = 200;
         let step = self.params.cell_m / 4.0 / crate::geo::METRES_PER_DEGREE;
-        let grid = SampleGrid {
-            lon: Axis::degrees(7.0, step, 0, n),
-            lat: Axis::degrees(0.5, -step, 0, n),
-        };
+        let grid = SampleGrid { lon: Axis::degrees(7.0, step, 0, n), lat: Axis::degrees(0.5, -step, 0, n) };
         let mut row = vec![0.0f32; n];
         let mut sum = 0.0f64;
         for r in 0..n {

@@ -152,8 +152,9 @@ impl ColourMemo {
     #[inline]
     fn class(&mut self, rgb: [f32; 3], classify: impl FnOnce() -> f32) -> f32 {
         let key = rgb.map(f32::to_bits);
-        let mix = (key[0].wrapping_mul(0x9E37_79B1) ^ key[1].wrapping_mul(0x85EB_CA77) ^ key[2].wrapping_mul(0xC2B2_AE3D))
-            .wrapping_mul(0x27D4_EB2F);
+        let mix =
+            (key[0].wrapping_mul(0x9E37_79B1) ^ key[1].wrapping_mul(0x85EB_CA77) ^ key[2].wrapping_mul(0xC2B2_AE3D))
+                .wrapping_mul(0x27D4_EB2F);
         let slot = &mut self.slots[(mix >> (32 - Self::BITS)) as usize];
         if slot.0 != key {
             *slot = (key, classify());

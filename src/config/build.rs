@@ -132,7 +132,8 @@ fn version_key(config: &Config, base: &Path) -> String {
     let files = [config.dem.path.as_ref(), config.landcover.as_ref().and_then(|l| l.path.as_ref())];
     for path in files.into_iter().flatten() {
         let meta = std::fs::metadata(base.join(path)).ok();
-        let stamp = meta.map(|m| (m.len(), m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())));
+        let stamp =
+            meta.map(|m| (m.len(), m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())));
         text.push_str(&format!("{path:?}{stamp:?}"));
     }
     format!("v{:016x}", crate::cache::digest(text.as_bytes()))
@@ -140,13 +141,21 @@ fn version_key(config: &Config, base: &Path) -> String {
 
 /// An upstream server as a source.
 #[cfg(feature = "http")]
-fn upstream(up: &UpstreamConfig, cache: &Arc<BlockCache>, _invalid: &dyn Fn(String) -> ConfigError) -> Result<GeoRaster, ConfigError> {
+fn upstream(
+    up: &UpstreamConfig,
+    cache: &Arc<BlockCache>,
+    _invalid: &dyn Fn(String) -> ConfigError,
+) -> Result<GeoRaster, ConfigError> {
     Ok(source::remote::open(up, cache)?)
 }
 
 /// Without the `http` feature there is no client to reach an upstream.
 #[cfg(not(feature = "http"))]
-fn upstream(up: &UpstreamConfig, _: &Arc<BlockCache>, invalid: &dyn Fn(String) -> ConfigError) -> Result<GeoRaster, ConfigError> {
+fn upstream(
+    up: &UpstreamConfig,
+    _: &Arc<BlockCache>,
+    invalid: &dyn Fn(String) -> ConfigError,
+) -> Result<GeoRaster, ConfigError> {
     Err(invalid(format!("upstream {} needs Sylva built with the `http` feature", up.url)))
 }
 
@@ -192,7 +201,8 @@ fn landcover(
             input.source().name().display()
         )));
     }
-    let map = (lc.kind == LandcoverKind::Map).then(|| GeoRaster::new(input.clone(), georef.clone(), &[Reducer::Mean], cache));
+    let map =
+        (lc.kind == LandcoverKind::Map).then(|| GeoRaster::new(input.clone(), georef.clone(), &[Reducer::Mean], cache));
     Ok((derived(input, georef, rule, cache), map))
 }
 

@@ -138,7 +138,13 @@ pub struct DemConfig {
 
 impl Default for DemConfig {
     fn default() -> Self {
-        DemConfig { path: None, upstream: None, crs: None, resampling: Resampling::Bilinear, nodata: NodataPolicy::default() }
+        DemConfig {
+            path: None,
+            upstream: None,
+            crs: None,
+            resampling: Resampling::Bilinear,
+            nodata: NodataPolicy::default(),
+        }
     }
 }
 

@@ -57,7 +57,8 @@ impl DemSource {
     /// set up.
     pub fn new() -> Result<DemSource, SourceError> {
         let name = PathBuf::from("demo: Val Selva DEM, 1″");
-        let utm = Crs::from_epsg(terrain::FRAME_EPSG).map_err(|source| SourceError::Crs { path: name.clone(), source })?;
+        let utm =
+            Crs::from_epsg(terrain::FRAME_EPSG).map_err(|source| SourceError::Crs { path: name.clone(), source })?;
         Ok(DemSource { name, georef: georef(), utm })
     }
 
@@ -105,7 +106,8 @@ impl PixelSource for DemSource {
             let t = (col % MESH_PX) as f64 / MESH_PX as f64;
             let u = (row % MESH_PX) as f64 / MESH_PX as f64;
             let (a, b, c, d) = (mesh.get(i, j), mesh.get(i + 1, j), mesh.get(i, j + 1), mesh.get(i + 1, j + 1));
-            let mix = |p: f64, q: f64, r: f64, s: f64| (1.0 - u) * ((1.0 - t) * p + t * q) + u * ((1.0 - t) * r + t * s);
+            let mix =
+                |p: f64, q: f64, r: f64, s: f64| (1.0 - u) * ((1.0 - t) * p + t * q) + u * ((1.0 - t) * r + t * s);
             patch.height_m(mix(a.0, b.0, c.0, d.0), mix(a.1, b.1, c.1, d.1)) as f32
         });
         Ok(vec![heights])

@@ -48,7 +48,8 @@ impl MapSource {
     /// The demo map.
     pub fn new() -> Result<MapSource, SourceError> {
         let name = PathBuf::from("demo: Val Selva 1:50,000 map");
-        let utm = Crs::from_epsg(terrain::FRAME_EPSG).map_err(|source| SourceError::Crs { path: name.clone(), source })?;
+        let utm =
+            Crs::from_epsg(terrain::FRAME_EPSG).map_err(|source| SourceError::Crs { path: name.clone(), source })?;
         Ok(MapSource { name, utm: Arc::new(utm) })
     }
 

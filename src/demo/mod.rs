@@ -125,7 +125,10 @@ mod tests {
         assert_eq!((s.map.size(), s.map.bands(), s.map.block_size()), ((2100, 1900), 3, (256, 256)));
         assert_eq!((s.dem_georef.crs.epsg(), s.map_georef.crs.epsg()), (4326, 32632));
         assert!((s.dem_georef.dx - 1.0 / 3600.0).abs() < 1e-15 && s.dem_georef.dy < 0.0);
-        assert_eq!((s.map_georef.x0, s.map_georef.y0, s.map_georef.dx, s.map_georef.dy), (576_005.0, 5_145_995.0, 10.0, -10.0));
+        assert_eq!(
+            (s.map_georef.x0, s.map_georef.y0, s.map_georef.dx, s.map_georef.dy),
+            (576_005.0, 5_145_995.0, 10.0, -10.0)
+        );
         assert_eq!((s.dem_georef.overhang, s.map_georef.overhang), (0.5, 0.5));
         assert!(BBOX.checked().is_ok());
     }

@@ -82,7 +82,8 @@ fn time_demo() {
     let t = Instant::now();
     let mut acc = 0.0;
     for i in 0..2_000 {
-        acc += super::terrain::ground(-9_000.0 + (i % 100) as f64 * 180.0, -8_000.0 + (i / 100) as f64 * 800.0).height_m;
+        acc +=
+            super::terrain::ground(-9_000.0 + (i % 100) as f64 * 180.0, -8_000.0 + (i / 100) as f64 * 800.0).height_m;
     }
     println!("ground(), one point alone: {:.1} µs per call ({acc:.0})", t.elapsed().as_nanos() as f64 / 2e6);
     let dem = DemSource::new().unwrap();

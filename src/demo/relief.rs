@@ -71,8 +71,12 @@ mod tests {
             prev = v;
         }
         // Along the downhill direction the stripes barely change; across it they do.
-        let along: f64 = (0..100).map(|i| (gullies(i as f64, 0.0, 500.0, 1.0, 0.0, 3) - gullies(0.0, 0.0, 500.0, 1.0, 0.0, 3)).abs()).sum();
-        let across: f64 = (0..100).map(|i| (gullies(0.0, i as f64, 500.0, 1.0, 0.0, 3) - gullies(0.0, 0.0, 500.0, 1.0, 0.0, 3)).abs()).sum();
+        let along: f64 = (0..100)
+            .map(|i| (gullies(i as f64, 0.0, 500.0, 1.0, 0.0, 3) - gullies(0.0, 0.0, 500.0, 1.0, 0.0, 3)).abs())
+            .sum();
+        let across: f64 = (0..100)
+            .map(|i| (gullies(0.0, i as f64, 500.0, 1.0, 0.0, 3) - gullies(0.0, 0.0, 500.0, 1.0, 0.0, 3)).abs())
+            .sum();
         assert!(across > 3.0 * along, "{along} {across}");
     }
 }

@@ -92,7 +92,11 @@ pub fn shape(x: f64, y: f64) -> Shape {
     let (along, across) = valley_coords(x, y);
     let floor = floor_m(x, y, along, across);
     let mountains = side_valleys(x, y, across, mountain_relief_m(x, y));
-    Shape { dry_m: floor + wall_profile(across) * mountains + cliff_m(x, along, across), along_m: along, across_m: across }
+    Shape {
+        dry_m: floor + wall_profile(across) * mountains + cliff_m(x, along, across),
+        along_m: along,
+        across_m: across,
+    }
 }
 
 /// Gullies cut down the slope `(gx, gy)`: two octaves of stripes (520 m and

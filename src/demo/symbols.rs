@@ -21,8 +21,8 @@
 //! Colours carry ±3 levels of per-pixel "scanner" noise, so a colour key needs
 //! its tolerance, as with a real scan.
 
-use super::{floor_i, palette};
 use super::terrain::{self, Ground};
+use super::{floor_i, palette};
 use crate::noise::{self, hash2, unit};
 
 /// Contour interval and index-contour interval, metres (Swiss 1:50,000).
@@ -217,7 +217,10 @@ pub fn draw(corners: &Corners, i: usize, j: usize, col: usize, row: usize) -> [u
         Some(palette::GRID)
     } else if or & WET == 0 && on_path(corners, i, j, crossed, height, col, row) {
         Some(palette::PATH)
-    } else if crossed & WET != 0 || or & WET == 0 && crossed & DRY_BANK != 0 || dry && crossed & STREAM != 0 && and & NEAR_STREAM != 0 {
+    } else if crossed & WET != 0
+        || or & WET == 0 && crossed & DRY_BANK != 0
+        || dry && crossed & STREAM != 0 && and & NEAR_STREAM != 0
+    {
         Some(palette::SHORE)
     } else if dry
         && tan2 < CLIFF_MIN_TAN2
@@ -344,10 +347,16 @@ mod tests {
                 let forest = px.iter().filter(|&&p| near(p, palette::FOREST)).count();
                 assert_eq!(lines + forest, px.len(), "{angle}° {rise_m} m: only forest and contours");
                 assert!(lines > px.len() / 12, "{angle}° {rise_m} m: {lines} contour pixels");
-                let mask = Raster::from_vec(60, 60, px.iter().map(|&p| f32::from(u8::from(near(p, palette::FOREST)))).collect()).unwrap();
+                let mask = Raster::from_vec(
+                    60,
+                    60,
+                    px.iter().map(|&p| f32::from(u8::from(near(p, palette::FOREST)))).collect(),
+                )
+                .unwrap();
                 let closed = apply_sequence(&mask, &MorphOp::parse_sequence("DDEE").unwrap(), 1);
                 // Away from the edges (where the close sees only the buffer) all is forest.
-                let holes = (4..56).flat_map(|y| (4..56).map(move |x| (x, y))).filter(|&(x, y)| closed.get(x, y) < 1.0).count();
+                let holes =
+                    (4..56).flat_map(|y| (4..56).map(move |x| (x, y))).filter(|&(x, y)| closed.get(x, y) < 1.0).count();
                 assert_eq!(holes, 0, "{angle}° {rise_m} m: the close leaves {holes} line pixels");
             }
         }

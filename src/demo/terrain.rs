@@ -184,7 +184,8 @@ impl Patch {
             let row = &self.nodes[r * self.cols..][..self.cols];
             for (k, (c, wx, tx)) in columns.iter().enumerate() {
                 let n = &row[*c..][..4];
-                let cubic = |f: fn(&Node) -> f64| wx[0] * f(&n[0]) + wx[1] * f(&n[1]) + wx[2] * f(&n[2]) + wx[3] * f(&n[3]);
+                let cubic =
+                    |f: fn(&Node) -> f64| wx[0] * f(&n[0]) + wx[1] * f(&n[1]) + wx[2] * f(&n[2]) + wx[3] * f(&n[3]);
                 let lerp = |f: fn(&Node) -> f64| f(&n[1]) + tx * (f(&n[2]) - f(&n[1]));
                 along_x[r * w + k] = [
                     cubic(|n| n.raw_m),
@@ -209,7 +210,14 @@ impl Patch {
                 }
                 let lerp = |f: usize| v(1)[f] + ty * (v(2)[f] - v(1)[f]);
                 let (height_m, lake_m) = clamp_lake(raw, basin);
-                let g = Ground { height_m, lake_m, river_m: lerp(2), stream_m: lerp(3), along_m: lerp(4), across_m: lerp(5) };
+                let g = Ground {
+                    height_m,
+                    lake_m,
+                    river_m: lerp(2),
+                    stream_m: lerp(3),
+                    along_m: lerp(4),
+                    across_m: lerp(5),
+                };
                 each(k, l, &g);
             }
         }

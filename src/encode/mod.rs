@@ -12,11 +12,11 @@ pub mod geotiff;
 pub mod relief;
 pub mod terrarium;
 
-use std::ops::RangeInclusive;
 use crate::cem::Layer;
 use crate::grid::SampleGrid;
 use crate::raster::Raster;
 use serde::{Deserialize, Serialize};
+use std::ops::RangeInclusive;
 use thiserror::Error;
 
 /// Nodata of BIL16 heights and of float outputs (World Wind's missing-data value).
@@ -161,7 +161,8 @@ pub fn encode(
 
 fn bil16(samples: Samples, q: Quantization) -> Encoded {
     let lo = i32::from(i16::MIN) + 1;
-    let (bytes, clamped) = quantize(&samples.floats(), q, NODATA_HEIGHT as i32, lo..=i32::from(i16::MAX), |c| (c as i16).to_le_bytes());
+    let (bytes, clamped) =
+        quantize(&samples.floats(), q, NODATA_HEIGHT as i32, lo..=i32::from(i16::MAX), |c| (c as i16).to_le_bytes());
     Encoded { bytes, clamped, quantization: Some(q) }
 }
 
@@ -176,7 +177,13 @@ fn bil32(samples: Samples) -> Vec<u8> {
 
 /// The 16-bit codes of `values` as bytes (`to_bytes` picks the byte order):
 /// `nodata` for NaN, others clamped into `codes`; and how many were clamped.
-fn quantize(values: &[f32], q: Quantization, nodata: i32, codes: RangeInclusive<i32>, to_bytes: impl Fn(i32) -> [u8; 2]) -> (Vec<u8>, usize) {
+fn quantize(
+    values: &[f32],
+    q: Quantization,
+    nodata: i32,
+    codes: RangeInclusive<i32>,
+    to_bytes: impl Fn(i32) -> [u8; 2],
+) -> (Vec<u8>, usize) {
     let mut clamped = 0;
     let mut bytes = Vec::with_capacity(2 * values.len());
     for &v in values {
@@ -195,7 +202,8 @@ fn quantize(values: &[f32], q: Quantization, nodata: i32, codes: RangeInclusive<
 /// PNG16: when `zero_is_nodata`, valid samples use codes 1..=65535.
 fn png16(samples: Samples, q: Quantization, zero_is_nodata: bool) -> Result<Encoded, EncodeError> {
     // The image crate takes 16-bit samples in native byte order.
-    let (bytes, clamped) = quantize(&samples.floats(), q, 0, i32::from(zero_is_nodata)..=65535, |c| (c as u16).to_ne_bytes());
+    let (bytes, clamped) =
+        quantize(&samples.floats(), q, 0, i32::from(zero_is_nodata)..=65535, |c| (c as u16).to_ne_bytes());
     let (w, h) = (samples.width(), bytes.len() / 2 / samples.width().max(1));
     Ok(Encoded { bytes: png(&bytes, w, h, image::ExtendedColorType::L16)?, clamped, quantization: Some(q) })
 }
@@ -209,7 +217,8 @@ pub fn png(pixels: &[u8], w: usize, h: usize, color: image::ExtendedColorType) -
         image::codecs::png::CompressionType::Fast,
         image::codecs::png::FilterType::Paeth,
     );
-    image::ImageEncoder::write_image(encoder, pixels, w as u32, h as u32, color).map_err(|e| EncodeError(e.to_string()))?;
+    image::ImageEncoder::write_image(encoder, pixels, w as u32, h as u32, color)
+        .map_err(|e| EncodeError(e.to_string()))?;
     Ok(out)
 }
 

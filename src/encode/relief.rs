@@ -63,8 +63,12 @@ pub fn encode(r: &Relief) -> Result<Vec<u8>, EncodeError> {
 /// Lambertian shade in [0, 1] at `(x, y)` of `cem` from Horn's 3×3 gradient.
 fn shade(cem: &Raster<f32>, x: usize, y: usize, (dx, dy): (f64, f64)) -> f32 {
     let z = |i: usize, j: usize| f64::from(cem.get(i, j));
-    let gx = ((z(x + 1, y - 1) + 2.0 * z(x + 1, y) + z(x + 1, y + 1)) - (z(x - 1, y - 1) + 2.0 * z(x - 1, y) + z(x - 1, y + 1))) / (8.0 * dx);
-    let gy = ((z(x - 1, y + 1) + 2.0 * z(x, y + 1) + z(x + 1, y + 1)) - (z(x - 1, y - 1) + 2.0 * z(x, y - 1) + z(x + 1, y - 1))) / (8.0 * dy);
+    let gx = ((z(x + 1, y - 1) + 2.0 * z(x + 1, y) + z(x + 1, y + 1))
+        - (z(x - 1, y - 1) + 2.0 * z(x - 1, y) + z(x - 1, y + 1)))
+        / (8.0 * dx);
+    let gy = ((z(x - 1, y + 1) + 2.0 * z(x, y + 1) + z(x + 1, y + 1))
+        - (z(x - 1, y - 1) + 2.0 * z(x, y - 1) + z(x + 1, y - 1)))
+        / (8.0 * dy);
     // Light from azimuth 315°, altitude 45°: direction (−½, ½, √½) with y to the south.
     let (lx, ly, lz) = (-0.5, -0.5, std::f64::consts::FRAC_1_SQRT_2);
     let n = (gx * gx + gy * gy + 1.0).sqrt();

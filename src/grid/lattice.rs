@@ -232,19 +232,14 @@ mod tests {
     #[test]
     fn positions_across_the_antimeridian_and_the_poles_are_exact() {
         let s = 0.25;
-        let grid = SampleGrid {
-            lon: Axis::degrees(-180.0, s, -2, 5),
-            lat: Axis::degrees(-90.0, -s, -(4 * 180 + 2), 5),
-        };
+        let grid =
+            SampleGrid { lon: Axis::degrees(-180.0, s, -2, 5), lat: Axis::degrees(-90.0, -s, -(4 * 180 + 2), 5) };
         // Two samples west of −180° are the last two of the globe.
         assert_eq!(grid.on_globe(0, 2).0.to_bits(), (-180.0f64 + 1438.0 * s).to_bits());
         assert_eq!(grid.on_globe(2, 2), (-180.0, 90.0));
         // Two rows north of the pole: 89.5° on the opposite meridian.
         assert_eq!(grid.on_globe(2, 0), (0.0, 89.5));
-        let free = SampleGrid {
-            lon: Axis::degrees(179.9, 0.3, 0, 2),
-            lat: Axis::degrees(10.0, -1.0, 0, 1),
-        };
+        let free = SampleGrid { lon: Axis::degrees(179.9, 0.3, 0, 2), lat: Axis::degrees(10.0, -1.0, 0, 1) };
         assert!((free.on_globe(1, 0).0 - (-179.8)).abs() < 1e-9);
     }
 

@@ -73,7 +73,10 @@ mod tests {
     #[test]
     fn tile_boxes_nest_and_their_grids_hit_known_latitudes() {
         let world = MercatorBox::of_tile(0, 0, 0).unwrap();
-        assert_eq!(world, MercatorBox { west: -HALF_WORLD_M, south: -HALF_WORLD_M, east: HALF_WORLD_M, north: HALF_WORLD_M });
+        assert_eq!(
+            world,
+            MercatorBox { west: -HALF_WORLD_M, south: -HALF_WORLD_M, east: HALF_WORLD_M, north: HALF_WORLD_M }
+        );
         let ne = MercatorBox::of_tile(1, 1, 0).unwrap();
         assert_eq!((ne.west, ne.south), (0.0, 0.0));
         // The centre of a 2×2 grid over the world sits at ±(half the square): latitude ±66.51°.
@@ -81,7 +84,8 @@ mod tests {
         assert!((g.lat.coord(0) - 66.513_260_443_111_83).abs() < 1e-9 && (g.lon.coord(1) - 90.0).abs() < 1e-12);
         assert!(MercatorBox::of_tile(3, 8, 0).is_err());
         let (x, y) = to_mercator(-105.7, 40.35);
-        let back = MercatorBox { west: x - 1.0, south: y - 1.0, east: x + 1.0, north: y + 1.0 }.area_grid(1, 1).unwrap();
+        let back =
+            MercatorBox { west: x - 1.0, south: y - 1.0, east: x + 1.0, north: y + 1.0 }.area_grid(1, 1).unwrap();
         assert!((back.lon.coord(0) + 105.7).abs() < 1e-9 && (back.lat.coord(0) - 40.35).abs() < 1e-9);
     }
 }

@@ -349,7 +349,8 @@ fn point_axis(a: f64, b: f64, len: usize, sign: f64, tiles: &TileGrid) -> Option
     let step = tiles.spacing_deg(level);
     let origin = if sign > 0.0 { -180.0 } else { -90.0 };
     let index = (a - origin) / step;
-    ((index - index.round()).abs() < 1e-6).then(|| Axis::degrees(origin, sign * step, (sign * index.round()) as i64, len))
+    ((index - index.round()).abs() < 1e-6)
+        .then(|| Axis::degrees(origin, sign * step, (sign * index.round()) as i64, len))
 }
 
 fn free_axis(a: f64, b: f64, len: usize, sign: f64) -> Axis {
@@ -445,7 +446,9 @@ mod tests {
         // A WMS grid whose pixel centres are the tile's samples.
         let s = g.sector(t);
         let d = g.spacing_deg(7) / 2.0;
-        let wms = BBox { west: s.min_lon - d, south: s.min_lat - d, east: s.max_lon + d, north: s.max_lat + d }.area_grid(65, 65).unwrap();
+        let wms = BBox { west: s.min_lon - d, south: s.min_lat - d, east: s.max_lon + d, north: s.max_lat + d }
+            .area_grid(65, 65)
+            .unwrap();
         assert_eq!(g.tile_of(&wms), Some(t));
         assert_eq!(g.tile_of(&BBox::parse("0,0,1,1").unwrap().area_grid(65, 65).unwrap()), None);
     }

@@ -63,15 +63,20 @@ impl Metrics {
         let mut registry = Registry::with_prefix("sylva");
         let requests = Family::<RequestLabels, Counter>::default();
         // 0.5 ms to 16 s, doubling.
-        let latency =
-            Family::<RouteLabel, Histogram>::new_with_constructor(|| Histogram::new(exponential_buckets(0.0005, 2.0, 16)));
+        let latency = Family::<RouteLabel, Histogram>::new_with_constructor(|| {
+            Histogram::new(exponential_buckets(0.0005, 2.0, 16))
+        });
         let cache = Family::<ResultLabel, Counter>::default();
         let computations = Counter::default();
         let stage_seconds = Family::<StageLabel, Counter<f64, AtomicU64>>::default();
         registry.register("http_requests", "HTTP requests by route and status", requests.clone());
         registry.register("http_request_duration_seconds", "Request latency by route", latency.clone());
         registry.register("tile_cache", "Tile cache lookups by result", cache.clone());
-        registry.register("tile_computations", "Tiles computed (cache misses that ran the pipeline)", computations.clone());
+        registry.register(
+            "tile_computations",
+            "Tiles computed (cache misses that ran the pipeline)",
+            computations.clone(),
+        );
         registry.register("stage_seconds", "Time spent in each pipeline stage and in encoding", stage_seconds.clone());
         Metrics { registry, requests, latency, cache, computations, stage_seconds }
     }
@@ -98,7 +103,9 @@ impl Metrics {
     pub fn computed(&self, stats: &Stats, encode: Duration) {
         self.computations.inc();
         for stage in Stage::ALL {
-            self.stage_seconds.get_or_create(&StageLabel { stage: stage.name() }).inc_by(stats.elapsed(stage).as_secs_f64());
+            self.stage_seconds
+                .get_or_create(&StageLabel { stage: stage.name() })
+                .inc_by(stats.elapsed(stage).as_secs_f64());
         }
         self.stage_seconds.get_or_create(&StageLabel { stage: "encode" }).inc_by(encode.as_secs_f64());
     }
@@ -134,7 +141,13 @@ mod tests {
         m.cache(CacheResult::Miss);
         m.computed(&Stats::default(), Duration::from_millis(1));
         let text = m.render();
-        for name in ["sylva_http_requests_total", "sylva_http_request_duration_seconds_bucket", "sylva_tile_cache_total", "sylva_tile_computations_total", "sylva_stage_seconds_total"] {
+        for name in [
+            "sylva_http_requests_total",
+            "sylva_http_request_duration_seconds_bucket",
+            "sylva_tile_cache_total",
+            "sylva_tile_computations_total",
+            "sylva_stage_seconds_total",
+        ] {
             assert!(text.contains(name), "{name} missing from\n{text}");
         }
         assert_eq!(m.computations(), 1);

@@ -63,7 +63,9 @@ impl From<ProduceError> for ServeError {
     fn from(e: ProduceError) -> ServeError {
         match e {
             ProduceError::Request(g) => ServeError::BadRequest(g.to_string()),
-            ProduceError::Source(s @ crate::source::SourceError::Upstream { .. }) => ServeError::Upstream(s.to_string()),
+            ProduceError::Source(s @ crate::source::SourceError::Upstream { .. }) => {
+                ServeError::Upstream(s.to_string())
+            }
             other => ServeError::Internal(other.to_string()),
         }
     }
@@ -135,15 +137,22 @@ impl Bound {
 /// Loads the configuration (off the executor: it opens files) and binds.
 pub async fn bind(config: Option<&Path>, options: ServeOptions) -> anyhow::Result<Bound> {
     let (cfg, base, label) = match config {
-        Some(path) => (crate::config::parse_file(path)?, path.parent().unwrap_or(Path::new(".")).to_path_buf(), path.to_path_buf()),
+        Some(path) => (
+            crate::config::parse_file(path)?,
+            path.parent().unwrap_or(Path::new(".")).to_path_buf(),
+            path.to_path_buf(),
+        ),
         None => (Config::default(), PathBuf::from("."), PathBuf::from("<built-in defaults>")),
     };
-    let (region, cfg) = tokio::task::spawn_blocking(move || crate::config::region_from(&cfg, &base, &label).map(|r| (r, cfg))).await??;
+    let (region, cfg) =
+        tokio::task::spawn_blocking(move || crate::config::region_from(&cfg, &base, &label).map(|r| (r, cfg)))
+            .await??;
     let settings = cfg.server.clone();
     let bind = options.bind.unwrap_or_else(|| settings.bind.clone());
     let cache_dir = options.cache_dir.unwrap_or_else(|| settings.cache_dir.clone());
     let state = AppState::new(region, &cache_dir, settings)?;
-    let listener = tokio::net::TcpListener::bind(&bind).await.map_err(|e| anyhow::anyhow!("cannot listen on {bind}: {e}"))?;
+    let listener =
+        tokio::net::TcpListener::bind(&bind).await.map_err(|e| anyhow::anyhow!("cannot listen on {bind}: {e}"))?;
     Ok(Bound { listener, state, cache_dir })
 }
 

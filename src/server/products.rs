@@ -146,7 +146,8 @@ pub fn compute(region: &Region, product: &Product) -> Result<Computed, ProduceEr
 
 fn data(region: &Region, grid: &SampleGrid, layer: Layer, encoding: Encoding) -> Result<Computed, ProduceError> {
     let products = cem::compute(region, grid, &[layer])?;
-    let samples = products.samples(layer).ok_or_else(|| EncodeError(format!("layer {} was not computed", layer.name())))?;
+    let samples =
+        products.samples(layer).ok_or_else(|| EncodeError(format!("layer {} was not computed", layer.name())))?;
     if no_data(&samples) {
         return Ok(Computed { bytes: Vec::new(), stats: products.stats, encode: Duration::ZERO });
     }
@@ -183,13 +184,17 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
     let (dx, dy) = (grid.lon.step_deg(), grid.lat.step_deg());
     let mid_lat = grid.lat.coord_at((grid.height() as f64 - 1.0) / 2.0).to_radians();
     let spacing_m = (dx * mid_lat.cos() * crate::geo::METRES_PER_DEGREE, dy * crate::geo::METRES_PER_DEGREE);
-    let bytes = encode::relief::encode(&encode::relief::Relief { cem, surface: &surface, map: map.as_deref(), spacing_m })?;
+    let bytes =
+        encode::relief::encode(&encode::relief::Relief { cem, surface: &surface, map: map.as_deref(), spacing_m })?;
     Ok(Computed { bytes, stats: products.stats, encode: start.elapsed() })
 }
 
 /// The map's R, G, B at the grid's samples, read and projected once for the
 /// three bands; `None` where the grid misses the map.
-fn map_colours(map: &crate::source::GeoRaster, grid: &SampleGrid) -> Result<Option<Vec<crate::raster::Raster<f32>>>, ProduceError> {
+fn map_colours(
+    map: &crate::source::GeoRaster,
+    grid: &SampleGrid,
+) -> Result<Option<Vec<crate::raster::Raster<f32>>>, ProduceError> {
     let bilinear = crate::raster::resample::Resampling::Bilinear;
     let footprint = map.read(grid, bilinear, 3)?;
     Ok(footprint.map(|f| (0..3).map(|b| f.resample(b, bilinear)).collect()))
@@ -201,9 +206,15 @@ mod tests {
 
     #[test]
     fn keys_follow_the_world_wind_layout_under_the_version() {
-        let t = Product::Tile { layer: MapLayer::Data(Layer::Cem), id: TileId::new(9, 1939, 2704), halo: 0, encoding: Encoding::Data(Format::Bil16) };
+        let t = Product::Tile {
+            layer: MapLayer::Data(Layer::Cem),
+            id: TileId::new(9, 1939, 2704),
+            halo: 0,
+            encoding: Encoding::Data(Format::Bil16),
+        };
         assert_eq!(t.key("v1").as_deref(), Some("v1/cem/9/1939/1939_2704.bil"));
-        let h = Product::Tile { layer: MapLayer::Relief, id: TileId::new(9, 1, 2), halo: 32, encoding: Encoding::Relief };
+        let h =
+            Product::Tile { layer: MapLayer::Relief, id: TileId::new(9, 1, 2), halo: 32, encoding: Encoding::Relief };
         assert_eq!(h.key("v1").as_deref(), Some("v1/relief/9/1/1_2_h32.png"));
         let x = Product::Xyz { layer: MapLayer::Data(Layer::Dem), zxy: (11, 400, 780) };
         assert_eq!(x.key("v2").as_deref(), Some("v2/xyz/dem/11/400/780.png"));

@@ -37,7 +37,10 @@ pub fn tile(t: &Tile, meta: &TileMeta, request: &HeaderMap) -> Response {
         insert(&mut headers, "x-sylva-scale", &q.scale.to_string());
         insert(&mut headers, "x-sylva-offset", &q.offset.to_string());
     }
-    let matches = request.get(header::IF_NONE_MATCH).and_then(|v| v.to_str().ok()).is_some_and(|v| v.split(',').any(|e| e.trim() == t.etag || e.trim() == "*"));
+    let matches = request
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.split(',').any(|e| e.trim() == t.etag || e.trim() == "*"));
     if matches {
         return (StatusCode::NOT_MODIFIED, headers).into_response();
     }

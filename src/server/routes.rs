@@ -76,7 +76,8 @@ async fn health(State(state): State<Arc<AppState>>) -> Response {
 }
 
 async fn metrics(State(state): State<Arc<AppState>>) -> Response {
-    ([(header::CONTENT_TYPE, "application/openmetrics-text; version=1.0.0; charset=utf-8")], state.metrics.render()).into_response()
+    ([(header::CONTENT_TYPE, "application/openmetrics-text; version=1.0.0; charset=utf-8")], state.metrics.render())
+        .into_response()
 }
 
 /// `/tiles/{layer}/{level}/{row}/{row}_{col}.{ext}?halo=B`.
@@ -98,10 +99,15 @@ async fn tile_path(
 
 /// `/tiles?T={layer}&L={level}&X={col}&Y={row}` (World Wind's request form);
 /// BIL16 unless `F` names another extension.
-async fn tile_query(State(state): State<Arc<AppState>>, RawQuery(query): RawQuery, headers: HeaderMap) -> Result<Response, ServeError> {
+async fn tile_query(
+    State(state): State<Arc<AppState>>,
+    RawQuery(query): RawQuery,
+    headers: HeaderMap,
+) -> Result<Response, ServeError> {
     let params = query_map(query.as_deref());
     let need = |k: &str| params.get(k).ok_or_else(|| ServeError::BadRequest(format!("parameter {k} is missing")));
-    let number = |k: &str| need(k)?.parse::<u64>().map_err(|_| ServeError::BadRequest(format!("{k} must be a whole number")));
+    let number =
+        |k: &str| need(k)?.parse::<u64>().map_err(|_| ServeError::BadRequest(format!("{k} must be a whole number")));
     let id = TileId::new(u32::try_from(number("L")?).map_err(|_| ServeError::NotFound)?, number("Y")?, number("X")?);
     let ext = params.get("F").map_or("bil", String::as_str);
     tile(&state, need("T")?, id, ext, halo(&params, &state)?, &headers).await
@@ -110,10 +116,20 @@ async fn tile_query(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
 fn halo(params: &HashMap<String, String>, state: &AppState) -> Result<usize, ServeError> {
     let Some(text) = params.get("HALO") else { return Ok(0) };
     let max = state.settings.max_halo;
-    text.parse::<usize>().ok().filter(|&h| h <= max).ok_or_else(|| ServeError::BadRequest(format!("halo must be 0 to {max}")))
+    text.parse::<usize>()
+        .ok()
+        .filter(|&h| h <= max)
+        .ok_or_else(|| ServeError::BadRequest(format!("halo must be 0 to {max}")))
 }
 
-async fn tile(state: &AppState, layer: &str, id: TileId, ext: &str, halo: usize, headers: &HeaderMap) -> Result<Response, ServeError> {
+async fn tile(
+    state: &AppState,
+    layer: &str,
+    id: TileId,
+    ext: &str,
+    halo: usize,
+    headers: &HeaderMap,
+) -> Result<Response, ServeError> {
     let layer = parse_layer(layer)?;
     let encoding = match (layer, ext.to_ascii_lowercase().as_str()) {
         (MapLayer::Relief, "png") => Encoding::Relief,
@@ -122,7 +138,9 @@ async fn tile(state: &AppState, layer: &str, id: TileId, ext: &str, halo: usize,
         (_, "bil32") => Encoding::Data(Format::Bil32),
         (_, "png") => Encoding::Data(Format::Png16),
         (_, "tif" | "tiff") => Encoding::Data(Format::Tiff),
-        (_, other) => return Err(ServeError::BadRequest(format!("tile extension .{other}: use bil, bil32, png or tif"))),
+        (_, other) => {
+            return Err(ServeError::BadRequest(format!("tile extension .{other}: use bil, bil32, png or tif")));
+        }
     };
     if state.region().tiles.check(id).is_err() {
         return Err(ServeError::NotFound);
@@ -141,7 +159,10 @@ async fn xyz(
     let y: u64 = file.strip_suffix(".png").and_then(|s| s.parse().ok()).ok_or(ServeError::NotFound)?;
     let layer = parse_layer(&layer)?;
     if matches!(layer, MapLayer::Data(Layer::Cover | Layer::Surface)) {
-        return Err(ServeError::BadRequest(format!("{} is not a height: XYZ tiles carry heights or the relief", layer.name())));
+        return Err(ServeError::BadRequest(format!(
+            "{} is not a height: XYZ tiles carry heights or the relief",
+            layer.name()
+        )));
     }
     if z > 24 || x >= 1 << z || y >= 1 << z {
         return Err(ServeError::NotFound);
@@ -161,8 +182,12 @@ fn parse_layer(name: &str) -> Result<MapLayer, ServeError> {
 /// MIME type, quantization and caching of a tile response.
 pub fn meta(state: &AppState, layer: MapLayer, encoding: Encoding) -> TileMeta {
     let quantization = match (layer, encoding) {
-        (MapLayer::Data(l), Encoding::Data(Format::Bil16)) => Some(encode::quantizations(l, state.region().heights_16).0),
-        (MapLayer::Data(l), Encoding::Data(Format::Png16)) => Some(encode::quantizations(l, state.region().heights_16).1),
+        (MapLayer::Data(l), Encoding::Data(Format::Bil16)) => {
+            Some(encode::quantizations(l, state.region().heights_16).0)
+        }
+        (MapLayer::Data(l), Encoding::Data(Format::Png16)) => {
+            Some(encode::quantizations(l, state.region().heights_16).1)
+        }
         _ => None,
     };
     TileMeta { mime: encoding.mime(), quantization, max_age_s: state.settings.tile_max_age_s }
@@ -170,5 +195,7 @@ pub fn meta(state: &AppState, layer: MapLayer, encoding: Encoding) -> TileMeta {
 
 /// Query parameters with upper-cased keys.
 fn query_map(query: Option<&str>) -> HashMap<String, String> {
-    form_urlencoded::parse(query.unwrap_or("").as_bytes()).map(|(k, v)| (k.to_ascii_uppercase(), v.into_owned())).collect()
+    form_urlencoded::parse(query.unwrap_or("").as_bytes())
+        .map(|(k, v)| (k.to_ascii_uppercase(), v.into_owned()))
+        .collect()
 }

@@ -47,7 +47,13 @@ pub struct TileService {
 
 impl TileService {
     /// A service over `store`, keeping up to `memory_bytes` of tiles in memory.
-    pub fn new(region: Arc<Region>, store: Arc<DirStore>, memory_bytes: u64, pool: Arc<Pool>, metrics: Arc<Metrics>) -> TileService {
+    pub fn new(
+        region: Arc<Region>,
+        store: Arc<DirStore>,
+        memory_bytes: u64,
+        pool: Arc<Pool>,
+        metrics: Arc<Metrics>,
+    ) -> TileService {
         let builder = Cache::builder()
             .weigher(|k: &String, v: &Arc<Tile>| (k.len() + v.bytes.len() + 128).try_into().unwrap_or(u32::MAX))
             .max_capacity(memory_bytes);
@@ -75,7 +81,12 @@ impl TileService {
         let Some(key) = product.key(&self.region.version) else {
             return self.compute(product).await.map(|c| Arc::new(tile_of(c)));
         };
-        let entry = self.memory.entry(key.clone()).or_try_insert_with(self.load(key, product)).await.map_err(|e| (*e).clone())?;
+        let entry = self
+            .memory
+            .entry(key.clone())
+            .or_try_insert_with(self.load(key, product))
+            .await
+            .map_err(|e| (*e).clone())?;
         if !entry.is_fresh() {
             self.metrics.cache(CacheResult::Memory);
         }
@@ -111,7 +122,8 @@ impl TileService {
         let tile = Arc::new(tile_of(computed));
         let store = self.store.clone();
         let bytes = tile.bytes.clone();
-        let written = tokio::task::spawn_blocking(move || store.put(&key, &bytes)).await.map_err(ServeError::internal)?;
+        let written =
+            tokio::task::spawn_blocking(move || store.put(&key, &bytes)).await.map_err(ServeError::internal)?;
         if let Err(e) = written {
             tracing::warn!(error = %e, "tile cache write failed; serving the computed tile anyway");
         }

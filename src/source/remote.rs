@@ -28,16 +28,30 @@ pub fn open(config: &UpstreamConfig, cache: &Arc<BlockCache>) -> Result<GeoRaste
     let link = Arc::new(Link::new(config));
     match config.service {
         UpstreamService::Terrarium => {
-            if !(config.url.contains("{z}") && config.url.contains("{x}") && config.url.contains("{y}")) || config.zoom > 22 {
+            if !(config.url.contains("{z}") && config.url.contains("{x}") && config.url.contains("{y}"))
+                || config.zoom > 22
+            {
                 return Err(bad("a Terrarium template needs {z}, {x} and {y}, and zoom ≤ 22".into()));
             }
             let crs = Arc::new(Crs::from_epsg(3857).map_err(|source| SourceError::Crs { path: name.clone(), source })?);
             let levels: Vec<Blocks> = (0..=config.zoom)
                 .rev()
-                .map(|z| Blocks::new(Arc::new(Terrarium { link: link.clone(), zoom: z, template: config.url.clone() }), cache))
+                .map(|z| {
+                    Blocks::new(
+                        Arc::new(Terrarium { link: link.clone(), zoom: z, template: config.url.clone() }),
+                        cache,
+                    )
+                })
                 .collect();
             let res = 2.0 * HALF_WORLD_M / (BLOCK as f64 * (1u64 << config.zoom) as f64);
-            let georef = Georef { crs, x0: -HALF_WORLD_M + 0.5 * res, y0: HALF_WORLD_M - 0.5 * res, dx: res, dy: -res, overhang: 0.5 };
+            let georef = Georef {
+                crs,
+                x0: -HALF_WORLD_M + 0.5 * res,
+                y0: HALF_WORLD_M - 0.5 * res,
+                dx: res,
+                dy: -res,
+                overhang: 0.5,
+            };
             Ok(GeoRaster::from_levels(levels, georef))
         }
         UpstreamService::Wms => {
@@ -53,14 +67,28 @@ pub fn open(config: &UpstreamConfig, cache: &Arc<BlockCache>) -> Result<GeoRaste
             loop {
                 let scale = (1u64 << k) as f64;
                 let (w, h) = (width.div_ceil(1 << k), height.div_ceil(1 << k));
-                let level = Wms { link: link.clone(), url: config.url.clone(), west: area.west, north: area.north, res: res * scale, size: (w, h) };
+                let level = Wms {
+                    link: link.clone(),
+                    url: config.url.clone(),
+                    west: area.west,
+                    north: area.north,
+                    res: res * scale,
+                    size: (w, h),
+                };
                 levels.push(Blocks::new(Arc::new(level), cache));
                 if w <= BLOCK && h <= BLOCK || k > 20 {
                     break;
                 }
                 k += 1;
             }
-            let georef = Georef { crs: Arc::new(Crs::wgs84()), x0: area.west + 0.5 * res, y0: area.north - 0.5 * res, dx: res, dy: -res, overhang: 0.5 };
+            let georef = Georef {
+                crs: Arc::new(Crs::wgs84()),
+                x0: area.west + 0.5 * res,
+                y0: area.north - 0.5 * res,
+                dx: res,
+                dy: -res,
+                overhang: 0.5,
+            };
             Ok(GeoRaster::from_levels(levels, georef))
         }
     }
@@ -131,7 +159,12 @@ impl Link {
         match response.status().as_u16() {
             200 => {
                 let mut body = Vec::new();
-                response.body_mut().as_reader().take(MAX_RESPONSE_BYTES).read_to_end(&mut body).map_err(|e| e.to_string())?;
+                response
+                    .body_mut()
+                    .as_reader()
+                    .take(MAX_RESPONSE_BYTES)
+                    .read_to_end(&mut body)
+                    .map_err(|e| e.to_string())?;
                 Ok(Some(body))
             }
             404 => Ok(None),
@@ -167,7 +200,11 @@ impl PixelSource for Terrarium {
     }
 
     fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError> {
-        let url = self.template.replace("{z}", &self.zoom.to_string()).replace("{x}", &bx.to_string()).replace("{y}", &by.to_string());
+        let url = self
+            .template
+            .replace("{z}", &self.zoom.to_string())
+            .replace("{x}", &bx.to_string())
+            .replace("{y}", &by.to_string());
         let Some(body) = self.link.fetch(&url)? else {
             return Ok(vec![Raster::filled(BLOCK, BLOCK, f32::NAN)]);
         };
@@ -178,7 +215,11 @@ impl PixelSource for Terrarium {
         }
         Ok(vec![Raster::from_fn(BLOCK, BLOCK, |x, y| {
             let p = img.get_pixel(x as u32, y as u32).0;
-            if p[3] == 0 || p[..3] == [0, 0, 0] { f32::NAN } else { crate::encode::terrarium::height([p[0], p[1], p[2]]) as f32 }
+            if p[3] == 0 || p[..3] == [0, 0, 0] {
+                f32::NAN
+            } else {
+                crate::encode::terrarium::height([p[0], p[1], p[2]]) as f32
+            }
         })])
     }
 }
@@ -204,7 +245,13 @@ impl PixelSource for Wms {
     }
 
     fn bands(&self) -> usize {
-        if self.url.to_ascii_lowercase().contains("format=image%2fpng") || self.url.to_ascii_lowercase().contains("format=image/png") { 3 } else { 1 }
+        if self.url.to_ascii_lowercase().contains("format=image%2fpng")
+            || self.url.to_ascii_lowercase().contains("format=image/png")
+        {
+            3
+        } else {
+            1
+        }
     }
 
     fn block_size(&self) -> (usize, usize) {
@@ -224,12 +271,17 @@ impl PixelSource for Wms {
         let bad = |problem: String| SourceError::Upstream { url: url.clone(), problem };
         if self.bands() == 3 {
             let img = image::load_from_memory(&body).map_err(|e| bad(format!("not an image: {e}")))?.into_rgba8();
-            return Ok((0..3).map(|k| Raster::from_fn(b.width, b.height, |x, y| f32::from(img.get_pixel(x as u32, y as u32).0[k]))).collect());
+            return Ok((0..3)
+                .map(|k| Raster::from_fn(b.width, b.height, |x, y| f32::from(img.get_pixel(x as u32, y as u32).0[k])))
+                .collect());
         }
         if body.len() != 4 * b.width * b.height {
             return Err(bad(format!("{} bytes, expected {} (application/bil32)", body.len(), 4 * b.width * b.height)));
         }
-        let values = body.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).map(|v| if v == crate::encode::NODATA_HEIGHT { f32::NAN } else { v });
+        let values = body
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .map(|v| if v == crate::encode::NODATA_HEIGHT { f32::NAN } else { v });
         Ok(vec![Raster::from_vec(b.width, b.height, values.collect()).ok_or_else(|| bad("short body".into()))?])
     }
 }

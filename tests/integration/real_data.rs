@@ -14,10 +14,7 @@ use sylva::source::Crs;
 
 /// A one-sample grid at a point, at a fine spacing (native-resolution reads).
 fn point(lon: f64, lat: f64) -> SampleGrid {
-    SampleGrid {
-        lon: Axis::degrees(lon, 1e-5, 0, 1),
-        lat: Axis::degrees(lat, -1e-5, 0, 1),
-    }
+    SampleGrid { lon: Axis::degrees(lon, 1e-5, 0, 1), lat: Axis::degrees(lat, -1e-5, 0, 1) }
 }
 
 #[test]

@@ -28,7 +28,11 @@ fn capabilities_are_valid_in_both_versions() {
         let r = server.get(&format!("/wms?service=WMS&request=GetCapabilities&version={version}"));
         assert_eq!(r.status, 200);
         let text = r.text();
-        let doc = roxmltree::Document::parse_with_options(&text, roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() }).unwrap();
+        let doc = roxmltree::Document::parse_with_options(
+            &text,
+            roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() },
+        )
+        .unwrap();
         assert_eq!(doc.root_element().tag_name().name(), root);
         assert!(text.contains(&format!("{}/wms", server.base)), "OnlineResource names the server");
         for layer in ["dem", "cover", "canopy", "cem", "surface", "relief"] {
@@ -44,7 +48,8 @@ fn the_same_area_in_every_axis_order_gives_identical_bytes() {
     let common = "SERVICE=WMS&REQUEST=GetMap&LAYERS=cem&STYLES=&WIDTH=300&HEIGHT=200&FORMAT=application/bil32";
     let a = server.get(&format!("/wms?{common}&VERSION=1.3.0&CRS=EPSG:4326&BBOX=46.33,10.05,46.42,10.2"));
     let b = server.get(&format!("/wms?{common}&VERSION=1.3.0&CRS=CRS:84&BBOX=10.05,46.33,10.2,46.42&"));
-    let c = server.get(&format!("/wms?{}&VERSION=1.1.1&SRS=EPSG:4326&BBOX=10.05,46.33,10.2,46.42", common.to_lowercase()));
+    let c =
+        server.get(&format!("/wms?{}&VERSION=1.1.1&SRS=EPSG:4326&BBOX=10.05,46.33,10.2,46.42", common.to_lowercase()));
     assert_eq!(a.status, 200, "{}", a.text());
     assert_eq!(a.body.len(), 300 * 200 * 4);
     assert!(a.body == b.body && b.body == c.body);
@@ -60,7 +65,11 @@ fn world_wind_tiles_have_n_squared_samples_and_neighbours_share_edges() {
     let tile = |row: u64, col: u64, ext: &str| server.get(&format!("/tiles/cem/{}/{row}/{row}_{col}.{ext}", t.level));
     let bil16 = tile(t.row, t.col, "bil");
     assert_eq!((bil16.status, bil16.body.len()), (200, n * n * 2));
-    let (sw, se, nw) = (bil32(&tile(t.row, t.col, "bil32").body), bil32(&tile(t.row, t.col + 1, "bil32").body), bil32(&tile(t.row + 1, t.col, "bil32").body));
+    let (sw, se, nw) = (
+        bil32(&tile(t.row, t.col, "bil32").body),
+        bil32(&tile(t.row, t.col + 1, "bil32").body),
+        bil32(&tile(t.row + 1, t.col, "bil32").body),
+    );
     for i in 0..n {
         assert_eq!(sw[i * n + n - 1].to_bits(), se[i * n].to_bits(), "east edge, row {i}");
         assert_eq!(sw[i].to_bits(), nw[(n - 1) * n + i].to_bits(), "north edge, column {i}");
@@ -101,7 +110,10 @@ fn a_corrupt_cache_file_is_recomputed_not_served() {
         let server = Server::start(None, &cache);
         server.get(&path).body
     };
-    let file = walk(&cache).into_iter().find(|p| p.to_string_lossy().ends_with(&format!("dem/{}/{}/{}_{}.bil32", t.level, t.row, t.row, t.col))).expect("cached file");
+    let file = walk(&cache)
+        .into_iter()
+        .find(|p| p.to_string_lossy().ends_with(&format!("dem/{}/{}/{}_{}.bil32", t.level, t.row, t.row, t.col)))
+        .expect("cached file");
     let mut bytes = std::fs::read(&file).unwrap();
     bytes.truncate(bytes.len() / 2);
     std::fs::write(&file, bytes).unwrap();
@@ -132,13 +144,34 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
     let cases = [
         ("/wms", "MissingParameterValue"),
         ("/wms?REQUEST=GetMap", "MissingParameterValue"),
-        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=trees&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png", "LayerNotDefined"),
-        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:2193&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png", "InvalidCRS"),
-        ("/wms?REQUEST=GetMap&VERSION=1.1.1&LAYERS=dem&SRS=EPSG:2193&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png", "InvalidSRS"),
-        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/gif", "InvalidFormat"),
-        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=1,0,0,1&WIDTH=10&HEIGHT=10&FORMAT=image/png", "InvalidParameterValue"),
-        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=100000&HEIGHT=10&FORMAT=image/png", "InvalidParameterValue"),
-        ("/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=nan,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png", "InvalidParameterValue"),
+        (
+            "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=trees&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png",
+            "LayerNotDefined",
+        ),
+        (
+            "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:2193&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png",
+            "InvalidCRS",
+        ),
+        (
+            "/wms?REQUEST=GetMap&VERSION=1.1.1&LAYERS=dem&SRS=EPSG:2193&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png",
+            "InvalidSRS",
+        ),
+        (
+            "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/gif",
+            "InvalidFormat",
+        ),
+        (
+            "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=1,0,0,1&WIDTH=10&HEIGHT=10&FORMAT=image/png",
+            "InvalidParameterValue",
+        ),
+        (
+            "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=100000&HEIGHT=10&FORMAT=image/png",
+            "InvalidParameterValue",
+        ),
+        (
+            "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=nan,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png",
+            "InvalidParameterValue",
+        ),
         ("/wms?REQUEST=GetFeatureInfo", "OperationNotSupported"),
         ("/tiles/cem/3/1/1_1.gif", ""),
         ("/tiles/trees/3/1/1_1.bil", ""),
@@ -200,7 +233,10 @@ fn xyz_tiles_are_terrarium_heights() {
     let (x, y) = sylva::grid::mercator::to_mercator(10.125, 46.375);
     let z = 12u32;
     let size = 2.0 * sylva::grid::mercator::HALF_WORLD_M / f64::from(1u32 << z);
-    let (tx, ty) = (((x + sylva::grid::mercator::HALF_WORLD_M) / size) as u64, ((sylva::grid::mercator::HALF_WORLD_M - y) / size) as u64);
+    let (tx, ty) = (
+        ((x + sylva::grid::mercator::HALF_WORLD_M) / size) as u64,
+        ((sylva::grid::mercator::HALF_WORLD_M - y) / size) as u64,
+    );
     let r = server.get(&format!("/xyz/dem/{z}/{tx}/{ty}.png"));
     assert_eq!(r.status, 200);
     let img = image::load_from_memory(&r.body).unwrap().into_rgb8();
@@ -228,14 +264,18 @@ fn get_maps_on_the_tile_lattice_come_from_the_tile_cache() {
     let (s, sector) = (tiles.spacing_deg(t.level), tiles.sector(t));
     let wms = |west: f64, south: f64, side: usize| {
         let (east, north) = (west + side as f64 * s, south + side as f64 * s);
-        format!("/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=cem&STYLES=&CRS=CRS:84&BBOX={west},{south},{east},{north}&WIDTH={side}&HEIGHT={side}&FORMAT=application/bil32")
+        format!(
+            "/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=cem&STYLES=&CRS=CRS:84&BBOX={west},{south},{east},{north}&WIDTH={side}&HEIGHT={side}&FORMAT=application/bil32"
+        )
     };
     // Pixel centres 600 × 600 samples from the tile's middle: parts of four tiles.
     let (west, south) = (sector.min_lon + 255.5 * s, sector.min_lat + 255.5 * s);
     let stitched = server.get(&wms(west, south, 600));
     assert_eq!(stitched.status, 200, "{}", stitched.text());
     assert_eq!(server.metric("sylva_tile_computations_total"), 4.0, "one computation per tile touched");
-    let fetch = |dr: u64, dc: u64| bil32(&server.get(&format!("/tiles/cem/{}/{}/{}_{}.bil32", t.level, t.row + dr, t.row + dr, t.col + dc)).body);
+    let fetch = |dr: u64, dc: u64| {
+        bil32(&server.get(&format!("/tiles/cem/{}/{}/{}_{}.bil32", t.level, t.row + dr, t.row + dr, t.col + dc)).body)
+    };
     let quad = [[fetch(0, 0), fetch(0, 1)], [fetch(1, 0), fetch(1, 1)]];
     assert_eq!(server.metric("sylva_tile_computations_total"), 4.0, "the tiles were cached by the GetMap");
     let image = bil32(&stitched.body);
@@ -264,7 +304,9 @@ fn world_wind_dem_tiles_match_the_dem_at_their_samples() {
     let file = std::fs::File::open(common::data("rmnp/rmnp-dem.tif")).unwrap();
     let mut decoder = tiff::decoder::Decoder::new(std::io::BufReader::new(file)).unwrap();
     let (w, h) = decoder.dimensions().unwrap();
-    let tiff::decoder::DecodingResult::U16(pixels) = decoder.read_image().unwrap() else { panic!("rmnp DEM is UInt16") };
+    let tiff::decoder::DecodingResult::U16(pixels) = decoder.read_image().unwrap() else {
+        panic!("rmnp DEM is UInt16")
+    };
     let (x0, y0, dx, dy) = (-105.912_500_000_000_01, 40.553_678_069_620_155, 0.00275, -0.00211);
     let dem = |px: usize, py: usize| f64::from(pixels[py * w as usize + px]);
     let tiles = common::region("examples/rmnp.toml").tiles;
@@ -314,7 +356,11 @@ fn an_overloaded_server_answers_503_with_retry_after_at_once() {
             .collect();
         handles.into_iter().map(|h| h.join().unwrap()).collect()
     });
-    assert!(replies.iter().all(|r| r.status == 200 || r.status == 503), "{:?}", replies.iter().map(|r| r.status).collect::<Vec<_>>());
+    assert!(
+        replies.iter().all(|r| r.status == 200 || r.status == 503),
+        "{:?}",
+        replies.iter().map(|r| r.status).collect::<Vec<_>>()
+    );
     let busy: Vec<_> = replies.iter().filter(|r| r.status == 503).collect();
     assert!(!busy.is_empty(), "no request was refused");
     for r in busy {

@@ -64,13 +64,15 @@ fn a_proxy_serves_the_upstream_dem_over_wms_and_terrarium() {
 
     // Terrarium: 4 mm steps on the upstream's Web Mercator grid at zoom 13
     // (~13 m pixels here), resampled again by the proxy.
-    let terrarium = format!("service = \"terrarium\"\nurl = \"{}/xyz/dem/{{z}}/{{x}}/{{y}}.png\"\nzoom = 13", upstream.base);
+    let terrarium =
+        format!("service = \"terrarium\"\nurl = \"{}/xyz/dem/{{z}}/{{x}}/{{y}}.png\"\nzoom = 13", upstream.base);
     let config = proxy_config(&dir, &terrarium);
     let proxy = Server::start(Some(&config), &dir.join("cache-xyz"));
     let reply = proxy.get(&tile_path(demo_tile(), "bil32"));
     assert_eq!(reply.status, 200, "{}", reply.text());
     let via_xyz = bil32(&reply.body);
-    let rmse = (direct.iter().zip(&via_xyz).map(|(a, b)| f64::from(a - b).powi(2)).sum::<f64>() / direct.len() as f64).sqrt();
+    let rmse =
+        (direct.iter().zip(&via_xyz).map(|(a, b)| f64::from(a - b).powi(2)).sum::<f64>() / direct.len() as f64).sqrt();
     assert!(rmse < 0.5, "Terrarium proxy RMSE {rmse} m against the upstream");
 }
 
@@ -88,7 +90,11 @@ fn bad_upstream(behaviour: &'static str) -> String {
                     "hang" => std::thread::sleep(Duration::from_secs(600)),
                     _ => {
                         let body = "upstream exploded";
-                        let _ = write!(stream, "HTTP/1.1 500 Internal Server Error\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}", body.len());
+                        let _ = write!(
+                            stream,
+                            "HTTP/1.1 500 Internal Server Error\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+                            body.len()
+                        );
                     }
                 }
             });
@@ -107,7 +113,10 @@ fn an_upstream_that_hangs_or_fails_gives_a_timely_exception_and_the_server_stays
         let b = common::demo().bounds;
         let get_map = format!(
             "/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=dem&STYLES=&CRS=CRS:84&BBOX={},{},{},{}&WIDTH=64&HEIGHT=64&FORMAT=image/tiff",
-            b.west, b.south, b.west + 0.01, b.south + 0.01
+            b.west,
+            b.south,
+            b.west + 0.01,
+            b.south + 0.01
         );
         let start = Instant::now();
         let reply = proxy.get(&get_map);
@@ -121,7 +130,11 @@ fn an_upstream_that_hangs_or_fails_gives_a_timely_exception_and_the_server_stays
         let reply = proxy.get(&tile_path(TileId::new(11, demo_tile().row + 2, demo_tile().col), "bil"));
         assert_eq!(reply.status, 502);
         assert!(reply.text().contains("circuit breaker"), "{behaviour}: {}", reply.text());
-        assert!(start.elapsed() < Duration::from_millis(250), "{behaviour}: the open breaker waited {:?}", start.elapsed());
+        assert!(
+            start.elapsed() < Duration::from_millis(250),
+            "{behaviour}: the open breaker waited {:?}",
+            start.elapsed()
+        );
         assert_eq!(proxy.get("/health").status, 200, "{behaviour}: still up");
     }
 }

@@ -69,7 +69,11 @@ fn v111(s: &Service) -> String {
     let url = escape(s.url);
     let b = s.bounds;
     let formats: String = MapFormat::ALL.iter().map(|(_, m)| format!("<Format>{m}</Format>")).collect();
-    let srs: String = RequestCrs::ALL.iter().filter(|(c, _)| *c != RequestCrs::Crs84).map(|(_, n)| format!("<SRS>{n}</SRS>")).collect();
+    let srs: String = RequestCrs::ALL
+        .iter()
+        .filter(|(c, _)| *c != RequestCrs::Crs84)
+        .map(|(_, n)| format!("<SRS>{n}</SRS>"))
+        .collect();
     format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <!DOCTYPE WMT_MS_Capabilities SYSTEM "http://schemas.opengis.net/wms/1.1.1/WMS_MS_Capabilities.dtd">
@@ -127,7 +131,19 @@ fn bounding_boxes(b: BBox, version: Version) -> String {
 }
 
 fn layers(s: &Service, version: Version) -> String {
-    LAYERS.iter().map(|&l| format!(r#"<Layer queryable="0"><Name>{}</Name><Title>{}</Title><Abstract>{}</Abstract>{}</Layer>"#, l.name(), title(l), escape(&abstract_of(l, s)), bounding_boxes(s.bounds, version).replace('\n', ""))).collect::<Vec<_>>().join("\n")
+    LAYERS
+        .iter()
+        .map(|&l| {
+            format!(
+                r#"<Layer queryable="0"><Name>{}</Name><Title>{}</Title><Abstract>{}</Abstract>{}</Layer>"#,
+                l.name(),
+                title(l),
+                escape(&abstract_of(l, s)),
+                bounding_boxes(s.bounds, version).replace('\n', "")
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("\n")
 }
 
 fn title(layer: MapLayer) -> &'static str {
@@ -181,8 +197,13 @@ mod tests {
         for version in [Version::V111, Version::V130] {
             let (_, xml) = document(&service(), version);
             let options = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
-            let doc = roxmltree::Document::parse_with_options(&xml, options).unwrap_or_else(|e| panic!("{version:?}: {e}\n{xml}"));
-            let names: Vec<&str> = doc.descendants().filter(|n| n.has_tag_name("Name") && n.parent().is_some_and(|p| p.has_tag_name("Layer"))).filter_map(|n| n.text()).collect();
+            let doc = roxmltree::Document::parse_with_options(&xml, options)
+                .unwrap_or_else(|e| panic!("{version:?}: {e}\n{xml}"));
+            let names: Vec<&str> = doc
+                .descendants()
+                .filter(|n| n.has_tag_name("Name") && n.parent().is_some_and(|p| p.has_tag_name("Layer")))
+                .filter_map(|n| n.text())
+                .collect();
             assert_eq!(names, ["dem", "cover", "canopy", "cem", "surface", "relief"]);
         }
     }

@@ -42,7 +42,9 @@ pub fn message(message: &str, w: usize, h: usize) -> Vec<u8> {
         for (line, text) in chars.chunks(per_line).enumerate() {
             let baseline = 4.0 + scaled.ascent() + line as f32 * scaled.height();
             for (i, &c) in text.iter().enumerate() {
-                let glyph = font.glyph_id(c).with_scale_and_position(PxScale::from(TEXT_PX), point(4.0 + i as f32 * advance, baseline));
+                let glyph = font
+                    .glyph_id(c)
+                    .with_scale_and_position(PxScale::from(TEXT_PX), point(4.0 + i as f32 * advance, baseline));
                 if let Some(outline) = font.outline_glyph(glyph) {
                     let b = outline.px_bounds();
                     outline.draw(|x, y, coverage| {
@@ -76,7 +78,8 @@ mod tests {
         assert!(img.pixels().filter(|p| p.0[3] > 128).count() > 100);
         let grid = crate::grid::BBox::parse("0,0,1,1").unwrap().area_grid(3, 2).unwrap();
         assert_eq!(blank(&grid, MapFormat::Bil16, Quantization::PNG16_HEIGHTS).len(), 3 * 2 * 2);
-        let blank_png = image::load_from_memory(&blank(&grid, MapFormat::Png, Quantization::PNG16_HEIGHTS)).unwrap().into_rgba8();
+        let blank_png =
+            image::load_from_memory(&blank(&grid, MapFormat::Png, Quantization::PNG16_HEIGHTS)).unwrap().into_rgba8();
         assert!(blank_png.pixels().all(|p| p.0[3] == 0));
     }
 }

@@ -33,7 +33,13 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
         Ok(Request::GetCapabilities(version)) => {
             let url = endpoint(&state, &headers);
             let r = state.region();
-            let service = capabilities::Service { url: &url, title: &r.name, bounds: r.bounds, max_side: limits.max_side, heights_16: r.heights_16 };
+            let service = capabilities::Service {
+                url: &url,
+                title: &r.name,
+                bounds: r.bounds,
+                max_side: limits.max_side,
+                heights_16: r.heights_16,
+            };
             let (mime, body) = capabilities::document(&service, version);
             ([(header::CONTENT_TYPE, mime)], body).into_response()
         }
@@ -47,7 +53,8 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
                 // The server's or an upstream's failure: still a report, with the status.
                 Err(e) => {
                     let (status, mut headers, message) = e.parts();
-                    let (mime, body) = Exception::new(super::exception::Code::NoApplicableCode, message).report(map.version);
+                    let (mime, body) =
+                        Exception::new(super::exception::Code::NoApplicableCode, message).report(map.version);
                     headers.insert(header::CONTENT_TYPE, axum::http::HeaderValue::from_static(mime));
                     (status, headers, body).into_response()
                 }
@@ -117,7 +124,8 @@ async fn stitched(state: &AppState, map: &GetMap, encoding: Encoding) -> Result<
     // BIL32 carries nodata as −32768.
     let bytes = match layer {
         Layer::Surface => {
-            let classes = out.map(|v| if v.is_nan() || v == encode::NODATA_HEIGHT { crate::cem::surface::NODATA } else { v as u8 });
+            let classes = out
+                .map(|v| if v.is_nan() || v == encode::NODATA_HEIGHT { crate::cem::surface::NODATA } else { v as u8 });
             encode::encode(layer, Samples::Class(&classes), &map.grid, format, state.region().heights_16)
         }
         _ => {
@@ -134,7 +142,9 @@ fn paste(out: &mut Raster<f32>, bil32: &[u8], n1: i64, (x0, y0): (i64, i64)) {
     let n = (n1 + 1) as usize;
     let values = bil32.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
     let Some(tile) = Raster::from_vec(n, n, values) else { return };
-    let Some(common) = Window::new(x0, y0, n, n).intersect(&Window::new(0, 0, out.width(), out.height())) else { return };
+    let Some(common) = Window::new(x0, y0, n, n).intersect(&Window::new(0, 0, out.width(), out.height())) else {
+        return;
+    };
     let local = Window::new(common.x - x0, common.y - y0, common.width, common.height);
     out.paste(&tile, local, common.x as usize, common.y as usize);
 }
@@ -148,7 +158,10 @@ fn exception(e: &Exception, reply: Reply, state: &AppState) -> Response {
         (ExceptionStyle::InImage | ExceptionStyle::Blank, Some((w, h, format))) => {
             let grid = crate::grid::BBox { west: 0.0, south: 0.0, east: 1.0, north: 1.0 }.area_grid(w, h);
             match grid {
-                Ok(g) => ([(header::CONTENT_TYPE, format.mime())], inimage::blank(&g, format, state.region().heights_16)).into_response(),
+                Ok(g) => {
+                    ([(header::CONTENT_TYPE, format.mime())], inimage::blank(&g, format, state.region().heights_16))
+                        .into_response()
+                }
                 Err(_) => report(e, reply),
             }
         }

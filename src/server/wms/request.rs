@@ -181,7 +181,10 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)>
     let mut reply = Reply { version, style: ExceptionStyle::Xml, image: None };
     let fail = |e: Exception, reply: Reply| Err((e, reply));
     if let Some(service) = params.get("SERVICE").filter(|s| !s.eq_ignore_ascii_case("WMS")) {
-        return fail(Exception::new(Code::InvalidParameterValue, format!("SERVICE={service}: only WMS is served")), reply);
+        return fail(
+            Exception::new(Code::InvalidParameterValue, format!("SERVICE={service}: only WMS is served")),
+            reply,
+        );
     }
     let Some(request) = params.get("REQUEST") else {
         return fail(Exception::new(Code::MissingParameterValue, "REQUEST is missing"), reply);
@@ -218,24 +221,30 @@ fn image_of(params: &Params) -> Option<(usize, usize, MapFormat)> {
 
 fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, Exception> {
     let required = |key: &'static str| {
-        params.get(key).filter(|v| !v.is_empty()).ok_or_else(|| Exception::new(Code::MissingParameterValue, format!("{key} is missing")))
+        params
+            .get(key)
+            .filter(|v| !v.is_empty())
+            .ok_or_else(|| Exception::new(Code::MissingParameterValue, format!("{key} is missing")))
     };
     let layers = required("LAYERS")?;
     let layer = match layers.split(',').collect::<Vec<_>>()[..] {
-        [one] => MapLayer::parse(one.trim())
-            .ok_or_else(|| Exception::new(Code::LayerNotDefined, format!("layer {one:?} is not served")).locator("LAYERS"))?,
+        [one] => MapLayer::parse(one.trim()).ok_or_else(|| {
+            Exception::new(Code::LayerNotDefined, format!("layer {one:?} is not served")).locator("LAYERS")
+        })?,
         _ => return Err(Exception::new(Code::InvalidParameterValue, "one layer per request").locator("LAYERS")),
     };
     let crs_key = if version == Version::V130 { "CRS" } else { "SRS" };
     let crs_text = params.get(crs_key).or(params.get(if crs_key == "CRS" { "SRS" } else { "CRS" }));
-    let crs_text = crs_text.ok_or_else(|| Exception::new(Code::MissingParameterValue, format!("{crs_key} is missing")))?;
+    let crs_text =
+        crs_text.ok_or_else(|| Exception::new(Code::MissingParameterValue, format!("{crs_key} is missing")))?;
     let crs = RequestCrs::parse(crs_text).ok_or_else(|| {
         let code = if version == Version::V130 { Code::InvalidCrs } else { Code::InvalidSrs };
         Exception::new(code, format!("{crs_text} is not offered (EPSG:4326, CRS:84, EPSG:3857)")).locator(crs_key)
     })?;
     let format_text = required("FORMAT")?;
-    let format = MapFormat::parse(format_text)
-        .ok_or_else(|| Exception::new(Code::InvalidFormat, format!("format {format_text:?} is not offered")).locator("FORMAT"))?;
+    let format = MapFormat::parse(format_text).ok_or_else(|| {
+        Exception::new(Code::InvalidFormat, format!("format {format_text:?} is not offered")).locator("FORMAT")
+    })?;
     if layer == MapLayer::Relief && format != MapFormat::Png {
         return Err(Exception::new(Code::InvalidFormat, "relief is an image: ask for image/png").locator("FORMAT"));
     }
@@ -264,14 +273,18 @@ fn numbers(text: &str) -> Result<[f64; 4], Exception> {
 fn grid(b: [f64; 4], crs: RequestCrs, version: Version, width: usize, height: usize) -> Result<SampleGrid, Exception> {
     let bad = |e: crate::grid::GridError| Exception::new(Code::InvalidParameterValue, e.to_string()).locator("BBOX");
     match (crs, version) {
-        (RequestCrs::Epsg3857, _) => {
-            MercatorBox { west: b[0], south: b[1], east: b[2], north: b[3] }.checked().and_then(|m| m.area_grid(width, height)).map_err(bad)
-        }
+        (RequestCrs::Epsg3857, _) => MercatorBox { west: b[0], south: b[1], east: b[2], north: b[3] }
+            .checked()
+            .and_then(|m| m.area_grid(width, height))
+            .map_err(bad),
         (RequestCrs::Epsg4326, Version::V130) => BBox { south: b[0], west: b[1], north: b[2], east: b[3] }
             .checked()
             .and_then(|g| g.area_grid(width, height))
             .map_err(bad),
-        _ => BBox { west: b[0], south: b[1], east: b[2], north: b[3] }.checked().and_then(|g| g.area_grid(width, height)).map_err(bad),
+        _ => BBox { west: b[0], south: b[1], east: b[2], north: b[3] }
+            .checked()
+            .and_then(|g| g.area_grid(width, height))
+            .map_err(bad),
     }
 }
 
@@ -316,9 +329,15 @@ mod tests {
 
     #[test]
     fn axis_order_follows_version_and_crs() {
-        let a = map("SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=dem&STYLES=&CRS=EPSG:4326&BBOX=40,-106,41,-105&WIDTH=4&HEIGHT=2&FORMAT=image/tiff");
-        let b = map("service=wms&version=1.3.0&request=getmap&layers=dem&crs=CRS:84&bbox=-106,40,-105,41&width=4&height=2&format=image/tiff&");
-        let c = map("SERVICE=WMS&VERSION=1.1.1&REQUEST=GetMap&LAYERS=dem&SRS=EPSG:4326&BBOX=-106,40,-105,41&WIDTH=4&HEIGHT=2&FORMAT=image/tiff");
+        let a = map(
+            "SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=dem&STYLES=&CRS=EPSG:4326&BBOX=40,-106,41,-105&WIDTH=4&HEIGHT=2&FORMAT=image/tiff",
+        );
+        let b = map(
+            "service=wms&version=1.3.0&request=getmap&layers=dem&crs=CRS:84&bbox=-106,40,-105,41&width=4&height=2&format=image/tiff&",
+        );
+        let c = map(
+            "SERVICE=WMS&VERSION=1.1.1&REQUEST=GetMap&LAYERS=dem&SRS=EPSG:4326&BBOX=-106,40,-105,41&WIDTH=4&HEIGHT=2&FORMAT=image/tiff",
+        );
         assert_eq!(a.grid, b.grid);
         assert_eq!(a.grid, c.grid);
         assert_eq!(a.grid.lon_lat(0, 0), (-105.875, 40.75));
@@ -328,13 +347,28 @@ mod tests {
     fn errors_carry_the_specification_codes() {
         let base = "SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&CRS=EPSG:4326&BBOX=40,-106,41,-105&WIDTH=4&HEIGHT=2&FORMAT=image/png";
         assert_eq!(code(&format!("{base}&LAYERS=nope")), Code::LayerNotDefined);
-        assert_eq!(code(&base.replace("CRS=EPSG:4326", "CRS=EPSG:2193").replace("&REQUEST", "&LAYERS=dem&REQUEST")), Code::InvalidCrs);
-        assert_eq!(code(&(base.replace("VERSION=1.3.0", "VERSION=1.1.1").replace("CRS=EPSG:4326", "SRS=EPSG:2193") + "&LAYERS=dem")), Code::InvalidSrs);
+        assert_eq!(
+            code(&base.replace("CRS=EPSG:4326", "CRS=EPSG:2193").replace("&REQUEST", "&LAYERS=dem&REQUEST")),
+            Code::InvalidCrs
+        );
+        assert_eq!(
+            code(
+                &(base.replace("VERSION=1.3.0", "VERSION=1.1.1").replace("CRS=EPSG:4326", "SRS=EPSG:2193")
+                    + "&LAYERS=dem")
+            ),
+            Code::InvalidSrs
+        );
         assert_eq!(code(&(base.replace("image/png", "image/gif") + "&LAYERS=dem")), Code::InvalidFormat);
         assert_eq!(code(&(base.replace("&WIDTH=4", "") + "&LAYERS=dem")), Code::MissingParameterValue);
         assert_eq!(code(&(base.replace("WIDTH=4", "WIDTH=99999") + "&LAYERS=dem")), Code::InvalidParameterValue);
-        assert_eq!(code(&(base.replace("BBOX=40,-106,41,-105", "BBOX=41,-106,40,-105") + "&LAYERS=dem")), Code::InvalidParameterValue);
-        assert_eq!(code(&(base.replace("BBOX=40,-106,41,-105", "BBOX=a,b") + "&LAYERS=dem")), Code::InvalidParameterValue);
+        assert_eq!(
+            code(&(base.replace("BBOX=40,-106,41,-105", "BBOX=41,-106,40,-105") + "&LAYERS=dem")),
+            Code::InvalidParameterValue
+        );
+        assert_eq!(
+            code(&(base.replace("BBOX=40,-106,41,-105", "BBOX=a,b") + "&LAYERS=dem")),
+            Code::InvalidParameterValue
+        );
         assert_eq!(code("SERVICE=WMS&REQUEST=GetFeatureInfo"), Code::OperationNotSupported);
         assert_eq!(code("SERVICE=WMS"), Code::MissingParameterValue);
         assert_eq!(code(&format!("{base}&LAYERS=relief").replace("image/png", "image/tiff")), Code::InvalidFormat);
@@ -345,12 +379,17 @@ mod tests {
         let q = "REQUEST=GetMap&VERSION=1.1.1&LAYERS=x&SRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=8&HEIGHT=4&FORMAT=image/png&EXCEPTIONS=application/vnd.ogc.se_inimage";
         let Err((e, reply)) = parse(q, LIMITS) else { panic!() };
         assert_eq!(e.code, Code::LayerNotDefined);
-        assert_eq!(reply, Reply { version: Version::V111, style: ExceptionStyle::InImage, image: Some((8, 4, MapFormat::Png)) });
+        assert_eq!(
+            reply,
+            Reply { version: Version::V111, style: ExceptionStyle::InImage, image: Some((8, 4, MapFormat::Png)) }
+        );
     }
 
     #[test]
     fn web_mercator_boxes_give_mercator_grids() {
-        let m = map("REQUEST=GetMap&LAYERS=cem&CRS=EPSG:3857&BBOX=0,0,20037508.342789244,20037508.342789244&WIDTH=2&HEIGHT=2&FORMAT=application/bil32");
+        let m = map(
+            "REQUEST=GetMap&LAYERS=cem&CRS=EPSG:3857&BBOX=0,0,20037508.342789244,20037508.342789244&WIDTH=2&HEIGHT=2&FORMAT=application/bil32",
+        );
         assert_eq!(m.crs, RequestCrs::Epsg3857);
         // Pixel centres at a quarter and three quarters of the north half: 40.98° and 79.17°.
         assert!((m.grid.lat.coord(1) - 40.979_898_069_620_14).abs() < 1e-9);

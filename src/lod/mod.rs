@@ -1,0 +1,6 @@
+//! Level-of-detail selection (issue 7): pure math, no I/O, no tokio, no wgpu.
+//! (Interface guide below; filled in as the modules land.)
+
+pub mod calibrate;
+pub mod model;
+pub mod optimizer;
