@@ -4,3 +4,4 @@
 pub mod calibrate;
 pub mod model;
 pub mod optimizer;
+pub mod split;
