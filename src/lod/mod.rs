@@ -2,6 +2,8 @@
 //! (Interface guide below; filled in as the modules land.)
 
 pub mod calibrate;
+pub mod deferral;
 pub mod model;
 pub mod optimizer;
+pub mod quadtree;
 pub mod split;
