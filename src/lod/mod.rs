@@ -4,6 +4,7 @@
 pub mod calibrate;
 pub mod deferral;
 pub mod model;
+pub mod morph;
 pub mod optimizer;
 pub mod quadtree;
 pub mod split;
