@@ -6,5 +6,6 @@ pub mod deferral;
 pub mod model;
 pub mod morph;
 pub mod optimizer;
+pub mod predict;
 pub mod quadtree;
 pub mod split;
