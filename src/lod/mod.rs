@@ -8,4 +8,5 @@ pub mod morph;
 pub mod optimizer;
 pub mod predict;
 pub mod quadtree;
+pub mod splats;
 pub mod split;
