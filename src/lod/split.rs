@@ -4,21 +4,29 @@
 //! Tree groups sit in a static quadtree ([`ObjectTree`]). Instead of one
 //! variable per group, a frame ties all groups below a node to one
 //! resolution, `x_i = x · capacity_i / capacity` (Eq. 8.16), whenever the
-//! benefit that tie can lose is small. The loss bound is Appendix A's: with
-//! benefit `Σ W_i φ(x_i / cap_i)` and `φ(u) ≤ √u / norm`, replacing the best
-//! allocation of `X` units over `n` groups by the equal one loses at most
-//! `W √(X/cap) (1 − 1/√n) / norm`. A node whose bound is below its share of
-//! the threshold, `θ / 4^depth`, becomes one variable; otherwise `X` is
-//! shared among the children as the Lagrange solution for square-root
-//! benefits would (`X_i ∝ W_i² / cap_i`) and the children are examined in
-//! turn. Culled nodes (the view returns `None`) are skipped with everything
-//! below them.
+//! benefit that tie loses is small. Appendix A bounds that loss for `X`
+//! units over `n` objects in the worst case (all weight in one object) by
+//! `W √(X/cap) (1 − 1/√n)`; that bound is near `W √(X/cap)` for any large
+//! node, so it never lets one merge. Algorithm 3 already evaluates the
+//! children and their Lagrange shares, so the estimate here uses their
+//! actual weights instead: the square-root optimum `√X √(Σ W_i²/cap_i)`
+//! against the tie `√X Σ W_i / √(Σ cap_i)`. A node whose estimate is below
+//! its share of the threshold becomes one variable; otherwise `X` is shared
+//! among the children as that Lagrange solution does (`X_i ∝ W_i² / cap_i`)
+//! and the children are examined in turn. Culled
+//! nodes (the view returns `None`) are skipped with everything below them.
 //!
-//! So the work per frame is the number of nodes visited, which follows the
-//! screen, not the number of trees. The summed shares of the threshold over
-//! any cut of the tree are at most `θ`, so the estimated total loss is at
-//! most `θ` (estimated: `X_i` is itself an estimate, as the dissertation
-//! notes).
+//! The dissertation states the shares two ways that disagree (`θ/4` per
+//! level in §8.3, `ε / 2^(d_max − d)` in Algorithm 3); here a node's share
+//! is proportional to its weight, `θ_rel · W · φ(X_root / cap_root)`: its
+//! part of the benefit the whole budget buys. Shares over any cut of the
+//! tree then sum to at most `θ_rel` times that benefit, so the estimated
+//! loss is at most that fraction (estimated: `X_i` is itself an estimate,
+//! as the dissertation notes). A node merges when its allocated relative
+//! resolution is below about `θ_rel²` times the average, so groups that
+//! get few splats — far away, small on screen — merge first. The work per frame is the
+//! number of nodes visited, which follows the screen, not the number of
+//! trees.
 //!
 //! Invariants: every visible group lies below exactly one variable; nodes
 //! cover contiguous ranges of groups (Morton order), so a variable's groups
@@ -150,7 +158,8 @@ fn bound(items: &[Item], ids: &[u32], first: u32) -> ObjectNode {
 /// Settings of one splitting pass.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SplitSettings {
-    /// Acceptable estimated loss, as a fraction of the root's full benefit.
+    /// Acceptable estimated loss, as a fraction of the benefit the budget
+    /// buys (each variable's share in proportion to its weight).
     pub loss_fraction: f64,
     /// Predicted ms per unit (splat).
     pub cost_per_unit_ms: f64,
@@ -193,8 +202,10 @@ pub fn split(
     stats.visited += 1;
     let Some(w) = weight(root).filter(|w| *w > 0.0) else { return stats };
     let units = if settings.cost_per_unit_ms > 0.0 { settings.budget_ms / settings.cost_per_unit_ms } else { f64::MAX };
-    let mut pass = Pass { tree, settings, theta: settings.loss_fraction.max(0.0) * w, weight, out, stats };
-    pass.visit(0, w, units.clamp(0.0, root.capacity), 0);
+    let x = units.clamp(0.0, root.capacity);
+    let ratio = settings.smooth.phi(x / root.capacity.max(f64::MIN_POSITIVE));
+    let mut pass = Pass { tree, settings, ratio, weight, out, stats };
+    pass.visit(0, w, x);
     pass.stats
 }
 
@@ -202,47 +213,58 @@ pub fn split(
 struct Pass<'a> {
     tree: &'a ObjectTree,
     settings: &'a SplitSettings,
-    theta: f64,
+    /// Benefit the budget buys per unit of full-resolution weight, over
+    /// the whole tree: `φ(X_root / capacity_root)`.
+    ratio: f64,
     weight: &'a mut dyn FnMut(&ObjectNode) -> Option<f64>,
     out: &'a mut Vec<Variable>,
     stats: SplitStats,
 }
 
 impl Pass<'_> {
-    /// Algorithm 3's `SplitVar` for node `n` with weight `w`, estimated units
-    /// `x` and depth `depth`.
-    fn visit(&mut self, n: u32, w: f64, x: f64, depth: u32) {
+    /// Algorithm 3's `SplitVar` for node `n` with weight `w` and estimated
+    /// units `x`.
+    fn visit(&mut self, n: u32, w: f64, x: f64) {
         let tree = self.tree;
         let node = &tree.nodes[n as usize];
-        let loss = self.loss_bound(node, w, x);
-        let share = self.theta / 4f64.powi(depth.min(1000) as i32);
-        if node.children.is_empty() || loss < share {
-            self.stats.estimated_loss += loss;
-            let continuous =
-                Continuous { weight: w, capacity: node.capacity, cost_per_unit_ms: self.settings.cost_per_unit_ms };
-            self.out.push(Variable { node: n, continuous });
-            return;
-        }
         let mut kids: Vec<(u32, f64, f64)> = Vec::with_capacity(4);
         for &c in &node.children {
             self.stats.visited += 1;
-            if let Some(wc) = (self.weight)(&tree.nodes[c as usize]).filter(|w| *w > 0.0) {
-                let cap = tree.nodes[c as usize].capacity.max(f64::MIN_POSITIVE);
-                kids.push((c, wc, wc * wc / cap));
-            }
+            let wc = (self.weight)(&tree.nodes[c as usize]).filter(|w| *w > 0.0).unwrap_or(0.0);
+            kids.push((c, wc, tree.nodes[c as usize].capacity.max(f64::MIN_POSITIVE)));
         }
-        let total: f64 = kids.iter().map(|k| k.2).sum();
-        for (c, wc, share) in kids {
-            let xc = if total > 0.0 { x * share / total } else { 0.0 };
-            self.visit(c, wc, xc.min(tree.nodes[c as usize].capacity), depth + 1);
+        let loss = self.loss_of_tying(&kids, x);
+        if kids.is_empty() || loss < self.settings.loss_fraction * w * self.ratio {
+            self.stats.estimated_loss += loss;
+            // The children's weights add up closer to the groups' than the
+            // node's own sphere, whose projection overstates near nodes.
+            let weight = if kids.is_empty() { w } else { kids.iter().map(|k| k.1).sum() };
+            let continuous =
+                Continuous { weight, capacity: node.capacity, cost_per_unit_ms: self.settings.cost_per_unit_ms };
+            self.out.push(Variable { node: n, continuous });
+            return;
+        }
+        let total: f64 = kids.iter().map(|k| k.1 * k.1 / k.2).sum();
+        for (c, wc, cap) in kids {
+            if wc > 0.0 {
+                let xc = if total > 0.0 { x * (wc * wc / cap) / total } else { 0.0 };
+                self.visit(c, wc, xc.min(cap));
+            }
         }
     }
 
-    /// Appendix A: `W √(X/cap) (1 − 1/√n) / norm`.
-    fn loss_bound(&self, node: &ObjectNode, w: f64, x: f64) -> f64 {
-        let n = f64::from(node.groups.max(1));
-        let u = if node.capacity > 0.0 { (x / node.capacity).clamp(0.0, 1.0) } else { 0.0 };
-        w * u.sqrt() * (1.0 - 1.0 / n.sqrt()) / self.settings.smooth.norm()
+    /// Benefit lost by tying the children `(node, weight, capacity)` to one
+    /// relative resolution when they share `x` units: the Lagrange optimum
+    /// of square-root benefits, `√x · √(Σ W_i² / cap_i)`, against the tie,
+    /// `√x · Σ W_i / √(Σ cap_i)` (over the smoothing's `norm`). This is
+    /// Appendix A's estimate with the children's actual weights in place of
+    /// its worst case (all weight in one object), which would never let a
+    /// large node merge.
+    fn loss_of_tying(&self, kids: &[(u32, f64, f64)], x: f64) -> f64 {
+        let spread: f64 = kids.iter().map(|k| k.1 * k.1 / k.2).sum();
+        let (w, cap): (f64, f64) = kids.iter().fold((0.0, 0.0), |(w, c), k| (w + k.1, c + k.2));
+        let loss = x.max(0.0).sqrt() * (spread.sqrt() - w / cap.max(f64::MIN_POSITIVE).sqrt());
+        (loss / self.settings.smooth.norm()).max(0.0)
     }
 }
 
@@ -330,7 +352,7 @@ mod tests {
         assert!(stats.visited < items.len() / 10, "{} nodes visited", stats.visited);
         let mut all = Vec::new();
         split(&tree, &mut view(eye, f64::MAX), &settings(0.0), &mut all);
-        let forest = Forest::new(vec![]).unwrap_or_else(|_| unreachable!());
+        let forest = Forest::default();
         let solve = |vars: &[Variable]| {
             let c: Vec<Continuous> = vars.iter().map(|v| v.continuous).collect();
             optimize(&forest, &c, &Settings::budget(8.0)).benefit

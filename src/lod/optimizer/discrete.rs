@@ -38,7 +38,7 @@ pub struct Node {
 pub(crate) const NONE: u32 = u32::MAX;
 
 /// A forest of LOD hierarchies with children lists.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct Forest {
     nodes: Vec<Node>,
     roots: Vec<u32>,

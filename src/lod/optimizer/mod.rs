@@ -18,9 +18,11 @@
 //!   alternative fits the budget and increments add benefit (Mason and
 //!   Blake's bound, via the fractional relaxation).
 //! - **An upper bound.** At the same moment the greedy state lies on the
-//!   path of the fractional optimum, and nothing left is worth more per ms
-//!   than the blocked increment, so `benefit + slope · remaining budget`
-//!   bounds every feasible answer ([`Selection::upper_bound`]).
+//!   path of the fractional optimum, and no discrete increment left is
+//!   worth more per ms than the blocked one, so the discrete benefit so far
+//!   plus the best split of the remaining budget between the continuous
+//!   curve and increments at that slope bounds every feasible answer
+//!   ([`Selection::upper_bound`]).
 //!
 //! If the roots alone (the coarsest representation) cost more than the
 //! budget they are still drawn, nothing else is, and the overrun is
@@ -312,11 +314,16 @@ impl<'a> Run<'a> {
         (gain > 0.0).then_some(mu)
     }
 
-    /// No feasible answer beats the current state plus `value` per ms of
-    /// the remaining budget, when nothing left is worth more than `value`.
+    /// No feasible answer beats the current discrete state plus the best
+    /// split of the remaining budget between the continuous variables (their
+    /// exact concave curve) and discrete increments worth `value` per ms,
+    /// when no discrete increment left is worth more than `value` (the
+    /// Lagrangian bound of the fractional problem).
     fn bound_now(&self, value: f64) -> f64 {
-        let slope = self.continuous_slope().unwrap_or(0.0).max(value);
-        self.benefit_d + self.levels.benefit(self.mu) + slope * self.remaining_ms().max(0.0)
+        let available = self.budget_ms - self.cost_d;
+        let mu = value.max(self.levels.level_for_budget(available));
+        let rest = (available - self.levels.cost_ms(mu)).max(0.0);
+        self.benefit_d + self.levels.benefit(mu) + value.max(0.0) * rest
     }
 
     /// A blocked group's head alone, if that is worth something: offered
