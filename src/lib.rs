@@ -9,7 +9,8 @@
 //! ([`cem::surface`]); and conservative ray-casting acceleration data
 //! ([`cem::accel`]). [`grid`] holds the World Wind tile math, [`source`] the
 //! raster readers, [`encode`] the tile formats and [`demo`] the embedded
-//! procedural region used when no configuration is given.
+//! procedural region used when no configuration is given. [`lod`] selects
+//! the renderer's levels of detail under a frame budget.
 //!
 //! See `ARCHITECTURE.md` for the code map and the invariants.
 

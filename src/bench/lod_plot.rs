@@ -19,17 +19,17 @@ pub fn png(title: &str, frames: &[Frame]) -> Result<Vec<u8>, String> {
         let root = BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area();
         root.fill(&WHITE).map_err(|e| e.to_string())?;
         let (top, bottom) = root.split_vertically(SIZE.1 / 2);
-        let times: [(&str, RGBColor, fn(&Frame) -> f64); 3] = [
+        let times: &Series<'_> = &[
             ("unsplit", RED, |f| f.ms_unsplit),
             ("split", BLUE, |f| f.ms_split),
             ("split + deferral", GREEN, |f| f.ms_deferred),
         ];
-        panel(&top, &format!("{title}: LOD selection time"), "ms", frames, &times)?;
-        let work: [(&str, RGBColor, fn(&Frame) -> f64); 2] = [
+        panel(&top, &format!("{title}: LOD selection time"), "ms", frames, times)?;
+        let work: &Series<'_> = &[
             ("full refinement", RED, |f| f.touched_full as f64),
             ("deferred", BLUE, |f| f.touched_deferred.max(1) as f64),
         ];
-        panel(&bottom, "tiles evaluated per frame", "tiles", frames, &work)?;
+        panel(&bottom, "tiles evaluated per frame", "tiles", frames, work)?;
         root.present().map_err(|e| e.to_string())?;
     }
     crate::encode::png(&buf, SIZE.0 as usize, SIZE.1 as usize, image::ExtendedColorType::Rgb8)

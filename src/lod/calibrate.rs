@@ -115,15 +115,16 @@ impl CostCalibrator {
 fn gauss(mut m: [[f64; FEATURES]; FEATURES], mut rhs: [f64; FEATURES]) -> Option<[f64; FEATURES]> {
     for col in 0..FEATURES {
         let pivot = (col..FEATURES).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
-        if !(m[pivot][col].abs() > 1e-300) {
+        if m[pivot][col].abs().partial_cmp(&1e-300) != Some(std::cmp::Ordering::Greater) {
             return None;
         }
         m.swap(col, pivot);
         rhs.swap(col, pivot);
         for row in col + 1..FEATURES {
             let k = m[row][col] / m[col][col];
-            for j in col..FEATURES {
-                m[row][j] -= k * m[col][j];
+            let pivot_row = m[col];
+            for (x, p) in m[row][col..].iter_mut().zip(&pivot_row[col..]) {
+                *x -= k * p;
             }
             rhs[row] -= k * rhs[col];
         }

@@ -70,3 +70,13 @@ pub mod predict;
 pub mod quadtree;
 pub mod splats;
 pub mod split;
+
+/// `x > 0`, false for NaN (so `!positive(x)` also catches NaN).
+pub(crate) fn positive(x: f64) -> bool {
+    x > 0.0
+}
+
+/// `x ≥ 0`, false for NaN.
+pub(crate) fn non_negative(x: f64) -> bool {
+    x >= 0.0
+}

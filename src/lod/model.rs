@@ -66,7 +66,7 @@ impl Smooth {
 /// it (four times the cost): per tile drawn, a split never gains
 /// (diminishing returns, 001 §3.1's condition for the greedy bound).
 pub fn tile_benefit(projected_px: f64, samples_per_side: u32, smooth: Smooth) -> f64 {
-    if !(projected_px > 0.0) || !projected_px.is_finite() {
+    if !crate::lod::positive(projected_px) || !projected_px.is_finite() {
         return 0.0;
     }
     let samples = f64::from(samples_per_side).powi(2);
@@ -78,7 +78,7 @@ pub fn tile_benefit(projected_px: f64, samples_per_side: u32, smooth: Smooth) ->
 /// times the group's density `N / 64`. The optimiser multiplies it by
 /// `φ(x / capacity)`.
 pub fn group_weight(projected_px: f64, trees: u32, k: f64) -> f64 {
-    if !(projected_px > 0.0) || !projected_px.is_finite() || !(k > 0.0) {
+    if !crate::lod::positive(projected_px) || !projected_px.is_finite() || !crate::lod::positive(k) {
         return 0.0;
     }
     k * projected_px * f64::from(trees.min(64)) / 64.0

@@ -85,7 +85,7 @@ impl PathPredictor {
             let mean_t = self.samples.iter().map(|s| s.0 - t0).sum::<f64>() / n;
             let mean_v = self.samples.iter().map(|s| f(&s.1)).sum::<DVec3>() / n;
             let var: f64 = self.samples.iter().map(|s| (s.0 - t0 - mean_t).powi(2)).sum();
-            if !(var > 1e-18) || !t_s.is_finite() {
+            if var.partial_cmp(&1e-18) != Some(std::cmp::Ordering::Greater) || !t_s.is_finite() {
                 return f(&last);
             }
             let cov: DVec3 = self.samples.iter().map(|s| (s.0 - t0 - mean_t) * (f(&s.1) - mean_v)).sum();

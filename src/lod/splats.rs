@@ -89,7 +89,7 @@ impl TreeField {
     /// The non-empty groups whose blocks meet the box `[min_m, max_m]`.
     pub fn groups_in(&self, min_m: DVec2, max_m: DVec2, cover: &dyn Fn(DVec2) -> f64) -> Vec<Group> {
         let side = self.group_side_m();
-        if !(side > 0.0) || !min_m.is_finite() || !max_m.is_finite() {
+        if !crate::lod::positive(side) || !min_m.is_finite() || !max_m.is_finite() {
             return Vec::new();
         }
         let (lo, hi) = ((min_m / side).floor(), (max_m / side).floor());

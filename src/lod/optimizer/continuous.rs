@@ -226,7 +226,7 @@ impl Levels {
     /// full resolution gives 0; no budget gives ∞). `cost_ms` of the answer
     /// never exceeds the budget.
     pub fn level_for_budget(&self, budget_ms: f64) -> f64 {
-        if !(budget_ms > 0.0) {
+        if !crate::lod::positive(budget_ms) {
             return f64::INFINITY;
         }
         if self.total_cost_ms <= budget_ms {
@@ -296,7 +296,7 @@ fn kind(v: &Continuous, shape: Smooth) -> Kind {
     if !usable(v.weight) || !usable(v.capacity) {
         return Kind::Inert;
     }
-    if !(v.cost_per_unit_ms > 0.0) {
+    if !crate::lod::positive(v.cost_per_unit_ms) {
         return Kind::Free;
     }
     if !v.cost_per_unit_ms.is_finite() {

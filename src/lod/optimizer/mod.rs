@@ -261,7 +261,7 @@ impl<'a> Run<'a> {
 
     fn past(&self, deadline: Option<Instant>) -> bool {
         // Instant::now costs ~20 ns: look every 64 iterations.
-        self.iterations % 64 == 0 && deadline.is_some_and(|d| Instant::now() >= d)
+        self.iterations.is_multiple_of(64) && deadline.is_some_and(|d| Instant::now() >= d)
     }
 
     fn why_done(&self) -> Stop {
@@ -280,7 +280,7 @@ impl<'a> Run<'a> {
     fn best_fitting(&mut self) -> Option<(Entry, f64)> {
         while let Some(e) = self.heap.peek().copied() {
             let (db, dc) = self.delta(&e);
-            if !(e.value > 0.0) || !(db > 0.0 || dc < 0.0) {
+            if !crate::lod::positive(e.value) || !(db > 0.0 || dc < 0.0) {
                 self.heap.clear();
                 return None;
             }
@@ -304,7 +304,7 @@ impl<'a> Run<'a> {
     /// the exchange gains benefit.
     fn squeeze(&self, db: f64, dc: f64) -> Option<f64> {
         let room = self.budget_ms - self.cost_d - dc;
-        if !(room >= 0.0) || !(self.cost_c > 0.0) {
+        if !crate::lod::non_negative(room) || !crate::lod::positive(self.cost_c) {
             return None;
         }
         // Compared with the continuous variables taking all that is left.
@@ -342,7 +342,7 @@ impl<'a> Run<'a> {
     }
 
     fn continuous_slope(&self) -> Option<f64> {
-        if self.continuous_done || !(self.remaining_ms() > 0.0) {
+        if self.continuous_done || !crate::lod::positive(self.remaining_ms()) {
             return None;
         }
         self.levels.slope(self.mu)

@@ -31,9 +31,9 @@ fn exact_continuous(vars: &[Continuous], smooth: Smooth, budget_ms: f64) -> f64 
     if at(0.0).1 <= budget_ms {
         return at(0.0).0;
     }
-    let (mut lo, mut hi) = (1e-12, 1e12);
+    let (mut lo, mut hi) = (1e-12f64, 1e12f64);
     for _ in 0..200 {
-        let mid = (lo * hi as f64).sqrt();
+        let mid = (lo * hi).sqrt();
         if at(mid).1 <= budget_ms { hi = mid } else { lo = mid }
     }
     at(hi).0
