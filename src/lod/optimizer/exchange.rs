@@ -16,7 +16,7 @@ use super::{Entry, Run, Settings, Stop};
 const ROUNDS: usize = 8;
 
 /// Recent applied and best dropped increments considered per round.
-const CANDIDATES: usize = 16;
+const CANDIDATES: usize = 8;
 
 /// One exchange: undo the split of node `out`, apply the increments
 /// `take` in order, set the continuous level `mu`.
@@ -106,13 +106,18 @@ impl Run<'_> {
         }
         // What the continuous variables would make of `room`.
         let continuous = |room: f64| self.levels.benefit(self.levels.level_for_budget(room));
-        for e in pool {
+        let mut now = continuous(room);
+        for e in pool.into_iter().take(CANDIDATES) {
             let (gb, gc) = self.delta(&e);
             let clash = take.iter().any(|t: &Entry| t.node == e.node);
-            let worth = || gb + continuous(room - gc) > continuous(room);
-            if !below_out(&e) && !clash && gc <= room && worth() {
+            if below_out(&e) || clash || gc > room {
+                continue;
+            }
+            let after = continuous(room - gc);
+            if gb + after > now {
                 room -= gc;
                 gain += gb;
+                now = after;
                 take.push(e);
             }
         }
