@@ -10,7 +10,9 @@
 //! ([`cem::accel`]). [`grid`] holds the World Wind tile math, [`source`] the
 //! raster and point-cloud readers, [`encode`] the tile formats, [`lidar`]
 //! the canopy proxies built from LiDAR (`sylva canopy`) and [`demo`] the
-//! embedded procedural region used when no configuration is given.
+//! embedded procedural region used when no configuration is given. The
+//! client ([`client`]) flies over the tiles, ray casting them on the GPU;
+//! [`lod`] selects its levels of detail under a frame budget.
 //!
 //! See `ARCHITECTURE.md` for the code map and the invariants.
 
@@ -25,6 +27,7 @@ pub mod encode;
 pub mod geo;
 pub mod grid;
 pub mod lidar;
+pub mod lod;
 pub mod noise;
 pub mod produce;
 pub mod raster;

@@ -261,6 +261,20 @@ enum Bench {
         #[arg(long, default_value_t = 4096)]
         build_side: usize,
     },
+    /// LOD selection along flyovers of the demo region and rmnp: selection
+    /// time with and without variable splitting and the deferral table,
+    /// benefit against the optimiser's upper bound.
+    Lod {
+        /// A real-data region.
+        #[arg(long, default_value = "config/examples/rmnp.toml")]
+        rmnp: PathBuf,
+        /// Frames per flyover.
+        #[arg(long, default_value_t = 300)]
+        frames: usize,
+        /// Where to write the plots (lod_demo.png, lod_rmnp.png).
+        #[arg(long)]
+        plots: Option<PathBuf>,
+    },
     /// The server over loopback HTTP beside MapServer and MapProxy: GetMap,
     /// uncached and cached tile latency and throughput, memory.
     #[cfg(feature = "server")]
@@ -367,6 +381,10 @@ fn run(command: Command) -> Result<()> {
         Command::Seed(args) => seed(*args),
         Command::Bench { what: Bench::Pipeline { rmnp, labels, build_side } } => {
             println!("{}", sylva::bench::pipeline_report(&rmnp, &labels, build_side)?);
+            Ok(())
+        }
+        Command::Bench { what: Bench::Lod { rmnp, frames, plots } } => {
+            println!("{}", sylva::bench::lod_report(&rmnp, frames, plots.as_deref())?);
             Ok(())
         }
         #[cfg(feature = "server")]

@@ -2,6 +2,9 @@
 //! never in tests). Numbers from one run are comparable with each other;
 //! compare across runs only as ratios.
 
+pub mod lod;
+mod lod_plot;
+pub mod lod_scene;
 pub mod pipeline;
 pub mod quality;
 #[cfg(feature = "client")]
@@ -77,5 +80,51 @@ pub fn pipeline_report(
         out.push(quality::quantization(region));
     }
     out.extend(quality::morphology(rmnp_config, labels));
+    Ok(out.join("\n"))
+}
+
+/// `sylva bench lod`: the flyover tables for the demo region (trees
+/// `spacing_m` apart at full cover) and, when its data is there, for the
+/// region of `rmnp_config`; plots go to `plot_dir` when given.
+pub fn lod_report(
+    rmnp_config: &std::path::Path,
+    frames: usize,
+    plot_dir: Option<&std::path::Path>,
+) -> Result<String, crate::config::ConfigError> {
+    let mut scenes = vec![("demo", crate::config::load(None)?, 7.0)];
+    let mut out = Vec::new();
+    match crate::config::load(Some(rmnp_config)) {
+        Ok(rmnp) => scenes.push(("rmnp", rmnp, 12.0)),
+        Err(e) => out.push(format!("(skipping the real-data region: {e})\n")),
+    }
+    for (key, region, spacing_m) in scenes {
+        let start = std::time::Instant::now();
+        let ground = match lod_scene::Ground::sample(&region, 40_960.0, 20.0) {
+            Ok(g) => g,
+            Err(e) => {
+                out.push(format!("({key}: {e})\n"));
+                continue;
+            }
+        };
+        let scene = lod_scene::Scene::build(&region.name, ground, 150.0, spacing_m);
+        let built_s = start.elapsed().as_secs_f64();
+        let result = lod::run(&scene, frames, lod::LOSS_FRACTION);
+        out.push(lod::report(&scene, &result));
+        out.push(format!(
+            "Splitting: error against run time ({} frames)\n\n{}\n",
+            frames / 3,
+            lod::sweep(&scene, frames / 3)
+        ));
+        out.push(format!("(scene built in {built_s:.1} s; trees {spacing_m} m apart at full cover)\n"));
+        if let Some(dir) = plot_dir {
+            let path = dir.join(format!("lod_{key}.png"));
+            let written = lod_plot::png(&region.name, &result)
+                .and_then(|png| std::fs::write(&path, png).map_err(|e| e.to_string()));
+            out.push(match written {
+                Ok(()) => format!("plot: {}\n", path.display()),
+                Err(e) => format!("(no plot: {e})\n"),
+            });
+        }
+    }
     Ok(out.join("\n"))
 }

@@ -223,7 +223,9 @@ fn bad_input_is_named_with_the_problem() {
 fn a_seeder_killed_mid_run_resumes_to_the_same_cache() {
     let dir = TempDir::new("seed-kill");
     let config = rmnp_config(&dir, "rmnp.toml", "[tile_cache]\nlock_ttl_s = 1");
-    let job = ["--config", config.to_str().unwrap(), "--layers", "dem", "--levels", "6-11", "--concurrency", "2"];
+    // Long enough (one worker, ~3,000 files) that the seeder is still busy
+    // when it first saves its progress, after a second.
+    let job = ["--config", config.to_str().unwrap(), "--layers", "dem", "--levels", "6-12", "--concurrency", "1"];
     let reference = dir.join("reference");
     ok(&seed(
         &dir.0,

@@ -1,0 +1,75 @@
+//! Plots of `sylva bench lod` (plotters into an RGB buffer, written with
+//! the crate's one PNG writer): selection time per frame with and without
+//! splitting and deferral (000 Figure 3), and tiles evaluated per frame by
+//! full and deferred refinement (004 Figure 3), both on log scales.
+
+use super::lod::Frame;
+use plotters::prelude::*;
+
+/// The font every label uses (registered once under "sans-serif").
+static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSansMono.ttf");
+
+const SIZE: (u32, u32) = (1000, 800);
+
+/// Draws the two panels for `frames` and returns the PNG.
+pub fn png(title: &str, frames: &[Frame]) -> Result<Vec<u8>, String> {
+    plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).map_err(|_| "bad font".to_string())?;
+    let mut buf = vec![0u8; (SIZE.0 * SIZE.1 * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        let (top, bottom) = root.split_vertically(SIZE.1 / 2);
+        let times: &Series<'_> = &[
+            ("unsplit", RED, |f| f.ms_unsplit),
+            ("split", BLUE, |f| f.ms_split),
+            ("split + deferral", GREEN, |f| f.ms_deferred),
+        ];
+        panel(&top, &format!("{title}: LOD selection time"), "ms", frames, times)?;
+        let work: &Series<'_> = &[
+            ("full refinement", RED, |f| f.touched_full as f64),
+            ("deferred", BLUE, |f| f.touched_deferred.max(1) as f64),
+        ];
+        panel(&bottom, "tiles evaluated per frame", "tiles", frames, work)?;
+        root.present().map_err(|e| e.to_string())?;
+    }
+    crate::encode::png(&buf, SIZE.0 as usize, SIZE.1 as usize, image::ExtendedColorType::Rgb8)
+        .map_err(|e| e.to_string())
+}
+
+type Series<'a> = [(&'a str, RGBColor, fn(&Frame) -> f64)];
+
+/// One log-scale panel of per-frame series.
+fn panel(
+    area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    caption: &str,
+    unit: &str,
+    frames: &[Frame],
+    series: &Series<'_>,
+) -> Result<(), String> {
+    let values = frames.iter().flat_map(|f| series.iter().map(move |s| (s.2)(f)));
+    let (lo, hi) = values.filter(|v| *v > 0.0).fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
+    let (lo, hi) = if lo <= hi { (lo / 1.5, hi * 1.5) } else { (0.001, 1.0) };
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(36)
+        .y_label_area_size(64)
+        .build_cartesian_2d(0..frames.len(), (lo..hi).log_scale())
+        .map_err(|e| e.to_string())?;
+    chart.configure_mesh().x_desc("frame").y_desc(unit).draw().map_err(|e| e.to_string())?;
+    for &(name, color, value) in series {
+        let points = frames.iter().enumerate().map(|(i, f)| (i, value(f).max(lo)));
+        chart
+            .draw_series(LineSeries::new(points, color))
+            .map_err(|e| e.to_string())?
+            .label(name)
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], color));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| e.to_string())?;
+    Ok(())
+}

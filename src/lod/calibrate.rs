@@ -1,0 +1,227 @@
+//! Cost feedback (001 §4.2): after each frame the measured frame time
+//! corrects the cost model's constants "using a weighted average scheme".
+//!
+//! With one constant (001's `c_vertex`) that is a weighted moving average of
+//! measured / predicted. Sylva's model has [`FEATURES`] constants (a fixed
+//! per-frame cost, tiles, ray-casting work, splats, tree groups), so the
+//! average is taken over the normal equations instead: exponentially
+//! weighted least squares, `A ← γA + f fᵀ`, `b ← γb + f·ms`, solved with a
+//! small ridge toward the prior constants. A frame's weight halves every
+//! `ln 2 / ln(1/γ)` frames (14 with the default γ = 0.95), so the model
+//! follows a GPU that throttles within a few dozen frames and forgets a
+//! scene it has left.
+//!
+//! Invariants: constants stay finite and non-negative; a non-finite or
+//! non-positive measurement, or one far from the prediction after warm-up
+//! (a hitch: shader compilation, a page fault), changes nothing.
+
+use super::model::{CostFeatures, CostModel, FEATURES};
+
+/// Settings of a [`CostCalibrator`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CalibratorSettings {
+    /// Weight kept by the past at each new frame (0 < γ < 1).
+    pub forgetting: f64,
+    /// Ridge toward the prior, relative to each feature's own diagonal
+    /// entry of `A` (so it does not depend on the features' units): keeps
+    /// constants whose features never vary (or vary together) at the prior.
+    pub ridge: f64,
+    /// Frames before outliers are rejected.
+    pub warmup_frames: u32,
+    /// A measurement beyond this factor of the prediction (either way) is
+    /// a hitch and is ignored after warm-up.
+    pub outlier_ratio: f64,
+}
+
+impl Default for CalibratorSettings {
+    fn default() -> CalibratorSettings {
+        CalibratorSettings { forgetting: 0.95, ridge: 1e-3, warmup_frames: 10, outlier_ratio: 4.0 }
+    }
+}
+
+/// Fits the cost model's constants to measured frame times.
+#[derive(Clone, Debug)]
+pub struct CostCalibrator {
+    settings: CalibratorSettings,
+    prior: CostModel,
+    model: CostModel,
+    a: [[f64; FEATURES]; FEATURES],
+    b: [f64; FEATURES],
+    frames: u32,
+}
+
+impl CostCalibrator {
+    /// A calibrator starting from `prior`.
+    pub fn new(prior: CostModel, settings: CalibratorSettings) -> CostCalibrator {
+        CostCalibrator { settings, prior, model: prior, a: [[0.0; FEATURES]; FEATURES], b: [0.0; FEATURES], frames: 0 }
+    }
+
+    /// The current model.
+    pub fn model(&self) -> CostModel {
+        self.model
+    }
+
+    /// Frames taken into account.
+    pub fn frames(&self) -> u32 {
+        self.frames
+    }
+
+    /// Records one frame: what was drawn and how long it took. Returns
+    /// whether the frame was used.
+    pub fn observe(&mut self, features: &CostFeatures, measured_ms: f64) -> bool {
+        if !measured_ms.is_finite() || measured_ms <= 0.0 || self.is_outlier(features, measured_ms) {
+            return false;
+        }
+        let f = features.vector();
+        let g = self.settings.forgetting.clamp(0.0, 1.0);
+        for i in 0..FEATURES {
+            for j in 0..FEATURES {
+                self.a[i][j] = g * self.a[i][j] + f[i] * f[j];
+            }
+            self.b[i] = g * self.b[i] + f[i] * measured_ms;
+        }
+        self.frames = self.frames.saturating_add(1);
+        if let Some(c) = self.solve() {
+            self.model = CostModel { constants_ms: c };
+        }
+        true
+    }
+
+    fn is_outlier(&self, features: &CostFeatures, measured_ms: f64) -> bool {
+        if self.frames < self.settings.warmup_frames {
+            return false;
+        }
+        let predicted = self.model.predict_ms(features);
+        let r = self.settings.outlier_ratio.max(1.0);
+        predicted > 0.0 && (measured_ms > predicted * r || measured_ms * r < predicted)
+    }
+
+    /// `(A + λI) c = b + λ c_prior`, clamped to non-negative constants.
+    fn solve(&self) -> Option<[f64; FEATURES]> {
+        let mut m = self.a;
+        let mut rhs = self.b;
+        for i in 0..FEATURES {
+            let lambda = self.settings.ridge.max(0.0) * self.a[i][i] + 1e-12;
+            m[i][i] += lambda;
+            rhs[i] += lambda * self.prior.constants_ms[i];
+        }
+        let c = gauss(m, rhs)?;
+        c.iter().all(|x| x.is_finite()).then(|| c.map(|x| x.max(0.0)))
+    }
+}
+
+/// Solves a small dense system by Gaussian elimination with partial
+/// pivoting; `None` if it is singular.
+fn gauss(mut m: [[f64; FEATURES]; FEATURES], mut rhs: [f64; FEATURES]) -> Option<[f64; FEATURES]> {
+    for col in 0..FEATURES {
+        let pivot = (col..FEATURES).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
+        if m[pivot][col].abs().partial_cmp(&1e-300) != Some(std::cmp::Ordering::Greater) {
+            return None;
+        }
+        m.swap(col, pivot);
+        rhs.swap(col, pivot);
+        for row in col + 1..FEATURES {
+            let k = m[row][col] / m[col][col];
+            let pivot_row = m[col];
+            for (x, p) in m[row][col..].iter_mut().zip(&pivot_row[col..]) {
+                *x -= k * p;
+            }
+            rhs[row] -= k * rhs[col];
+        }
+    }
+    let mut x = [0.0; FEATURES];
+    for row in (0..FEATURES).rev() {
+        let tail: f64 = (row + 1..FEATURES).map(|j| m[row][j] * x[j]).sum();
+        x[row] = (rhs[row] - tail) / m[row][row];
+    }
+    Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::noise::{hash2, unit};
+
+    const TRUTH: CostModel = CostModel { constants_ms: [1.2, 0.004, 2.5, 0.03, 0.05] };
+
+    /// A frame's features, varying like a flyover: `k` seeds the hash.
+    fn frame(k: i64) -> CostFeatures {
+        let h = hash2(k, 7, 99);
+        CostFeatures {
+            tiles: 200.0 + 800.0 * unit(h, 0),
+            raycast_mpx_steps: 1.0 + 6.0 * unit(h, 1),
+            splats_k: 100.0 + 900.0 * unit(h, 2),
+            groups_h: 5.0 + 40.0 * unit(h, 3),
+        }
+    }
+
+    /// Measured time with ±3 % noise.
+    fn measure(model: &CostModel, f: &CostFeatures, k: i64) -> f64 {
+        model.predict_ms(f) * (1.0 + 0.06 * (unit(hash2(k, 3, 5), 0) - 0.5))
+    }
+
+    fn relative_error(calibrated: &CostModel, truth: &CostModel, from: i64) -> f64 {
+        (from..from + 100)
+            .map(|k| {
+                let f = frame(k);
+                (calibrated.predict_ms(&f) / truth.predict_ms(&f) - 1.0).abs()
+            })
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn converges_to_the_true_constants() {
+        let mut cal = CostCalibrator::new(CostModel::default(), CalibratorSettings::default());
+        assert!(relative_error(&cal.model(), &TRUTH, 10_000) > 0.3, "the prior is far off");
+        for k in 0..300 {
+            assert!(cal.observe(&frame(k), measure(&TRUTH, &frame(k), k)));
+        }
+        assert!(relative_error(&cal.model(), &TRUTH, 10_000) < 0.05);
+        for (c, t) in cal.model().constants_ms.iter().zip(TRUTH.constants_ms) {
+            assert!((c / t - 1.0).abs() < 0.25, "{c} vs {t}");
+        }
+    }
+
+    #[test]
+    fn follows_a_throttling_gpu() {
+        let mut cal = CostCalibrator::new(CostModel::default(), CalibratorSettings::default());
+        for k in 0..300 {
+            cal.observe(&frame(k), measure(&TRUTH, &frame(k), k));
+        }
+        let slow = CostModel { constants_ms: TRUTH.constants_ms.map(|c| 1.5 * c) };
+        for k in 300..380 {
+            cal.observe(&frame(k), measure(&slow, &frame(k), k));
+        }
+        assert!(relative_error(&cal.model(), &slow, 10_000) < 0.05);
+    }
+
+    #[test]
+    fn junk_and_hitches_change_nothing() {
+        let mut cal = CostCalibrator::new(CostModel::default(), CalibratorSettings::default());
+        for k in 0..50 {
+            cal.observe(&frame(k), measure(&TRUTH, &frame(k), k));
+        }
+        let before = cal.model();
+        for ms in [f64::NAN, f64::INFINITY, -1.0, 0.0, 1e6, 1e-6] {
+            assert!(!cal.observe(&frame(1), ms), "{ms}");
+        }
+        assert_eq!(cal.model(), before);
+        assert_eq!(cal.frames(), 50);
+    }
+
+    #[test]
+    fn collinear_features_still_predict() {
+        // Splats always 20 × groups: the split between the two constants is
+        // not identifiable, but predictions are, and nothing blows up.
+        let mut cal = CostCalibrator::new(CostModel::default(), CalibratorSettings::default());
+        let tied = |k: i64| CostFeatures { splats_k: 20.0 * frame(k).groups_h, ..frame(k) };
+        for k in 0..300 {
+            cal.observe(&tied(k), measure(&TRUTH, &tied(k), k));
+        }
+        let worst = (10_000..10_100)
+            .map(|k| (cal.model().predict_ms(&tied(k)) / TRUTH.predict_ms(&tied(k)) - 1.0).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 0.05, "{worst}");
+        assert!(cal.model().constants_ms.iter().all(|c| c.is_finite() && *c >= 0.0));
+    }
+}

@@ -1,0 +1,206 @@
+//! Benefit and cost models (000 §5.3, dissertation §8.4 Eqs. 8.18–8.21, 001
+//! §4.2): what a representation is worth on screen and what it costs to draw.
+//!
+//! Benefit has diminishing returns: the papers use square roots (`S·√(4^d /
+//! 4^d_max)` for a terrain patch, `k S (N/64) √(x/N)` for a tree group), whose
+//! slope is infinite at zero resolution. Here the root is *smoothed*,
+//! `φ(u) = (√(u + s) − √s) / (√(1 + s) − √s)` on `u ∈ [0, 1]`: `φ(0) = 0`,
+//! `φ(1) = 1`, concave, and `φ'(0) = 1 / (2 √s · norm)` is finite for
+//! `s > 0` (with `s = 0` it is the papers' root, which the optimiser also
+//! handles).
+//!
+//! Costs are linear in a few per-frame features ([`CostFeatures`]) with
+//! constants that [`super::calibrate::CostCalibrator`] fits to measured frame
+//! times.
+//!
+//! Invariant: every function returns a finite, non-negative number for any
+//! finite input, and 0 for non-positive or non-finite sizes.
+
+/// The smoothed square root `φ` with smoothing `s ≥ 0` (a fraction of full
+/// resolution).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Smooth {
+    /// Smoothing: the slope at 0 is that of `√u` at `u = s`.
+    pub s: f64,
+}
+
+impl Default for Smooth {
+    /// `s = 1/64`: one tree of a full group of 64 (or one splat in 64) is
+    /// where the root's slope stops growing; `φ'(0) ≈ 4.5`.
+    fn default() -> Smooth {
+        Smooth { s: 1.0 / 64.0 }
+    }
+}
+
+impl Smooth {
+    /// `√(1 + s) − √s`, the normaliser that makes `φ(1) = 1`.
+    pub fn norm(&self) -> f64 {
+        let s = self.s.max(0.0);
+        // (1+s) − s over the sum of the roots: no cancellation for tiny s.
+        1.0 / ((1.0 + s).sqrt() + s.sqrt())
+    }
+
+    /// `φ(u)`, `u` clamped to [0, 1].
+    pub fn phi(&self, u: f64) -> f64 {
+        let s = self.s.max(0.0);
+        let u = if u.is_nan() { 0.0 } else { u.clamp(0.0, 1.0) };
+        // √(u+s) − √s = u / (√(u+s) + √s): exact near 0.
+        let num = if u > 0.0 { u / ((u + s).sqrt() + s.sqrt()) } else { 0.0 };
+        num / self.norm()
+    }
+
+    /// `φ'(u)`, infinite only at `u = 0` with `s = 0`.
+    pub fn slope(&self, u: f64) -> f64 {
+        let s = self.s.max(0.0);
+        let u = if u.is_nan() { 0.0 } else { u.clamp(0.0, 1.0) };
+        1.0 / (2.0 * (u + s).sqrt() * self.norm())
+    }
+}
+
+/// Benefit of drawing a terrain tile of `samples_per_side²` samples that
+/// covers `projected_px` pixels (dissertation Eq. 8.21 with the accuracy of
+/// 001 §4.2): importance is the screen size, accuracy the smoothed root of
+/// the fraction of those pixels that get a sample of their own, saturating
+/// at 1 when the tile has as many samples as pixels. Four children of a
+/// quarter of the size are worth at least the parent and at most four times
+/// it (four times the cost): per tile drawn, a split never gains
+/// (diminishing returns, 001 §3.1's condition for the greedy bound).
+pub fn tile_benefit(projected_px: f64, samples_per_side: u32, smooth: Smooth) -> f64 {
+    if !crate::lod::positive(projected_px) || !projected_px.is_finite() {
+        return 0.0;
+    }
+    let samples = f64::from(samples_per_side).powi(2);
+    projected_px * smooth.phi(samples / projected_px)
+}
+
+/// Full-resolution benefit weight of a group of `trees` trees covering
+/// `projected_px` pixels (dissertation Eq. 8.20 at `x = N`): importance `k S`
+/// times the group's density `N / 64`. The optimiser multiplies it by
+/// `φ(x / capacity)`.
+pub fn group_weight(projected_px: f64, trees: u32, k: f64) -> f64 {
+    if !crate::lod::positive(projected_px) || !projected_px.is_finite() || !crate::lod::positive(k) {
+        return 0.0;
+    }
+    k * projected_px * f64::from(trees.min(64)) / 64.0
+}
+
+/// What one frame draws, as the cost model sees it. Each feature is in units
+/// that keep its constant near 1 ms on a current GPU.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CostFeatures {
+    /// Tiles drawn (draw calls, mesh vertices, texture binds).
+    pub tiles: f64,
+    /// Ray-casting work: millions of pixel·steps.
+    pub raycast_mpx_steps: f64,
+    /// Point splats drawn, thousands.
+    pub splats_k: f64,
+    /// Tree groups drawn (per-group setup, 000 §5.3's `c_tree`), hundreds.
+    pub groups_h: f64,
+}
+
+/// Number of calibrated constants: one per feature plus a fixed per-frame
+/// cost.
+pub const FEATURES: usize = 5;
+
+impl CostFeatures {
+    /// The features as a vector, with 1 for the fixed per-frame cost first.
+    pub fn vector(&self) -> [f64; FEATURES] {
+        [1.0, self.tiles, self.raycast_mpx_steps, self.splats_k, self.groups_h].map(finite_non_negative)
+    }
+
+    /// Sum of two feature sets (a tile's and a group's, say).
+    pub fn plus(&self, o: &CostFeatures) -> CostFeatures {
+        CostFeatures {
+            tiles: self.tiles + o.tiles,
+            raycast_mpx_steps: self.raycast_mpx_steps + o.raycast_mpx_steps,
+            splats_k: self.splats_k + o.splats_k,
+            groups_h: self.groups_h + o.groups_h,
+        }
+    }
+}
+
+/// Milliseconds per unit of each feature: `predicted = Σ cᵢ fᵢ` (000 §5.3:
+/// `cost_d = c_vertex n`, `cost_c = c_splat N x + c_tree`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CostModel {
+    /// Fixed per-frame ms, then ms per unit of each [`CostFeatures`] field.
+    pub constants_ms: [f64; FEATURES],
+}
+
+impl Default for CostModel {
+    /// Starting guesses before any frame was measured: 0.5 ms per frame,
+    /// 0.01 ms per tile, 1 ms per million pixel·steps, 0.02 ms per thousand
+    /// splats, 0.01 ms per hundred groups. The calibrator replaces them
+    /// within a few frames.
+    fn default() -> CostModel {
+        CostModel { constants_ms: [0.5, 0.01, 1.0, 0.02, 0.01] }
+    }
+}
+
+impl CostModel {
+    /// Predicted milliseconds for `features`.
+    pub fn predict_ms(&self, features: &CostFeatures) -> f64 {
+        features.vector().iter().zip(&self.constants_ms).map(|(f, c)| f * c).sum()
+    }
+
+    /// Milliseconds of the features alone, without the fixed per-frame cost
+    /// (the cost of one representation).
+    pub fn marginal_ms(&self, features: &CostFeatures) -> f64 {
+        self.predict_ms(features) - self.constants_ms[0]
+    }
+}
+
+fn finite_non_negative(x: f64) -> f64 {
+    if x.is_finite() { x.max(0.0) } else { 0.0 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn phi_is_normalised_with_finite_slope_at_zero() {
+        let smooth = Smooth::default();
+        assert_eq!(smooth.phi(0.0), 0.0);
+        assert!((smooth.phi(1.0) - 1.0).abs() < 1e-15);
+        assert!(smooth.slope(0.0).is_finite() && smooth.slope(0.0) > 4.0);
+        let papers = Smooth { s: 0.0 };
+        assert!((papers.phi(0.25) - 0.5).abs() < 1e-15, "s = 0 is the plain root");
+        assert_eq!(papers.slope(0.0), f64::INFINITY);
+        assert!(Smooth { s: 1e-300 }.phi(1e-300).is_finite());
+    }
+
+    proptest! {
+        #[test]
+        fn phi_is_increasing_and_concave(s in 0.0f64..1.0, a in 0.0f64..1.0, b in 0.0f64..1.0) {
+            let f = Smooth { s };
+            let (lo, hi) = (a.min(b), a.max(b));
+            prop_assert!(f.phi(lo) <= f.phi(hi));
+            let mid = 0.5 * (lo + hi);
+            prop_assert!(f.phi(mid) >= 0.5 * (f.phi(lo) + f.phi(hi)) - 1e-12);
+            prop_assert!(f.slope(lo) >= f.slope(hi));
+        }
+
+        #[test]
+        fn splitting_a_tile_has_diminishing_returns(px in 1.0f64..1e7, n in 2u32..600) {
+            // Four children of a quarter of the size: no loss, and per tile no gain.
+            let f = Smooth::default();
+            let parent = tile_benefit(px, n, f);
+            let children = 4.0 * tile_benefit(px / 4.0, n, f);
+            prop_assert!(children >= parent * (1.0 - 1e-12));
+            prop_assert!(children <= 4.0 * parent * (1.0 + 1e-12));
+        }
+    }
+
+    #[test]
+    fn sizes_that_are_not_sizes_are_worth_nothing() {
+        for px in [0.0, -3.0, f64::NAN, f64::INFINITY] {
+            assert_eq!(tile_benefit(px, 64, Smooth::default()), 0.0);
+            assert_eq!(group_weight(px, 64, 1.0), 0.0);
+        }
+        let model = CostModel::default();
+        let junk = CostFeatures { tiles: f64::NAN, raycast_mpx_steps: -1.0, splats_k: f64::INFINITY, groups_h: 2.0 };
+        assert!((model.predict_ms(&junk) - (0.5 + 0.02)).abs() < 1e-12);
+    }
+}

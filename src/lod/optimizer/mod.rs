@@ -1,0 +1,464 @@
+//! The mixed discrete/continuous LOD optimiser of 000 §3.4 (dissertation
+//! §8.3): maximise total benefit subject to predicted cost ≤ the budget `T`.
+//!
+//! Each iteration either applies the best discrete increment (a convexified
+//! Mason–Blake group, [`discrete`]) or raises the continuous variables
+//! ([`continuous`]), whichever has the higher benefit per millisecond: the
+//! discrete slope `Δb/Δc` against the continuous slope `d b̃_c / d cost`.
+//! A continuous step goes down its slope curve until its slope meets the
+//! best discrete slope or the budget is spent (Figure 1's point Q). The loop
+//! stops when the budget is spent, when everything is at full resolution,
+//! or at an iteration or time limit; every state it passes through is
+//! feasible, so any stop returns a feasible answer.
+//!
+//! Two additions make the answer certain rather than hoped for:
+//! - **Half-optimality.** At the first increment that does not fit, the
+//!   alternative "its ancestors and it alone" is remembered; the better of
+//!   that and the greedy answer is at least half the optimum whenever that
+//!   alternative fits the budget and increments add benefit (Mason and
+//!   Blake's bound, via the fractional relaxation).
+//! - **An upper bound.** At the same moment the greedy state lies on the
+//!   path of the fractional optimum, and no discrete increment left is
+//!   worth more per ms than the blocked one, so the discrete benefit so far
+//!   plus the best split of the remaining budget between the continuous
+//!   curve and increments at that slope bounds every feasible answer
+//!   ([`Selection::upper_bound`]).
+//!
+//! If the roots alone (the coarsest representation) cost more than the
+//! budget they are still drawn, nothing else is, and the overrun is
+//! reported.
+
+pub mod continuous;
+pub mod discrete;
+mod exchange;
+#[cfg(test)]
+mod tests;
+
+pub use continuous::{Continuous, Levels};
+pub use discrete::{Forest, Node};
+
+use super::model::Smooth;
+use discrete::{Groups, ratio};
+use std::collections::BinaryHeap;
+use std::time::Instant;
+
+/// Bad optimiser input.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum LodError {
+    /// More nodes than 32-bit indices address.
+    #[error("{0} nodes is more than the optimiser indexes")]
+    TooManyNodes(usize),
+    /// A parent must come before its children.
+    #[error("node {node} names parent {parent}, which does not come before it")]
+    ParentAfterChild {
+        /// The child.
+        node: u32,
+        /// Its parent.
+        parent: u32,
+    },
+}
+
+/// What the optimiser may spend.
+#[derive(Clone, Copy, Debug)]
+pub struct Settings {
+    /// Frame budget `T`, ms (NaN or negative: 0).
+    pub budget_ms: f64,
+    /// The benefit curve of the continuous variables.
+    pub smooth: Smooth,
+    /// Iterations before it stops (each applies one increment or one
+    /// continuous step).
+    pub max_iterations: usize,
+    /// Wall-clock time at which it stops (its own time limit).
+    pub deadline: Option<Instant>,
+}
+
+impl Settings {
+    /// `budget_ms` with no limit but the natural one (at most two
+    /// iterations per node, plus one).
+    pub fn budget(budget_ms: f64) -> Settings {
+        Settings { budget_ms, smooth: Smooth::default(), max_iterations: usize::MAX, deadline: None }
+    }
+}
+
+/// Why the optimiser stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stop {
+    /// The next increment did not fit (or the continuous budget is spent).
+    Budget,
+    /// Everything that adds benefit was taken.
+    FullResolution,
+    /// The iteration or time limit.
+    Limit,
+}
+
+/// The optimiser's answer.
+#[derive(Clone, Debug)]
+pub struct Selection {
+    /// Per node: whether it is replaced by its children.
+    pub split: Vec<bool>,
+    /// Per continuous variable: its resolution `x ∈ [0, capacity]`.
+    pub resolutions: Vec<f64>,
+    /// Total benefit.
+    pub benefit: f64,
+    /// Total predicted cost, ms.
+    pub cost_ms: f64,
+    /// Predicted cost beyond the budget (only when the roots alone exceed it).
+    pub overrun_ms: f64,
+    /// No feasible selection has more benefit than this.
+    pub upper_bound: f64,
+    /// The continuous slope level at the end: benefit per ms of the last
+    /// unit; ∞ when no continuous variable got any, 0 when all are at full
+    /// resolution (or there are none).
+    pub level: f64,
+    /// Why it stopped.
+    pub stop: Stop,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Whether the half-optimality alternative beat the greedy answer.
+    pub alternative: bool,
+}
+
+impl Selection {
+    /// The nodes drawn: not split, and a root or a child of a split node.
+    pub fn drawn<'a>(&'a self, forest: &'a Forest) -> impl Iterator<Item = u32> + 'a {
+        drawn(forest, &self.split)
+    }
+}
+
+/// The nodes a split vector draws.
+fn drawn<'a>(forest: &'a Forest, split: &'a [bool]) -> impl Iterator<Item = u32> + 'a {
+    (0..forest.len() as u32)
+        .filter(move |&i| !split[i as usize] && forest.node(i).parent.is_none_or(|p| split[p as usize]))
+}
+
+/// Benefit and cost of the nodes a split vector draws, summed afresh.
+fn drawn_sums(forest: &Forest, split: &[bool]) -> (f64, f64) {
+    drawn(forest, split).fold((0.0, 0.0), |(b, c), i| (b + forest.node(i).benefit, c + forest.node(i).cost_ms))
+}
+
+/// Maximises benefit under the budget over the nodes of `forest` and the
+/// `continuous` variables.
+pub fn optimize(forest: &Forest, continuous: &[Continuous], settings: &Settings) -> Selection {
+    let mut run = Run::new(forest, Levels::new(continuous, settings.smooth), settings);
+    let stop = run.greedy(settings);
+    let stop = run.exchange(settings, stop);
+    run.finish(stop)
+}
+
+/// A heap entry: a group (or, after it was blocked, its head alone).
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    value: f64,
+    node: u32,
+    alone: bool,
+}
+
+impl PartialEq for Entry {
+    fn eq(&self, o: &Entry) -> bool {
+        self.cmp(o).is_eq()
+    }
+}
+impl Eq for Entry {}
+impl PartialOrd for Entry {
+    fn partial_cmp(&self, o: &Entry) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
+    }
+}
+impl Ord for Entry {
+    /// Higher value first; ties to the lower node index.
+    fn cmp(&self, o: &Entry) -> std::cmp::Ordering {
+        self.value.total_cmp(&o.value).then(o.node.cmp(&self.node))
+    }
+}
+
+/// The optimiser's state.
+struct Run<'a> {
+    forest: &'a Forest,
+    groups: Groups,
+    levels: Levels,
+    budget_ms: f64,
+    split: Vec<bool>,
+    heap: BinaryHeap<Entry>,
+    benefit_d: f64,
+    cost_d: f64,
+    /// Continuous slope level and its cost.
+    mu: f64,
+    cost_c: f64,
+    continuous_done: bool,
+    /// The first group that did not fit, and the bound at that moment.
+    first_block: Option<(u32, f64)>,
+    /// Nodes split, in order, and increments dropped for not fitting.
+    applied: Vec<u32>,
+    dropped: Vec<Entry>,
+    iterations: usize,
+}
+
+impl<'a> Run<'a> {
+    fn new(forest: &'a Forest, levels: Levels, settings: &Settings) -> Run<'a> {
+        let mut run = Run {
+            forest,
+            groups: Groups::new(forest),
+            levels,
+            budget_ms: if settings.budget_ms > 0.0 { settings.budget_ms } else { 0.0 },
+            split: vec![false; forest.len()],
+            heap: BinaryHeap::new(),
+            benefit_d: 0.0,
+            cost_d: 0.0,
+            mu: f64::INFINITY,
+            cost_c: 0.0,
+            continuous_done: false,
+            first_block: None,
+            applied: Vec::new(),
+            dropped: Vec::new(),
+            iterations: 0,
+        };
+        for &r in forest.roots() {
+            run.benefit_d += forest.node(r).benefit;
+            run.cost_d += forest.node(r).cost_ms;
+            run.offer(r);
+        }
+        run
+    }
+
+    /// Makes the group headed by `v` available, if it has one.
+    fn offer(&mut self, v: u32) {
+        if !self.forest.children(v).is_empty() {
+            self.heap.push(Entry { value: self.groups.value[v as usize], node: v, alone: false });
+        }
+    }
+
+    fn remaining_ms(&self) -> f64 {
+        self.budget_ms - self.cost_d - self.cost_c
+    }
+
+    fn delta(&self, e: &Entry) -> (f64, f64) {
+        let v = e.node as usize;
+        match e.alone {
+            true => self.forest.increment(e.node).unwrap_or((0.0, 0.0)),
+            false => (self.groups.db[v], self.groups.dc[v]),
+        }
+    }
+
+    fn greedy(&mut self, settings: &Settings) -> Stop {
+        if self.remaining_ms() < 0.0 {
+            return Stop::Budget;
+        }
+        loop {
+            if self.iterations >= settings.max_iterations || self.past(settings.deadline) {
+                return Stop::Limit;
+            }
+            self.iterations += 1;
+            let top = self.best_fitting();
+            let slope_c = self.continuous_slope();
+            match (top, slope_c) {
+                (None, None) => return self.why_done(),
+                (Some((e, mu)), None) => self.take(e, mu),
+                (Some((e, mu)), Some(s)) if e.value >= s => self.take(e, mu),
+                (e, Some(s)) => self.continuous_step(e.map_or(0.0, |(e, _)| e.value), s),
+            }
+        }
+    }
+
+    fn past(&self, deadline: Option<Instant>) -> bool {
+        // Instant::now costs ~20 ns: look every 64 iterations.
+        self.iterations.is_multiple_of(64) && deadline.is_some_and(|d| Instant::now() >= d)
+    }
+
+    fn why_done(&self) -> Stop {
+        let saturated = self.levels.slope(self.mu).is_none();
+        match self.first_block.is_none() && saturated {
+            true => Stop::FullResolution,
+            false => Stop::Budget,
+        }
+    }
+
+    /// The best available increment that adds benefit and fits, with the
+    /// continuous level it needs: the current one, or a higher one that
+    /// frees the room (continuous variables are divisible, so they give way
+    /// to a discrete step that is worth more than what they lose). Blocked
+    /// groups are dropped; their head alone is offered instead.
+    fn best_fitting(&mut self) -> Option<(Entry, f64)> {
+        while let Some(e) = self.heap.peek().copied() {
+            let (db, dc) = self.delta(&e);
+            if !crate::lod::positive(e.value) || !(db > 0.0 || dc < 0.0) {
+                self.heap.clear();
+                return None;
+            }
+            if dc <= self.remaining_ms() {
+                return Some((e, self.mu));
+            }
+            if self.first_block.is_none() {
+                self.first_block = Some((e.node, self.bound_now(e.value)));
+            }
+            if let Some(mu) = self.squeeze(db, dc) {
+                return Some((e, mu));
+            }
+            self.heap.pop();
+            self.dropped.push(e);
+            self.offer_alone(e);
+        }
+        None
+    }
+
+    /// The continuous level that makes room for an increment `(db, dc)`, if
+    /// the exchange gains benefit.
+    fn squeeze(&self, db: f64, dc: f64) -> Option<f64> {
+        let room = self.budget_ms - self.cost_d - dc;
+        if !crate::lod::non_negative(room) || !crate::lod::positive(self.cost_c) {
+            return None;
+        }
+        // Compared with the continuous variables taking all that is left.
+        let without = self.levels.level_for_budget(self.budget_ms - self.cost_d);
+        let mu = self.levels.level_for_budget(room);
+        let gain = db - (self.levels.benefit(without) - self.levels.benefit(mu));
+        (gain > 0.0).then_some(mu)
+    }
+
+    /// No feasible answer beats the current discrete state plus the best
+    /// split of the remaining budget between the continuous variables (their
+    /// exact concave curve) and discrete increments worth `value` per ms,
+    /// when no discrete increment left is worth more than `value` (the
+    /// Lagrangian bound of the fractional problem).
+    fn bound_now(&self, value: f64) -> f64 {
+        let available = self.budget_ms - self.cost_d;
+        let mu = value.max(self.levels.level_for_budget(available));
+        let rest = (available - self.levels.cost_ms(mu)).max(0.0);
+        self.benefit_d + self.levels.benefit(mu) + value.max(0.0) * rest
+    }
+
+    /// A blocked group's head alone, if that is worth something: offered
+    /// if it fits (with the continuous variables giving way, if need be),
+    /// kept for the exchange steps otherwise.
+    fn offer_alone(&mut self, e: Entry) {
+        if let (false, Some((db, dc))) = (e.alone, self.forest.increment(e.node)) {
+            let alone = Entry { value: ratio(db, dc), node: e.node, alone: true };
+            if alone.value > 0.0 && dc <= self.budget_ms - self.cost_d {
+                self.heap.push(alone);
+            } else if alone.value > 0.0 {
+                // Perhaps after an exchange.
+                self.dropped.push(alone);
+            }
+        }
+    }
+
+    fn continuous_slope(&self) -> Option<f64> {
+        if self.continuous_done || !crate::lod::positive(self.remaining_ms()) {
+            return None;
+        }
+        self.levels.slope(self.mu)
+    }
+
+    /// Takes the top of the heap.
+    fn take(&mut self, e: Entry, mu: f64) {
+        self.heap.pop();
+        self.apply(e, mu);
+    }
+
+    /// Applies increment `e` with the continuous variables at level `mu`
+    /// and offers what it makes available.
+    fn apply(&mut self, e: Entry, mu: f64) {
+        self.set_level(mu);
+        let (db, dc) = self.delta(&e);
+        self.benefit_d += db;
+        self.cost_d += dc;
+        let members: Vec<u32> = self.members(&e).collect();
+        for &m in &members {
+            self.split[m as usize] = true;
+        }
+        self.applied.extend(&members);
+        for &m in &members {
+            for i in 0..self.forest.children(m).len() {
+                let c = self.forest.children(m)[i];
+                if !self.split[c as usize] {
+                    self.offer(c);
+                }
+            }
+        }
+    }
+
+    fn set_level(&mut self, mu: f64) {
+        if mu != self.mu {
+            self.mu = mu;
+            self.cost_c = self.levels.cost_ms(mu);
+        }
+    }
+
+    /// The nodes an entry splits: its head alone, or its whole group.
+    fn members(&self, e: &Entry) -> impl Iterator<Item = u32> + '_ {
+        let group = (!e.alone).then(|| self.groups.members(e.node).skip(1));
+        std::iter::once(e.node).chain(group.into_iter().flatten())
+    }
+
+    /// Lowers the continuous level to the discrete slope or to where the
+    /// budget is spent, whichever is higher.
+    fn continuous_step(&mut self, slope_d: f64, slope_c: f64) {
+        let target = slope_d.max(self.levels.level_for_budget(self.budget_ms - self.cost_d));
+        if target >= slope_c.min(self.mu) {
+            // No progress is possible at this precision.
+            self.continuous_done = true;
+            return;
+        }
+        self.mu = target;
+        self.cost_c = self.levels.cost_ms(target);
+    }
+
+    fn finish(mut self, stop: Stop) -> Selection {
+        let mut alternative = false;
+        if let Some((v, _)) = self.first_block {
+            alternative = self.try_alternative(v);
+        }
+        let (benefit_d, cost_d) = drawn_sums(self.forest, &self.split);
+        let benefit = benefit_d + self.levels.benefit(self.mu);
+        let cost_ms = cost_d + self.levels.cost_ms(self.mu);
+        let upper_bound = match (stop, self.first_block) {
+            (_, Some((_, bound))) => bound.max(benefit),
+            (Stop::FullResolution, None) => benefit,
+            _ => self.open_bound(benefit),
+        };
+        Selection {
+            resolutions: self.levels.resolutions(self.mu),
+            split: self.split,
+            benefit,
+            cost_ms,
+            overrun_ms: (cost_ms - self.budget_ms).max(0.0),
+            upper_bound,
+            level: self.mu,
+            stop,
+            iterations: self.iterations,
+            alternative,
+        }
+    }
+
+    /// The bound when stopped early with nothing blocked yet.
+    fn open_bound(&mut self, benefit: f64) -> f64 {
+        let discrete = self.heap.peek().map_or(0.0, |e| e.value);
+        let bound = self.bound_now(discrete).max(benefit);
+        if bound.is_nan() { f64::INFINITY } else { bound }
+    }
+
+    /// The half-optimality alternative: the roots, the ancestors of `v`
+    /// split one by one, and `v`'s group. Adopted if it fits and is better.
+    fn try_alternative(&mut self, v: u32) -> bool {
+        let mut split = vec![false; self.forest.len()];
+        let mut a = self.forest.node(v).parent;
+        while let Some(p) = a {
+            split[p as usize] = true;
+            a = self.forest.node(p).parent;
+        }
+        for m in self.groups.members(v) {
+            split[m as usize] = true;
+        }
+        let greedy = (std::mem::replace(&mut self.split, split), self.mu);
+        let (benefit_d, cost_d) = drawn_sums(self.forest, &self.split);
+        let mu = self.levels.level_for_budget(self.budget_ms - cost_d);
+        let better = cost_d <= self.budget_ms
+            && benefit_d + self.levels.benefit(mu)
+                > drawn_sums(self.forest, &greedy.0).0 + self.levels.benefit(greedy.1);
+        if better {
+            self.mu = mu;
+        } else {
+            self.split = greedy.0;
+        }
+        better
+    }
+}
