@@ -4,6 +4,8 @@
 
 const CLASS_FOREST: u32 = 1u;
 const CLASS_WATER: u32 = 2u;
+// raycast::WATER_MIN_NORMAL_Z: the cosine of 15°.
+const WATER_MIN_NORMAL_Z: f32 = 0.966;
 
 // Light reaching the hit at sample `s`, height `z`, through the terrain
 // toward the sun: samples at horizontal distances growing linearly step by
@@ -68,27 +70,29 @@ fn shade(s: vec2<f32>, z: f32, dir: vec3<f32>) -> vec3<f32> {
     let base = mix(mix(c00.rgb, c10.rgb, f.x), mix(c01.rgb, c11.rgb, f.x), f.y);
     let nearest = vec2<i32>(floor(s + 0.5));
     let surface = u32(round(colour_at(nearest.x, nearest.y).a * 255.0));
-    let sun_on = frame.mode.w == 1u;
-    if !sun_on {
-        if surface == CLASS_WATER {
-            return water(base, dir, vec3<f32>(0.0), false, 1.0);
-        }
-        return base;
-    }
     var h = cell_heights(c.x, c.y, &shadow_fetches);
     if !has_data(h) {
         h = vec4<f32>(z);
     }
+    let normal = patch_normal(h, f);
+    // Water is flat: water classes on slopes are misclassified shadows.
+    let flat_water = surface == CLASS_WATER && normal.z >= WATER_MIN_NORMAL_Z;
+    if frame.mode.w != 1u {
+        if flat_water {
+            return water(base, dir, vec3<f32>(0.0), false, 1.0);
+        }
+        return base;
+    }
     let sun = tile.sun.xyz;
     let light = shadow(s, z, sun);
-    let lambert = max(dot(patch_normal(h, f), sun), 0.0);
+    let lambert = max(dot(normal, sun), 0.0);
     let ambient = frame.sky.a;
     if surface == CLASS_FOREST {
         let l = ambient + (1.0 - ambient) * light * (0.6 + 0.4 * lambert);
         return base * frame.canopy_tint.rgb * l;
     }
     let lit = base * (ambient + (1.0 - ambient) * light * lambert);
-    if surface == CLASS_WATER {
+    if flat_water {
         return water(lit, dir, sun, true, light);
     }
     return lit;

@@ -312,6 +312,9 @@ enum Bench {
         /// GPU tile cache budget, MiB.
         #[arg(long, default_value_t = 1024)]
         gpu_budget_mib: usize,
+        /// Where to write the plot of error against time.
+        #[arg(long, default_value = "docs/raycast-error-vs-time.png")]
+        plot: PathBuf,
     },
     /// Seeding speed (1 and 2 workers, parents from children or not) and
     /// memory over a ~100,000-tile job.
@@ -441,7 +444,7 @@ fn run(command: Command) -> Result<()> {
             Ok(())
         }
         #[cfg(feature = "client")]
-        Command::Bench { what: Bench::Raycast { rmnp, size, gpu_budget_mib } } => {
+        Command::Bench { what: Bench::Raycast { rmnp, size, gpu_budget_mib, plot } } => {
             let size = parse_size(&size)?;
             let gpu = sylva::client::render::gpu::Gpu::open()?;
             let name = gpu.describe();
@@ -449,6 +452,8 @@ fn run(command: Command) -> Result<()> {
             let views = sylva::bench::raycast::default_views(&rmnp);
             let rows = sylva::bench::raycast::run(&views, size, &mut renderer).map_err(anyhow::Error::msg)?;
             println!("{}", sylva::bench::raycast::report(&rows, size, &name));
+            write_file(&plot, &sylva::bench::raycast::plot(&rows).map_err(anyhow::Error::msg)?)?;
+            eprintln!("plot: {}", plot.display());
             Ok(())
         }
         Command::Info { config } => {

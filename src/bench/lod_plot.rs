@@ -1,23 +1,16 @@
-//! Plots of `sylva bench lod` (plotters into an RGB buffer, written with
-//! the crate's one PNG writer): selection time per frame with and without
+//! Plots of `sylva bench lod`: selection time per frame with and without
 //! splitting and deferral (000 Figure 3), and tiles evaluated per frame by
 //! full and deferred refinement (004 Figure 3), both on log scales.
 
 use super::lod::Frame;
+use super::plot::{self, Area};
 use plotters::prelude::*;
-
-/// The font every label uses (registered once under "sans-serif").
-static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSansMono.ttf");
 
 const SIZE: (u32, u32) = (1000, 800);
 
 /// Draws the two panels for `frames` and returns the PNG.
 pub fn png(title: &str, frames: &[Frame]) -> Result<Vec<u8>, String> {
-    plotters::style::register_font("sans-serif", FontStyle::Normal, FONT).map_err(|_| "bad font".to_string())?;
-    let mut buf = vec![0u8; (SIZE.0 * SIZE.1 * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
+    plot::png(SIZE, |root| {
         let (top, bottom) = root.split_vertically(SIZE.1 / 2);
         let times: &Series<'_> = &[
             ("unsplit", RED, |f| f.ms_unsplit),
@@ -29,18 +22,15 @@ pub fn png(title: &str, frames: &[Frame]) -> Result<Vec<u8>, String> {
             ("full refinement", RED, |f| f.touched_full as f64),
             ("deferred", BLUE, |f| f.touched_deferred.max(1) as f64),
         ];
-        panel(&bottom, "tiles evaluated per frame", "tiles", frames, work)?;
-        root.present().map_err(|e| e.to_string())?;
-    }
-    crate::encode::png(&buf, SIZE.0 as usize, SIZE.1 as usize, image::ExtendedColorType::Rgb8)
-        .map_err(|e| e.to_string())
+        panel(&bottom, "tiles evaluated per frame", "tiles", frames, work)
+    })
 }
 
 type Series<'a> = [(&'a str, RGBColor, fn(&Frame) -> f64)];
 
 /// One log-scale panel of per-frame series.
 fn panel(
-    area: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    area: &Area<'_>,
     caption: &str,
     unit: &str,
     frames: &[Frame],

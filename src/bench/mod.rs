@@ -6,6 +6,7 @@ pub mod lod;
 mod lod_plot;
 pub mod lod_scene;
 pub mod pipeline;
+pub mod plot;
 pub mod quality;
 #[cfg(feature = "client")]
 pub mod raycast;

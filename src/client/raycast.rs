@@ -39,6 +39,11 @@ pub const SHADOW_WEIGHT: f64 = 0.6;
 pub const SHADOW_SOFT_M: f64 = 2.0;
 /// Tint of lit canopy.
 pub const CANOPY_TINT: [f64; 3] = [0.80, 0.92, 0.74];
+/// Water is flat: where the surface normal leans further than this from
+/// the vertical (cosine of 15°), a water class is a misclassified shadow
+/// (dark north slopes key as lakes on Landsat images) and is shaded as
+/// ground.
+pub const WATER_MIN_NORMAL_Z: f64 = 0.966;
 
 /// How rays find the surface.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -154,10 +159,11 @@ pub fn shade(view: &TileView, s: DVec2, z: f64, dir: DVec3) -> [f64; 3] {
     let corners = view.cell(ci, cj).unwrap_or([z; 4]);
     let base = colour(tile, ci, cj, fx, fy);
     let class = tile.surface[texel_index(tile, (s.x + 0.5).floor() as i64, (s.y + 0.5).floor() as i64)];
-    let Some(sun) = view.sun else {
-        return if class == SurfaceType::Water as u8 { water(base, dir, None, 1.0) } else { base };
-    };
     let normal = normal(corners, fx, fy, tile.frame.spacing_m);
+    let Some(sun) = view.sun else {
+        let flat_water = class == SurfaceType::Water as u8 && normal.z >= WATER_MIN_NORMAL_Z;
+        return if flat_water { water(base, dir, None, 1.0) } else { base };
+    };
     let shadow = shadow(view, s, z, sun);
     let lambert = normal.dot(sun).max(0.0);
     let lit = |k: f64| AMBIENT + (1.0 - AMBIENT) * k;
@@ -166,7 +172,9 @@ pub fn shade(view: &TileView, s: DVec2, z: f64, dir: DVec3) -> [f64; 3] {
             let l = lit(shadow * (0.6 + 0.4 * lambert));
             [0, 1, 2].map(|c| base[c] * CANOPY_TINT[c] * l)
         }
-        Some(SurfaceType::Water) => water(base.map(|c| c * lit(shadow * lambert)), dir, Some(sun), shadow),
+        Some(SurfaceType::Water) if normal.z >= WATER_MIN_NORMAL_Z => {
+            water(base.map(|c| c * lit(shadow * lambert)), dir, Some(sun), shadow)
+        }
         _ => base.map(|c| c * lit(shadow * lambert)),
     }
 }

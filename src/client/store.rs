@@ -118,8 +118,7 @@ impl TileStore {
     }
 
     fn insert(&mut self, tile: TileData) {
-        let lift = tile.base_m;
-        self.ranges.insert(tile.id(), (tile.range.min_m as f64 + lift, tile.range.max_m as f64 + lift));
+        self.ranges.insert(tile.id(), tile.range.heights_m);
         let bytes = tile.gpu_bytes() + tile.hull.vertices.len() * 20 + tile.hull.indices.len() * 4;
         self.bytes += bytes;
         self.tiles.insert(tile.id(), Entry { tile: Arc::new(tile), last_used: self.clock, bytes });

@@ -63,6 +63,9 @@ pub struct TileRange {
     /// How far the coarse terrain mesh departs from the ground samples,
     /// metres: the error of drawing the tile without ray casting.
     pub mesh_error_m: f32,
+    /// Lowest ground and highest CEM above the ellipsoid, metres (what the
+    /// quadtree bounds the tile and its descendants with).
+    pub heights_m: (f64, f64),
 }
 
 /// A tile ready for the ray casters, on the CPU.
@@ -160,6 +163,7 @@ impl TileData {
             texels_max_m: cem.min_max().map_or(0.0, |(_, hi)| hi),
             canopy_max_m: canopy_max(&cast, &cast_dem),
             mesh_error_m: terrain.mesh_error_m,
+            heights_m: height_range(&payload.dem, &payload.cem),
         };
         Ok(TileData { frame, base_m: base, serial: next_serial(), halo, size, texels, colour, surface, mip, hull, terrain, range })
     }
@@ -191,6 +195,14 @@ fn next_serial() -> u64 {
 fn base_height(cem: &[f32]) -> f64 {
     let (lo, hi) = cem.iter().filter(|v| v.is_finite()).fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
     if lo > hi { 0.0 } else { ((lo as f64 + hi as f64) / 2.0).round() }
+}
+
+/// The lowest ground and highest CEM of a payload, metres above the
+/// ellipsoid (0, 0 without data).
+fn height_range(dem: &[f32], cem: &[f32]) -> (f64, f64) {
+    let lo = dem.iter().filter(|v| v.is_finite()).fold(f32::MAX, |a, &b| a.min(b));
+    let hi = cem.iter().filter(|v| v.is_finite()).fold(f32::MIN, |a, &b| a.max(b));
+    if lo > hi { (0.0, 0.0) } else { (lo as f64, hi as f64) }
 }
 
 fn nodata_low(v: f32) -> f32 {

@@ -189,3 +189,51 @@ fn corners(tile: &TileData) -> [DVec3; 8] {
     let [lo, hi] = bounds(tile);
     std::array::from_fn(|k| DVec3::new([lo.x, hi.x][k & 1], [lo.y, hi.y][(k >> 1) & 1], [lo.z, hi.z][k >> 2]))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::mem::{offset_of, size_of};
+
+    /// Member offsets of a WGSL struct, by name, from naga's layout.
+    fn wgsl_offsets(name: &str) -> (Vec<(String, u32)>, u32) {
+        let module = naga::front::wgsl::parse_str(&super::super::shaders::raycast_source()).expect("WGSL parses");
+        let mut layouter = naga::proc::Layouter::default();
+        layouter.update(module.to_ctx()).expect("layout");
+        let (handle, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect("struct");
+        let naga::TypeInner::Struct { members, .. } = &ty.inner else { panic!("{name} is not a struct") };
+        (members.iter().map(|m| (m.name.clone().unwrap_or_default(), m.offset)).collect(), layouter[handle].size)
+    }
+
+    #[test]
+    fn uniform_blocks_match_their_wgsl_twins() {
+        let frame = [
+            ("proj", offset_of!(FrameUniform, proj)),
+            ("sky", offset_of!(FrameUniform, sky)),
+            ("fade", offset_of!(FrameUniform, fade)),
+            ("viewport", offset_of!(FrameUniform, viewport)),
+            ("shadow", offset_of!(FrameUniform, shadow)),
+            ("canopy_tint", offset_of!(FrameUniform, canopy_tint)),
+            ("mode", offset_of!(FrameUniform, mode)),
+            ("mip_rects", offset_of!(FrameUniform, mip_rects)),
+        ];
+        let tile = [
+            ("model_view", offset_of!(TileUniform, model_view)),
+            ("camera", offset_of!(TileUniform, camera)),
+            ("sun", offset_of!(TileUniform, sun)),
+            ("grid", offset_of!(TileUniform, grid)),
+            ("range", offset_of!(TileUniform, range)),
+            ("index", offset_of!(TileUniform, index)),
+            ("flags", offset_of!(TileUniform, flags)),
+            ("texels", offset_of!(TileUniform, texels)),
+        ];
+        for (name, rust) in [("Frame", &frame[..]), ("Tile", &tile[..])] {
+            let (wgsl, size) = wgsl_offsets(name);
+            let rust: Vec<(String, u32)> = rust.iter().map(|(n, o)| (n.to_string(), *o as u32)).collect();
+            assert_eq!(wgsl, rust, "{name}: fields and offsets");
+            let rust_size = if name == "Frame" { size_of::<FrameUniform>() } else { offset_of!(TileUniform, _pad) };
+            assert_eq!(size as usize, rust_size, "{name}: size");
+        }
+        assert_eq!(size_of::<TileUniform>() as u64, TILE_STRIDE);
+    }
+}
