@@ -62,8 +62,8 @@ const NO_HIT: f32 = -1.0;
 @group(0) @binding(4) var gather_sampler: sampler;
 @group(1) @binding(0) var<uniform> tile: Tile;
 
-// Texture accesses of this invocation (view ray, shadow ray): the benchmark's
-// "fetches per pixel".
+// Texture accesses of this invocation: view ray (with the two gathers of the
+// hit cell's shading), and shadow ray — the benchmark's "fetches per pixel".
 var<private> view_fetches: u32 = 0u;
 var<private> shadow_fetches: u32 = 0u;
 

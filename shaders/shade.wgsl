@@ -70,7 +70,7 @@ fn shade(s: vec2<f32>, z: f32, dir: vec3<f32>) -> vec3<f32> {
     let base = mix(mix(c00.rgb, c10.rgb, f.x), mix(c01.rgb, c11.rgb, f.x), f.y);
     let nearest = vec2<i32>(floor(s + 0.5));
     let surface = u32(round(colour_at(nearest.x, nearest.y).a * 255.0));
-    var h = cell_heights(c.x, c.y, &shadow_fetches);
+    var h = cell_heights(c.x, c.y, &view_fetches);
     if !has_data(h) {
         h = vec4<f32>(z);
     }
