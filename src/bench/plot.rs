@@ -19,5 +19,6 @@ pub fn png(size: (u32, u32), draw: impl FnOnce(&Area<'_>) -> Result<(), String>)
         draw(&root)?;
         root.present().map_err(|e| e.to_string())?;
     }
-    crate::encode::png(&buf, size.0 as usize, size.1 as usize, image::ExtendedColorType::Rgb8).map_err(|e| e.to_string())
+    crate::encode::png(&buf, size.0 as usize, size.1 as usize, image::ExtendedColorType::Rgb8)
+        .map_err(|e| e.to_string())
 }

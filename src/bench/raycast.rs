@@ -87,8 +87,18 @@ pub fn default_views(rmnp: &Path) -> Vec<View> {
     vec![
         View { name: "demo valley".into(), config: None, path: paths("demo_valley.toml"), t_s: 12.0 },
         View { name: "demo horizon".into(), config: None, path: paths("demo_horizon.toml"), t_s: 8.0 },
-        View { name: "rmnp valley".into(), config: Some(rmnp.to_path_buf()), path: paths("rmnp_valley.toml"), t_s: 10.0 },
-        View { name: "rmnp horizon".into(), config: Some(rmnp.to_path_buf()), path: paths("rmnp_horizon.toml"), t_s: 0.0 },
+        View {
+            name: "rmnp valley".into(),
+            config: Some(rmnp.to_path_buf()),
+            path: paths("rmnp_valley.toml"),
+            t_s: 10.0,
+        },
+        View {
+            name: "rmnp horizon".into(),
+            config: Some(rmnp.to_path_buf()),
+            path: paths("rmnp_horizon.toml"),
+            t_s: 0.0,
+        },
     ]
 }
 
@@ -102,13 +112,15 @@ pub fn run(views: &[View], size: (u32, u32), renderer: &mut Renderer) -> Result<
         let camera = camera_at(&path, view.t_s, size);
         let options = FlyOptions::default();
         let mut store = TileStore::new(options.halo, usize::MAX, 2).map_err(|e| e.to_string())?;
-        let (tiles, _) = fly::visible_tiles(&source, &mut store, &camera, &options, renderer.cache_slots()).map_err(|e| e.to_string())?;
+        let (tiles, _) = fly::visible_tiles(&source, &mut store, &camera, &options, renderer.cache_slots())
+            .map_err(|e| e.to_string())?;
         let tiles: Vec<TileData> = tiles.iter().map(|t| t.as_ref().clone()).collect();
         let lighting = Lighting { sun_ecef: path.sun_ecef(), shadow_steps: REFERENCE_SHADOW_STEPS, fade: Fade::NONE };
         let truth = reference::render(&camera, &tiles, &lighting);
         for (name, traversal, shadows, sun, fade) in settings() {
             let fade = if fade { default_fade(&camera) } else { Fade::NONE };
-            let frame = FrameSettings { traversal, shadow_steps: shadows, sun_ecef: path.sun_ecef().filter(|_| sun), fade };
+            let frame =
+                FrameSettings { traversal, shadow_steps: shadows, sun_ecef: path.sun_ecef().filter(|_| sun), fade };
             let refs: Vec<&TileData> = tiles.iter().collect();
             let mut times = Vec::with_capacity(TIMED_FRAMES);
             for k in 0..=TIMED_FRAMES {
@@ -127,7 +139,13 @@ pub fn run(views: &[View], size: (u32, u32), renderer: &mut Renderer) -> Result<
 
 fn camera_at(path: &CameraPath, t_s: f64, size: (u32, u32)) -> Camera {
     let k = path.at(t_s);
-    Camera::looking(crate::client::globe::Geodetic::new(k.lon, k.lat, k.height_m), k.heading_deg, k.pitch_deg, path.fov_deg, size)
+    Camera::looking(
+        crate::client::globe::Geodetic::new(k.lon, k.lat, k.height_m),
+        k.heading_deg,
+        k.pitch_deg,
+        path.fov_deg,
+        size,
+    )
 }
 
 /// The fade `sylva fly` uses.
@@ -157,7 +175,17 @@ fn row(view: &str, setting: &str, out: &Rendered, truth: &Image) -> Row {
 
 /// The table of one run.
 pub fn report(rows: &[Row], size: (u32, u32), gpu: &str) -> String {
-    let header = ["view", "setting", "ms/frame", "fetches mean", "fetches p99", "shadow fetches", "% missed", "depth RMS rel", "PSNR dB"];
+    let header = [
+        "view",
+        "setting",
+        "ms/frame",
+        "fetches mean",
+        "fetches p99",
+        "shadow fetches",
+        "% missed",
+        "depth RMS rel",
+        "PSNR dB",
+    ];
     let cells: Vec<Vec<String>> = rows
         .iter()
         .map(|r| {
@@ -194,13 +222,19 @@ pub fn plot(rows: &[Row]) -> Result<Vec<u8>, String> {
     });
     let kinds = ["linear 30", "linear 50", "linear 70", "linear 90", "exact"];
     let colours = [RED, MAGENTA, BLUE, CYAN, BLACK];
-    let timed: Vec<&Row> = rows.iter().filter(|r| r.setting.starts_with("linear") || r.setting.starts_with("exact +")).filter(|r| !r.setting.contains("fade")).collect();
+    let timed: Vec<&Row> = rows
+        .iter()
+        .filter(|r| r.setting.starts_with("linear") || r.setting.starts_with("exact +"))
+        .filter(|r| !r.setting.contains("fade"))
+        .collect();
     let ms_max = timed.iter().map(|r| r.ms).fold(1.0, f64::max) * 1.1;
     let psnr = |r: &Row| if r.psnr_db.is_finite() { r.psnr_db.min(90.0) } else { 90.0 };
     super::plot::png((1000, 900), |root| {
         let panels = root.split_evenly((2, 1));
-        let metrics: [(&str, f64, &dyn Fn(&Row) -> f64); 2] =
-            [("colour PSNR against the exact reference, dB (∞ drawn at 90)", 95.0, &psnr), ("pixels missed, %", 0.6, &|r: &Row| r.missed_pct)];
+        let metrics: [(&str, f64, &dyn Fn(&Row) -> f64); 2] = [
+            ("colour PSNR against the exact reference, dB (∞ drawn at 90)", 95.0, &psnr),
+            ("pixels missed, %", 0.6, &|r: &Row| r.missed_pct),
+        ];
         for (area, (caption, top, metric)) in panels.iter().zip(metrics) {
             let top = timed.iter().map(|r| metric(r)).fold(top, f64::max);
             let mut chart = ChartBuilder::on(area)
@@ -223,14 +257,23 @@ pub fn plot(rows: &[Row]) -> Result<Vec<u8>, String> {
                     .label(*kind)
                     .legend(move |(x, y)| Circle::new((x, y), 4, colour.filled()));
             }
-            chart.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(|e| e.to_string())?;
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|e| e.to_string())?;
         }
         Ok(())
     })
 }
 
 /// A marker per view: circle, cross, triangle, square.
-fn marker<DB: plotters::prelude::DrawingBackend>(at: (f64, f64), view: usize, colour: plotters::style::RGBColor) -> plotters::element::DynElement<'static, DB, (f64, f64)> {
+fn marker<DB: plotters::prelude::DrawingBackend>(
+    at: (f64, f64),
+    view: usize,
+    colour: plotters::style::RGBColor,
+) -> plotters::element::DynElement<'static, DB, (f64, f64)> {
     use plotters::prelude::*;
     match view % 4 {
         0 => Circle::new(at, 4, colour.filled()).into_dyn(),

@@ -73,10 +73,22 @@ impl Camera {
         let f = 1.0 / (self.fov_y_rad / 2.0).tan();
         let aspect = self.width_px as f64 / self.height_px as f64;
         let m = DMat4::from_cols_array(&[
-            f / aspect, 0.0, 0.0, 0.0, //
-            0.0, f, 0.0, 0.0, //
-            0.0, 0.0, 0.0, -1.0, //
-            0.0, 0.0, self.near_m, 0.0,
+            f / aspect,
+            0.0,
+            0.0,
+            0.0, //
+            0.0,
+            f,
+            0.0,
+            0.0, //
+            0.0,
+            0.0,
+            0.0,
+            -1.0, //
+            0.0,
+            0.0,
+            self.near_m,
+            0.0,
         ]);
         m.as_mat4()
     }
@@ -87,7 +99,8 @@ impl Camera {
         let to_cam = self.rotation.transpose();
         let rot = to_cam * frame.basis;
         let t = to_cam * (frame.origin_ecef - self.position_ecef);
-        DMat4::from_cols(rot.x_axis.extend(0.0), rot.y_axis.extend(0.0), rot.z_axis.extend(0.0), t.extend(1.0)).as_mat4()
+        DMat4::from_cols(rot.x_axis.extend(0.0), rot.y_axis.extend(0.0), rot.z_axis.extend(0.0), t.extend(1.0))
+            .as_mat4()
     }
 
     /// Depth-buffer value of a point at `distance_m` along the view axis.

@@ -115,7 +115,12 @@ pub enum FlyError {
 }
 
 /// Flies `path` over `source`, rendering with `renderer`.
-pub fn fly(source: &dyn TileSource, path: &CameraPath, renderer: &mut Renderer, options: &FlyOptions) -> Result<Vec<FrameRecord>, FlyError> {
+pub fn fly(
+    source: &dyn TileSource,
+    path: &CameraPath,
+    renderer: &mut Renderer,
+    options: &FlyOptions,
+) -> Result<Vec<FrameRecord>, FlyError> {
     let budget = 2 * renderer.cache_slots() as usize * slot_estimate(source, options.halo);
     let mut store = TileStore::new(options.halo, budget, options.in_flight)?;
     if let Some(dir) = &options.out_dir {
@@ -133,7 +138,14 @@ pub fn fly(source: &dyn TileSource, path: &CameraPath, renderer: &mut Renderer, 
     Ok(records)
 }
 
-fn frame(source: &dyn TileSource, path: &CameraPath, renderer: &mut Renderer, store: &mut TileStore, options: &FlyOptions, k: usize) -> Result<FrameRecord, FlyError> {
+fn frame(
+    source: &dyn TileSource,
+    path: &CameraPath,
+    renderer: &mut Renderer,
+    store: &mut TileStore,
+    options: &FlyOptions,
+    k: usize,
+) -> Result<FrameRecord, FlyError> {
     let start = Instant::now();
     let bytes_before = source.bytes_fetched();
     let camera = path.camera(k, options.frames, options.size);
@@ -151,8 +163,13 @@ fn frame(source: &dyn TileSource, path: &CameraPath, renderer: &mut Renderer, st
     if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
         let file = dir.join(format!("frame_{k:05}.png"));
         let bytes: Vec<u8> = out.colour.iter().flatten().copied().collect();
-        let png = crate::encode::png(&bytes, options.size.0 as usize, options.size.1 as usize, image::ExtendedColorType::Rgba8)
-            .map_err(|e| io(&file, std::io::Error::other(e.0)))?;
+        let png = crate::encode::png(
+            &bytes,
+            options.size.0 as usize,
+            options.size.1 as usize,
+            image::ExtendedColorType::Rgba8,
+        )
+        .map_err(|e| io(&file, std::io::Error::other(e.0)))?;
         std::fs::write(&file, png).map_err(|e| io(&file, e))?;
     }
     let mut levels = BTreeMap::new();
@@ -250,7 +267,11 @@ pub fn summary(records: &[FrameRecord]) -> String {
     let n = records.len().max(1) as f64;
     let mean = |f: &dyn Fn(&FrameRecord) -> f64| records.iter().map(f).sum::<f64>() / n;
     let gpu: Vec<f64> = records.iter().filter_map(|r| r.gpu_ms).collect();
-    let gpu_text = if gpu.is_empty() { "no timestamps".to_string() } else { format!("{:.2} ms GPU", gpu.iter().sum::<f64>() / gpu.len() as f64) };
+    let gpu_text = if gpu.is_empty() {
+        "no timestamps".to_string()
+    } else {
+        format!("{:.2} ms GPU", gpu.iter().sum::<f64>() / gpu.len() as f64)
+    };
     let (first, last) = (records.first(), records.last());
     format!(
         "{} frames: {:.2} ms CPU (select + load), {:.2} ms render, {gpu_text} per frame; {:.1} tiles ({:.1} ray cast); view fetches/pixel mean {:.1}, max {}; {} bytes fetched; RSS {:.0} → {:.0} MiB",
@@ -271,13 +292,20 @@ pub fn summary(records: &[FrameRecord]) -> String {
 pub fn parse_traversal(text: &str) -> Option<Traversal> {
     match text.split_once(':') {
         None if text.eq_ignore_ascii_case("exact") => Some(Traversal::Exact),
-        Some((kind, steps)) if kind.eq_ignore_ascii_case("linear") => steps.parse().ok().filter(|&s| s > 0).map(Traversal::Linear),
+        Some((kind, steps)) if kind.eq_ignore_ascii_case("linear") => {
+            steps.parse().ok().filter(|&s| s > 0).map(Traversal::Linear)
+        }
         _ => None,
     }
 }
 
 /// Opens the GPU and flies: what `sylva fly` does.
-pub fn run(source: &dyn TileSource, path: &CameraPath, options: &FlyOptions, gpu_budget_bytes: usize) -> Result<Vec<FrameRecord>, RunError> {
+pub fn run(
+    source: &dyn TileSource,
+    path: &CameraPath,
+    options: &FlyOptions,
+    gpu_budget_bytes: usize,
+) -> Result<Vec<FrameRecord>, RunError> {
     let gpu = super::render::gpu::Gpu::open()?;
     let grid = source.grid();
     let mut renderer = Renderer::new(gpu, grid.samples(), options.halo as u32, gpu_budget_bytes);

@@ -151,7 +151,16 @@ impl TileFrame {
     pub fn flat_error_m(&self, max_abs_height_m: f64) -> f64 {
         let n1 = (self.samples - 1) as f64;
         let mut worst: f64 = 0.0;
-        for (i, j) in [(0.0, 0.0), (n1, 0.0), (0.0, n1), (n1, n1), (n1 / 2.0, 0.0), (n1 / 2.0, n1), (0.0, n1 / 2.0), (n1, n1 / 2.0)] {
+        for (i, j) in [
+            (0.0, 0.0),
+            (n1, 0.0),
+            (0.0, n1),
+            (n1, n1),
+            (n1 / 2.0, 0.0),
+            (n1 / 2.0, n1),
+            (0.0, n1 / 2.0),
+            (n1, n1 / 2.0),
+        ] {
             let truth = self.ellipsoid_local(i, j);
             let flat = self.local_xy(i, j);
             let tilt = self.normal_local(i, j).truncate().length();

@@ -19,7 +19,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// wait for its sources to load, and a busy server answers 503 until its
 /// pool has room — so a minute per request, and six retries backing off
 /// from a quarter second (16 s in all).
-const SETTINGS: LinkSettings = LinkSettings { timeout_ms: 60_000, retries: 6, backoff_ms: 250, breaker_failures: 5, breaker_cooldown_s: 5.0 };
+const SETTINGS: LinkSettings =
+    LinkSettings { timeout_ms: 60_000, retries: 6, backoff_ms: 250, breaker_failures: 5, breaker_cooldown_s: 5.0 };
 
 /// A tile server as a tile source.
 pub struct HttpSource {
@@ -38,14 +39,18 @@ impl HttpSource {
         let link = Link::new(&SETTINGS);
         let url = format!("{base}/tiles.json");
         let bad = |reason: String| super::source::OpenError::Server(format!("{url}: {reason}"));
-        let body = link.fetch(&url).map_err(|e| bad(e.to_string()))?.ok_or_else(|| bad("not found: is it a sylva server?".into()))?;
+        let body = link
+            .fetch(&url)
+            .map_err(|e| bad(e.to_string()))?
+            .ok_or_else(|| bad("not found: is it a sylva server?".into()))?;
         let tileset: Tileset = serde_json::from_slice(&body).map_err(|e| bad(format!("not a tileset: {e}")))?;
         let grid = TileGrid::new(tileset.level0_delta_deg, tileset.samples).map_err(|e| bad(e.to_string()))?;
         Ok(HttpSource { base, tileset, grid, link, bytes: AtomicU64::new(body.len() as u64) })
     }
 
     fn get(&self, id: TileId, url: String) -> Result<Option<Vec<u8>>, FetchError> {
-        let body = self.link.fetch(&url).map_err(|e| FetchError::Http { id, url: url.clone(), reason: e.to_string() })?;
+        let body =
+            self.link.fetch(&url).map_err(|e| FetchError::Http { id, url: url.clone(), reason: e.to_string() })?;
         if let Some(b) = &body {
             self.bytes.fetch_add(b.len() as u64, Ordering::Relaxed);
         }
@@ -69,7 +74,11 @@ impl TileSource for HttpSource {
 
     fn fetch(&self, id: TileId, halo: usize) -> Result<Option<TilePayload>, FetchError> {
         if halo > self.tileset.max_halo {
-            return Err(FetchError::Http { id, url: self.base.clone(), reason: format!("halo {halo} is above the server's {}", self.tileset.max_halo) });
+            return Err(FetchError::Http {
+                id,
+                url: self.base.clone(),
+                reason: format!("halo {halo} is above the server's {}", self.tileset.max_halo),
+            });
         }
         let count = (self.grid.samples() as usize + 2 * halo).pow(2);
         let floats = |layer: &str| -> Result<Option<Vec<f32>>, FetchError> {

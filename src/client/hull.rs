@@ -64,7 +64,9 @@ impl Hull {
         };
         let around = |layer: &Raster<f32>, a: usize, b: usize| {
             let mut m = f32::NAN;
-            for (qa, qb) in [(a.wrapping_sub(1), b.wrapping_sub(1)), (a, b.wrapping_sub(1)), (a.wrapping_sub(1), b), (a, b)] {
+            for (qa, qb) in
+                [(a.wrapping_sub(1), b.wrapping_sub(1)), (a, b.wrapping_sub(1)), (a.wrapping_sub(1), b), (a, b)]
+            {
                 if qa < k && qb < k {
                     m = m.max(quad_max(layer, qa, qb));
                 }

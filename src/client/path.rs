@@ -105,7 +105,8 @@ impl CameraPath {
             return Err(format!("fov_deg {} is not within 1..170", path.fov_deg));
         }
         for (k, key) in path.key.iter().enumerate() {
-            let finite = [key.t, key.lon, key.lat, key.height_m, key.heading_deg, key.pitch_deg].iter().all(|v| v.is_finite());
+            let finite =
+                [key.t, key.lon, key.lat, key.height_m, key.heading_deg, key.pitch_deg].iter().all(|v| v.is_finite());
             if !finite || key.lat.abs() > 90.0 || key.pitch_deg.abs() > 90.0 {
                 return Err(format!("key {} is out of range: {key:?}", k + 1));
             }

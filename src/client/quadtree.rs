@@ -52,7 +52,13 @@ pub struct Selection {
 
 /// Selects tiles of `grid` over `bounds` for `camera`. `range(id)` gives
 /// the absolute height range of a tile if known (from it or an ancestor).
-pub fn select(grid: &TileGrid, bounds: &BBox, camera: &Camera, range: &dyn Fn(TileId) -> Option<(f64, f64)>, rule: &LodRule) -> Selection {
+pub fn select(
+    grid: &TileGrid,
+    bounds: &BBox,
+    camera: &Camera,
+    range: &dyn Fn(TileId) -> Option<(f64, f64)>,
+    rule: &LodRule,
+) -> Selection {
     let area = Sector { min_lat: bounds.south, max_lat: bounds.north, min_lon: bounds.west, max_lon: bounds.east };
     let (rows, cols) = grid.tiles_on_level(0);
     let mut out = Selection::default();
@@ -96,10 +102,16 @@ fn touches(grid: &TileGrid, id: TileId, area: &Sector) -> bool {
 pub fn local_box(frame: &TileFrame, lo_m: f64, hi_m: f64) -> (DVec3, DVec3) {
     let n = frame.samples as f64;
     let slack = frame.flat_error_m(lo_m.abs().max(hi_m.abs()));
-    let corner_drop = [(-1.0, -1.0), (n, -1.0), (-1.0, n), (n, n)].iter().map(|&(i, j)| frame.ellipsoid_local(i, j).z).fold(0.0, f64::min);
+    let corner_drop = [(-1.0, -1.0), (n, -1.0), (-1.0, n), (n, n)]
+        .iter()
+        .map(|&(i, j)| frame.ellipsoid_local(i, j).z)
+        .fold(0.0, f64::min);
     let a = frame.local_xy(-1.0, -1.0);
     let b = frame.local_xy(n, n);
-    (DVec3::new(a.x - slack, a.y - slack, lo_m + corner_drop - slack), DVec3::new(b.x + slack, b.y + slack, hi_m + slack))
+    (
+        DVec3::new(a.x - slack, a.y - slack, lo_m + corner_drop - slack),
+        DVec3::new(b.x + slack, b.y + slack, hi_m + slack),
+    )
 }
 
 /// A sphere inside the ellipsoid and below any ground (the polar radius
@@ -165,7 +177,8 @@ mod tests {
     fn the_far_side_of_the_globe_is_culled() {
         let camera = Camera::looking(Geodetic::new(10.0, 0.0, 2_000_000.0), 0.0, -90.0, 60.0, (640, 480));
         let world = BBox { west: -180.0, south: -90.0, east: 180.0, north: 90.0 };
-        let s = select(&grid(), &world, &camera, &|_| Some((0.0, 1000.0)), &LodRule { max_error_px: 2.0, max_level: 8 });
+        let s =
+            select(&grid(), &world, &camera, &|_| Some((0.0, 1000.0)), &LodRule { max_error_px: 2.0, max_level: 8 });
         assert!(!s.tiles.is_empty());
         for t in &s.tiles {
             let sector = grid().sector(t.id);

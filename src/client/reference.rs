@@ -82,7 +82,12 @@ pub fn render(camera: &Camera, tiles: &[TileData], lighting: &Lighting) -> Image
             }
         })
         .collect();
-    Image { width: w, height: h, colour: pixels.iter().map(|p| p.0).collect(), view_z_m: pixels.iter().map(|p| p.1).collect() }
+    Image {
+        width: w,
+        height: h,
+        colour: pixels.iter().map(|p| p.0).collect(),
+        view_z_m: pixels.iter().map(|p| p.1).collect(),
+    }
 }
 
 /// A tile's view for this camera.
@@ -162,7 +167,15 @@ fn slab(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
 /// Visits, in ray order, the cells of side `size` (cell `m` spans samples
 /// `m·size − 1 .. (m+1)·size − 1`, `m < count` on both axes) that the 2-D
 /// ray `o + t·d` crosses for `t ∈ [t0, t1]`, until `visit` returns a value.
-fn walk<R>(o: DVec2, d: DVec2, t0: f64, t1: f64, size: f64, count: i64, mut visit: impl FnMut(i64, i64, f64, f64) -> Option<R>) -> Option<R> {
+fn walk<R>(
+    o: DVec2,
+    d: DVec2,
+    t0: f64,
+    t1: f64,
+    size: f64,
+    count: i64,
+    mut visit: impl FnMut(i64, i64, f64, f64) -> Option<R>,
+) -> Option<R> {
     let start = o + d * t0;
     let cell = |v: f64| (((v + 1.0) / size).floor() as i64).clamp(0, count - 1);
     let (mut cx, mut cy) = (cell(start.x), cell(start.y));
@@ -254,7 +267,10 @@ mod tests {
         let saddle = [0.0, 10.0, 10.0, 0.0];
         let diag = DVec3::new(1.0, 1.0, 0.0).normalize();
         assert!(patch_hit(saddle, DVec2::ZERO, diag, 0.5, 2f64.sqrt()).is_some(), "starts below the first corner");
-        assert!(patch_hit(saddle, DVec2::new(0.0, 0.0), diag, 5.1, 1.4).is_none(), "above the saddle's top (5 at the centre)");
+        assert!(
+            patch_hit(saddle, DVec2::new(0.0, 0.0), diag, 5.1, 1.4).is_none(),
+            "above the saddle's top (5 at the centre)"
+        );
     }
 
     #[test]

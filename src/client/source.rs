@@ -77,7 +77,8 @@ impl TileSource for RegionSource {
         let err = |source: ProduceError| FetchError::Produce { id, source };
         region.tiles.check(id).map_err(|e| err(e.into()))?;
         let grid = region.tiles.tile_samples(id, halo);
-        let products = cem::compute(region, &grid, &[Layer::Dem, Layer::Cem, Layer::Surface]).map_err(|e| err(e.into()))?;
+        let products =
+            cem::compute(region, &grid, &[Layer::Dem, Layer::Cem, Layer::Surface]).map_err(|e| err(e.into()))?;
         let (Some(dem), Some(cem), Some(surface)) = (products.dem, products.cem, products.surface) else {
             return Ok(None);
         };
@@ -86,7 +87,14 @@ impl TileSource for RegionSource {
         }
         let map = produce::map_colours(region, &grid).map_err(err)?;
         let colour = base_colours(&surface, map.as_deref());
-        Ok(Some(TilePayload { id, halo, cem: cem.into_vec(), dem: dem.into_vec(), surface: surface.into_vec(), colour }))
+        Ok(Some(TilePayload {
+            id,
+            halo,
+            cem: cem.into_vec(),
+            dem: dem.into_vec(),
+            surface: surface.into_vec(),
+            colour,
+        }))
     }
 
     fn describe(&self) -> String {

@@ -49,7 +49,10 @@ impl TileStore {
     /// A store of tiles with `halo`, holding at most about `budget_bytes`,
     /// loading at most `in_flight` tiles at once.
     pub fn new(halo: usize, budget_bytes: usize, in_flight: usize) -> Result<TileStore, LoadError> {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(in_flight.max(1)).thread_name(|k| format!("tile-fetch-{k}")).build()?;
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(in_flight.max(1))
+            .thread_name(|k| format!("tile-fetch-{k}"))
+            .build()?;
         Ok(TileStore {
             pool,
             halo,
@@ -84,7 +87,8 @@ impl TileStore {
     /// returns those with data, in the order asked.
     pub fn get(&mut self, source: &dyn TileSource, ids: &[TileId]) -> Result<Vec<Arc<TileData>>, LoadError> {
         self.clock += 1;
-        let missing: Vec<TileId> = ids.iter().filter(|id| !self.tiles.contains_key(id) && !self.empty.contains(id)).copied().collect();
+        let missing: Vec<TileId> =
+            ids.iter().filter(|id| !self.tiles.contains_key(id) && !self.empty.contains(id)).copied().collect();
         let grid = source.grid();
         let halo = self.halo;
         let loaded: Vec<(TileId, Option<TileData>)> = self.pool.install(|| {
@@ -127,7 +131,12 @@ impl TileStore {
     /// Drops least recently used tiles not used this frame until within budget.
     fn evict(&mut self) {
         while self.bytes > self.budget_bytes {
-            let victim = self.tiles.iter().filter(|(_, e)| e.last_used < self.clock).min_by_key(|(_, e)| e.last_used).map(|(id, _)| *id);
+            let victim = self
+                .tiles
+                .iter()
+                .filter(|(_, e)| e.last_used < self.clock)
+                .min_by_key(|(_, e)| e.last_used)
+                .map(|(id, _)| *id);
             let Some(id) = victim else { break };
             if let Some(e) = self.tiles.remove(&id) {
                 self.bytes -= e.bytes;

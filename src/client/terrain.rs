@@ -57,8 +57,11 @@ impl TerrainMesh {
             .collect();
         let mesh_error_m = mesh_error(dem, &heights, &pos, k);
         let skirt_m = (4.0 * mesh_error_m as f64).max(0.01 * cells as f64 * frame.spacing_m.max_element());
-        let mut vertices: Vec<TerrainVertex> =
-            heights.iter().enumerate().map(|(n, &h)| vertex(frame, pos[n % (k + 1)], pos[n / (k + 1)], h as f64)).collect();
+        let mut vertices: Vec<TerrainVertex> = heights
+            .iter()
+            .enumerate()
+            .map(|(n, &h)| vertex(frame, pos[n % (k + 1)], pos[n / (k + 1)], h as f64))
+            .collect();
         let ring = hull::ring(k);
         let top_count = vertices.len() as u32;
         for &(a, b) in &ring {
@@ -104,7 +107,8 @@ fn mesh_error(dem: &Raster<f32>, heights: &[f32], pos: &[f64], k: usize) -> f32 
             let a = quad(x);
             let u = ((x as f64 - pos[a]) / (pos[a + 1] - pos[a])) as f32;
             let (v00, v10, v11, v01) = (h(a, b), h(a + 1, b), h(a + 1, b + 1), h(a, b + 1));
-            let mesh = if u >= v { v00 + u * (v10 - v00) + v * (v11 - v10) } else { v00 + v * (v01 - v00) + u * (v11 - v01) };
+            let mesh =
+                if u >= v { v00 + u * (v10 - v00) + v * (v11 - v10) } else { v00 + v * (v01 - v00) + u * (v11 - v01) };
             if g.is_finite() {
                 worst = worst.max((g - mesh).abs());
             }
@@ -136,7 +140,10 @@ mod tests {
         let hills = |lon: f64, lat: f64| 500.0 + 300.0 * (lon * 3.0).sin() * (lat * 5.0).cos();
         // Two polar tiles side by side, and a pair at mid latitude.
         let (rows, _) = grid.tiles_on_level(3);
-        for (a, b) in [(TileId::new(3, rows - 1, 10), TileId::new(3, rows - 1, 11)), (TileId::new(9, 700, 1000), TileId::new(9, 700, 1001))] {
+        for (a, b) in [
+            (TileId::new(3, rows - 1, 10), TileId::new(3, rows - 1, 11)),
+            (TileId::new(9, 700, 1000), TileId::new(9, 700, 1001)),
+        ] {
             let (fa, da) = ground(&grid, a, hills);
             let (fb, db) = ground(&grid, b, hills);
             let (ma, mb) = (TerrainMesh::build(&fa, &da), TerrainMesh::build(&fb, &db));

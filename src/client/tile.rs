@@ -156,7 +156,8 @@ impl TileData {
         let n = grid.samples() as usize;
         let cast_dem = cast_window(&dem, halo, n);
         let hull = Hull::build(&cast, &cast_dem);
-        let terrain = TerrainMesh::build(&frame, &dem.crop(crate::raster::Window::new(halo as i64, halo as i64, n, n), f32::NAN));
+        let terrain =
+            TerrainMesh::build(&frame, &dem.crop(crate::raster::Window::new(halo as i64, halo as i64, n, n), f32::NAN));
         let range = TileRange {
             min_m: hull.bottom_m,
             max_m: cast.min_max().map_or(0.0, |(_, hi)| hi),
@@ -165,7 +166,20 @@ impl TileData {
             mesh_error_m: terrain.mesh_error_m,
             heights_m: height_range(&payload.dem, &payload.cem),
         };
-        Ok(TileData { frame, base_m: base, serial: next_serial(), halo, size, texels, colour, surface, mip, hull, terrain, range })
+        Ok(TileData {
+            frame,
+            base_m: base,
+            serial: next_serial(),
+            halo,
+            size,
+            texels,
+            colour,
+            surface,
+            mip,
+            hull,
+            terrain,
+            range,
+        })
     }
 
     /// The tile.
@@ -193,7 +207,8 @@ fn next_serial() -> u64 {
 
 /// The height the frame is raised to: the middle of the valid CEM range.
 fn base_height(cem: &[f32]) -> f64 {
-    let (lo, hi) = cem.iter().filter(|v| v.is_finite()).fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    let (lo, hi) =
+        cem.iter().filter(|v| v.is_finite()).fold((f32::MAX, f32::MIN), |(lo, hi), &v| (lo.min(v), hi.max(v)));
     if lo > hi { 0.0 } else { ((lo as f64 + hi as f64) / 2.0).round() }
 }
 

@@ -70,7 +70,10 @@ fn tiles_over_http_equal_tiles_in_process_and_a_flight_uses_them() {
     assert!(remote.fetch(TileId::new(10, 100, 100), 8).unwrap().is_none());
 
     let path = common::repo().join("config/paths/demo_dive.toml");
-    fly(&["--server", &server.base, "--path", path.to_str().unwrap(), "--frames", "2", "--size", "64x48"], &dir.join("out"));
+    fly(
+        &["--server", &server.base, "--path", path.to_str().unwrap(), "--frames", "2", "--size", "64x48"],
+        &dir.join("out"),
+    );
     let rows = stats(&dir.join("out"));
     assert!(rows.iter().map(|r| r["bytes_fetched"].parse::<u64>().unwrap()).sum::<u64>() > 0, "tiles came over HTTP");
 }

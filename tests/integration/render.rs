@@ -53,7 +53,8 @@ struct Both {
 fn render_both(tiles: &[TileData], camera: &Camera, settings: &FrameSettings) -> Both {
     let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
     let refs: Vec<&TileData> = tiles.iter().collect();
-    let gpu = with_renderer(samples, halo, |r| r.render(camera, &refs, settings, Readback::All).expect("fits the cache"));
+    let gpu =
+        with_renderer(samples, halo, |r| r.render(camera, &refs, settings, Readback::All).expect("fits the cache"));
     let lighting = Lighting { sun_ecef: settings.sun_ecef, shadow_steps: settings.shadow_steps, fade: settings.fade };
     let cpu = reference::render(camera, tiles, &lighting);
     let departure = reference::compare(&gpu.colour, &gpu.view_z_m, &cpu);
@@ -72,7 +73,11 @@ fn sun_at(lon: f64, lat: f64, azimuth_deg: f64, elevation_deg: f64) -> DVec3 {
 
 fn assert_close(name: &str, d: &Departure) {
     eprintln!("{name}: {d:?}");
-    assert!(d.mismatch_share() <= MAX_MISMATCH, "{name}: hit masks differ on {:.3} % of pixels", 100.0 * d.mismatch_share());
+    assert!(
+        d.mismatch_share() <= MAX_MISMATCH,
+        "{name}: hit masks differ on {:.3} % of pixels",
+        100.0 * d.mismatch_share()
+    );
     assert!(d.depth_rms_rel <= MAX_DEPTH_RMS_REL && d.depth_max_rel <= MAX_DEPTH_REL, "{name}: depth error {d:?}");
     assert!(d.psnr_db >= MIN_PSNR_DB, "{name}: PSNR {} dB", d.psnr_db);
 }
@@ -114,7 +119,14 @@ fn synthetic(grid: &TileGrid, id: TileId, halo: usize, f: &dyn Fn(f64, f64) -> (
 
 /// A 2×2 block of synthetic tiles with its south-west corner at the tile
 /// containing `(lon, lat)`.
-fn synthetic_block(grid: &TileGrid, lon: f64, lat: f64, level: u32, halo: usize, f: &dyn Fn(f64, f64) -> (f64, f64, u8)) -> Vec<TileData> {
+fn synthetic_block(
+    grid: &TileGrid,
+    lon: f64,
+    lat: f64,
+    level: u32,
+    halo: usize,
+    f: &dyn Fn(f64, f64) -> (f64, f64, u8),
+) -> Vec<TileData> {
     let first = grid.tile_containing(lon, lat, level);
     let ids = [(0, 0), (0, 1), (1, 0), (1, 1)].map(|(r, c)| TileId::new(level, first.row + r, first.col + c));
     ids.iter().map(|&id| synthetic(grid, id, halo, f)).collect()
@@ -178,7 +190,8 @@ fn the_exact_traversal_never_misses_in_stiff_cases() {
 
     let rolling = synthetic_block(&grid, lon0, lat0, 13, 8, &hills(lon0, lat0));
     let cliff_at = west + tile_deg * 0.75;
-    let cliff = synthetic_block(&grid, lon0, lat0, 13, 8, &|lon, _| (if lon < cliff_at { 1000.0 } else { 2000.0 }, 0.0, 3));
+    let cliff =
+        synthetic_block(&grid, lon0, lat0, 13, 8, &|lon, _| (if lon < cliff_at { 1000.0 } else { 2000.0 }, 0.0, 3));
     let valley_lon = west + tile_deg;
     let valley = synthetic_block(&grid, lon0, lat0, 13, 8, &move |lon, lat| {
         let (x, _) = metres(lon, lat, valley_lon, lat0);
@@ -189,18 +202,40 @@ fn the_exact_traversal_never_misses_in_stiff_cases() {
         (
             "grazing 0.01°",
             &rolling,
-            Camera::looking(Geodetic::new(west + tile_deg * 0.1, south + tile_deg * 0.1, 1009.0), 45.0, -0.01, 10.0, (160, 100)),
+            Camera::looking(
+                Geodetic::new(west + tile_deg * 0.1, south + tile_deg * 0.1, 1009.0),
+                45.0,
+                -0.01,
+                10.0,
+                (160, 100),
+            ),
         ),
-        ("vertical", &rolling, Camera::looking(Geodetic::new(west + tile_deg, south + tile_deg, 1400.0), 0.0, -90.0, 40.0, (120, 120))),
+        (
+            "vertical",
+            &rolling,
+            Camera::looking(Geodetic::new(west + tile_deg, south + tile_deg, 1400.0), 0.0, -90.0, 40.0, (120, 120)),
+        ),
         (
             "1000 m cliff",
             &cliff,
-            Camera::looking(Geodetic::new(west + tile_deg * 0.3, south + tile_deg, 1500.0), 90.0, 0.0, 60.0, (160, 120)),
+            Camera::looking(
+                Geodetic::new(west + tile_deg * 0.3, south + tile_deg, 1500.0),
+                90.0,
+                0.0,
+                60.0,
+                (160, 120),
+            ),
         ),
         (
             "just above the canopy",
             &rolling,
-            Camera::looking(Geodetic::new(west + tile_deg * 0.9, south + tile_deg * 0.6, canopy_top + 0.5), 60.0, -3.0, 60.0, (160, 100)),
+            Camera::looking(
+                Geodetic::new(west + tile_deg * 0.9, south + tile_deg * 0.6, canopy_top + 0.5),
+                60.0,
+                -3.0,
+                60.0,
+                (160, 100),
+            ),
         ),
         (
             "inside a valley",
@@ -224,7 +259,13 @@ fn the_linear_march_misses_are_measured() {
     let s = grid.sector(grid.tile_containing(lon0, lat0, 13));
     let tile_deg = s.max_lat - s.min_lat;
     let tiles = synthetic_block(&grid, lon0, lat0, 13, 8, &hills(lon0, lat0));
-    let camera = Camera::looking(Geodetic::new(s.min_lon + tile_deg * 0.1, s.min_lat + tile_deg * 0.1, 1009.0), 45.0, -0.01, 10.0, (160, 100));
+    let camera = Camera::looking(
+        Geodetic::new(s.min_lon + tile_deg * 0.1, s.min_lat + tile_deg * 0.1, 1009.0),
+        45.0,
+        -0.01,
+        10.0,
+        (160, 100),
+    );
     let misses = |t: Traversal| render_both(&tiles, &camera, &settings(t, None)).departure.misses;
     let (exact, m30, m90) = (misses(Traversal::Exact), misses(Traversal::Linear(30)), misses(Traversal::Linear(90)));
     eprintln!("grazing view, pixels missed: exact {exact}, linear 30 steps {m30}, linear 90 steps {m90}");
@@ -291,7 +332,12 @@ fn deep_zoom_renders_the_scene_of_a_coarse_tile() {
     assert_close("level 22", &b.departure);
     // The deep view against the coarse one, depth in tile units.
     let scale = tile_a.frame.spacing_m.x / tile_b.frame.spacing_m.x;
-    let coarse_as_image = Image { width: 128, height: 96, colour: a.gpu.colour.clone(), view_z_m: a.gpu.view_z_m.iter().map(|z| (*z as f64 / scale) as f32).collect() };
+    let coarse_as_image = Image {
+        width: 128,
+        height: 96,
+        colour: a.gpu.colour.clone(),
+        view_z_m: a.gpu.view_z_m.iter().map(|z| (*z as f64 / scale) as f32).collect(),
+    };
     let d = reference::compare(&b.gpu.colour, &b.gpu.view_z_m, &coarse_as_image);
     assert!(coarse_as_image.view_z_m.iter().filter(|&&z| z > 0.0).count() > 5000);
     assert_close("level 22 against level 2", &d);
@@ -301,7 +347,9 @@ fn deep_zoom_renders_the_scene_of_a_coarse_tile() {
 /// across the antimeridian and over the poles.
 fn globe_terrain(lon: f64, lat: f64) -> (f64, f64, u8) {
     let p = Geodetic::new(lon, lat, 0.0).to_ecef().normalize();
-    let ground = 900.0 + 700.0 * (40.0 * p.x + 3.0).sin() * (35.0 * p.y).cos() * (30.0 * p.z).sin() + 120.0 * (400.0 * p.x).sin() * (380.0 * p.y + 300.0 * p.z).cos();
+    let ground = 900.0
+        + 700.0 * (40.0 * p.x + 3.0).sin() * (35.0 * p.y).cos() * (30.0 * p.z).sin()
+        + 120.0 * (400.0 * p.x).sin() * (380.0 * p.y + 300.0 * p.z).cos();
     let forest = (900.0 * p.x).sin() * (850.0 * p.y).cos() + (700.0 * p.z).sin() > 0.4;
     (ground, if forest { 25.0 } else { 0.0 }, if forest { 1 } else { 3 })
 }
@@ -325,7 +373,11 @@ fn assert_whole_view(name: &str, tiles: &[TileData], camera: &Camera) -> usize {
     let both = render_both(tiles, camera, &settings(Traversal::Exact, Some(sun_at(0.0, 60.0, 200.0, 30.0))));
     let holes = both.gpu.view_z_m.iter().filter(|&&z| z <= 0.0).count();
     let d = both.departure;
-    eprintln!("{name}: {} tiles on levels {levels:?}, {holes} pixels without ground, {} cracks filled; {d:?}", tiles.len(), d.extras);
+    eprintln!(
+        "{name}: {} tiles on levels {levels:?}, {holes} pixels without ground, {} cracks filled; {d:?}",
+        tiles.len(),
+        d.extras
+    );
     assert_eq!(holes, 0, "{name}: the ground fills the view, no crack");
     assert_eq!(d.misses, 0, "{name}: {d:?}");
     assert!(d.depth_rms_rel <= 1e-3 && d.depth_max_rel <= 0.02 && d.psnr_db >= MIN_PSNR_DB, "{name}: {d:?}");
@@ -349,7 +401,10 @@ fn the_antimeridian_and_the_poles_have_no_seams() {
         let (south, north) = if lat > 0.0 { (70.0, 90.0) } else { (-90.0, -70.0) };
         let cap = sylva::grid::BBox { west: -180.0, south, east: 180.0, north };
         let tiles = selected(&grid, cap, &camera);
-        assert!(tiles.iter().any(|t| t.frame.sector.max_lat == 90.0 || t.frame.sector.min_lat == -90.0), "{name}: tiles meet at the pole");
+        assert!(
+            tiles.iter().any(|t| t.frame.sector.max_lat == 90.0 || t.frame.sector.min_lat == -90.0),
+            "{name}: tiles meet at the pole"
+        );
         assert_whole_view(name, &tiles, &camera);
     }
 }

@@ -36,7 +36,9 @@ pub struct Mesh {
 
 impl Mesh {
     fn new(device: &wgpu::Device, vertices: &[u8], indices: &[u32], grid_count: usize) -> Mesh {
-        let buffer = |label, contents, usage| device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage });
+        let buffer = |label, contents, usage| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage })
+        };
         Mesh {
             vertices: buffer("tile vertices", vertices, wgpu::BufferUsages::VERTEX),
             indices: buffer("tile indices", bytemuck::cast_slice(indices), wgpu::BufferUsages::INDEX),
@@ -82,7 +84,8 @@ impl TileCache {
         let atlas_w = mip_rects.iter().map(|r| r[0] + r[2]).max().unwrap_or(1);
         let atlas_h = mip_rects.iter().map(|r| r[1] + r[3]).max().unwrap_or(1);
         let slot_bytes = (size * size * (16 + 4) + atlas_w * atlas_h * 4) as usize;
-        let count = ((budget_bytes / slot_bytes) as u32).clamp(1, MAX_SLOTS.min(device.limits().max_texture_array_layers));
+        let count =
+            ((budget_bytes / slot_bytes) as u32).clamp(1, MAX_SLOTS.min(device.limits().max_texture_array_layers));
         let array = |label, w, h, format| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
@@ -139,15 +142,27 @@ impl TileCache {
 
     /// Makes `tile` resident (if it is not), evicting the least recently
     /// drawn tile not used in `frame`; returns its slot.
-    pub fn insert(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, tile: &TileData, frame: u64) -> Result<u32, CacheFull> {
+    pub fn insert(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        tile: &TileData,
+        frame: u64,
+    ) -> Result<u32, CacheFull> {
         if let Some(slot) = self.lookup(tile.serial, frame) {
             return Ok(slot);
         }
         let slot = self.victim(frame).ok_or(CacheFull { slots: self.capacity() })?;
         self.write(queue, tile, slot);
         let t = &tile.terrain;
-        let hull = Mesh::new(device, bytemuck::cast_slice::<HullVertex, u8>(&tile.hull.vertices), &tile.hull.indices, tile.hull.indices.len());
-        let terrain = Mesh::new(device, bytemuck::cast_slice::<TerrainVertex, u8>(&t.vertices), &t.indices, t.grid_indices);
+        let hull = Mesh::new(
+            device,
+            bytemuck::cast_slice::<HullVertex, u8>(&tile.hull.vertices),
+            &tile.hull.indices,
+            tile.hull.indices.len(),
+        );
+        let terrain =
+            Mesh::new(device, bytemuck::cast_slice::<TerrainVertex, u8>(&t.vertices), &t.indices, t.grid_indices);
         self.slots[slot as usize] = Some(Resident { serial: tile.serial, last_frame: frame, hull, terrain });
         Ok(slot)
     }
@@ -168,7 +183,8 @@ impl TileCache {
 
     fn write(&self, queue: &wgpu::Queue, tile: &TileData, slot: u32) {
         let size = self.size;
-        let colours: Vec<[u8; 4]> = tile.colour.iter().zip(&tile.surface).map(|(c, &s)| [c[0], c[1], c[2], s]).collect();
+        let colours: Vec<[u8; 4]> =
+            tile.colour.iter().zip(&tile.surface).map(|(c, &s)| [c[0], c[1], c[2], s]).collect();
         write_layer(queue, &self.texels, slot, [0, 0, size, size], bytemuck::cast_slice(&tile.texels), 16);
         write_layer(queue, &self.colours, slot, [0, 0, size, size], bytemuck::cast_slice(&colours), 4);
         for (level, rect) in self.mip_rects.iter().enumerate().take(tile.mip.levels()) {
@@ -177,7 +193,14 @@ impl TileCache {
     }
 }
 
-fn write_layer(queue: &wgpu::Queue, texture: &wgpu::Texture, slot: u32, rect: [u32; 4], bytes: &[u8], texel_bytes: u32) {
+fn write_layer(
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    slot: u32,
+    rect: [u32; 4],
+    bytes: &[u8],
+    texel_bytes: u32,
+) {
     queue.write_texture(
         wgpu::TexelCopyTextureInfo {
             texture,
@@ -186,7 +209,11 @@ fn write_layer(queue: &wgpu::Queue, texture: &wgpu::Texture, slot: u32, rect: [u
             aspect: wgpu::TextureAspect::All,
         },
         bytes,
-        wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(rect[2] * texel_bytes), rows_per_image: Some(rect[3]) },
+        wgpu::TexelCopyBufferLayout {
+            offset: 0,
+            bytes_per_row: Some(rect[2] * texel_bytes),
+            rows_per_image: Some(rect[3]),
+        },
         wgpu::Extent3d { width: rect[2], height: rect[3], depth_or_array_layers: 1 },
     );
 }
@@ -216,7 +243,10 @@ mod tests {
         assert_eq!(rects.last().map(|r| (r[2], r[3])), Some((1, 1)));
         for (a, ra) in rects.iter().enumerate() {
             for rb in rects.iter().skip(a + 1) {
-                let apart = ra[0] + ra[2] <= rb[0] || rb[0] + rb[2] <= ra[0] || ra[1] + ra[3] <= rb[1] || rb[1] + rb[3] <= ra[1];
+                let apart = ra[0] + ra[2] <= rb[0]
+                    || rb[0] + rb[2] <= ra[0]
+                    || ra[1] + ra[3] <= rb[1]
+                    || rb[1] + rb[3] <= ra[1];
                 assert!(apart, "{ra:?} overlaps {rb:?}");
             }
         }

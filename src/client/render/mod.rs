@@ -105,7 +105,18 @@ impl Renderer {
         let tile_buffer = tile_buffer(device, cache.capacity());
         let tile_group = pipelines.tile_group(device, &tile_buffer);
         let timer = PassTimer::new(device, &gpu.queue, gpu.timestamps);
-        Renderer { gpu, pipelines, cache, frame_buffer, frame_group, tile_buffer, tile_group, targets: None, timer, frame_no: 0 }
+        Renderer {
+            gpu,
+            pipelines,
+            cache,
+            frame_buffer,
+            frame_group,
+            tile_buffer,
+            tile_group,
+            targets: None,
+            timer,
+            frame_no: 0,
+        }
     }
 
     /// The GPU.
@@ -119,7 +130,13 @@ impl Renderer {
     }
 
     /// Renders `tiles` (all the frame's tiles, at most [`Self::cache_slots`]).
-    pub fn render(&mut self, camera: &Camera, tiles: &[&TileData], settings: &FrameSettings, readback: Readback) -> Result<Rendered, CacheFull> {
+    pub fn render(
+        &mut self,
+        camera: &Camera,
+        tiles: &[&TileData],
+        settings: &FrameSettings,
+        readback: Readback,
+    ) -> Result<Rendered, CacheFull> {
         self.frame_no += 1;
         let size = (camera.width_px, camera.height_px);
         if self.targets.as_ref().map(|t| t.size) != Some(size) {
@@ -137,7 +154,13 @@ impl Renderer {
     }
 
     /// Uploads tiles, decides how each is drawn and writes the uniforms.
-    fn prepare(&mut self, camera: &Camera, tiles: &[&TileData], settings: &FrameSettings, stats: &mut FrameStats) -> Result<Vec<(u32, DrawMode)>, CacheFull> {
+    fn prepare(
+        &mut self,
+        camera: &Camera,
+        tiles: &[&TileData],
+        settings: &FrameSettings,
+        stats: &mut FrameStats,
+    ) -> Result<Vec<(u32, DrawMode)>, CacheFull> {
         let (device, queue) = (&self.gpu.device, &self.gpu.queue);
         let mut order: Vec<(f64, &TileData)> = tiles.iter().map(|t| (uniforms::tile_near_m(camera, t), *t)).collect();
         order.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -221,7 +244,8 @@ impl Renderer {
         let (device, queue) = (&self.gpu.device, &self.gpu.queue);
         out.colour = bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.colour, 4)).to_vec();
         if readback == Readback::All {
-            let depth: Vec<f32> = bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.depth, 4)).to_vec();
+            let depth: Vec<f32> =
+                bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.depth, 4)).to_vec();
             out.view_z_m = depth.iter().map(|&d| if d > 0.0 { (near_m / d as f64) as f32 } else { 0.0 }).collect();
             out.fetches = bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.fetches, 8)).to_vec();
         }

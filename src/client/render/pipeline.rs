@@ -4,11 +4,11 @@
 //! under ray-cast ones). All write colour, per-pixel
 //! fetch counts and reversed-Z depth (greater is nearer).
 
+use super::super::hull::HullVertex;
+use super::super::terrain::TerrainVertex;
 use super::cache::TileCache;
 use super::shaders;
 use super::uniforms::{FrameUniform, TILE_STRIDE, TileUniform};
-use super::super::hull::HullVertex;
-use super::super::terrain::TerrainVertex;
 
 /// Colour target format.
 pub const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -74,7 +74,9 @@ impl Pipelines {
             step_mode: wgpu::VertexStepMode::Vertex,
             attributes: &terrain_attributes,
         };
-        let make = |vs, fs, cull, vertex: &wgpu::VertexBufferLayout| pipeline(device, &layout, &module, (vs, vertex.clone()), fs, cull);
+        let make = |vs, fs, cull, vertex: &wgpu::VertexBufferLayout| {
+            pipeline(device, &layout, &module, (vs, vertex.clone()), fs, cull)
+        };
         Pipelines {
             hull: make("vs_hull", "fs_ray", wgpu::Face::Back, &hull_vertex),
             inside: make("vs_hull", "fs_ray", wgpu::Face::Front, &hull_vertex),

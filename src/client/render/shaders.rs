@@ -28,7 +28,8 @@ mod tests {
             Ok(m) => m,
             Err(e) => panic!("{}", e.emit_to_string(&source)),
         };
-        let mut validator = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all());
+        let mut validator =
+            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all());
         if let Err(e) = validator.validate(&module) {
             panic!("{}", e.emit_to_string(&source));
         }

@@ -23,7 +23,12 @@ impl PassTimer {
             count: 2,
         });
         let buffer = |usage| {
-            device.create_buffer(&wgpu::BufferDescriptor { label: Some("timestamps"), size: 16, usage, mapped_at_creation: false })
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("timestamps"),
+                size: 16,
+                usage,
+                mapped_at_creation: false,
+            })
         };
         Some(PassTimer {
             queries,

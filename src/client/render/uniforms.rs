@@ -125,8 +125,18 @@ impl TileUniform {
             model_view: camera.model_view(frame).to_cols_array_2d(),
             camera: [cam.x as f32, cam.y as f32, cam.z as f32, reach as f32],
             sun: [sun.x as f32, sun.y as f32, sun.z as f32, tile.halo as f32],
-            grid: [frame.spacing_m.x as f32, frame.spacing_m.y as f32, frame.centre_index() as f32, frame.samples as f32],
-            range: [tile.range.min_m, tile.range.max_m, hull.bottom_m, if mode == DrawMode::Plain { 0.0 } else { filler_drop_m(tile) }],
+            grid: [
+                frame.spacing_m.x as f32,
+                frame.spacing_m.y as f32,
+                frame.centre_index() as f32,
+                frame.samples as f32,
+            ],
+            range: [
+                tile.range.min_m,
+                tile.range.max_m,
+                hull.bottom_m,
+                if mode == DrawMode::Plain { 0.0 } else { filler_drop_m(tile) },
+            ],
             index: [tile.halo as i32, tile.size as i32, slot as i32, tile.mip.levels() as i32 - 1],
             flags: [mode as u32, whole as u32, 0, 0],
             texels: [tile.range.texels_max_m, 0.0, 0.0, 0.0],
@@ -141,7 +151,9 @@ impl TileUniform {
 /// three times as much.
 fn filler_drop_m(tile: &TileData) -> f32 {
     let heights = (tile.base_m.abs() + tile.range.max_m.abs().max(tile.range.min_m.abs()) as f64).max(1.0);
-    (tile.range.mesh_error_m as f64 + 3.0 * tile.frame.flat_error_m(heights) + 0.01 * tile.frame.spacing_m.min_element()) as f32
+    (tile.range.mesh_error_m as f64
+        + 3.0 * tile.frame.flat_error_m(heights)
+        + 0.01 * tile.frame.spacing_m.min_element()) as f32
 }
 
 /// Side of a hull quad, metres (the larger axis).
