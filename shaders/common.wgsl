@@ -66,6 +66,10 @@ const NO_HIT: f32 = -1.0;
 // hit cell's shading), and shadow ray — the benchmark's "fetches per pixel".
 var<private> view_fetches: u32 = 0u;
 var<private> shadow_fetches: u32 = 0u;
+// The last cell whose corners were read, and its faded corner heights: the
+// hit cell is shaded from it, and consecutive samples in one cell share it.
+var<private> memo_cell: vec2<i32> = vec2<i32>(-2147483647);
+var<private> memo_heights: vec4<f32>;
 
 fn texel(i: i32, j: i32) -> vec4<f32> {
     let b = tile.index.x;

@@ -20,6 +20,15 @@ fn sample_local(s: vec2<f32>, z: f32) -> vec3<f32> {
 // Corner heights [h00, h10, h01, h11] of the cell whose south-west sample
 // is (ci, cj), with the canopy faded; any nodata corner gives NODATA.
 fn cell_heights(ci: i32, cj: i32, counter: ptr<private, u32>) -> vec4<f32> {
+    if all(vec2<i32>(ci, cj) == memo_cell) {
+        return memo_heights;
+    }
+    memo_cell = vec2<i32>(ci, cj);
+    memo_heights = fetch_cell_heights(ci, cj, counter);
+    return memo_heights;
+}
+
+fn fetch_cell_heights(ci: i32, cj: i32, counter: ptr<private, u32>) -> vec4<f32> {
     let size = f32(tile.index.y);
     let b = tile.index.x;
     let uv = (vec2<f32>(vec2<i32>(ci + b, cj + b)) + 1.0) / size;

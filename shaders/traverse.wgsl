@@ -15,15 +15,24 @@
 const START_LEVEL: i32 = 4;
 const MAX_ITERATIONS: u32 = 8192u;
 
+// A ray's constants for cell stepping: the inverse direction, and which
+// side of a cell it leaves by (1 toward +x/+y, 0 toward -x/-y).
+struct Stepper {
+    inverse: vec2<f32>,
+    far_side: vec2<f32>,
+    moving: vec2<bool>,
+};
+
+fn stepper(d: vec2<f32>) -> Stepper {
+    let moving = d != vec2<f32>(0.0);
+    return Stepper(1.0 / select(vec2<f32>(1.0), d, moving), select(vec2<f32>(0.0), vec2<f32>(1.0), d > vec2<f32>(0.0)), moving);
+}
+
 // The ray parameter where the ray leaves cell `cell` of side `size` (cell m
 // spans samples m*size - 1 .. (m+1)*size - 1), per axis.
-fn cell_exit(cell: vec2<i32>, size: f32, o: vec2<f32>, d: vec2<f32>) -> vec2<f32> {
-    let lo = vec2<f32>(cell) * size - 1.0;
-    let hi = lo + size;
-    var t = vec2<f32>(1.0e30);
-    if d.x > 0.0 { t.x = (hi.x - o.x) / d.x; } else if d.x < 0.0 { t.x = (lo.x - o.x) / d.x; }
-    if d.y > 0.0 { t.y = (hi.y - o.y) / d.y; } else if d.y < 0.0 { t.y = (lo.y - o.y) / d.y; }
-    return t;
+fn cell_exit(cell: vec2<i32>, size: f32, o: vec2<f32>, s: Stepper) -> vec2<f32> {
+    let side = (vec2<f32>(cell) + s.far_side) * size - 1.0;
+    return select(vec2<f32>(1.0e30), (side - o) * s.inverse, s.moving);
 }
 
 fn cell_of(p: vec2<f32>, size: f32, lo: vec2<i32>, hi: vec2<i32>) -> vec2<i32> {
@@ -35,10 +44,11 @@ fn traverse_exact(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> f32 {
     var level = min(START_LEVEL, top);
     var t = t0;
     let step = vec2<i32>(sign(d.xy));
+    let stepping = stepper(d.xy);
     var cell = cell_of(o.xy + d.xy * t, f32(1 << u32(level)), vec2<i32>(0), mip_cells(level) - 1);
     for (var it = 0u; it < MAX_ITERATIONS; it++) {
         let size = f32(1 << u32(level));
-        let exits = cell_exit(cell, size, o.xy, d.xy);
+        let exits = cell_exit(cell, size, o.xy, stepping);
         let t_out = min(min(exits.x, exits.y), t1);
         let bound = mip_bound(level, cell);
         view_fetches += 1u;
