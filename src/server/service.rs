@@ -3,7 +3,9 @@
 //! requests ask for it at once — the memory cache coalesces concurrent loads
 //! of a key in this process, the cache's locks ([`crate::cache::flight`])
 //! across processes — and the pipeline run on the bounded worker pool, never
-//! on the async executor.
+//! on the async executor. A load runs as its own task: a requester that gives
+//! up (request timeout, closed connection) does not abandon it, so the tile
+//! lands in the cache for the retry instead of being computed again.
 
 use super::ServeError;
 use super::metrics::{CacheResult, Metrics};
@@ -40,7 +42,8 @@ impl Tile {
     }
 }
 
-/// Tiles for one region.
+/// Tiles for one region. Clones share everything (the memory cache too).
+#[derive(Clone)]
 pub struct TileService {
     region: Arc<Region>,
     store: Arc<dyn TileStore>,
@@ -88,12 +91,16 @@ impl TileService {
         let Some(key) = product.key(&self.region.version) else {
             return self.compute(product).await.map(|c| Arc::new(tile_of(c)));
         };
-        let entry = self
-            .memory
-            .entry(key.clone())
-            .or_try_insert_with(self.load(key, product))
-            .await
-            .map_err(|e| (*e).clone())?;
+        let (this, k) = (self.clone(), key.clone());
+        let loading = async move {
+            let detached = async move {
+                let tile = this.load(k.clone(), product).await?;
+                this.memory.insert(k, tile.clone()).await;
+                Ok::<_, ServeError>(tile)
+            };
+            tokio::spawn(detached).await.map_err(ServeError::internal)?
+        };
+        let entry = self.memory.entry(key.clone()).or_try_insert_with(loading).await.map_err(|e| (*e).clone())?;
         if !entry.is_fresh() {
             self.metrics.cache(CacheResult::Memory);
         }

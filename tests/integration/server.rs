@@ -370,3 +370,20 @@ fn an_overloaded_server_answers_503_with_retry_after_at_once() {
     assert!(replies.iter().any(|r| r.status == 200));
     assert_eq!(server.get("/health").status, 200);
 }
+
+#[test]
+fn a_request_that_times_out_leaves_its_tile_computed_for_the_retry() {
+    let dir = TempDir::new("srv-timeout");
+    let config = dir.join("impatient.toml");
+    // Far shorter than a tile's computation: every computing request gives up.
+    std::fs::write(&config, "[server]\nrequest_timeout_s = 0.001\n").unwrap();
+    let impatient = Server::start(Some(&config), &dir.join("cache"));
+    let t = demo_tile();
+    let path = format!("/tiles/cem/{}/{}/{}_{}.bil32?halo=8", t.level, t.row, t.row, t.col);
+    assert_eq!(impatient.get(&path).status, 503, "the request gives up");
+    // A patient server on the same cache waits for the abandoned computation.
+    let patient = Server::start(None, &dir.join("cache"));
+    assert_eq!(patient.get(&path).status, 200);
+    assert_eq!(patient.metric("sylva_tile_computations_total"), 0.0, "the retry computed nothing");
+    assert_eq!(impatient.metric("sylva_tile_computations_total"), 1.0);
+}
