@@ -18,20 +18,24 @@ struct VertexOut {
     @location(0) local: vec3<f32>,
 };
 
+// Per pixel: view-ray fetches, shadow-ray fetches, the bits of the
+// distance along the view axis (m), unused.
 struct FragmentOut {
     @location(0) colour: vec4<f32>,
-    @location(1) fetches: vec2<u32>,
+    @location(1) data: vec4<u32>,
     @builtin(frag_depth) depth: f32,
 };
 
 struct PlainVertexOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) sample: vec2<f32>,
+    // Distance along the view axis, metres.
+    @location(1) distance: f32,
 };
 
 struct PlainOut {
     @location(0) colour: vec4<f32>,
-    @location(1) fetches: vec2<u32>,
+    @location(1) data: vec4<u32>,
 };
 
 fn project(local: vec3<f32>) -> vec4<f32> {
@@ -56,7 +60,8 @@ fn vs_hull(v: HullIn) -> VertexOut {
 @vertex
 fn vs_plain(v: TerrainIn) -> PlainVertexOut {
     let flat = vec3<f32>((v.sample - vec2<f32>(tile.grid.z)) * tile.grid.xy, v.height - tile.range.w);
-    return PlainVertexOut(project(flat + v.offset), v.sample);
+    let view = tile.model_view * vec4<f32>(flat + v.offset, 1.0);
+    return PlainVertexOut(frame.proj * view, v.sample, -view.z);
 }
 
 // The ray's parameter interval inside the cast box, in sample space.
@@ -121,8 +126,9 @@ fn fs_ray(in: VertexOut) -> FragmentOut {
     let hs = to_samples(hit);
     let colour = shade(hs.xy, hs.z, dir);
     let view = tile.model_view * vec4<f32>(hit, 1.0);
-    let depth = frame.viewport.z / max(-view.z, 1.0e-30);
-    return FragmentOut(vec4<f32>(colour, 1.0), vec2<u32>(view_fetches, shadow_fetches), depth);
+    let distance = max(-view.z, 1.0e-30);
+    let data = vec4<u32>(view_fetches, shadow_fetches, bitcast<u32>(distance), 0u);
+    return FragmentOut(vec4<f32>(colour, 1.0), data, frame.viewport.z / distance);
 }
 
 @fragment
@@ -146,5 +152,5 @@ fn fs_plain(in: PlainVertexOut) -> PlainOut {
         let lambert = max(dot(patch_normal(g, f), tile.sun.xyz), 0.0);
         lit = base * (frame.sky.a + (1.0 - frame.sky.a) * lambert);
     }
-    return PlainOut(vec4<f32>(lit, 1.0), vec2<u32>(0u, 0u));
+    return PlainOut(vec4<f32>(lit, 1.0), vec4<u32>(0u, 0u, bitcast<u32>(in.distance), 0u));
 }

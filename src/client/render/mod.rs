@@ -150,7 +150,7 @@ impl Renderer {
         stats.gpu_ms = self.timer.as_ref().and_then(|t| t.read_ms(&self.gpu.device));
         stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         stats.resident_bytes = self.cache.resident_bytes();
-        Ok(self.read(readback, stats, camera.near_m))
+        Ok(self.read(readback, stats))
     }
 
     /// Uploads tiles, decides how each is drawn and writes the uniforms.
@@ -189,7 +189,7 @@ impl Renderer {
     fn encode_and_submit(&self, draws: &[(u32, DrawMode)]) {
         let Some(targets) = &self.targets else { return };
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
-        let (colour, fetches, depth) = (view(&targets.colour), view(&targets.fetches), view(&targets.depth));
+        let (colour, pixel_data, depth) = (view(&targets.colour), view(&targets.pixel_data), view(&targets.depth));
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
         {
             let sky = wgpu::Color { r: SKY[0], g: SKY[1], b: SKY[2], a: 1.0 };
@@ -203,7 +203,7 @@ impl Renderer {
             };
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("tiles"),
-                color_attachments: &[attach(&colour, sky), attach(&fetches, wgpu::Color::TRANSPARENT)],
+                color_attachments: &[attach(&colour, sky), attach(&pixel_data, wgpu::Color::TRANSPARENT)],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &depth,
                     depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
@@ -238,16 +238,16 @@ impl Renderer {
         let _ = self.gpu.device.poll(wgpu::PollType::wait_indefinitely());
     }
 
-    fn read(&self, readback: Readback, stats: FrameStats, near_m: f64) -> Rendered {
+    fn read(&self, readback: Readback, stats: FrameStats) -> Rendered {
         let mut out = Rendered { stats, ..Default::default() };
         let (Some(targets), true) = (&self.targets, readback != Readback::None) else { return out };
         let (device, queue) = (&self.gpu.device, &self.gpu.queue);
         out.colour = bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.colour, 4)).to_vec();
         if readback == Readback::All {
-            let depth: Vec<f32> =
-                bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.depth, 4)).to_vec();
-            out.view_z_m = depth.iter().map(|&d| if d > 0.0 { (near_m / d as f64) as f32 } else { 0.0 }).collect();
-            out.fetches = bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.fetches, 8)).to_vec();
+            let data: Vec<[u32; 4]> =
+                bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.pixel_data, 16)).to_vec();
+            out.view_z_m = data.iter().map(|d| f32::from_bits(d[2])).collect();
+            out.fetches = data.iter().map(|d| [d[0], d[1]]).collect();
         }
         out
     }

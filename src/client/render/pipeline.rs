@@ -1,8 +1,8 @@
 //! The render pipelines and their bindings: hull fragments that ray cast
 //! (front faces), the same from a camera inside the hull (back faces), and
 //! plain texture mapping of the terrain mesh (far tiles, and crack filling
-//! under ray-cast ones). All write colour, per-pixel
-//! fetch counts and reversed-Z depth (greater is nearer).
+//! under ray-cast ones). All write colour, per-pixel fetch counts, the
+//! view-axis distance and reversed-Z depth (greater is nearer).
 
 use super::super::hull::HullVertex;
 use super::super::terrain::TerrainVertex;
@@ -12,8 +12,10 @@ use super::uniforms::{FrameUniform, TILE_STRIDE, TileUniform};
 
 /// Colour target format.
 pub const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
-/// Fetch-count target format.
-pub const FETCH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg32Uint;
+/// Per-pixel data target: view and shadow fetches, and the bits of the
+/// view-axis distance (read back instead of the depth buffer, which GL
+/// cannot copy; an integer target, which GL renders to, unlike R32Float).
+pub const PIXEL_DATA_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Uint;
 /// Depth format.
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
@@ -189,7 +191,11 @@ fn pipeline(
             compilation_options: Default::default(),
             targets: &[
                 Some(wgpu::ColorTargetState { format: COLOUR_FORMAT, blend: None, write_mask: wgpu::ColorWrites::ALL }),
-                Some(wgpu::ColorTargetState { format: FETCH_FORMAT, blend: None, write_mask: wgpu::ColorWrites::ALL }),
+                Some(wgpu::ColorTargetState {
+                    format: PIXEL_DATA_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                }),
             ],
         }),
         multiview_mask: None,

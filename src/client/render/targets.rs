@@ -1,8 +1,8 @@
-//! Off-screen render targets (colour, fetch counts, depth) and reading
-//! them back: rows are copied with wgpu's 256-byte row alignment and
-//! unpadded here.
+//! Off-screen render targets (colour, per-pixel data, depth) and reading
+//! the colour ones back: rows are copied with wgpu's 256-byte
+//! row alignment and unpadded here. Depth is never copied (GL cannot).
 
-use super::pipeline::{COLOUR_FORMAT, DEPTH_FORMAT, FETCH_FORMAT};
+use super::pipeline::{COLOUR_FORMAT, DEPTH_FORMAT, PIXEL_DATA_FORMAT};
 
 /// The three targets of one image size.
 pub struct Targets {
@@ -10,8 +10,9 @@ pub struct Targets {
     pub size: (u32, u32),
     /// Colour.
     pub colour: wgpu::Texture,
-    /// Per-pixel texture fetches (view ray, shadow ray).
-    pub fetches: wgpu::Texture,
+    /// Per pixel: view-ray and shadow-ray fetches, the bits of the distance
+    /// along the view axis (metres; 0: nothing).
+    pub pixel_data: wgpu::Texture,
     /// Reversed-Z depth.
     pub depth: wgpu::Texture,
 }
@@ -34,7 +35,7 @@ impl Targets {
         Targets {
             size,
             colour: make("colour", COLOUR_FORMAT),
-            fetches: make("fetches", FETCH_FORMAT),
+            pixel_data: make("pixel data", PIXEL_DATA_FORMAT),
             depth: make("depth", DEPTH_FORMAT),
         }
     }
@@ -51,14 +52,14 @@ pub fn read_texture(device: &wgpu::Device, queue: &wgpu::Queue, texture: &wgpu::
         usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
         mapped_at_creation: false,
     });
-    let aspect = if texture.format().is_depth_stencil_format() {
-        wgpu::TextureAspect::DepthOnly
-    } else {
-        wgpu::TextureAspect::All
-    };
     let mut encoder = device.create_command_encoder(&Default::default());
     encoder.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo { texture, mip_level: 0, origin: wgpu::Origin3d::ZERO, aspect },
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
         wgpu::TexelCopyBufferInfo {
             buffer: &buffer,
             layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(padded), rows_per_image: Some(h) },
