@@ -410,14 +410,28 @@ fn run(command: Command) -> Result<()> {
             Ok(())
         }
         #[cfg(feature = "client")]
-        Command::Fly { config, server, path, frames, size, out, traversal, shadow_steps, max_error_px, max_level, gpu_budget_mib, no_frames } => {
+        Command::Fly {
+            config,
+            server,
+            path,
+            frames,
+            size,
+            out,
+            traversal,
+            shadow_steps,
+            max_error_px,
+            max_level,
+            gpu_budget_mib,
+            no_frames,
+        } => {
             let options = sylva::client::fly::FlyOptions {
                 frames,
                 size: parse_size(&size)?,
                 out_dir: Some(out),
                 write_frames: !no_frames,
-                traversal: sylva::client::fly::parse_traversal(&traversal)
-                    .ok_or_else(|| anyhow::anyhow!("unknown traversal {traversal:?}; expected exact or linear:STEPS"))?,
+                traversal: sylva::client::fly::parse_traversal(&traversal).ok_or_else(|| {
+                    anyhow::anyhow!("unknown traversal {traversal:?}; expected exact or linear:STEPS")
+                })?,
                 shadow_steps,
                 lod: sylva::client::quadtree::LodRule { max_error_px, max_level },
                 ..Default::default()

@@ -75,7 +75,10 @@ pub fn grid_product(region: &Region, grid: &SampleGrid, layer: Layer, format: Fo
 /// The region's map colours (R, G, B, 0–255) at the grid's samples, read and
 /// projected once for the three bands; `None` without a map or where the
 /// grid misses it.
-pub fn map_colours(region: &Region, grid: &SampleGrid) -> Result<Option<Vec<crate::raster::Raster<f32>>>, ProduceError> {
+pub fn map_colours(
+    region: &Region,
+    grid: &SampleGrid,
+) -> Result<Option<Vec<crate::raster::Raster<f32>>>, ProduceError> {
     let Some(map) = &region.map else { return Ok(None) };
     let bilinear = crate::raster::resample::Resampling::Bilinear;
     let footprint = map.read(grid, bilinear, 3)?;

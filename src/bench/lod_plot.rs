@@ -29,13 +29,7 @@ pub fn png(title: &str, frames: &[Frame]) -> Result<Vec<u8>, String> {
 type Series<'a> = [(&'a str, RGBColor, fn(&Frame) -> f64)];
 
 /// One log-scale panel of per-frame series.
-fn panel(
-    area: &Area<'_>,
-    caption: &str,
-    unit: &str,
-    frames: &[Frame],
-    series: &Series<'_>,
-) -> Result<(), String> {
+fn panel(area: &Area<'_>, caption: &str, unit: &str, frames: &[Frame], series: &Series<'_>) -> Result<(), String> {
     let values = frames.iter().flat_map(|f| series.iter().map(move |s| (s.2)(f)));
     let (lo, hi) = values.filter(|v| *v > 0.0).fold((f64::MAX, f64::MIN), |(a, b), v| (a.min(v), b.max(v)));
     let (lo, hi) = if lo <= hi { (lo / 1.5, hi * 1.5) } else { (0.001, 1.0) };

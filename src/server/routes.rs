@@ -141,7 +141,9 @@ async fn tile(
     let layer = parse_layer(layer)?;
     let encoding = match (layer, ext.to_ascii_lowercase().as_str()) {
         (layer, "png") if layer.is_picture() => Encoding::Rgba,
-        (layer, _) if layer.is_picture() => return Err(ServeError::BadRequest(format!("{} tiles are .png", layer.name()))),
+        (layer, _) if layer.is_picture() => {
+            return Err(ServeError::BadRequest(format!("{} tiles are .png", layer.name())));
+        }
         (_, "bil" | "bil16") => Encoding::Data(Format::Bil16),
         (_, "bil32") => Encoding::Data(Format::Bil32),
         (_, "png") => Encoding::Data(Format::Png16),

@@ -6,8 +6,8 @@
 use super::SourceError;
 use crate::config::UpstreamConfig;
 use std::io::Read;
-use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 /// Largest response read, bytes (a 577² float32 tile is 1.3 MiB).
@@ -105,7 +105,12 @@ impl Link {
         match response.status().as_u16() {
             200 => {
                 let mut body = Vec::new();
-                response.body_mut().as_reader().take(MAX_RESPONSE_BYTES).read_to_end(&mut body).map_err(|e| e.to_string())?;
+                response
+                    .body_mut()
+                    .as_reader()
+                    .take(MAX_RESPONSE_BYTES)
+                    .read_to_end(&mut body)
+                    .map_err(|e| e.to_string())?;
                 Ok(Some(body))
             }
             404 => Ok(None),
@@ -113,4 +118,3 @@ impl Link {
         }
     }
 }
-

@@ -19,13 +19,13 @@ pub mod georaster;
 pub mod geotiff;
 pub mod hgt;
 pub mod las;
+#[cfg(feature = "http")]
+pub mod link;
 pub mod memory;
 pub mod nodata;
 mod palette;
 pub mod proxy;
 pub mod pyramid;
-#[cfg(feature = "http")]
-pub mod link;
 #[cfg(feature = "http")]
 pub mod remote;
 

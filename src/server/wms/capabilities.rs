@@ -198,8 +198,13 @@ mod tests {
         for version in [Version::V111, Version::V130] {
             let (_, xml) = document(&service(), version);
             let options = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
-            let doc = roxmltree::Document::parse_with_options(&xml, options).unwrap_or_else(|e| panic!("{version:?}: {e}\n{xml}"));
-            let names: Vec<&str> = doc.descendants().filter(|n| n.has_tag_name("Name") && n.parent().is_some_and(|p| p.has_tag_name("Layer"))).filter_map(|n| n.text()).collect();
+            let doc = roxmltree::Document::parse_with_options(&xml, options)
+                .unwrap_or_else(|e| panic!("{version:?}: {e}\n{xml}"));
+            let names: Vec<&str> = doc
+                .descendants()
+                .filter(|n| n.has_tag_name("Name") && n.parent().is_some_and(|p| p.has_tag_name("Layer")))
+                .filter_map(|n| n.text())
+                .collect();
             assert_eq!(names, ["dem", "cover", "canopy", "cem", "surface", "colour", "relief"]);
         }
     }

@@ -252,10 +252,12 @@ fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, 
         Exception::new(code, format!("{crs_text} is not offered (EPSG:4326, CRS:84, EPSG:3857)")).locator(crs_key)
     })?;
     let format_text = required("FORMAT")?;
-    let format = MapFormat::parse(format_text)
-        .ok_or_else(|| Exception::new(Code::InvalidFormat, format!("format {format_text:?} is not offered")).locator("FORMAT"))?;
+    let format = MapFormat::parse(format_text).ok_or_else(|| {
+        Exception::new(Code::InvalidFormat, format!("format {format_text:?} is not offered")).locator("FORMAT")
+    })?;
     if layer.is_picture() && format != MapFormat::Png {
-        return Err(Exception::new(Code::InvalidFormat, format!("{} is an image: ask for image/png", layer.name())).locator("FORMAT"));
+        return Err(Exception::new(Code::InvalidFormat, format!("{} is an image: ask for image/png", layer.name()))
+            .locator("FORMAT"));
     }
     let (width, height) = (size(required("WIDTH")?, "WIDTH", limits)?, size(required("HEIGHT")?, "HEIGHT", limits)?);
     let bbox = numbers(required("BBOX")?)?;
