@@ -3,20 +3,28 @@
 //!
 //! The cache is weighted by bytes and evicts least-recently-used blocks beyond
 //! its budget. Concurrent requests for one missing block compute it once (the
-//! cache's own single-flight insertion). A cache may give its blocks a time
+//! cache's own single-flight insertion), waiting for each other a bounded
+//! time ([`LOAD_WAIT`]). A cache may give its blocks a time
 //! to live, for regions fed by upstream servers: an expired block is read
 //! again from its source.
 
 use super::{PixelSource, SourceError};
 use crate::raster::{Raster, Window};
 use quick_cache::Weighter;
-use quick_cache::sync::Cache;
+use quick_cache::sync::{Cache, GuardResult};
 use rayon::prelude::*;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 type Block = Arc<Vec<Raster<f32>>>;
+
+/// Longest a read waits for another load of the same block before loading
+/// it too. Loads run rayon work, and a rayon thread waiting inside one runs
+/// other jobs meanwhile, which may want the block it is loading itself (or
+/// one held by a thread that waits on it): an unbounded wait can deadlock
+/// the pool, a bounded one costs at worst a block loaded twice.
+const LOAD_WAIT: Duration = Duration::from_millis(250);
 
 /// A block and when it was read.
 #[derive(Clone)]
@@ -147,11 +155,24 @@ impl Blocks {
         {
             cache.blocks.remove(&key);
         }
-        let stamped = cache.blocks.get_or_insert_with(&key, || {
+        let load = || {
             cache.computed.fetch_add(1, Ordering::Relaxed);
             let block = self.source.read_block(bx, by).map(Arc::new)?;
             Ok::<_, SourceError>(Stamped { block, read_at: Instant::now() })
-        })?;
+        };
+        let stamped = match cache.blocks.get_value_or_guard(&key, Some(LOAD_WAIT)) {
+            GuardResult::Value(stamped) => stamped,
+            GuardResult::Guard(guard) => {
+                let stamped = load()?;
+                let _ = guard.insert(stamped.clone());
+                stamped
+            }
+            GuardResult::Timeout => {
+                let stamped = load()?;
+                cache.blocks.insert(key, stamped.clone());
+                stamped
+            }
+        };
         Ok(stamped.block)
     }
 }
@@ -225,5 +246,58 @@ pub(crate) mod tests {
         let blocks = Blocks::new(src, &cache);
         blocks.read(Window::new(0, 0, 512, 512)).unwrap();
         assert!(cache.bytes() <= 4 * 64 * 64 * 4, "{}", cache.bytes());
+    }
+
+    /// Blocks whose loading reads (in parallel) from another cached source,
+    /// like a pyramid level or a land cover over its map.
+    struct Nested {
+        inner: Blocks,
+    }
+
+    impl PixelSource for Nested {
+        fn name(&self) -> &Path {
+            Path::new("<nested>")
+        }
+        fn size(&self) -> (usize, usize) {
+            self.inner.size()
+        }
+        fn bands(&self) -> usize {
+            1
+        }
+        fn block_size(&self) -> (usize, usize) {
+            (16, 16)
+        }
+        fn read_block(&self, bx: usize, by: usize) -> Result<Vec<Raster<f32>>, SourceError> {
+            std::thread::sleep(Duration::from_millis(2));
+            self.inner.read(Window::new(bx as i64 * 16, by as i64 * 16, 16, 16))
+        }
+    }
+
+    #[test]
+    fn concurrent_jobs_reading_nested_sources_never_deadlock_the_pool() {
+        // Rayon threads waiting inside a block's load run other jobs, which
+        // may want that very block: waits must not be unbounded.
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        for round in 0..20 {
+            let cache = BlockCache::new(1 << 24);
+            let counting = Arc::new(Counting { size: (128, 128), block: (4, 4), reads: AtomicUsize::new(0) });
+            let middle = Blocks::new(Arc::new(Nested { inner: Blocks::new(counting, &cache) }), &cache);
+            let outer = Blocks::new(Arc::new(Nested { inner: middle }), &cache);
+            let (tx, rx) = std::sync::mpsc::channel();
+            let jobs = 24;
+            for j in 0..jobs {
+                let (outer, tx) = (outer.clone(), tx.clone());
+                pool.spawn(move || {
+                    let read = outer.read(Window::new((j % 4) as i64 * 8, (j / 4) as i64 * 8, 96, 96));
+                    let _ = tx.send(read.map(|r| r[0].get(0, 0)));
+                });
+            }
+            for j in 0..jobs {
+                let got = rx.recv_timeout(Duration::from_secs(60));
+                assert!(got.is_ok(), "round {round}: the pool deadlocked ({j} of {jobs} jobs done)");
+                let corner = got.unwrap().unwrap();
+                assert!((0..jobs).any(|k| corner == ((k % 4) * 8 + 1000 * ((k / 4) * 8)) as f32), "{corner}");
+            }
+        }
     }
 }
