@@ -154,6 +154,9 @@ fn default_fade(camera: &Camera) -> Fade {
     Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px }
 }
 
+/// One plotted quantity of a benchmark row.
+type Metric = dyn Fn(&Row) -> f64;
+
 fn row(view: &str, setting: &str, out: &Rendered, truth: &Image) -> Row {
     let d = reference::compare(&out.colour, &out.view_z_m, truth);
     let mut rays: Vec<[u32; 2]> = out.fetches.iter().copied().filter(|f| f[0] > 0).collect();
@@ -231,7 +234,7 @@ pub fn plot(rows: &[Row]) -> Result<Vec<u8>, String> {
     let psnr = |r: &Row| if r.psnr_db.is_finite() { r.psnr_db.min(90.0) } else { 90.0 };
     super::plot::png((1000, 900), |root| {
         let panels = root.split_evenly((2, 1));
-        let metrics: [(&str, f64, &dyn Fn(&Row) -> f64); 2] = [
+        let metrics: [(&str, f64, &Metric); 2] = [
             ("colour PSNR against the exact reference, dB (∞ drawn at 90)", 95.0, &psnr),
             ("pixels missed, %", 0.6, &|r: &Row| r.missed_pct),
         ];

@@ -184,6 +184,6 @@ mod tests {
         let d = (q.x - p.x) * (r.y - p.y) - (r.x - p.x) * (q.y - p.y);
         let u = ((s.x - p.x) * (r.y - p.y) - (r.x - p.x) * (s.y - p.y)) / d;
         let v = ((q.x - p.x) * (s.y - p.y) - (s.x - p.x) * (q.y - p.y)) / d;
-        (u >= -1e-6 && v >= -1e-6 && u + v <= 1.0 + 1e-6).then(|| p.z + u * (q.z - p.z) + v * (r.z - p.z))
+        (u >= -1e-6 && v >= -1e-6 && u + v <= 1.0 + 1e-6).then_some(p.z + u * (q.z - p.z) + v * (r.z - p.z))
     }
 }
