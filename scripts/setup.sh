@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Installs what Sylva needs on a fresh Debian machine: a C toolchain and
 # certificates for cargo, GDAL's command-line tools and OWSLib (the tests read
-# our GeoTIFFs and our WMS with them), Mesa's software Vulkan for the
-# renderer, redis-server (the tests start one for the shared Redis tile
+# our GeoTIFFs and our WMS with them), Mesa's software Vulkan and OpenGL for
+# the renderer, redis-server (the tests start one for the shared Redis tile
 # cache), and Rust through rustup when cargo is missing.
 # Safe to run again: it installs only what is absent.
 set -euo pipefail
@@ -16,6 +16,9 @@ command -v gdalinfo >/dev/null || need+=(gdal-bin)
 # The renderer's tests run wgpu on Mesa's software Vulkan (lavapipe) when
 # the machine has no GPU.
 [ -e /usr/share/vulkan/icd.d/lvp_icd.x86_64.json ] || need+=(mesa-vulkan-drivers libvulkan1)
+# ... and on its software OpenGL (llvmpipe through EGL), the second backend.
+ls /usr/lib/*/libEGL.so.1 >/dev/null 2>&1 || need+=(libegl1)
+ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || need+=(libgl1-mesa-dri)
 command -v redis-server >/dev/null || need+=(redis-server)
 if [ ${#need[@]} -gt 0 ]; then
   $sudo apt-get update -qq

@@ -33,9 +33,15 @@ struct PlainVertexOut {
     @location(1) distance: f32,
 };
 
+// Depth is written from the distance, as for ray-cast fragments: the
+// rasterised depth of a reversed-Z projection keeps its precision only
+// where clip space ends at 0 (not on GL, whose −1..1 range leaves far
+// distances a few float steps, so the crack-filling mesh below a ray-cast
+// tile could win the depth test against it).
 struct PlainOut {
     @location(0) colour: vec4<f32>,
     @location(1) data: vec4<u32>,
+    @builtin(frag_depth) depth: f32,
 };
 
 fn project(local: vec3<f32>) -> vec4<f32> {
@@ -152,5 +158,7 @@ fn fs_plain(in: PlainVertexOut) -> PlainOut {
         let lambert = max(dot(patch_normal(g, f), tile.sun.xyz), 0.0);
         lit = base * (frame.sky.a + (1.0 - frame.sky.a) * lambert);
     }
-    return PlainOut(vec4<f32>(lit, 1.0), vec4<u32>(0u, 0u, bitcast<u32>(in.distance), 0u));
+    let distance = max(in.distance, 1.0e-30);
+    let data = vec4<u32>(0u, 0u, bitcast<u32>(distance), 0u);
+    return PlainOut(vec4<f32>(lit, 1.0), data, frame.viewport.z / distance);
 }
