@@ -22,6 +22,7 @@
 
 use super::CanopyProxy;
 use crate::geo::EARTH_RADIUS_M;
+use crate::grid::lattice::Globe;
 use crate::grid::{Axis, SampleGrid};
 use crate::noise::{hash2, unit};
 use crate::raster::Raster;
@@ -74,11 +75,13 @@ pub struct ProceduralProxy {
     mean_m: f32,
 }
 
-/// One tree: canonical longitude (radians), size, and the east–west metres
-/// per radian of longitude of its cell row (at the row's middle).
+/// One tree: canonical longitude and latitude (radians), size, and the
+/// east–west metres per radian of longitude of its cell row (at the row's
+/// middle).
 #[derive(Clone, Copy, Debug)]
 struct Tree {
     lon: f64,
+    lat: f64,
     height: f32,
     east_m_per_rad: f64,
 }
@@ -141,11 +144,10 @@ impl ProceduralProxy {
         CellRow { j, columns, column_rad: TAU / columns as f64, east_m_per_rad, reach_rad }
     }
 
-    /// The tree of cell `i` (taken modulo the columns) of `row` and its
-    /// north–south distance in metres from latitude `lat` (radians), if there
-    /// is a tree and its crown reaches that latitude.
+    /// The tree of cell `i` (taken modulo the columns) of `row`, if the cell
+    /// is not a gap.
     #[inline]
-    fn tree(&self, row: CellRow, i: i64, lat: f64) -> Option<(Tree, f64)> {
+    fn planted(&self, row: CellRow, i: i64) -> Option<Tree> {
         let i = i.rem_euclid(row.columns);
         let h = hash2(row.j, i, self.params.seed);
         if unit(h, 0) < self.params.gap_fraction {
@@ -154,18 +156,21 @@ impl ProceduralProxy {
         // Keep centres away from cell edges so crowns of radius ≤ 1 cell reach
         // only neighbouring cells.
         let jitter = |k| 0.15 + 0.7 * unit(h, k);
-        let tree_lat = (row.j as f64 + jitter(2)) * self.row_rad;
-        let dy = (lat - tree_lat) * EARTH_RADIUS_M;
-        if dy.abs() >= self.radius_m {
-            return None;
-        }
         let p = &self.params;
-        let tree = Tree {
+        Some(Tree {
             lon: -PI + (i as f64 + jitter(1)) * row.column_rad,
+            lat: (row.j as f64 + jitter(2)) * self.row_rad,
             height: p.height_m * (1.0 - unit(h, 3) as f32 * p.height_variation),
             east_m_per_rad: row.east_m_per_rad,
-        };
-        Some((tree, dy))
+        })
+    }
+
+    /// North–south metres from latitude `lat` (radians) to `tree`, if its
+    /// crown reaches that latitude.
+    #[inline]
+    fn reaches(&self, tree: &Tree, lat: f64) -> Option<f64> {
+        let dy = (lat - tree.lat) * EARTH_RADIUS_M;
+        (dy.abs() < self.radius_m).then_some(dy)
     }
 
     /// Crown height of `tree` at normalised longitude `lon` (radians), on a
@@ -200,53 +205,6 @@ impl ProceduralProxy {
         }
     }
 
-    /// Full-detail crowns of grid row `r` into `out`, over the column ranges
-    /// `runs` (the wanted samples).
-    fn splat_row(&self, grid: &SampleGrid, r: usize, out: &mut [f32], runs: &[(usize, usize)]) {
-        let globe = grid.globe();
-        let lat = globe.at(0, r as i64).1.to_radians();
-        // Every column's longitude once: crowns overlap, so each is read several times.
-        let lons: Vec<f64> = (0..out.len()).map(|c| globe.at(c as i64, r as i64).0.to_radians()).collect();
-        let lon_of = |c: usize| lons[c];
-        // Rows of cells whose trees (centres 0.15–0.85 into the cell) can
-        // reach this latitude: about 2.3 of the 3 around it.
-        let reach = self.radius_m / EARTH_RADIUS_M;
-        let j_lo = ((lat - reach) / self.row_rad - 0.85).floor() as i64;
-        let j_hi = ((lat + reach) / self.row_rad - 0.15).floor() as i64;
-        let cell_rows: Vec<CellRow> = (j_lo..=j_hi).map(|j| self.cell_row(j)).collect();
-        for &(start, end) in runs {
-            for (start, end) in monotone_segments(start, end, &lon_of) {
-                let (la, lb) = (lon_of(start), lon_of(end - 1));
-                let step = if end - start > 1 { (lb - la) / (end - start - 1) as f64 } else { 1.0 };
-                let per_step = 1.0 / step;
-                let column = |lon: f64| start as f64 + (lon - la) * per_step;
-                for &row in &cell_rows {
-                    let col = |lon: f64| ((lon + PI) / row.column_rad).floor() as i64;
-                    for i in col(la) - 1..=col(lb) + 1 {
-                        let Some((tree, dy)) = self.tree(row, i, lat) else { continue };
-                        // Candidate columns: those within the crown's radius east or
-                        // west, rounded outwards; the crown test is exact.
-                        let half = row.reach_rad;
-                        let mut centre = tree.lon;
-                        // The tree may sit on the other side of the antimeridian from the row.
-                        if centre - la > PI {
-                            centre -= TAU;
-                        } else if la - centre > PI {
-                            centre += TAU;
-                        }
-                        let first = ((column(centre - half) - SLACK).floor() as i64).max(start as i64);
-                        let last = ((column(centre + half) + SLACK).ceil() as i64).min(end as i64 - 1);
-                        let dy2 = dy * dy;
-                        for c in first..=last {
-                            let c = c as usize;
-                            out[c] = out[c].max(self.crown(&tree, lons[c], dy2));
-                        }
-                    }
-                }
-            }
-        }
-    }
-
     fn measure_mean(&self) -> f32 {
         // 50 × 50 cells at a quarter-cell spacing, away from any pole.
         let n = 200;
@@ -254,9 +212,10 @@ impl ProceduralProxy {
         let grid = SampleGrid { lon: Axis::degrees(7.0, step, 0, n), lat: Axis::degrees(0.5, -step, 0, n) };
         let mut row = vec![0.0f32; n];
         let mut sum = 0.0f64;
+        let mut splat = Splat::new(self, &grid);
         for r in 0..n {
             row.fill(0.0);
-            self.splat_row(&grid, r, &mut row, &[(0, n)]);
+            splat.row(r, &mut row, &[(0, n)]);
             sum += row.iter().map(|&v| v as f64).sum::<f64>();
         }
         (sum / (n * n) as f64) as f32
@@ -265,6 +224,163 @@ impl ProceduralProxy {
 
 /// Columns of slack around a crown's chord, for rounding in its end points.
 const SLACK: f64 = 1e-6;
+
+/// Rows of samples one [`Splat`] draws in turn (its trees are reused
+/// between them: a crown spans several rows).
+const BAND_ROWS: usize = 16;
+
+/// Full-detail crowns, drawn row after row over one grid. Trees are planted
+/// (hashed) once per cell and kept while rows go by, each row's longitudes
+/// are computed once, and a crown is evaluated only at the columns under its
+/// chord on the row.
+struct Splat<'a> {
+    proxy: &'a ProceduralProxy,
+    globe: Globe<'a>,
+    /// Longitudes (radians) of the columns, and the bits of the first: rows
+    /// past a pole read the opposite meridian, where it differs.
+    lons: Vec<f64>,
+    lon0_bits: Option<u64>,
+    /// Ranges of columns over which the longitude increases.
+    segments: Vec<(usize, usize)>,
+    /// Trees of the cell rows met so far, per segment.
+    planted: Vec<Planted>,
+}
+
+/// The trees of one cell row over the cells a segment of columns reaches
+/// (none kept when cells are much narrower than columns: each tree then
+/// meets at most one sample, and the cells of a wide grid would not fit).
+struct Planted {
+    row: CellRow,
+    segment: usize,
+    /// Cell index of `trees[0]`.
+    i0: i64,
+    trees: Vec<Cell>,
+}
+
+/// Most cells kept per column of a segment.
+const CELLS_PER_COLUMN: usize = 4;
+
+/// A cell, not yet hashed, without a tree, or with one.
+#[derive(Clone, Copy)]
+enum Cell {
+    Unknown,
+    Gap,
+    Tree(Tree),
+}
+
+impl<'a> Splat<'a> {
+    fn new(proxy: &'a ProceduralProxy, grid: &'a SampleGrid) -> Splat<'a> {
+        Splat {
+            proxy,
+            globe: grid.globe(),
+            lons: Vec::new(),
+            lon0_bits: None,
+            segments: Vec::new(),
+            planted: Vec::new(),
+        }
+    }
+
+    /// Crowns of grid row `r` into `out` (which holds 0 or lower values),
+    /// over the column ranges `runs` (the wanted samples).
+    fn row(&mut self, r: usize, out: &mut [f32], runs: &[(usize, usize)]) {
+        if runs.is_empty() {
+            return;
+        }
+        let p = self.proxy;
+        let lat = self.globe.at(0, r as i64).1.to_radians();
+        self.longitudes(r, out.len());
+        // Rows of cells whose trees (centres 0.15–0.85 into the cell) can
+        // reach this latitude: about 2.3 of the 3 around it.
+        let reach = p.radius_m / EARTH_RADIUS_M;
+        let j_lo = ((lat - reach) / p.row_rad - 0.85).floor() as i64;
+        let j_hi = ((lat + reach) / p.row_rad - 0.15).floor() as i64;
+        let radius2 = p.radius_m * p.radius_m;
+        for s in 0..self.segments.len() {
+            let (start, end) = self.segments[s];
+            let (la, lb) = (self.lons[start], self.lons[end - 1]);
+            let per_step = if end - start > 1 && lb > la { (end - start - 1) as f64 / (lb - la) } else { 1.0 };
+            let column = |lon: f64| start as f64 + (lon - la) * per_step;
+            for &(a, b) in runs {
+                let (a, b) = (a.max(start), b.min(end));
+                if a >= b {
+                    continue;
+                }
+                for j in j_lo..=j_hi {
+                    let k = self.cell_row(j, s);
+                    let row = self.planted[k].row;
+                    let col = |lon: f64| ((lon + PI) / row.column_rad).floor() as i64;
+                    for i in col(self.lons[a]) - 1..=col(self.lons[b - 1]) + 1 {
+                        let Some(tree) = self.tree(k, i) else { continue };
+                        let Some(dy) = p.reaches(&tree, lat) else { continue };
+                        let dy2 = dy * dy;
+                        // The crown's chord on this row, in columns: every
+                        // sample inside the crown lies on it.
+                        let half = (radius2 - dy2).max(0.0).sqrt() / tree.east_m_per_rad;
+                        let mut centre = tree.lon;
+                        // The tree may sit on the other side of the antimeridian from the row.
+                        if centre - la > PI {
+                            centre -= TAU;
+                        } else if la - centre > PI {
+                            centre += TAU;
+                        }
+                        let first = ((column(centre - half) - SLACK).ceil() as i64).max(a as i64);
+                        let last = ((column(centre + half) + SLACK).floor() as i64).min(b as i64 - 1);
+                        for c in first..=last {
+                            let c = c as usize;
+                            out[c] = out[c].max(p.crown(&tree, self.lons[c], dy2));
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Longitudes and monotone segments of row `r`'s `width` columns.
+    fn longitudes(&mut self, r: usize, width: usize) {
+        let first = self.globe.at(0, r as i64).0.to_bits();
+        if self.lon0_bits == Some(first) && self.lons.len() == width {
+            return;
+        }
+        self.lons = (0..width).map(|c| self.globe.at(c as i64, r as i64).0.to_radians()).collect();
+        self.lon0_bits = Some(first);
+        let lons = &self.lons;
+        self.segments = monotone_segments(0, width, &|c| lons[c]);
+        // Cells were indexed along the old segments.
+        self.planted.clear();
+    }
+
+    /// Index in `planted` of cell row `j` over segment `s`.
+    fn cell_row(&mut self, j: i64, s: usize) -> usize {
+        if let Some(k) = self.planted.iter().position(|t| t.row.j == j && t.segment == s) {
+            return k;
+        }
+        let row = self.proxy.cell_row(j);
+        let (start, end) = self.segments[s];
+        let col = |lon: f64| ((lon + PI) / row.column_rad).floor() as i64;
+        let i0 = col(self.lons[start]) - 1;
+        let cells = (col(self.lons[end - 1]) + 2 - i0).max(0) as usize;
+        let cells = if cells <= CELLS_PER_COLUMN * (end - start) + 8 { cells } else { 0 };
+        self.planted.push(Planted { row, segment: s, i0, trees: vec![Cell::Unknown; cells] });
+        self.planted.len() - 1
+    }
+
+    /// The tree of cell `i` of `planted[k]`, planted on first use.
+    #[inline]
+    fn tree(&mut self, k: usize, i: i64) -> Option<Tree> {
+        let set = &mut self.planted[k];
+        if set.trees.is_empty() {
+            return self.proxy.planted(set.row, i);
+        }
+        let cell = &mut set.trees[(i - set.i0) as usize];
+        if let Cell::Unknown = cell {
+            *cell = self.proxy.planted(set.row, i).map_or(Cell::Gap, Cell::Tree);
+        }
+        match *cell {
+            Cell::Tree(t) => Some(t),
+            _ => None,
+        }
+    }
+}
 
 /// Index ranges within `start..end` over which `lon_of` increases (a row
 /// crossing the antimeridian has two).
@@ -301,15 +417,19 @@ impl CanopyProxy for ProceduralProxy {
         let mut out = Raster::filled(grid.width(), grid.height(), 0.0f32);
         let blend = self.blend(grid.lat.step_deg() * crate::geo::METRES_PER_DEGREE);
         let width = grid.width().max(1);
-        out.data_mut().par_chunks_mut(width).enumerate().for_each(|(r, row)| {
-            let spans = runs(row.len(), |c| wanted(c, r));
-            if blend < 1.0 {
-                self.splat_row(grid, r, row, &spans);
-            }
-            if blend > 0.0 {
-                for &(start, end) in &spans {
-                    for v in &mut row[start..end] {
-                        *v += blend * (self.mean_m - *v);
+        out.data_mut().par_chunks_mut(width * BAND_ROWS).enumerate().for_each(|(band, rows)| {
+            let mut splat = Splat::new(self, grid);
+            for (k, row) in rows.chunks_mut(width).enumerate() {
+                let r = band * BAND_ROWS + k;
+                let spans = runs(row.len(), |c| wanted(c, r));
+                if blend < 1.0 {
+                    splat.row(r, row, &spans);
+                }
+                if blend > 0.0 {
+                    for &(start, end) in &spans {
+                        for v in &mut row[start..end] {
+                            *v += blend * (self.mean_m - *v);
+                        }
                     }
                 }
             }
@@ -358,7 +478,7 @@ mod tests {
             let row = p.cell_row(j);
             let i0 = ((lon + PI) / row.column_rad).floor() as i64;
             for i in i0 - 1..=i0 + 1 {
-                if let Some((t, dy)) = p.tree(row, i, lat) {
+                if let Some((t, dy)) = p.planted(row, i).and_then(|t| Some((t, p.reaches(&t, lat)?))) {
                     best = best.max(p.crown(&t, lon, dy * dy));
                 }
             }
