@@ -94,8 +94,6 @@ struct CellRow {
     columns: i64,
     column_rad: f64,
     east_m_per_rad: f64,
-    /// Longitude a crown reaches east and west of its centre, radians.
-    reach_rad: f64,
 }
 
 impl ProceduralProxy {
@@ -140,8 +138,7 @@ impl ProceduralProxy {
         let lat = ((j as f64 + 0.5) * self.row_rad).clamp(-PI / 2.0, PI / 2.0);
         let east_m_per_rad = EARTH_RADIUS_M * lat.cos();
         let columns = ((TAU * east_m_per_rad / self.params.cell_m).floor() as i64).max(1);
-        let reach_rad = self.radius_m / east_m_per_rad.max(1e-9);
-        CellRow { j, columns, column_rad: TAU / columns as f64, east_m_per_rad, reach_rad }
+        CellRow { j, columns, column_rad: TAU / columns as f64, east_m_per_rad }
     }
 
     /// The tree of cell `i` (taken modulo the columns) of `row`, if the cell
