@@ -120,6 +120,17 @@ enum Command {
         /// Shadow samples per hit (0: none).
         #[arg(long, default_value_t = 10)]
         shadow_steps: u32,
+        /// Tile selection: `sse` (refine to --max-error-px) or `budget`
+        /// (the most benefit whose predicted frame time fits --budget-ms).
+        #[arg(long, default_value = "sse")]
+        lod: String,
+        /// Frame budget of `--lod budget`, ms.
+        #[arg(long, default_value_t = 33.0)]
+        budget_ms: f64,
+        /// Frames between selections of `--lod budget` (the selection
+        /// thread's period).
+        #[arg(long, default_value_t = 1)]
+        select_every: u32,
         /// Largest projected tile error, pixels.
         #[arg(long, default_value_t = 2.0)]
         max_error_px: f64,
@@ -410,16 +421,42 @@ fn run(command: Command) -> Result<()> {
             Ok(())
         }
         #[cfg(feature = "client")]
-        Command::Fly { config, server, path, frames, size, out, traversal, shadow_steps, max_error_px, max_level, gpu_budget_mib, no_frames } => {
+        Command::Fly {
+            config,
+            server,
+            path,
+            frames,
+            size,
+            out,
+            traversal,
+            shadow_steps,
+            lod,
+            budget_ms,
+            select_every,
+            max_error_px,
+            max_level,
+            gpu_budget_mib,
+            no_frames,
+        } => {
+            let mode = match lod.as_str() {
+                "sse" => sylva::client::fly::LodMode::Sse,
+                "budget" if budget_ms.is_finite() && budget_ms > 0.0 => {
+                    sylva::client::fly::LodMode::Budget { budget_ms, select_every }
+                }
+                "budget" => anyhow::bail!("--budget-ms {budget_ms} is not a positive number of milliseconds"),
+                other => anyhow::bail!("unknown --lod {other:?}; expected sse or budget"),
+            };
             let options = sylva::client::fly::FlyOptions {
                 frames,
                 size: parse_size(&size)?,
                 out_dir: Some(out),
                 write_frames: !no_frames,
-                traversal: sylva::client::fly::parse_traversal(&traversal)
-                    .ok_or_else(|| anyhow::anyhow!("unknown traversal {traversal:?}; expected exact or linear:STEPS"))?,
+                traversal: sylva::client::fly::parse_traversal(&traversal).ok_or_else(|| {
+                    anyhow::anyhow!("unknown traversal {traversal:?}; expected exact or linear:STEPS")
+                })?,
                 shadow_steps,
                 lod: sylva::client::quadtree::LodRule { max_error_px, max_level },
+                mode,
                 ..Default::default()
             };
             let path = sylva::client::path::CameraPath::load(&path)?;
