@@ -17,7 +17,10 @@
 //! above `q` the pixel-weighted mean of the regions it spans (which costs
 //! exactly what the regions were charged, cost being linear in steps).
 //! `q` is the deepest level with at most [`MAX_REGIONS`] regions.
-//! A region's full-resolution benefit is [`SHADOW_WORTH`] of its pixels.
+//! A region's full-resolution benefit is [`SHADOW_WORTH`] of the benefit of
+//! its head's geometry: shadows sharpen what the terrain shows, so they
+//! never outweigh refining it (weighed by pixels, full shadows on one
+//! coarse tile beat refining the whole view).
 //!
 //! Invariant: the cut is feasible as [`optimize`] answers it (steps are
 //! rounded down), and draws at most `max_tiles` tiles (the GPU cache's
@@ -178,7 +181,8 @@ impl Regions {
         regions
     }
 
-    /// A variable per region: its pixels' worth and their cost per step.
+    /// A variable per region: its geometry's worth and its pixels' cost
+    /// per step.
     fn variables(&self, candidates: &[Candidate], model: &CostModel) -> Vec<Continuous> {
         let per_step = CostFeatures { shadow_mpx_steps: 1e-6, ..CostFeatures::default() };
         let ms_per_px_step = model.marginal_ms(&per_step);
@@ -188,7 +192,7 @@ impl Regions {
                 let c = &candidates[h as usize];
                 let casts = c.ray_px > 0.0;
                 Continuous {
-                    weight: if casts { SHADOW_WORTH * c.seen_px } else { 0.0 },
+                    weight: if casts { SHADOW_WORTH * c.benefit } else { 0.0 },
                     capacity: f64::from(MAX_SHADOW_STEPS),
                     cost_per_unit_ms: ms_per_px_step * c.ray_px,
                 }
