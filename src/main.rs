@@ -285,6 +285,10 @@ enum Bench {
         /// Where to write the plots (lod_demo.png, lod_rmnp.png).
         #[arg(long)]
         plots: Option<PathBuf>,
+        /// Output directories of `sylva fly --lod budget`: their predicted
+        /// and measured frame times against the budget.
+        #[arg(long, num_args = 0..)]
+        flights: Vec<PathBuf>,
     },
     /// The server over loopback HTTP beside MapServer and MapProxy: GetMap,
     /// uncached and cached tile latency and throughput, memory.
@@ -397,8 +401,8 @@ fn run(command: Command) -> Result<()> {
             println!("{}", sylva::bench::pipeline_report(&rmnp, &labels, build_side)?);
             Ok(())
         }
-        Command::Bench { what: Bench::Lod { rmnp, frames, plots } } => {
-            println!("{}", sylva::bench::lod_report(&rmnp, frames, plots.as_deref())?);
+        Command::Bench { what: Bench::Lod { rmnp, frames, plots, flights } } => {
+            println!("{}", sylva::bench::lod_report(&rmnp, frames, plots.as_deref(), &flights)?);
             Ok(())
         }
         #[cfg(feature = "server")]

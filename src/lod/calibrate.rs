@@ -14,9 +14,14 @@
 //!
 //! Invariants: constants stay finite and non-negative; a non-finite or
 //! non-positive measurement, or one far from the prediction after warm-up
-//! (a hitch: shader compilation, a page fault), changes nothing.
+//! (a hitch: shader compilation, a page fault), changes nothing, unless
+//! more than [`MAX_HITCHES`] come in a row.
 
 use super::model::{CostFeatures, CostModel, FEATURES};
+
+/// Outliers in a row that are hitches; the next one is taken: the model,
+/// not the frame, is off (else a wrong model would never be corrected).
+pub const MAX_HITCHES: u32 = 2;
 
 /// Settings of a [`CostCalibrator`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -49,12 +54,22 @@ pub struct CostCalibrator {
     a: [[f64; FEATURES]; FEATURES],
     b: [f64; FEATURES],
     frames: u32,
+    /// Outliers rejected since the last frame used.
+    hitches: u32,
 }
 
 impl CostCalibrator {
     /// A calibrator starting from `prior`.
     pub fn new(prior: CostModel, settings: CalibratorSettings) -> CostCalibrator {
-        CostCalibrator { settings, prior, model: prior, a: [[0.0; FEATURES]; FEATURES], b: [0.0; FEATURES], frames: 0 }
+        CostCalibrator {
+            settings,
+            prior,
+            model: prior,
+            a: [[0.0; FEATURES]; FEATURES],
+            b: [0.0; FEATURES],
+            frames: 0,
+            hitches: 0,
+        }
     }
 
     /// The current model.
@@ -70,9 +85,14 @@ impl CostCalibrator {
     /// Records one frame: what was drawn and how long it took. Returns
     /// whether the frame was used.
     pub fn observe(&mut self, features: &CostFeatures, measured_ms: f64) -> bool {
-        if !measured_ms.is_finite() || measured_ms <= 0.0 || self.is_outlier(features, measured_ms) {
+        if !measured_ms.is_finite() || measured_ms <= 0.0 {
             return false;
         }
+        if self.is_outlier(features, measured_ms) && self.hitches < MAX_HITCHES {
+            self.hitches += 1;
+            return false;
+        }
+        self.hitches = 0;
         let f = features.vector();
         let g = self.settings.forgetting.clamp(0.0, 1.0);
         for i in 0..FEATURES {
@@ -263,6 +283,21 @@ mod tests {
         }
         assert_eq!(cal.model(), before);
         assert_eq!(cal.frames(), 50);
+    }
+
+    #[test]
+    fn a_lasting_change_is_not_a_hitch() {
+        let mut cal = CostCalibrator::new(CostModel::default(), CalibratorSettings::default());
+        for k in 0..100 {
+            cal.observe(&frame(k), measure(&TRUTH, &frame(k), k));
+        }
+        // Five times slower for good: two frames are taken for hitches,
+        // then the model follows.
+        let slow = CostModel { constants_ms: TRUTH.constants_ms.map(|c| 5.0 * c) };
+        let used: Vec<bool> = (100..400).map(|k| cal.observe(&frame(k), measure(&slow, &frame(k), k))).collect();
+        assert_eq!(used[..3], [false, false, true]);
+        let error = relative_error(&cal.model(), &slow, 10_000);
+        assert!(error < 0.05, "{error} after {} frames used", used.iter().filter(|u| **u).count());
     }
 
     #[test]

@@ -13,6 +13,10 @@
 //! `s + e` the same way). Its children are candidates while it has fewer
 //! samples than pixels for some camera, down to the deepest level.
 //!
+//! Tiles holding less of the region than [`MIN_SAMPLES_PER_SIDE`]² samples
+//! are not candidates: the walk passes through them, and the first
+//! drawable tiles below are the roots (the coarsest cut).
+//!
 //! Its cost is in pixels: the most any camera sees of it, unless the
 //! renderer would draw it plain ([`raycast::plain`], from the terrain
 //! mesh's error once the tile has been loaded).
@@ -100,6 +104,10 @@ pub fn candidates(scope: &Scope) -> Candidates {
         if !in_view {
             continue;
         }
+        if !drawable(&frame, &scope.bounds) && id.level < scope.max_level {
+            stack.extend(id.children().map(|c| (c, parent)));
+            continue;
+        }
         let judged = judge(scope, &frame, (lo, hi), (box_lo, box_hi));
         let index = out.tiles.len() as u32;
         out.tiles.push(Candidate { id, parent, ..judged.candidate });
@@ -175,6 +183,17 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
         candidate: Candidate { id: frame.id, parent: None, benefit: benefit / k, seen_px: seen / k, ray_px: ray },
         refinable,
     }
+}
+
+/// Samples per side a tile must hold inside the region to be drawn: a
+/// coarser one shows a few samples of the region (the demo's level-0 tile
+/// holds 3 × 2), which the renderer draws as nothing.
+pub const MIN_SAMPLES_PER_SIDE: f64 = 32.0;
+
+/// Whether the tile of `frame` holds enough of the region to be drawn.
+fn drawable(frame: &TileFrame, bounds: &BBox) -> bool {
+    let n = f64::from(frame.samples.saturating_sub(1));
+    inside(&frame.sector, bounds).1 * n * n >= MIN_SAMPLES_PER_SIDE * MIN_SAMPLES_PER_SIDE
 }
 
 /// The part of `sector` inside the region (a coarse tile holds data only
@@ -254,6 +273,17 @@ mod tests {
         assert!(nearest_deep < 1.5, "{nearest_deep} km");
         let far_level = c.tiles.iter().filter(|t| km(t) > 8.0).map(|t| t.id.level).max().unwrap();
         assert!(far_level + 2 <= deepest, "{far_level} far, {deepest} near");
+    }
+
+    #[test]
+    fn tiles_holding_a_few_samples_of_the_region_are_passed_through() {
+        let camera = Camera::looking(Geodetic::new(10.1, 46.32, 2500.0), 10.0, -15.0, 60.0, (320, 240));
+        let c = walk(camera, None, 16);
+        // The region is 0.25° × 0.15°: a level-4 tile (2.25°) holds ~44²
+        // samples of it, a level-3 one ~22².
+        let roots: Vec<u32> = c.tiles.iter().filter(|t| t.parent.is_none()).map(|t| t.id.level).collect();
+        assert!(!roots.is_empty() && roots.iter().all(|&l| l == 4), "{roots:?}");
+        assert!(c.tiles.iter().all(|t| t.id.level >= 4));
     }
 
     #[test]

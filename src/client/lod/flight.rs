@@ -19,7 +19,7 @@ use crate::lod::predict::PathPredictor;
 /// time them with ±50 % noise (lavapipe on a shared machine); constants
 /// separate only as frames keep disagreeing with the prior's proportions.
 pub fn calibration() -> CalibratorSettings {
-    CalibratorSettings { ridge: 0.3, ..CalibratorSettings::default() }
+    CalibratorSettings { ridge: 0.03, ..CalibratorSettings::default() }
 }
 
 /// The selection state of a flight.
