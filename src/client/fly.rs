@@ -129,6 +129,11 @@ pub struct FrameRecord {
     pub budget_ms: Option<f64>,
     /// The selection's predicted frame time, ms (budget mode).
     pub predicted_ms: Option<f64>,
+    /// Candidate tiles of the selection (budget mode).
+    pub candidates: Option<usize>,
+    /// The selection's benefit over the optimiser's upper bound (budget
+    /// mode).
+    pub benefit_bound: Option<f64>,
     /// Mean shadow steps over the tiles drawn.
     pub shadow_steps_mean: f64,
 }
@@ -256,7 +261,8 @@ fn frame(
     let draws: Vec<Draw> =
         tiles.iter().zip(&chosen.steps).map(|(t, &shadow_steps)| Draw { tile: t.as_ref(), shadow_steps }).collect();
     let out = renderer.render_draws(&camera, &draws, &settings, Readback::All)?;
-    let predicted_ms = chosen.selected.as_ref().map(|s| s.cut.predicted_ms);
+    let selected = chosen.selected.as_ref();
+    let predicted_ms = selected.map(|s| s.cut.predicted_ms);
     let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
     if let Some(lod) = lod {
         let drawn: Vec<Choice> =
@@ -300,6 +306,8 @@ fn frame(
         selection_ms: chosen.selected.as_ref().map_or(cpu_ms, |s| s.ms),
         budget_ms,
         predicted_ms,
+        candidates: selected.map(|s| s.candidates),
+        benefit_bound: selected.map(|s| s.cut.benefit / s.cut.upper_bound),
         shadow_steps_mean: chosen.steps.iter().map(|&s| f64::from(s)).sum::<f64>() / chosen.steps.len().max(1) as f64,
     })
 }
@@ -339,7 +347,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     let mut out = Vec::new();
     let _ = writeln!(
         out,
-        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean"
+        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound"
     );
     for r in records {
         let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
@@ -347,7 +355,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
         let gpu = optional(r.gpu_ms);
         let _ = writeln!(
             out,
-            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2}",
+            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{}",
             r.frame,
             r.cpu_ms,
             r.render_ms,
@@ -367,7 +375,9 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             r.selection_ms,
             optional(r.budget_ms),
             optional(r.predicted_ms),
-            r.shadow_steps_mean
+            r.shadow_steps_mean,
+            r.candidates.map_or(String::new(), |n| n.to_string()),
+            optional(r.benefit_bound)
         );
     }
     String::from_utf8_lossy(&out).into_owned()

@@ -122,6 +122,9 @@ fn a_flight_under_a_frame_budget_reports_its_predicted_frame_time() {
         assert!(number(t, "predicted_ms") > number(t, "budget_ms"), "{t:?}");
         assert!(number(l, "predicted_ms") <= number(l, "budget_ms"), "{l:?}");
         assert!(number(l, "tiles") > number(t, "tiles"), "{t:?} {l:?}");
+        assert!(number(l, "candidates") >= number(l, "tiles"), "{l:?}");
+        let reached = number(l, "benefit_bound");
+        assert!(reached > 0.5 && reached <= 1.0 + 1e-9, "{l:?}");
         // The sun is up: a rich budget buys shadows, a poor one none.
         assert!(number(l, "shadow_steps_mean") > number(t, "shadow_steps_mean"), "{t:?} {l:?}");
     }

@@ -71,13 +71,11 @@ pub struct Scope<'a> {
     pub limit: usize,
 }
 
-/// The candidates, parents before children, and the nodes visited.
+/// The candidates, parents before children.
 #[derive(Clone, Debug, Default)]
 pub struct Candidates {
     /// The candidates.
     pub tiles: Vec<Candidate>,
-    /// Quadtree nodes visited.
-    pub visited: usize,
 }
 
 /// Walks the quadtree over `scope`.
@@ -95,7 +93,6 @@ pub fn candidates(scope: &Scope) -> Candidates {
         if !overlaps(&sector, &area) {
             continue;
         }
-        out.visited += 1;
         let (lo, hi) = (scope.range)(id).unwrap_or(UNKNOWN_RANGE_M);
         let frame = TileFrame::new(&scope.grid, id);
         let (box_lo, box_hi) = local_box(&frame, lo, hi);
