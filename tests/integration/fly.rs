@@ -93,6 +93,10 @@ fn bad_flight_input_is_explained() {
     let path = common::repo().join("config/paths/demo_valley.toml");
     let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--traversal", "linear:0"]);
     assert!(String::from_utf8_lossy(&e.stderr).contains("linear:STEPS"));
+    let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--lod", "fastest"]);
+    assert!(String::from_utf8_lossy(&e.stderr).contains("sse or budget"));
+    let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--lod", "budget", "--budget-ms", "0"]);
+    assert!(String::from_utf8_lossy(&e.stderr).contains("--budget-ms 0 is not a positive"));
     let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--server", "http://127.0.0.1:9"]);
     assert!(String::from_utf8_lossy(&e.stderr).contains("tiles.json"), "{}", String::from_utf8_lossy(&e.stderr));
 }

@@ -150,6 +150,17 @@ mod tests {
     }
 
     #[test]
+    fn a_selection_is_started_once_per_tau() {
+        let mut f = flight();
+        f.frame(0.0, &camera(10.05));
+        // Half of τ later nothing new is started; a whole τ later it is.
+        f.frame(0.5, &camera(10.06));
+        assert!(!f.worker.busy() && f.requested_s == 0.0);
+        f.frame(1.0, &camera(10.07));
+        assert_eq!(f.requested_s, 1.0);
+    }
+
+    #[test]
     fn measured_frames_calibrate_the_model() {
         let mut f = flight();
         let cam = camera(10.05);
