@@ -4,11 +4,14 @@
 //! cast them on the GPU — and records per-frame statistics: CPU and GPU
 //! time, tiles drawn per level and how, texture fetches per pixel (the ray
 //! steps), bytes fetched and memory resident; under a budget also the
-//! predicted frame time, which the measured one calibrates.
+//! predicted frame time, which the measured one calibrates, and refined
+//! tiles geomorph from the coarser tile they replace
+//! ([`super::lod::morphs`]).
 
 use super::lod::ahead::Lookahead;
 use super::lod::budget::{Budget, Choice};
 use super::lod::flight::BudgetFlight;
+use super::lod::morphs;
 use super::lod::{Selected, Selector};
 use super::path::CameraPath;
 use super::quadtree::{self, LodRule};
@@ -136,6 +139,8 @@ pub struct FrameRecord {
     pub benefit_bound: Option<f64>,
     /// Mean shadow steps over the tiles drawn.
     pub shadow_steps_mean: f64,
+    /// Tiles drawn morphing from a coarser one (budget mode).
+    pub morphing: usize,
 }
 
 /// Why a flight stopped.
@@ -213,6 +218,8 @@ struct Chosen {
     steps: Vec<u32>,
     error_px: f64,
     selected: Option<Selected>,
+    /// Tiles drawn morphing from a coarser one.
+    morphing: usize,
 }
 
 /// The frame's tiles: by screen-space error, or under the budget.
@@ -226,14 +233,24 @@ fn choose(
     let Some(lod) = lod else {
         let (tiles, error_px) = visible_tiles(source, store, camera, options, slots)?;
         let steps = vec![options.shadow_steps; tiles.len()];
-        return Ok(Chosen { tiles, steps, error_px, selected: None });
+        return Ok(Chosen { tiles, steps, error_px, selected: None, morphing: 0 });
     };
     let selected = lod.frame(t_s, camera);
     let ids: Vec<_> = selected.cut.tiles.iter().map(|c| c.id).collect();
-    let tiles = store.get(source, &ids)?;
+    let mut tiles = store.get(source, &ids)?;
+    let drawn: Vec<_> = tiles.iter().map(|t| t.id()).collect();
+    let morphing = lod.morphs(t_s, &drawn);
+    for m in &morphing {
+        let (Some(k), Some(from)) = (drawn.iter().position(|&id| id == m.tile), store.get(source, &[m.from])?.pop())
+        else {
+            continue;
+        };
+        let blended = morphs::blend(&source.grid(), &tiles[k], &from, m.weight).map_err(LoadError::from)?;
+        tiles[k] = Arc::new(blended);
+    }
     let steps_of: std::collections::HashMap<_, _> = selected.cut.tiles.iter().map(|c| (c.id, c.shadow_steps)).collect();
     let steps = tiles.iter().map(|t| steps_of.get(&t.id()).copied().unwrap_or(0)).collect();
-    Ok(Chosen { tiles, steps, error_px: f64::NAN, selected: Some(selected) })
+    Ok(Chosen { tiles, steps, error_px: f64::NAN, selected: Some(selected), morphing: morphing.len() })
 }
 
 fn frame(
@@ -308,6 +325,7 @@ fn frame(
         predicted_ms,
         candidates: selected.map(|s| s.candidates),
         benefit_bound: selected.map(|s| s.cut.benefit / s.cut.upper_bound),
+        morphing: chosen.morphing,
         shadow_steps_mean: chosen.steps.iter().map(|&s| f64::from(s)).sum::<f64>() / chosen.steps.len().max(1) as f64,
     })
 }
@@ -347,7 +365,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     let mut out = Vec::new();
     let _ = writeln!(
         out,
-        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound"
+        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,morphing"
     );
     for r in records {
         let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
@@ -355,7 +373,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
         let gpu = optional(r.gpu_ms);
         let _ = writeln!(
             out,
-            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{}",
+            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{}",
             r.frame,
             r.cpu_ms,
             r.render_ms,
@@ -377,7 +395,8 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             optional(r.predicted_ms),
             r.shadow_steps_mean,
             r.candidates.map_or(String::new(), |n| n.to_string()),
-            optional(r.benefit_bound)
+            optional(r.benefit_bound),
+            r.morphing
         );
     }
     String::from_utf8_lossy(&out).into_owned()

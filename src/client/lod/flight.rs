@@ -4,12 +4,15 @@
 //! thread ([`super::worker`]) while the last finished cut is drawn; after
 //! each frame its features and measured time go to the calibrator (001
 //! §4.2), so the next selection predicts with constants fitted to this GPU.
+//! It also keeps the geomorphs of the cuts drawn ([`super::morphs`]).
 
 use super::super::camera::Camera;
 use super::ahead::{self, Lookahead, WINDOW};
 use super::budget::{Budget, Choice};
+use super::morphs::{Morphing, Morphs};
 use super::worker::{Request, Worker};
 use super::{Selected, Selector};
+use crate::grid::TileId;
 use crate::lod::calibrate::{CalibratorSettings, CostCalibrator};
 use crate::lod::model::{CostFeatures, CostModel};
 use crate::lod::predict::PathPredictor;
@@ -35,6 +38,7 @@ pub struct BudgetFlight {
     /// Flight time of the last request.
     requested_s: f64,
     frames: usize,
+    morphs: Morphs,
 }
 
 impl BudgetFlight {
@@ -51,6 +55,7 @@ impl BudgetFlight {
             current: None,
             requested_s: f64::NEG_INFINITY,
             frames: 0,
+            morphs: Morphs::new(look.tau_s),
         })
     }
 
@@ -86,6 +91,12 @@ impl BudgetFlight {
         self.current
             .get_or_insert_with(|| self.selector.select(std::slice::from_ref(camera), None, &model, &self.budget))
             .clone()
+    }
+
+    /// Which tiles of `drawn`, the cut drawn at `t_s`, morph from a
+    /// coarser tile (over `τ`).
+    pub fn morphs(&mut self, t_s: f64, drawn: &[TileId]) -> Vec<Morphing> {
+        self.morphs.update(t_s, drawn)
     }
 
     /// Records a drawn frame: its tiles as drawn from `camera` and its

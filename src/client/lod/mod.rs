@@ -11,6 +11,8 @@
 //! - [`ahead`]: the predicted cameras and the conservative cone a
 //!   selection is for.
 //! - [`worker`]: the selection thread.
+//! - [`morphs`]: geomorphs of refined tiles from the coarser tile drawn
+//!   before.
 //! - [`flight`]: a flight's selections, amortised over frames on the
 //!   selection thread, and the cost model calibrated from its measured
 //!   frame times.
@@ -22,6 +24,7 @@ pub mod budget;
 pub mod candidates;
 pub mod coverage;
 pub mod flight;
+pub mod morphs;
 pub mod worker;
 
 use super::camera::Camera;
