@@ -131,6 +131,10 @@ enum Command {
         /// thread's period).
         #[arg(long, default_value_t = 1)]
         select_every: u32,
+        /// Geomorph between tile levels over the selection period (`--lod
+        /// budget`; morphing tiles are uploaded again every frame).
+        #[arg(long)]
+        geomorph: bool,
         /// Largest projected tile error, pixels.
         #[arg(long, default_value_t = 2.0)]
         max_error_px: f64,
@@ -437,6 +441,7 @@ fn run(command: Command) -> Result<()> {
             lod,
             budget_ms,
             select_every,
+            geomorph,
             max_error_px,
             max_level,
             gpu_budget_mib,
@@ -461,6 +466,7 @@ fn run(command: Command) -> Result<()> {
                 shadow_steps,
                 lod: sylva::client::quadtree::LodRule { max_error_px, max_level },
                 mode,
+                geomorph,
                 ..Default::default()
             };
             let path = sylva::client::path::CameraPath::load(&path)?;

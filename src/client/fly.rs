@@ -4,9 +4,8 @@
 //! cast them on the GPU — and records per-frame statistics: CPU and GPU
 //! time, tiles drawn per level and how, texture fetches per pixel (the ray
 //! steps), bytes fetched and memory resident; under a budget also the
-//! predicted frame time, which the measured one calibrates, and refined
-//! tiles geomorph from the coarser tile they replace
-//! ([`super::lod::morphs`]).
+//! predicted frame time, which the measured one calibrates, and, asked to,
+//! tiles geomorph between levels ([`super::lod::morphs`]).
 
 use super::lod::ahead::Lookahead;
 use super::lod::budget::{Budget, Choice};
@@ -66,6 +65,9 @@ pub struct FlyOptions {
     pub lod: LodRule,
     /// How tiles are chosen.
     pub mode: LodMode,
+    /// Geomorph between tile levels (budget mode): morphing tiles are
+    /// prepared and uploaded again every frame of their morph.
+    pub geomorph: bool,
     /// Halo requested with every tile, samples.
     pub halo: usize,
     /// The canopy fade: reference height (m), then low and high (px).
@@ -85,6 +87,7 @@ impl Default for FlyOptions {
             shadow_steps: 10,
             lod: LodRule { max_error_px: 2.0, max_level: 13 },
             mode: LodMode::Sse,
+            geomorph: false,
             halo: 32,
             fade: (30.0, 0.5, 2.0),
             in_flight: 8,
@@ -196,7 +199,7 @@ pub fn fly(
             let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
             let look =
                 Lookahead { tau_s: frame_s * f64::from(select_every.max(1)), limits: path.motion_limits(MOTION_STEPS) };
-            Some(BudgetFlight::new(selector, budget, look).map_err(FlyError::Thread)?)
+            Some(BudgetFlight::new(selector, budget, look, options.geomorph).map_err(FlyError::Thread)?)
         }
     };
     let mut records = Vec::with_capacity(options.frames);
@@ -281,7 +284,9 @@ fn frame(
     let selected = chosen.selected.as_ref();
     let predicted_ms = selected.map(|s| s.cut.predicted_ms);
     let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
-    if let Some(lod) = lod {
+    // Morphing tiles are prepared and uploaded again every frame, a cost the
+    // model has no term for: such frames do not calibrate it.
+    if let Some(lod) = lod.filter(|_| chosen.morphing == 0) {
         let drawn: Vec<Choice> =
             draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
         lod.observe(&camera, &drawn, out.stats.gpu_ms.unwrap_or(out.stats.wall_ms));

@@ -19,8 +19,9 @@
 
 use super::model::{CostFeatures, CostModel, FEATURES};
 
-/// Outliers in a row that are hitches; the next one is taken: the model,
-/// not the frame, is off (else a wrong model would never be corrected).
+/// Outliers in a row that are hitches; from the next one on they are
+/// taken until a frame fits again: the model, not the frame, is off (else
+/// a wrong model would never be corrected).
 pub const MAX_HITCHES: u32 = 2;
 
 /// Settings of a [`CostCalibrator`].
@@ -54,7 +55,7 @@ pub struct CostCalibrator {
     a: [[f64; FEATURES]; FEATURES],
     b: [f64; FEATURES],
     frames: u32,
-    /// Outliers rejected since the last frame used.
+    /// Outliers rejected since the last frame that fitted.
     hitches: u32,
 }
 
@@ -88,11 +89,14 @@ impl CostCalibrator {
         if !measured_ms.is_finite() || measured_ms <= 0.0 {
             return false;
         }
-        if self.is_outlier(features, measured_ms) && self.hitches < MAX_HITCHES {
+        let outlier = self.is_outlier(features, measured_ms);
+        if outlier && self.hitches < MAX_HITCHES {
             self.hitches += 1;
             return false;
         }
-        self.hitches = 0;
+        if !outlier {
+            self.hitches = 0;
+        }
         let f = features.vector();
         let g = self.settings.forgetting.clamp(0.0, 1.0);
         for i in 0..FEATURES {
@@ -292,10 +296,10 @@ mod tests {
             cal.observe(&frame(k), measure(&TRUTH, &frame(k), k));
         }
         // Five times slower for good: two frames are taken for hitches,
-        // then the model follows.
+        // then every frame until the model fits again.
         let slow = CostModel { constants_ms: TRUTH.constants_ms.map(|c| 5.0 * c) };
         let used: Vec<bool> = (100..400).map(|k| cal.observe(&frame(k), measure(&slow, &frame(k), k))).collect();
-        assert_eq!(used[..3], [false, false, true]);
+        assert_eq!(used[..4], [false, false, true, true]);
         let error = relative_error(&cal.model(), &slow, 10_000);
         assert!(error < 0.05, "{error} after {} frames used", used.iter().filter(|u| **u).count());
     }

@@ -4,7 +4,8 @@
 //! thread ([`super::worker`]) while the last finished cut is drawn; after
 //! each frame its features and measured time go to the calibrator (001
 //! §4.2), so the next selection predicts with constants fitted to this GPU.
-//! It also keeps the geomorphs of the cuts drawn ([`super::morphs`]).
+//! With geomorphing on it also keeps the morphs of the cuts drawn
+//! ([`super::morphs`]).
 
 use super::super::camera::Camera;
 use super::ahead::{self, Lookahead, WINDOW};
@@ -35,16 +36,20 @@ pub struct BudgetFlight {
     worker: Worker,
     /// The cut drawn now.
     current: Option<Selected>,
+    /// A cut that coarsens the current one, drawn once the tiles it
+    /// replaces have morphed onto its coarser tiles.
+    pending: Option<Pending>,
     /// Flight time of the last request.
     requested_s: f64,
     frames: usize,
-    morphs: Morphs,
+    /// The morphs, with geomorphing on.
+    morphs: Option<Morphs>,
 }
 
 impl BudgetFlight {
     /// A flight of frames of `budget` looking ahead by `look`, starting
-    /// from the default cost model.
-    pub fn new(selector: Selector, budget: Budget, look: Lookahead) -> std::io::Result<BudgetFlight> {
+    /// from the default cost model, geomorphing or not.
+    pub fn new(selector: Selector, budget: Budget, look: Lookahead, geomorph: bool) -> std::io::Result<BudgetFlight> {
         Ok(BudgetFlight {
             worker: Worker::spawn(selector.clone())?,
             selector,
@@ -53,9 +58,10 @@ impl BudgetFlight {
             look,
             predictor: PathPredictor::new(WINDOW),
             current: None,
+            pending: None,
             requested_s: f64::NEG_INFINITY,
             frames: 0,
-            morphs: Morphs::new(look.tau_s),
+            morphs: geomorph.then(|| Morphs::new(look.tau_s)),
         })
     }
 
@@ -74,8 +80,13 @@ impl BudgetFlight {
     /// selection when `τ` has passed since the last and the thread is idle.
     pub fn frame(&mut self, t_s: f64, camera: &Camera) -> Selected {
         self.predictor.observe(t_s, ahead::pose(camera));
+        if self.morphs.as_ref().is_none_or(Morphs::settled)
+            && let Some(p) = self.pending.take()
+        {
+            self.current = Some(p.selected);
+        }
         if let Some(done) = self.worker.take(false) {
-            self.current = Some(done);
+            self.offer(done, t_s);
         }
         if !self.worker.busy() && t_s >= self.requested_s + self.look.tau_s {
             let (cameras, cone) = ahead::ahead(&self.predictor, camera, t_s, &self.look);
@@ -93,10 +104,31 @@ impl BudgetFlight {
             .clone()
     }
 
-    /// Which tiles of `drawn`, the cut drawn at `t_s`, morph from a
+    /// Which tiles of `drawn`, the cut drawn at `t_s`, morph from or to a
     /// coarser tile (over `τ`).
     pub fn morphs(&mut self, t_s: f64, drawn: &[TileId]) -> Vec<Morphing> {
-        self.morphs.update(t_s, drawn)
+        let next: Option<Vec<TileId>> = self.pending.as_ref().map(|p| ids(&p.selected));
+        let since_s = self.pending.as_ref().map_or(t_s, |p| p.since_s);
+        let Some(morphs) = &mut self.morphs else { return Vec::new() };
+        morphs.update(t_s, drawn, next.as_deref().map(|n| (n, since_s)))
+    }
+
+    /// A finished selection: drawn at once unless, geomorphing, it
+    /// coarsens the cut drawn: then it is held while the tiles it replaces
+    /// morph down (a newer one replaces it there, the morphs keep their
+    /// start).
+    fn offer(&mut self, next: Selected, t_s: f64) {
+        let Some(current) = &self.current else {
+            self.current = Some(next);
+            return;
+        };
+        if let Some(p) = &mut self.pending {
+            p.selected = next;
+        } else if self.morphs.is_some() && coarsens(current, &next) {
+            self.pending = Some(Pending { selected: next, since_s: t_s });
+        } else {
+            self.current = Some(next);
+        }
     }
 
     /// Records a drawn frame: its tiles as drawn from `camera` and its
@@ -111,6 +143,22 @@ impl BudgetFlight {
         self.frames += 1;
         features
     }
+}
+
+/// A cut waiting for downmorphs, and when they began.
+struct Pending {
+    selected: Selected,
+    since_s: f64,
+}
+
+fn ids(s: &Selected) -> Vec<TileId> {
+    s.cut.tiles.iter().map(|c| c.id).collect()
+}
+
+/// Whether `next` draws a strict ancestor of a tile `current` draws.
+fn coarsens(current: &Selected, next: &Selected) -> bool {
+    let next: std::collections::HashSet<TileId> = ids(next).into_iter().collect();
+    ids(current).into_iter().any(|id| std::iter::successors(id.parent(), |p| p.parent()).any(|a| next.contains(&a)))
 }
 
 #[cfg(test)]
@@ -131,15 +179,11 @@ mod tests {
         };
         let budget = Budget { budget_ms: 8.0, max_tiles: 256, shadows: true, deadline: None };
         let look = Lookahead { tau_s: 1.0, limits: MotionLimits { max_speed_mps: 100.0, max_turn_radps: 0.1 } };
-        BudgetFlight::new(selector, budget, look).unwrap()
+        BudgetFlight::new(selector, budget, look, true).unwrap()
     }
 
     fn camera(lon: f64) -> Camera {
         Camera::looking(Geodetic::new(lon, 46.33, 2000.0), 0.0, -20.0, 60.0, (160, 120))
-    }
-
-    fn ids(s: &Selected) -> Vec<crate::grid::TileId> {
-        s.cut.tiles.iter().map(|c| c.id).collect()
     }
 
     #[test]

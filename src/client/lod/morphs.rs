@@ -1,5 +1,5 @@
-//! Geomorphing between tile levels in the client (001 §3.4 and §4.4), for
-//! refinement: when a cut draws a tile in place of a coarser one drawn the
+//! Geomorphing between tile levels in the client (001 §3.4 and §4.4). For
+//! refinement, when a cut draws a tile in place of a coarser one drawn the
 //! frame before, the tile's heights start on the coarser tile's surface
 //! (bilinear between its samples, the surface the ray caster drew) and
 //! glide to its own along a [`MorphTrack`] over `τ` (an upmorph, run
@@ -10,20 +10,24 @@
 //! ([`blend`]): its own surface classes and colours, CEM and ground heights
 //! moved from the ancestor's surface toward its own by the morph weight
 //! (`crate::lod::morph::morphed_height`). Nodata stays nodata; where only
-//! the ancestor has none, the tile's own height is used.
+//! the ancestor has none, the tile's own height is used. Such a tile is
+//! prepared and uploaded again every frame of its morph, so `sylva fly`
+//! geomorphs only when asked (`--geomorph`).
 //!
-//! Coarsening (a downmorph, which 001 runs before the switch) still pops:
-//! it needs the next cut a stage before it is drawn.
+//! Coarsening is a downmorph, run *before* the switch (001's asymmetry):
+//! the flight holds a cut that coarsens back for `τ` while the tiles it
+//! replaces glide onto the surface of their coarser tile in it, and draws
+//! it once a frame has shown them all there ([`Morphs::settled`]).
 
 use super::super::tile::{NODATA_M, TileData, TileError, TilePayload};
 use crate::grid::{TileGrid, TileId};
 use crate::lod::morph::{MorphTrack, morphed_height};
 use std::collections::{HashMap, HashSet};
 
-/// A tile morphing from a coarser one.
+/// A tile's level track and the coarser tile at its other end.
 #[derive(Clone, Debug)]
-struct Upmorph {
-    from: TileId,
+struct Track {
+    coarse: TileId,
     track: MorphTrack,
 }
 
@@ -32,7 +36,8 @@ struct Upmorph {
 pub struct Morphs {
     tau_s: f64,
     drawn: HashSet<TileId>,
-    active: HashMap<TileId, Upmorph>,
+    active: HashMap<TileId, Track>,
+    settled: bool,
 }
 
 /// A tile of this frame's cut that is morphing.
@@ -40,7 +45,7 @@ pub struct Morphs {
 pub struct Morphing {
     /// The tile drawn.
     pub tile: TileId,
-    /// The coarser tile it morphs from.
+    /// The coarser tile whose surface it morphs from or to.
     pub from: TileId,
     /// Weight of its own heights, in `[0, 1)`.
     pub weight: f64,
@@ -49,33 +54,72 @@ pub struct Morphing {
 impl Morphs {
     /// Morphs of `tau_s` seconds.
     pub fn new(tau_s: f64) -> Morphs {
-        Morphs { tau_s, drawn: HashSet::new(), active: HashMap::new() }
+        Morphs { tau_s, drawn: HashSet::new(), active: HashMap::new(), settled: true }
     }
 
     /// The cut drawn at `t_s`: which of its tiles morph, and how far.
-    pub fn update(&mut self, t_s: f64, cut: &[TileId]) -> Vec<Morphing> {
+    /// `coarser`, the next cut and when it was offered, starts downmorphs
+    /// of the tiles it coarsens, over `τ` from then (001: before the
+    /// switch; an upmorph in the same interval collapses with it).
+    pub fn update(&mut self, t_s: f64, cut: &[TileId], coarser: Option<(&[TileId], f64)>) -> Vec<Morphing> {
         for &id in cut.iter().filter(|id| !self.drawn.contains(id)) {
-            let from = std::iter::successors(id.parent(), |p| p.parent()).find(|a| self.drawn.contains(a));
-            if let Some(from) = from {
-                let mut track = MorphTrack::new(from.level as u8, self.tau_s);
+            if let Some(coarse) = ancestors(id).find(|a| self.drawn.contains(a)) {
+                let mut track = MorphTrack::new(coarse.level as u8, self.tau_s);
                 track.request(id.level as u8, t_s);
-                self.active.insert(id, Upmorph { from, track });
+                self.active.insert(id, Track { coarse, track });
             }
         }
         self.drawn = cut.iter().copied().collect();
-        self.active.retain(|id, m| self.drawn.contains(id) && m.track.level_at(t_s) < f64::from(id.level));
+        self.settled = true;
+        if let Some((next, since_s)) = coarser {
+            self.downmorph(cut, next, since_s + self.tau_s, t_s);
+        }
+        self.active.retain(|id, m| {
+            m.track.prune(t_s);
+            self.drawn.contains(id)
+                && (m.track.level_at(t_s) < f64::from(id.level) || !m.track.transitions().is_empty())
+        });
         let mut out: Vec<Morphing> = self
             .active
             .iter()
             .map(|(&tile, m)| {
-                let from_level = f64::from(m.from.level);
-                let weight = (m.track.level_at(t_s) - from_level) / (f64::from(tile.level) - from_level);
-                Morphing { tile, from: m.from, weight }
+                let coarse = f64::from(m.coarse.level);
+                let weight = (m.track.level_at(t_s) - coarse) / (f64::from(tile.level) - coarse);
+                Morphing { tile, from: m.coarse, weight: weight.clamp(0.0, 1.0) }
             })
+            .filter(|m| m.weight < 1.0)
             .collect();
         out.sort_by_key(|m| m.tile);
         out
     }
+
+    /// Whether the downmorphs of the last cut drawn were all complete (the
+    /// next cut may be drawn: its coarse tiles lie where they ended).
+    pub fn settled(&self) -> bool {
+        self.settled
+    }
+
+    /// Requests each tile of `cut` that `next` coarsens to reach its
+    /// ancestor there by `target_s`.
+    fn downmorph(&mut self, cut: &[TileId], next: &[TileId], target_s: f64, t_s: f64) {
+        let next: HashSet<TileId> = next.iter().copied().collect();
+        for &id in cut {
+            let Some(coarse) = ancestors(id).find(|a| next.contains(a)) else { continue };
+            let tau_s = self.tau_s;
+            let m = self
+                .active
+                .entry(id)
+                .or_insert_with(|| Track { coarse, track: MorphTrack::new(id.level as u8, tau_s) });
+            m.coarse = coarse;
+            m.track.request(coarse.level as u8, target_s);
+            self.settled &= m.track.level_at(t_s) <= f64::from(coarse.level);
+        }
+    }
+}
+
+/// The strict ancestors of `id`, nearest first.
+fn ancestors(id: TileId) -> impl Iterator<Item = TileId> {
+    std::iter::successors(id.parent(), |p| p.parent())
 }
 
 /// `tile` with its heights moved from `from`'s surface toward its own by
@@ -245,17 +289,60 @@ mod tests {
         let (parent, grandparent) = (child.parent().unwrap(), child.parent().unwrap().parent().unwrap());
         let children: Vec<TileId> = parent.children().to_vec();
         let mut m = Morphs::new(1.0);
-        assert!(m.update(0.0, &[grandparent]).is_empty());
+        assert!(m.update(0.0, &[grandparent], None).is_empty());
         // Two levels at once: every child morphs from the grandparent.
-        let at_switch = m.update(0.25, &children);
+        let at_switch = m.update(0.25, &children, None);
         assert_eq!(at_switch.len(), 4);
         assert!(at_switch.iter().all(|x| x.from == grandparent && x.weight == 0.0), "{at_switch:?}");
-        let halfway = m.update(0.75, &children);
+        let halfway = m.update(0.75, &children, None);
         assert!(halfway.iter().all(|x| (x.weight - 0.5).abs() < 1e-12), "{halfway:?}");
-        assert!(m.update(1.25, &children).is_empty(), "done after τ");
-        // A tile with no coarser one drawn before (or coarsening) pops.
-        assert!(m.update(1.5, &[grandparent]).is_empty());
+        assert!(m.update(1.25, &children, None).is_empty(), "done after τ");
+        // A tile with no coarser one drawn before does not morph.
         let far = grid().tile_containing(12.0, 47.0, 8);
-        assert!(m.update(1.75, &[far]).is_empty());
+        assert!(m.update(1.5, &[far], None).is_empty());
+    }
+
+    #[test]
+    fn coarsened_tiles_reach_the_coarser_surface_before_the_switch() {
+        let child = grid().tile_containing(10.1, 46.35, 10);
+        let parent = child.parent().unwrap();
+        let children = parent.children().to_vec();
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &children, None);
+        assert!(m.settled());
+        // The next cut coarsens back to the parent, offered at 0.5 s: the
+        // children glide onto its surface over [0.5, 1.5] s.
+        let next = [parent];
+        assert!(m.update(0.5, &children, Some((&next, 0.5))).is_empty(), "not started");
+        assert!(!m.settled());
+        let halfway = m.update(1.0, &children, Some((&next, 0.5)));
+        assert_eq!(halfway.len(), 4);
+        assert!(halfway.iter().all(|x| x.from == parent && (x.weight - 0.5).abs() < 1e-12), "{halfway:?}");
+        let done = m.update(1.5, &children, Some((&next, 0.5)));
+        assert!(done.iter().all(|x| x.weight == 0.0) && done.len() == 4, "on the parent's surface: {done:?}");
+        assert!(m.settled());
+        // The switch: the parent is drawn with its own heights, which is
+        // where the children ended (blend at weight 0 is its surface).
+        assert!(m.update(1.6, &next, None).is_empty());
+    }
+
+    #[test]
+    fn a_refinement_undone_in_its_interval_collapses_into_one_morph() {
+        let child = grid().tile_containing(10.1, 46.35, 10);
+        let parent = child.parent().unwrap();
+        let children = parent.children().to_vec();
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &[parent], None);
+        let up = m.update(0.5, &children, None);
+        assert!(up.iter().all(|x| x.weight == 0.0));
+        // The next cut, offered at once, coarsens back: the upmorph over
+        // [0.5, 1.5] and the downmorph there become one, staying on the
+        // parent's surface; no weight ever leaves it.
+        let next = [parent];
+        for t in [0.5, 0.8, 1.2, 1.5] {
+            let w = m.update(t, &children, Some((&next, 0.5)));
+            assert!(w.len() == 4 && w.iter().all(|x| x.weight == 0.0), "{t}: {w:?}");
+        }
+        assert!(m.settled());
     }
 }
