@@ -20,7 +20,7 @@ struct Frame {
     shadow: vec4<f32>,
     // rgb: canopy tint.
     canopy_tint: vec4<f32>,
-    // traversal (0 exact, 1 linear), linear steps, shadow steps, sun on.
+    // traversal (0 exact, 1 linear), linear steps, unused, sun on.
     mode: vec4<u32>,
     // The maximum mipmap's levels in the atlas: x, y, width, height.
     mip_rects: array<vec4<u32>, 16>,
@@ -40,7 +40,8 @@ struct Tile {
     range: vec4<f32>,
     // halo B, texels per side, texture slot, top mipmap level.
     index: vec4<i32>,
-    // draw mode (0 hull, 1 camera inside the hull, 2 plain), canopy whole (1), unused, unused.
+    // draw mode (0 hull, 1 camera inside the hull, 2 plain), canopy whole (1),
+    // shadow steps (the tile's ray-casting quality), unused.
     flags: vec4<u32>,
     // highest CEM over all texels, halo included (local m), unused x3.
     texels: vec4<f32>,

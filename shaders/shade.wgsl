@@ -9,11 +9,11 @@ const WATER_MIN_NORMAL_Z: f32 = 0.966;
 
 // Light reaching the hit at sample `s`, height `z`, through the terrain
 // toward the sun: samples at horizontal distances growing linearly step by
-// step up to the halo; near occluders weigh more.
+// step up to the halo; near occluders weigh more. The tile's quality sets n.
 fn shadow(s: vec2<f32>, z: f32, sun: vec3<f32>) -> f32 {
     let per_m = sun.xy / tile.grid.xy;
     let horizontal = length(per_m);
-    let n = frame.mode.z;
+    let n = tile.flags.z;
     if n == 0u || horizontal < 1.0e-9 {
         return 1.0;
     }

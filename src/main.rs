@@ -120,6 +120,21 @@ enum Command {
         /// Shadow samples per hit (0: none).
         #[arg(long, default_value_t = 10)]
         shadow_steps: u32,
+        /// Tile selection: `sse` (refine to --max-error-px) or `budget`
+        /// (the most benefit whose predicted frame time fits --budget-ms).
+        #[arg(long, default_value = "sse")]
+        lod: String,
+        /// Frame budget of `--lod budget`, ms.
+        #[arg(long, default_value_t = 33.0)]
+        budget_ms: f64,
+        /// Frames between selections of `--lod budget` (the selection
+        /// thread's period).
+        #[arg(long, default_value_t = 1)]
+        select_every: u32,
+        /// Geomorph between tile levels over the selection period (`--lod
+        /// budget`; morphing tiles are uploaded again every frame).
+        #[arg(long)]
+        geomorph: bool,
         /// Largest projected tile error, pixels.
         #[arg(long, default_value_t = 2.0)]
         max_error_px: f64,
@@ -274,6 +289,10 @@ enum Bench {
         /// Where to write the plots (lod_demo.png, lod_rmnp.png).
         #[arg(long)]
         plots: Option<PathBuf>,
+        /// Output directories of `sylva fly --lod budget`: their predicted
+        /// and measured frame times against the budget.
+        #[arg(long, num_args = 0..)]
+        flights: Vec<PathBuf>,
     },
     /// The server over loopback HTTP beside MapServer and MapProxy: GetMap,
     /// uncached and cached tile latency and throughput, memory.
@@ -386,8 +405,8 @@ fn run(command: Command) -> Result<()> {
             println!("{}", sylva::bench::pipeline_report(&rmnp, &labels, build_side)?);
             Ok(())
         }
-        Command::Bench { what: Bench::Lod { rmnp, frames, plots } } => {
-            println!("{}", sylva::bench::lod_report(&rmnp, frames, plots.as_deref())?);
+        Command::Bench { what: Bench::Lod { rmnp, frames, plots, flights } } => {
+            println!("{}", sylva::bench::lod_report(&rmnp, frames, plots.as_deref(), &flights)?);
             Ok(())
         }
         #[cfg(feature = "server")]
@@ -419,11 +438,23 @@ fn run(command: Command) -> Result<()> {
             out,
             traversal,
             shadow_steps,
+            lod,
+            budget_ms,
+            select_every,
+            geomorph,
             max_error_px,
             max_level,
             gpu_budget_mib,
             no_frames,
         } => {
+            let mode = match lod.as_str() {
+                "sse" => sylva::client::fly::LodMode::Sse,
+                "budget" if budget_ms.is_finite() && budget_ms > 0.0 => {
+                    sylva::client::fly::LodMode::Budget { budget_ms, select_every }
+                }
+                "budget" => anyhow::bail!("--budget-ms {budget_ms} is not a positive number of milliseconds"),
+                other => anyhow::bail!("unknown --lod {other:?}; expected sse or budget"),
+            };
             let options = sylva::client::fly::FlyOptions {
                 frames,
                 size: parse_size(&size)?,
@@ -434,6 +465,8 @@ fn run(command: Command) -> Result<()> {
                 })?,
                 shadow_steps,
                 lod: sylva::client::quadtree::LodRule { max_error_px, max_level },
+                mode,
+                geomorph,
                 ..Default::default()
             };
             let path = sylva::client::path::CameraPath::load(&path)?;

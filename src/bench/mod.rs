@@ -3,6 +3,7 @@
 //! compare across runs only as ratios.
 
 pub mod lod;
+pub mod lod_frames;
 mod lod_plot;
 pub mod lod_scene;
 pub mod pipeline;
@@ -61,6 +62,34 @@ pub fn table(header: &[&str], rows: &[Vec<String>]) -> String {
     out.join("\n")
 }
 
+/// The frame-time table of `flights` and their plots
+/// (`lod_frames_<directory name>.png`).
+fn flight_report(flights: &[std::path::PathBuf], plot_dir: Option<&std::path::Path>) -> String {
+    if flights.is_empty() {
+        return "(no flights under a budget given: --flights)\n".into();
+    }
+    let read = |dir: &std::path::PathBuf| -> Result<(String, String), String> {
+        let name = dir.file_name().map_or("flight".into(), |n| n.to_string_lossy().into_owned());
+        let csv = std::fs::read_to_string(dir.join("stats.csv")).map_err(|e| format!("{}: {e}", dir.display()))?;
+        Ok((name, csv))
+    };
+    let report = flights.iter().map(read).collect::<Result<Vec<_>, _>>().and_then(|f| lod_frames::report(&f));
+    let (table, plots) = match report {
+        Ok(r) => r,
+        Err(e) => return format!("(flights: {e})\n"),
+    };
+    let mut out = format!("### Frame time against the budget\n\n{table}\n");
+    let Some(dir) = plot_dir else { return out };
+    for (name, png) in &plots {
+        let path = dir.join(format!("lod_frames_{name}.png"));
+        out += &match std::fs::write(&path, png) {
+            Ok(()) => format!("plot: {}\n", path.display()),
+            Err(e) => format!("(no plot: {e})\n"),
+        };
+    }
+    out
+}
+
 /// `sylva bench pipeline`: the tables for the demo and, when its data is
 /// there, the region of `rmnp_config`; `labels` scores the close sequences.
 pub fn pipeline_report(
@@ -91,14 +120,17 @@ pub fn pipeline_report(
 
 /// `sylva bench lod`: the flyover tables for the demo region (trees
 /// `spacing_m` apart at full cover) and, when its data is there, for the
-/// region of `rmnp_config`; plots go to `plot_dir` when given.
+/// region of `rmnp_config`; plots go to `plot_dir` when given. `flights`
+/// (directories of `sylva fly --lod budget`) add their frame times against
+/// the budget.
 pub fn lod_report(
     rmnp_config: &std::path::Path,
     frames: usize,
     plot_dir: Option<&std::path::Path>,
+    flights: &[std::path::PathBuf],
 ) -> Result<String, crate::config::ConfigError> {
     let mut scenes = vec![("demo", crate::config::load(None)?, 7.0)];
-    let mut out = Vec::new();
+    let mut out = vec![flight_report(flights, plot_dir)];
     match crate::config::load(Some(rmnp_config)) {
         Ok(rmnp) => scenes.push(("rmnp", rmnp, 12.0)),
         Err(e) => out.push(format!("(skipping the real-data region: {e})\n")),

@@ -1,22 +1,49 @@
 //! `sylva fly`: renders a camera path headless, frame by frame — select
-//! tiles ([`super::quadtree`]), load the missing ones ([`super::store`]),
-//! ray cast them on the GPU — and records per-frame statistics: CPU and GPU
+//! tiles (by screen-space error, [`super::quadtree`], or under a frame
+//! budget, [`super::lod`]), load the missing ones ([`super::store`]), ray
+//! cast them on the GPU — and records per-frame statistics: CPU and GPU
 //! time, tiles drawn per level and how, texture fetches per pixel (the ray
-//! steps), bytes fetched and memory resident.
+//! steps), bytes fetched and memory resident; under a budget also the
+//! predicted frame time, which the measured one calibrates, and, asked to,
+//! tiles geomorph between levels ([`super::lod::morphs`]).
 
+use super::lod::ahead::Lookahead;
+use super::lod::budget::{Budget, Choice};
+use super::lod::flight::BudgetFlight;
+use super::lod::morphs;
+use super::lod::{Selected, Selector};
 use super::path::CameraPath;
 use super::quadtree::{self, LodRule};
 use super::raycast::{Fade, Traversal};
 use super::render::cache::CacheFull;
 use super::render::uniforms::FrameSettings;
-use super::render::{Readback, Renderer};
+use super::render::{Draw, Readback, Renderer};
 use super::source::TileSource;
 use super::store::{LoadError, TileStore};
 use super::tile::TileData;
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Instant;
+
+/// How tiles are chosen.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LodMode {
+    /// Refine while the projected error exceeds [`LodRule::max_error_px`].
+    Sse,
+    /// The most benefit whose predicted frame time fits `budget_ms`.
+    Budget {
+        /// The frame budget, ms.
+        budget_ms: f64,
+        /// Frames between selections (the selection period `τ`).
+        select_every: u32,
+    },
+}
+
+/// Steps of the path sampled for its motion limits (the conservative
+/// camera's speed and turn rate).
+const MOTION_STEPS: usize = 200;
 
 /// How to fly.
 #[derive(Clone, Debug)]
@@ -33,8 +60,14 @@ pub struct FlyOptions {
     pub traversal: Traversal,
     /// Shadow samples per hit (0: no shadows).
     pub shadow_steps: u32,
-    /// Tile refinement.
+    /// Tile refinement: the screen-space error rule, and the deepest level
+    /// for both modes.
     pub lod: LodRule,
+    /// How tiles are chosen.
+    pub mode: LodMode,
+    /// Geomorph between tile levels (budget mode): morphing tiles are
+    /// prepared and uploaded again every frame of their morph.
+    pub geomorph: bool,
     /// Halo requested with every tile, samples.
     pub halo: usize,
     /// The canopy fade: reference height (m), then low and high (px).
@@ -53,6 +86,8 @@ impl Default for FlyOptions {
             traversal: Traversal::Exact,
             shadow_steps: 10,
             lod: LodRule { max_error_px: 2.0, max_level: 13 },
+            mode: LodMode::Sse,
+            geomorph: false,
             halo: 32,
             fade: (30.0, 0.5, 2.0),
             in_flight: 8,
@@ -77,7 +112,8 @@ pub struct FrameRecord {
     pub tiles_ray: u32,
     /// Tiles drawn without rays.
     pub tiles_plain: u32,
-    /// The error threshold used (raised when the GPU cache was too small).
+    /// The error threshold used (raised when the GPU cache was too small;
+    /// NaN under a budget).
     pub error_px: f64,
     /// Pixels where a view ray was cast.
     pub ray_pixels: usize,
@@ -93,6 +129,21 @@ pub struct FrameRecord {
     pub cpu_bytes: usize,
     /// Resident memory of the process, MiB.
     pub rss_mib: f64,
+    /// Selection time, ms.
+    pub selection_ms: f64,
+    /// The frame budget, ms (budget mode).
+    pub budget_ms: Option<f64>,
+    /// The selection's predicted frame time, ms (budget mode).
+    pub predicted_ms: Option<f64>,
+    /// Candidate tiles of the selection (budget mode).
+    pub candidates: Option<usize>,
+    /// The selection's benefit over the optimiser's upper bound (budget
+    /// mode).
+    pub benefit_bound: Option<f64>,
+    /// Mean shadow steps over the tiles drawn.
+    pub shadow_steps_mean: f64,
+    /// Tiles drawn morphing from a coarser one (budget mode).
+    pub morphing: usize,
 }
 
 /// Why a flight stopped.
@@ -104,6 +155,9 @@ pub enum FlyError {
     /// The GPU cache cannot hold even the coarsest view.
     #[error(transparent)]
     Cache(#[from] CacheFull),
+    /// The LOD selection thread could not start.
+    #[error("starting the LOD selection thread: {0}")]
+    Thread(std::io::Error),
     /// Writing frames or statistics failed.
     #[error("{path}: {source}")]
     Io {
@@ -126,9 +180,31 @@ pub fn fly(
     if let Some(dir) = &options.out_dir {
         std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
     }
+    let mut lod = match options.mode {
+        LodMode::Sse => None,
+        LodMode::Budget { budget_ms, select_every } => {
+            let selector = Selector {
+                grid: source.grid(),
+                bounds: source.bounds(),
+                knowledge: store.knowledge(),
+                fade: options.fade,
+                max_level: options.lod.max_level,
+            };
+            let budget = Budget {
+                budget_ms,
+                max_tiles: renderer.cache_slots() as usize,
+                shadows: path.sun.is_some(),
+                deadline: None,
+            };
+            let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
+            let look =
+                Lookahead { tau_s: frame_s * f64::from(select_every.max(1)), limits: path.motion_limits(MOTION_STEPS) };
+            Some(BudgetFlight::new(selector, budget, look, options.geomorph).map_err(FlyError::Thread)?)
+        }
+    };
     let mut records = Vec::with_capacity(options.frames);
     for k in 0..options.frames {
-        let record = frame(source, path, renderer, &mut store, options, k)?;
+        let record = frame(source, path, renderer, (&mut store, lod.as_mut()), options, k)?;
         records.push(record);
     }
     if let Some(dir) = &options.out_dir {
@@ -138,18 +214,62 @@ pub fn fly(
     Ok(records)
 }
 
+/// The tiles of one frame and how they were chosen.
+struct Chosen {
+    tiles: Vec<Arc<TileData>>,
+    /// Shadow steps per tile, in the order of `tiles`.
+    steps: Vec<u32>,
+    error_px: f64,
+    selected: Option<Selected>,
+    /// Tiles drawn morphing from a coarser one.
+    morphing: usize,
+}
+
+/// The frame's tiles: by screen-space error, or under the budget.
+fn choose(
+    source: &dyn TileSource,
+    store: &mut TileStore,
+    lod: Option<&mut BudgetFlight>,
+    (t_s, camera): (f64, &super::camera::Camera),
+    (options, slots): (&FlyOptions, u32),
+) -> Result<Chosen, FlyError> {
+    let Some(lod) = lod else {
+        let (tiles, error_px) = visible_tiles(source, store, camera, options, slots)?;
+        let steps = vec![options.shadow_steps; tiles.len()];
+        return Ok(Chosen { tiles, steps, error_px, selected: None, morphing: 0 });
+    };
+    let selected = lod.frame(t_s, camera);
+    let ids: Vec<_> = selected.cut.tiles.iter().map(|c| c.id).collect();
+    let mut tiles = store.get(source, &ids)?;
+    let drawn: Vec<_> = tiles.iter().map(|t| t.id()).collect();
+    let morphing = lod.morphs(t_s, &drawn);
+    for m in &morphing {
+        let (Some(k), Some(from)) = (drawn.iter().position(|&id| id == m.tile), store.get(source, &[m.from])?.pop())
+        else {
+            continue;
+        };
+        let blended = morphs::blend(&source.grid(), &tiles[k], &from, m.weight).map_err(LoadError::from)?;
+        tiles[k] = Arc::new(blended);
+    }
+    let steps_of: std::collections::HashMap<_, _> = selected.cut.tiles.iter().map(|c| (c.id, c.shadow_steps)).collect();
+    let steps = tiles.iter().map(|t| steps_of.get(&t.id()).copied().unwrap_or(0)).collect();
+    Ok(Chosen { tiles, steps, error_px: f64::NAN, selected: Some(selected), morphing: morphing.len() })
+}
+
 fn frame(
     source: &dyn TileSource,
     path: &CameraPath,
     renderer: &mut Renderer,
-    store: &mut TileStore,
+    (store, mut lod): (&mut TileStore, Option<&mut BudgetFlight>),
     options: &FlyOptions,
     k: usize,
 ) -> Result<FrameRecord, FlyError> {
     let start = Instant::now();
     let bytes_before = source.bytes_fetched();
     let camera = path.camera(k, options.frames, options.size);
-    let (tiles, error_px) = visible_tiles(source, store, &camera, options, renderer.cache_slots())?;
+    let t_s = path.time(k, options.frames);
+    let chosen = choose(source, store, lod.as_deref_mut(), (t_s, &camera), (options, renderer.cache_slots()))?;
+    let (tiles, error_px) = (&chosen.tiles, chosen.error_px);
     let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
     let (canopy_ref_m, lo_px, hi_px) = options.fade;
     let settings = FrameSettings {
@@ -158,8 +278,19 @@ fn frame(
         sun_ecef: path.sun_ecef(),
         fade: Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px },
     };
-    let refs: Vec<&TileData> = tiles.iter().map(|t| t.as_ref()).collect();
-    let out = renderer.render(&camera, &refs, &settings, Readback::All)?;
+    let draws: Vec<Draw> =
+        tiles.iter().zip(&chosen.steps).map(|(t, &shadow_steps)| Draw { tile: t.as_ref(), shadow_steps }).collect();
+    let out = renderer.render_draws(&camera, &draws, &settings, Readback::All)?;
+    let selected = chosen.selected.as_ref();
+    let predicted_ms = selected.map(|s| s.cut.predicted_ms);
+    let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
+    // Morphing tiles are prepared and uploaded again every frame, a cost the
+    // model has no term for: such frames do not calibrate it.
+    if let Some(lod) = lod.filter(|_| chosen.morphing == 0) {
+        let drawn: Vec<Choice> =
+            draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
+        lod.observe(&camera, &drawn, out.stats.gpu_ms.unwrap_or(out.stats.wall_ms));
+    }
     if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
         let file = dir.join(format!("frame_{k:05}.png"));
         let bytes: Vec<u8> = out.colour.iter().flatten().copied().collect();
@@ -173,7 +304,7 @@ fn frame(
         std::fs::write(&file, png).map_err(|e| io(&file, e))?;
     }
     let mut levels = BTreeMap::new();
-    for t in &tiles {
+    for t in tiles {
         *levels.entry(t.id().level).or_insert(0) += 1;
     }
     let rays: Vec<&[u32; 2]> = out.fetches.iter().filter(|f| f[0] > 0).collect();
@@ -194,6 +325,13 @@ fn frame(
         gpu_bytes: out.stats.resident_bytes,
         cpu_bytes: store.bytes(),
         rss_mib: crate::bench::rss_mib().0,
+        selection_ms: chosen.selected.as_ref().map_or(cpu_ms, |s| s.ms),
+        budget_ms,
+        predicted_ms,
+        candidates: selected.map(|s| s.candidates),
+        benefit_bound: selected.map(|s| s.cut.benefit / s.cut.upper_bound),
+        morphing: chosen.morphing,
+        shadow_steps_mean: chosen.steps.iter().map(|&s| f64::from(s)).sum::<f64>() / chosen.steps.len().max(1) as f64,
     })
 }
 
@@ -205,7 +343,7 @@ pub fn visible_tiles(
     camera: &super::camera::Camera,
     options: &FlyOptions,
     slots: u32,
-) -> Result<(Vec<std::sync::Arc<TileData>>, f64), FlyError> {
+) -> Result<(Vec<Arc<TileData>>, f64), FlyError> {
     let mut rule = options.lod;
     loop {
         let selection = quadtree::select(&source.grid(), &source.bounds(), camera, &|id| store.range(id), &rule);
@@ -232,14 +370,15 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     let mut out = Vec::new();
     let _ = writeln!(
         out,
-        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib"
+        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,morphing"
     );
     for r in records {
         let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
-        let gpu = r.gpu_ms.map_or(String::new(), |v| format!("{v:.3}"));
+        let optional = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.3}"));
+        let gpu = optional(r.gpu_ms);
         let _ = writeln!(
             out,
-            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1}",
+            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{}",
             r.frame,
             r.cpu_ms,
             r.render_ms,
@@ -255,7 +394,14 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             r.bytes_fetched,
             r.gpu_bytes,
             r.cpu_bytes,
-            r.rss_mib
+            r.rss_mib,
+            r.selection_ms,
+            optional(r.budget_ms),
+            optional(r.predicted_ms),
+            r.shadow_steps_mean,
+            r.candidates.map_or(String::new(), |n| n.to_string()),
+            optional(r.benefit_bound),
+            r.morphing
         );
     }
     String::from_utf8_lossy(&out).into_owned()

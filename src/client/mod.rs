@@ -4,8 +4,9 @@
 //! The pure parts — the ellipsoid ([`globe`]), tile frames ([`frame`]), the
 //! camera ([`camera`]), prepared tiles and their hulls ([`tile`],
 //! [`hull`]), the ray-casting model shared by both ray casters
-//! ([`raycast`]) and the exact CPU reference ([`reference`]) — know nothing
-//! of wgpu; the GPU path lives in `render` (feature `client`).
+//! ([`raycast`]), the exact CPU reference ([`reference`]) and the LOD
+//! selection under a frame budget ([`lod`]) — know nothing of wgpu; the GPU
+//! path lives in `render` (feature `client`).
 //!
 //! Positions are `f64` on the CPU; the GPU sees tile-local `f32` values only.
 
@@ -17,6 +18,7 @@ pub mod globe;
 #[cfg(feature = "http")]
 pub mod http;
 pub mod hull;
+pub mod lod;
 pub mod path;
 pub mod quadtree;
 pub mod raycast;

@@ -17,6 +17,7 @@
 
 use super::camera::Camera;
 use super::globe::{self, Geodetic};
+use crate::lod::predict::MotionLimits;
 use glam::DVec3;
 use serde::Deserialize;
 use std::path::Path;
@@ -141,10 +142,37 @@ impl CameraPath {
         }
     }
 
+    /// The time of frame `index` of `frames`, spread evenly over the path.
+    pub fn time(&self, index: usize, frames: usize) -> f64 {
+        let (first, last) = (self.key[0].t, self.key[self.key.len() - 1].t);
+        if frames > 1 { first + (last - first) * index as f64 / (frames - 1) as f64 } else { first }
+    }
+
     /// The camera of frame `index` of `frames`, spread evenly over the path.
     pub fn camera(&self, index: usize, frames: usize, size: (u32, u32)) -> Camera {
-        let (first, last) = (self.key[0].t, self.key[self.key.len() - 1].t);
-        let t = if frames > 1 { first + (last - first) * index as f64 / (frames - 1) as f64 } else { first };
+        self.camera_at(self.time(index, frames), size)
+    }
+
+    /// The fastest the camera moves (m/s) and turns its view (rad/s) over
+    /// `steps` even steps of the path: the bounds the conservative camera
+    /// of a flight along it needs.
+    pub fn motion_limits(&self, steps: usize) -> MotionLimits {
+        let steps = steps.max(1);
+        let at = |i: usize| (self.time(i, steps + 1), self.camera_at(self.time(i, steps + 1), (1, 1)));
+        let mut limits = MotionLimits { max_speed_mps: 0.0, max_turn_radps: 0.0 };
+        for i in 0..steps {
+            let ((t0, a), (t1, b)) = (at(i), at(i + 1));
+            let dt = t1 - t0;
+            if dt > 0.0 {
+                let turn = a.forward().dot(b.forward()).clamp(-1.0, 1.0).acos();
+                limits.max_speed_mps = limits.max_speed_mps.max((b.position_ecef - a.position_ecef).length() / dt);
+                limits.max_turn_radps = limits.max_turn_radps.max(turn / dt);
+            }
+        }
+        limits
+    }
+
+    fn camera_at(&self, t: f64, size: (u32, u32)) -> Camera {
         let k = self.at(t);
         Camera::looking(Geodetic::new(k.lon, k.lat, k.height_m), k.heading_deg, k.pitch_deg, self.fov_deg, size)
     }
@@ -186,6 +214,17 @@ height_m = 3000.0
 heading_deg = 10.0
 pitch_deg = -30.0
 "#;
+
+    #[test]
+    fn motion_limits_bound_the_steps_of_the_path() {
+        let p = CameraPath::parse(PATH).unwrap();
+        let limits = p.motion_limits(40);
+        // ~19 km and 2 km up in 2 s, turning 20° of heading and 20° of pitch.
+        let chord = (p.camera(1, 2, (1, 1)).position_ecef - p.camera(0, 2, (1, 1)).position_ecef).length();
+        assert!(limits.max_speed_mps >= chord / 2.0 && limits.max_speed_mps < 2.0 * chord / 2.0, "{limits:?}");
+        let turn = p.camera(0, 2, (1, 1)).forward().angle_between(p.camera(1, 2, (1, 1)).forward());
+        assert!(limits.max_turn_radps >= turn / 2.0 && limits.max_turn_radps < 3.0 * turn / 2.0, "{limits:?}");
+    }
 
     #[test]
     fn keys_are_met_and_headings_turn_the_short_way() {

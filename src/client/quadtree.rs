@@ -120,7 +120,7 @@ const OCCLUDER_RADIUS_M: f64 = 6_356_752.0 - 11_000.0;
 
 /// False when the box is entirely outside one side plane of the frustum or
 /// entirely behind the horizon.
-fn visible(camera: &Camera, frame: &TileFrame, planes: &[DVec3; 4], lo: DVec3, hi: DVec3) -> bool {
+pub fn visible(camera: &Camera, frame: &TileFrame, planes: &[DVec3; 4], lo: DVec3, hi: DVec3) -> bool {
     let corners: [DVec3; 8] = std::array::from_fn(|k| {
         let local = DVec3::new([lo.x, hi.x][k & 1], [lo.y, hi.y][(k >> 1) & 1], [lo.z, hi.z][k >> 2]);
         frame.to_ecef(local) - camera.position_ecef
@@ -131,7 +131,7 @@ fn visible(camera: &Camera, frame: &TileFrame, planes: &[DVec3; 4], lo: DVec3, h
 
 /// Whether the sight line from `eye` to `eye + to` passes through the
 /// occluding sphere.
-fn behind_horizon(eye: DVec3, to: DVec3) -> bool {
+pub fn behind_horizon(eye: DVec3, to: DVec3) -> bool {
     let t = (-eye.dot(to) / to.length_squared()).clamp(0.0, 1.0);
     (eye + to * t).length() < OCCLUDER_RADIUS_M
 }

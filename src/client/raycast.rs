@@ -85,6 +85,19 @@ impl Fade {
     }
 }
 
+/// Below this projected error (pixels) a tile needs no ray casting: its
+/// canopy is faded out and its terrain mesh departs from the ground by
+/// less than half a pixel.
+pub const PLAIN_ERROR_PX: f64 = 0.5;
+
+/// Whether a tile whose nearest point is `near_m` away and whose terrain
+/// mesh departs from its ground by `mesh_error_m` is drawn plain, without
+/// rays (the renderer's rule, which the LOD cost model predicts too).
+pub fn plain(fade: &Fade, near_m: f64, mesh_error_m: f64) -> bool {
+    let mesh_px = mesh_error_m * fade.focal_px / near_m.max(1e-9);
+    fade.factor(near_m) <= 0.0 && mesh_px < PLAIN_ERROR_PX
+}
+
 fn smoothstep(lo: f64, hi: f64, x: f64) -> f64 {
     let t = ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
     t * t * (3.0 - 2.0 * t)

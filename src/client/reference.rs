@@ -58,7 +58,21 @@ pub struct Hit {
 
 /// Renders `tiles` from `camera`.
 pub fn render(camera: &Camera, tiles: &[TileData], lighting: &Lighting) -> Image {
-    let views: Vec<TileView> = tiles.iter().map(|t| view_of(camera, t, lighting)).collect();
+    render_with_steps(camera, tiles, lighting, &vec![lighting.shadow_steps; tiles.len()])
+}
+
+/// Renders `tiles` from `camera`, tile `k` with `shadow_steps[k]` shadow
+/// samples per hit (the renderer's per-tile quality; missing entries take
+/// the lighting's).
+pub fn render_with_steps(camera: &Camera, tiles: &[TileData], lighting: &Lighting, shadow_steps: &[u32]) -> Image {
+    let views: Vec<TileView> = tiles
+        .iter()
+        .enumerate()
+        .map(|(k, t)| TileView {
+            shadow_steps: shadow_steps.get(k).copied().unwrap_or(lighting.shadow_steps),
+            ..view_of(camera, t, lighting)
+        })
+        .collect();
     let (w, h) = (camera.width_px, camera.height_px);
     let pixels: Vec<([u8; 4], f32)> = (0..w * h)
         .into_par_iter()

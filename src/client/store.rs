@@ -1,7 +1,9 @@
 //! The client's CPU-side tile store: prepared tiles fetched from a tile
 //! source, kept within a memory budget (least recently used out first),
-//! with the height range of every tile ever seen for the quadtree's
-//! bounding boxes, and tiles known to be empty so they are not asked again.
+//! with what is known of every tile ever seen ([`Known`]: the height range
+//! for the quadtree's bounding boxes, the terrain mesh's error for the LOD
+//! cost model) in a map the selection thread shares ([`Knowledge`]), and
+//! tiles known to be empty so they are not asked again.
 //!
 //! Missing tiles of a frame are fetched and prepared in parallel on the
 //! store's own thread pool, whose size bounds the requests in flight.
@@ -11,7 +13,47 @@ use super::tile::{TileData, TileError};
 use crate::grid::TileId;
 use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
-use std::sync::Arc;
+use std::sync::{Arc, PoisonError, RwLock};
+
+/// What a loaded tile told about itself.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Known {
+    /// Lowest ground and highest CEM above the ellipsoid, metres.
+    pub heights_m: (f64, f64),
+    /// How far its terrain mesh departs from its ground, metres.
+    pub mesh_error_m: f64,
+}
+
+/// A shared, growing map of what is known of tiles.
+#[derive(Clone, Debug, Default)]
+pub struct Knowledge {
+    map: Arc<RwLock<HashMap<TileId, Known>>>,
+}
+
+impl Knowledge {
+    /// The absolute height range of a tile, or of its nearest ancestor
+    /// seen so far.
+    pub fn range(&self, id: TileId) -> Option<(f64, f64)> {
+        let map = self.map.read().unwrap_or_else(PoisonError::into_inner);
+        let mut at = Some(id);
+        while let Some(t) = at {
+            if let Some(k) = map.get(&t) {
+                return Some(k.heights_m);
+            }
+            at = t.parent();
+        }
+        None
+    }
+
+    /// What is known of the tile itself.
+    pub fn get(&self, id: TileId) -> Option<Known> {
+        self.map.read().unwrap_or_else(PoisonError::into_inner).get(&id).copied()
+    }
+
+    fn insert(&self, id: TileId, known: Known) {
+        self.map.write().unwrap_or_else(PoisonError::into_inner).insert(id, known);
+    }
+}
 
 /// Why a tile could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -39,7 +81,7 @@ pub struct TileStore {
     budget_bytes: usize,
     tiles: HashMap<TileId, Entry>,
     empty: HashSet<TileId>,
-    ranges: HashMap<TileId, (f64, f64)>,
+    known: Knowledge,
     bytes: usize,
     clock: u64,
     pool: rayon::ThreadPool,
@@ -59,7 +101,7 @@ impl TileStore {
             budget_bytes,
             tiles: HashMap::new(),
             empty: HashSet::new(),
-            ranges: HashMap::new(),
+            known: Knowledge::default(),
             bytes: 0,
             clock: 0,
         })
@@ -73,14 +115,12 @@ impl TileStore {
     /// The absolute height range of a tile, or of its nearest ancestor
     /// seen so far.
     pub fn range(&self, id: TileId) -> Option<(f64, f64)> {
-        let mut at = Some(id);
-        while let Some(t) = at {
-            if let Some(r) = self.ranges.get(&t) {
-                return Some(*r);
-            }
-            at = t.parent();
-        }
-        None
+        self.known.range(id)
+    }
+
+    /// The map of what is known of tiles, shared.
+    pub fn knowledge(&self) -> Knowledge {
+        self.known.clone()
     }
 
     /// Loads the tiles of `ids` that are not here (in parallel), then
@@ -122,7 +162,8 @@ impl TileStore {
     }
 
     fn insert(&mut self, tile: TileData) {
-        self.ranges.insert(tile.id(), tile.range.heights_m);
+        let known = Known { heights_m: tile.range.heights_m, mesh_error_m: f64::from(tile.range.mesh_error_m) };
+        self.known.insert(tile.id(), known);
         let bytes = tile.gpu_bytes() + tile.hull.vertices.len() * 20 + tile.hull.indices.len() * 4;
         self.bytes += bytes;
         self.tiles.insert(tile.id(), Entry { tile: Arc::new(tile), last_used: self.clock, bytes });

@@ -3,19 +3,26 @@
 //!
 //! With one constant (001's `c_vertex`) that is a weighted moving average of
 //! measured / predicted. Sylva's model has [`FEATURES`] constants (a fixed
-//! per-frame cost, tiles, ray-casting work, splats, tree groups), so the
-//! average is taken over the normal equations instead: exponentially
+//! per-frame cost, tiles, view- and shadow-ray work, splats, tree groups),
+//! so the average is taken over the normal equations instead: exponentially
 //! weighted least squares, `A ← γA + f fᵀ`, `b ← γb + f·ms`, solved with a
-//! small ridge toward the prior constants. A frame's weight halves every
-//! `ln 2 / ln(1/γ)` frames (14 with the default γ = 0.95), so the model
-//! follows a GPU that throttles within a few dozen frames and forgets a
-//! scene it has left.
+//! small ridge toward the prior constants, whose per-item part is scaled by
+//! a free factor (so the first frames make 001's single weighted average).
+//! A frame's weight halves every `ln 2 / ln(1/γ)` frames (14 with the
+//! default γ = 0.95), so the model follows a GPU that throttles within a
+//! few dozen frames and forgets a scene it has left.
 //!
 //! Invariants: constants stay finite and non-negative; a non-finite or
 //! non-positive measurement, or one far from the prediction after warm-up
-//! (a hitch: shader compilation, a page fault), changes nothing.
+//! (a hitch: shader compilation, a page fault), changes nothing, unless
+//! more than [`MAX_HITCHES`] come in a row.
 
 use super::model::{CostFeatures, CostModel, FEATURES};
+
+/// Outliers in a row that are hitches; from the next one on they are
+/// taken until a frame fits again: the model, not the frame, is off (else
+/// a wrong model would never be corrected).
+pub const MAX_HITCHES: u32 = 2;
 
 /// Settings of a [`CostCalibrator`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,12 +55,22 @@ pub struct CostCalibrator {
     a: [[f64; FEATURES]; FEATURES],
     b: [f64; FEATURES],
     frames: u32,
+    /// Outliers rejected since the last frame that fitted.
+    hitches: u32,
 }
 
 impl CostCalibrator {
     /// A calibrator starting from `prior`.
     pub fn new(prior: CostModel, settings: CalibratorSettings) -> CostCalibrator {
-        CostCalibrator { settings, prior, model: prior, a: [[0.0; FEATURES]; FEATURES], b: [0.0; FEATURES], frames: 0 }
+        CostCalibrator {
+            settings,
+            prior,
+            model: prior,
+            a: [[0.0; FEATURES]; FEATURES],
+            b: [0.0; FEATURES],
+            frames: 0,
+            hitches: 0,
+        }
     }
 
     /// The current model.
@@ -69,8 +86,16 @@ impl CostCalibrator {
     /// Records one frame: what was drawn and how long it took. Returns
     /// whether the frame was used.
     pub fn observe(&mut self, features: &CostFeatures, measured_ms: f64) -> bool {
-        if !measured_ms.is_finite() || measured_ms <= 0.0 || self.is_outlier(features, measured_ms) {
+        if !measured_ms.is_finite() || measured_ms <= 0.0 {
             return false;
+        }
+        let outlier = self.is_outlier(features, measured_ms);
+        if outlier && self.hitches < MAX_HITCHES {
+            self.hitches += 1;
+            return false;
+        }
+        if !outlier {
+            self.hitches = 0;
         }
         let f = features.vector();
         let g = self.settings.forgetting.clamp(0.0, 1.0);
@@ -96,17 +121,51 @@ impl CostCalibrator {
         predicted > 0.0 && (measured_ms > predicted * r || measured_ms * r < predicted)
     }
 
-    /// `(A + λI) c = b + λ c_prior`, clamped to non-negative constants.
+    /// Ridge regression toward the prior with its per-item constants times
+    /// a free factor `s` (001's single weighted average of the per-vertex
+    /// constant): a few similar frames rescale the prior's per-item costs
+    /// rather than load the whole error onto the constants whose features
+    /// are small, and the fixed per-frame cost moves only as frames
+    /// separate it. With `M = A + Λ`, the prior split into its fixed part
+    /// `p₀` and per-item part `p̃`: `c(s) = M⁻¹(b + Λp₀) + s M⁻¹Λp̃`, `s`
+    /// minimising the fit plus the ridge. Clamped to non-negative constants.
     fn solve(&self) -> Option<[f64; FEATURES]> {
         let mut m = self.a;
-        let mut rhs = self.b;
-        for i in 0..FEATURES {
-            let lambda = self.settings.ridge.max(0.0) * self.a[i][i] + 1e-12;
-            m[i][i] += lambda;
-            rhs[i] += lambda * self.prior.constants_ms[i];
+        let mut lambda = [0.0; FEATURES];
+        for (i, l) in lambda.iter_mut().enumerate() {
+            *l = self.settings.ridge.max(0.0) * self.a[i][i] + 1e-12;
+            m[i][i] += *l;
         }
-        let c = gauss(m, rhs)?;
+        let (fixed, scaled) = self.prior_parts();
+        let c0 = gauss(m, std::array::from_fn(|i| self.b[i] + lambda[i] * fixed[i]))?;
+        let c1 = gauss(m, std::array::from_fn(|i| lambda[i] * scaled[i]))?;
+        let s = self.prior_scale((&c0, &c1), &lambda);
+        let c: [f64; FEATURES] = std::array::from_fn(|i| c0[i] + s * c1[i]);
         c.iter().all(|x| x.is_finite()).then(|| c.map(|x| x.max(0.0)))
+    }
+
+    /// The prior's fixed per-frame cost and its per-item constants, apart.
+    fn prior_parts(&self) -> ([f64; FEATURES], [f64; FEATURES]) {
+        let p = &self.prior.constants_ms;
+        (
+            std::array::from_fn(|i| if i == 0 { p[0] } else { 0.0 }),
+            std::array::from_fn(|i| if i == 0 { 0.0 } else { p[i] }),
+        )
+    }
+
+    /// The `s` minimising `cᵀAc − 2bᵀc + Σ λᵢ (cᵢ − p₀ᵢ − s p̃ᵢ)²` over
+    /// `c = c0 + s c1` (its derivative set to zero); 1 if degenerate.
+    fn prior_scale(&self, (c0, c1): (&[f64; FEATURES], &[f64; FEATURES]), lambda: &[f64; FEATURES]) -> f64 {
+        let (fixed, scaled) = self.prior_parts();
+        let a_form = |x: &[f64; FEATURES], y: &[f64; FEATURES]| -> f64 {
+            (0..FEATURES).map(|i| (0..FEATURES).map(|j| x[i] * self.a[i][j] * y[j]).sum::<f64>()).sum()
+        };
+        let b_c1: f64 = (0..FEATURES).map(|i| self.b[i] * c1[i]).sum();
+        let ridge_num: f64 = (0..FEATURES).map(|i| lambda[i] * (c0[i] - fixed[i]) * (c1[i] - scaled[i])).sum();
+        let ridge_den: f64 = (0..FEATURES).map(|i| lambda[i] * (c1[i] - scaled[i]).powi(2)).sum();
+        let (num, den) = (a_form(c1, c0) - b_c1 + ridge_num, a_form(c1, c1) + ridge_den);
+        let s = -num / den;
+        if s.is_finite() && den > 0.0 { s.max(0.0) } else { 1.0 }
     }
 }
 
@@ -142,7 +201,7 @@ mod tests {
     use super::*;
     use crate::noise::{hash2, unit};
 
-    const TRUTH: CostModel = CostModel { constants_ms: [1.2, 0.004, 2.5, 0.03, 0.05] };
+    const TRUTH: CostModel = CostModel { constants_ms: [1.2, 0.004, 2.5, 0.8, 0.03, 0.05] };
 
     /// A frame's features, varying like a flyover: `k` seeds the hash.
     fn frame(k: i64) -> CostFeatures {
@@ -150,6 +209,7 @@ mod tests {
         CostFeatures {
             tiles: 200.0 + 800.0 * unit(h, 0),
             raycast_mpx_steps: 1.0 + 6.0 * unit(h, 1),
+            shadow_mpx_steps: 0.5 + 4.0 * unit(hash2(k, 11, 99), 0),
             splats_k: 100.0 + 900.0 * unit(h, 2),
             groups_h: 5.0 + 40.0 * unit(h, 3),
         }
@@ -171,15 +231,35 @@ mod tests {
 
     #[test]
     fn converges_to_the_true_constants() {
-        let mut cal = CostCalibrator::new(CostModel::default(), CalibratorSettings::default());
+        // A GPU that does not change: a long memory (a half-life of 69
+        // frames) separates six constants under 3 % noise.
+        let settings = CalibratorSettings { forgetting: 0.99, ..CalibratorSettings::default() };
+        let mut cal = CostCalibrator::new(CostModel::default(), settings);
         assert!(relative_error(&cal.model(), &TRUTH, 10_000) > 0.3, "the prior is far off");
-        for k in 0..300 {
+        for k in 0..600 {
             assert!(cal.observe(&frame(k), measure(&TRUTH, &frame(k), k)));
         }
         assert!(relative_error(&cal.model(), &TRUTH, 10_000) < 0.05);
         for (c, t) in cal.model().constants_ms.iter().zip(TRUTH.constants_ms) {
             assert!((c / t - 1.0).abs() < 0.25, "{c} vs {t}");
         }
+    }
+
+    #[test]
+    fn a_few_similar_frames_rescale_the_prior() {
+        // One scene seen over and over: nothing separates the constants,
+        // so the per-item ones keep the prior's proportions, the fixed cost
+        // stays, and the model predicts what was measured.
+        let prior = CostModel::default();
+        let mut cal = CostCalibrator::new(prior, CalibratorSettings::default());
+        for k in 0..3 {
+            assert!(cal.observe(&frame(0), 40.0 + f64::from(k)));
+        }
+        let c = cal.model().constants_ms;
+        assert!((c[0] - prior.constants_ms[0]).abs() < 1e-6, "{c:?}");
+        let ratio: Vec<f64> = c.iter().zip(prior.constants_ms).skip(1).map(|(c, p)| c / p).collect();
+        assert!(ratio[0] > 1.0 && ratio.iter().all(|r| (r / ratio[0] - 1.0).abs() < 1e-6), "{ratio:?}");
+        assert!((cal.model().predict_ms(&frame(0)) - 41.0).abs() < 0.5, "{:?}", cal.model());
     }
 
     #[test]
@@ -207,6 +287,21 @@ mod tests {
         }
         assert_eq!(cal.model(), before);
         assert_eq!(cal.frames(), 50);
+    }
+
+    #[test]
+    fn a_lasting_change_is_not_a_hitch() {
+        let mut cal = CostCalibrator::new(CostModel::default(), CalibratorSettings::default());
+        for k in 0..100 {
+            cal.observe(&frame(k), measure(&TRUTH, &frame(k), k));
+        }
+        // Five times slower for good: two frames are taken for hitches,
+        // then every frame until the model fits again.
+        let slow = CostModel { constants_ms: TRUTH.constants_ms.map(|c| 5.0 * c) };
+        let used: Vec<bool> = (100..400).map(|k| cal.observe(&frame(k), measure(&slow, &frame(k), k))).collect();
+        assert_eq!(used[..4], [false, false, true, true]);
+        let error = relative_error(&cal.model(), &slow, 10_000);
+        assert!(error < 0.05, "{error} after {} frames used", used.iter().filter(|u| **u).count());
     }
 
     #[test]

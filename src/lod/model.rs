@@ -66,11 +66,23 @@ impl Smooth {
 /// it (four times the cost): per tile drawn, a split never gains
 /// (diminishing returns, 001 §3.1's condition for the greedy bound).
 pub fn tile_benefit(projected_px: f64, samples_per_side: u32, smooth: Smooth) -> f64 {
-    if !crate::lod::positive(projected_px) || !projected_px.is_finite() {
+    tile_benefit_seen(projected_px, projected_px, f64::from(samples_per_side).powi(2), smooth)
+}
+
+/// [`tile_benefit`] of a tile partly on screen: `visible_px` of it are
+/// seen (the importance), and its `samples` are spread over `full_px`, the
+/// pixels the whole tile would cover at the density of its nearest point
+/// (the accuracy `φ(samples / full_px)`). A tile the camera hovers over
+/// has a small `visible_px` of a huge `full_px`: worth refining. With
+/// `full_px = visible_px` it is [`tile_benefit`]; four children, each with
+/// a quarter of `full_px` and the parent's samples, keep its diminishing
+/// returns (`φ` is concave with `φ(0) = 0`, so `φ(u) ≤ φ(4u) ≤ 4 φ(u)`).
+pub fn tile_benefit_seen(visible_px: f64, full_px: f64, samples: f64, smooth: Smooth) -> f64 {
+    let finite_positive = |x: f64| crate::lod::positive(x) && x.is_finite();
+    if !finite_positive(visible_px) || !finite_positive(full_px.max(visible_px)) || !crate::lod::non_negative(samples) {
         return 0.0;
     }
-    let samples = f64::from(samples_per_side).powi(2);
-    projected_px * smooth.phi(samples / projected_px)
+    visible_px * smooth.phi(samples / full_px.max(visible_px))
 }
 
 /// Full-resolution benefit weight of a group of `trees` trees covering
@@ -90,8 +102,10 @@ pub fn group_weight(projected_px: f64, trees: u32, k: f64) -> f64 {
 pub struct CostFeatures {
     /// Tiles drawn (draw calls, mesh vertices, texture binds).
     pub tiles: f64,
-    /// Ray-casting work: millions of pixel·steps.
+    /// View-ray casting work: millions of pixel·steps.
     pub raycast_mpx_steps: f64,
+    /// Shadow-ray work: millions of pixel·shadow steps.
+    pub shadow_mpx_steps: f64,
     /// Point splats drawn, thousands.
     pub splats_k: f64,
     /// Tree groups drawn (per-group setup, 000 §5.3's `c_tree`), hundreds.
@@ -100,12 +114,13 @@ pub struct CostFeatures {
 
 /// Number of calibrated constants: one per feature plus a fixed per-frame
 /// cost.
-pub const FEATURES: usize = 5;
+pub const FEATURES: usize = 6;
 
 impl CostFeatures {
     /// The features as a vector, with 1 for the fixed per-frame cost first.
     pub fn vector(&self) -> [f64; FEATURES] {
-        [1.0, self.tiles, self.raycast_mpx_steps, self.splats_k, self.groups_h].map(finite_non_negative)
+        [1.0, self.tiles, self.raycast_mpx_steps, self.shadow_mpx_steps, self.splats_k, self.groups_h]
+            .map(finite_non_negative)
     }
 
     /// Sum of two feature sets (a tile's and a group's, say).
@@ -113,6 +128,7 @@ impl CostFeatures {
         CostFeatures {
             tiles: self.tiles + o.tiles,
             raycast_mpx_steps: self.raycast_mpx_steps + o.raycast_mpx_steps,
+            shadow_mpx_steps: self.shadow_mpx_steps + o.shadow_mpx_steps,
             splats_k: self.splats_k + o.splats_k,
             groups_h: self.groups_h + o.groups_h,
         }
@@ -129,11 +145,11 @@ pub struct CostModel {
 
 impl Default for CostModel {
     /// Starting guesses before any frame was measured: 0.5 ms per frame,
-    /// 0.01 ms per tile, 1 ms per million pixel·steps, 0.02 ms per thousand
-    /// splats, 0.01 ms per hundred groups. The calibrator replaces them
-    /// within a few frames.
+    /// 0.01 ms per tile, 1 ms per million pixel·steps of view or shadow
+    /// rays, 0.02 ms per thousand splats, 0.01 ms per hundred groups. The
+    /// calibrator replaces them within a few frames.
     fn default() -> CostModel {
-        CostModel { constants_ms: [0.5, 0.01, 1.0, 0.02, 0.01] }
+        CostModel { constants_ms: [0.5, 0.01, 1.0, 1.0, 0.02, 0.01] }
     }
 }
 
@@ -191,6 +207,25 @@ mod tests {
             prop_assert!(children >= parent * (1.0 - 1e-12));
             prop_assert!(children <= 4.0 * parent * (1.0 + 1e-12));
         }
+
+        #[test]
+        fn a_partly_seen_tile_keeps_diminishing_returns(
+            seen in 1.0f64..1e6, more in 1.0f64..1e4, n in 2u32..600, share in (0.0f64..1.0, 0.0f64..1.0, 0.0f64..1.0),
+        ) {
+            // The children share the seen pixels in any way; each spreads
+            // the parent's samples over a quarter of its full size.
+            let f = Smooth::default();
+            let full = seen * more;
+            let samples = f64::from(n).powi(2);
+            let parent = tile_benefit_seen(seen, full, samples, f);
+            let parts = [share.0, share.1 * (1.0 - share.0), share.2 * (1.0 - share.0) * (1.0 - share.1)];
+            let rest = 1.0 - parts.iter().sum::<f64>();
+            let children: f64 =
+                parts.iter().chain([rest].iter()).map(|p| tile_benefit_seen(seen * p, full / 4.0, samples, f)).sum();
+            prop_assert!(children >= parent * (1.0 - 1e-9));
+            prop_assert!(children <= 4.0 * parent * (1.0 + 1e-9));
+            prop_assert!(tile_benefit_seen(seen, seen, samples, f) == tile_benefit(seen, n, f));
+        }
     }
 
     #[test]
@@ -198,9 +233,17 @@ mod tests {
         for px in [0.0, -3.0, f64::NAN, f64::INFINITY] {
             assert_eq!(tile_benefit(px, 64, Smooth::default()), 0.0);
             assert_eq!(group_weight(px, 64, 1.0), 0.0);
+            assert_eq!(tile_benefit_seen(px, 1e6, 1e4, Smooth::default()), 0.0);
+            assert_eq!(tile_benefit_seen(10.0, px, f64::NAN, Smooth::default()), 0.0);
         }
         let model = CostModel::default();
-        let junk = CostFeatures { tiles: f64::NAN, raycast_mpx_steps: -1.0, splats_k: f64::INFINITY, groups_h: 2.0 };
+        let junk = CostFeatures {
+            tiles: f64::NAN,
+            raycast_mpx_steps: -1.0,
+            shadow_mpx_steps: f64::NEG_INFINITY,
+            splats_k: f64::INFINITY,
+            groups_h: 2.0,
+        };
         assert!((model.predict_ms(&junk) - (0.5 + 0.02)).abs() < 1e-12);
     }
 }

@@ -93,6 +93,44 @@ fn bad_flight_input_is_explained() {
     let path = common::repo().join("config/paths/demo_valley.toml");
     let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--traversal", "linear:0"]);
     assert!(String::from_utf8_lossy(&e.stderr).contains("linear:STEPS"));
+    let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--lod", "fastest"]);
+    assert!(String::from_utf8_lossy(&e.stderr).contains("sse or budget"));
+    let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--lod", "budget", "--budget-ms", "0"]);
+    assert!(String::from_utf8_lossy(&e.stderr).contains("--budget-ms 0 is not a positive"));
     let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--server", "http://127.0.0.1:9"]);
     assert!(String::from_utf8_lossy(&e.stderr).contains("tiles.json"), "{}", String::from_utf8_lossy(&e.stderr));
+}
+
+#[test]
+fn a_flight_under_a_frame_budget_reports_its_predicted_frame_time() {
+    let dir = TempDir::new("fly-budget");
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    let flight = |ms: &str, name: &str, more: &[&str]| {
+        let out = dir.join(name);
+        let args = ["--frames", "3", "--size", "96x64", "--no-frames", "--lod", "budget", "--budget-ms", ms];
+        fly(&[&["--path", path.to_str().unwrap()][..], &args[..], more].concat(), &out);
+        stats(&out)
+    };
+    let number = |row: &std::collections::HashMap<String, String>, c: &str| {
+        row[c].parse::<f64>().unwrap_or_else(|_| panic!("{c} = {:?}", row[c]))
+    };
+    // A budget no frame can meet: the coarsest tiles, the overrun reported.
+    let tight = flight("0.001", "tight", &[]);
+    // A budget every frame meets: refined as far as the GPU cache allows
+    // (geomorphing, which changes no cut).
+    let loose = flight("100000", "loose", &["--geomorph"]);
+    for row in tight.iter().chain(&loose) {
+        assert!(number(row, "predicted_ms") > 0.0 && number(row, "selection_ms") >= 0.0, "{row:?}");
+        assert!(row["error_px"] == "NaN" && number(row, "tiles") >= 1.0, "{row:?}");
+    }
+    for (t, l) in tight.iter().zip(&loose) {
+        assert!(number(t, "predicted_ms") > number(t, "budget_ms"), "{t:?}");
+        assert!(number(l, "predicted_ms") <= number(l, "budget_ms"), "{l:?}");
+        assert!(number(l, "tiles") > number(t, "tiles"), "{t:?} {l:?}");
+        assert!(number(l, "candidates") >= number(l, "tiles"), "{l:?}");
+        let reached = number(l, "benefit_bound");
+        assert!(reached > 0.5 && reached <= 1.0 + 1e-9, "{l:?}");
+        // The sun is up: a rich budget buys shadows, a poor one none.
+        assert!(number(l, "shadow_steps_mean") > number(t, "shadow_steps_mean"), "{t:?} {l:?}");
+    }
 }

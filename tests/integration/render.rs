@@ -1,5 +1,6 @@
 //! The GPU ray caster against the exact CPU reference (lavapipe in CI,
-//! small images): real tiles of the demo and rmnp, stiff synthetic scenes,
+//! small images): real tiles of the demo and rmnp (also with a shadow
+//! quality per tile), stiff synthetic scenes,
 //! deep zoom, poles and the antimeridian, tile seams and shadows across
 //! them, and work left out.
 //!
@@ -19,7 +20,7 @@ use sylva::client::raycast::{Fade, Traversal};
 use sylva::client::reference::{self, Departure, Image, Lighting};
 use sylva::client::render::gpu::Gpu;
 use sylva::client::render::uniforms::FrameSettings;
-use sylva::client::render::{Readback, Rendered, Renderer};
+use sylva::client::render::{Draw, Readback, Rendered, Renderer};
 use sylva::client::source::{RegionSource, TileSource};
 use sylva::client::tile::{TileData, TilePayload};
 use sylva::grid::{TileGrid, TileId};
@@ -165,6 +166,34 @@ fn gpu_matches_the_reference_on_real_tiles() {
     let camera = Camera::looking(eye, 40.0, -15.0, 60.0, (160, 120));
     let both = render_both(&tiles, &camera, &settings(Traversal::Exact, sun));
     assert_close("rmnp", &both.departure);
+}
+
+#[test]
+fn per_tile_shadow_quality_matches_the_reference() {
+    // The LOD selection gives each tile its own shadow samples per hit.
+    let demo = RegionSource::new(Arc::new(common::demo()));
+    let grid = demo.grid();
+    let first = grid.tile_containing(10.12, 46.36, 11);
+    let tiles = block(&demo, first, 2, 32);
+    let s = grid.sector(first);
+    let eye = Geodetic::new(s.max_lon, s.min_lat - 0.002, 1500.0);
+    let camera = Camera::looking(eye, 10.0, -20.0, 60.0, (160, 120));
+    let settings = settings(Traversal::Exact, Some(sun_at(eye.lon_deg, eye.lat_deg, 150.0, 35.0)));
+    let steps: Vec<u32> = [0, 3, 10, 30].into_iter().cycle().take(tiles.len()).collect();
+    let draws: Vec<Draw> = tiles.iter().zip(&steps).map(|(tile, &shadow_steps)| Draw { tile, shadow_steps }).collect();
+    let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
+    let gpu =
+        with_renderer(samples, halo, |r| r.render_draws(&camera, &draws, &settings, Readback::All).expect("fits"));
+    let lighting = Lighting { sun_ecef: settings.sun_ecef, shadow_steps: settings.shadow_steps, fade: settings.fade };
+    let per_tile = reference::compare(
+        &gpu.colour,
+        &gpu.view_z_m,
+        &reference::render_with_steps(&camera, &tiles, &lighting, &steps),
+    );
+    assert_close("per-tile shadow steps", &per_tile);
+    // Against one quality for all the tiles, the shading differs.
+    let uniform = reference::compare(&gpu.colour, &gpu.view_z_m, &reference::render(&camera, &tiles, &lighting));
+    assert!(uniform.psnr_db + 3.0 < per_tile.psnr_db, "{uniform:?} vs {per_tile:?}");
 }
 
 /// Rolling ground with forest patches around `(lon0, lat0)`.

@@ -18,7 +18,7 @@ pub mod timer;
 pub mod uniforms;
 
 use super::camera::Camera;
-use super::raycast::SKY;
+use super::raycast::{self, SKY};
 use super::tile::TileData;
 use cache::{CacheFull, TileCache};
 use gpu::Gpu;
@@ -27,11 +27,6 @@ use std::time::Instant;
 use targets::Targets;
 use timer::PassTimer;
 use uniforms::{DrawMode, FrameSettings, FrameUniform, TILE_STRIDE, TileUniform};
-
-/// Below this projected error (pixels) a tile needs no ray casting: its
-/// canopy is faded out and its terrain mesh departs from the ground by
-/// less than half a pixel.
-pub const PLAIN_ERROR_PX: f64 = 0.5;
 
 /// What to read back after a frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -72,6 +67,15 @@ pub struct Rendered {
     pub fetches: Vec<[u32; 2]>,
     /// Counts and times.
     pub stats: FrameStats,
+}
+
+/// A tile to draw and its ray-casting quality.
+#[derive(Clone, Copy, Debug)]
+pub struct Draw<'a> {
+    /// The tile.
+    pub tile: &'a TileData,
+    /// Shadow samples per hit on this tile (0: none).
+    pub shadow_steps: u32,
 }
 
 /// The renderer and its GPU resources.
@@ -129,11 +133,24 @@ impl Renderer {
         self.cache.capacity()
     }
 
-    /// Renders `tiles` (all the frame's tiles, at most [`Self::cache_slots`]).
+    /// Renders `tiles` (all the frame's tiles, at most [`Self::cache_slots`])
+    /// with the settings' shadow steps on every tile.
     pub fn render(
         &mut self,
         camera: &Camera,
         tiles: &[&TileData],
+        settings: &FrameSettings,
+        readback: Readback,
+    ) -> Result<Rendered, CacheFull> {
+        let draws: Vec<Draw> = tiles.iter().map(|&tile| Draw { tile, shadow_steps: settings.shadow_steps }).collect();
+        self.render_draws(camera, &draws, settings, readback)
+    }
+
+    /// Renders `draws`, each tile with its own quality.
+    pub fn render_draws(
+        &mut self,
+        camera: &Camera,
+        draws: &[Draw],
         settings: &FrameSettings,
         readback: Readback,
     ) -> Result<Rendered, CacheFull> {
@@ -143,9 +160,9 @@ impl Renderer {
             self.targets = Some(Targets::new(&self.gpu.device, size));
         }
         let start = Instant::now();
-        let camera = &depth_camera(camera, tiles);
+        let camera = &depth_camera(camera, draws);
         let mut stats = FrameStats::default();
-        let draws = self.prepare(camera, tiles, settings, &mut stats)?;
+        let draws = self.prepare(camera, draws, settings, &mut stats)?;
         self.encode_and_submit(&draws);
         stats.gpu_ms = self.timer.as_ref().and_then(|t| t.read_ms(&self.gpu.device));
         stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -157,16 +174,16 @@ impl Renderer {
     fn prepare(
         &mut self,
         camera: &Camera,
-        tiles: &[&TileData],
+        tiles: &[Draw],
         settings: &FrameSettings,
         stats: &mut FrameStats,
     ) -> Result<Vec<(u32, DrawMode)>, CacheFull> {
         let (device, queue) = (&self.gpu.device, &self.gpu.queue);
-        let mut order: Vec<(f64, &TileData)> = tiles.iter().map(|t| (uniforms::tile_near_m(camera, t), *t)).collect();
+        let mut order: Vec<(f64, &Draw)> = tiles.iter().map(|d| (uniforms::tile_near_m(camera, d.tile), d)).collect();
         order.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut blocks = Vec::with_capacity(order.len());
         let mut draws = Vec::with_capacity(order.len());
-        for (near_m, tile) in order {
+        for (near_m, &Draw { tile, shadow_steps }) in order {
             let slot = self.cache.insert(device, queue, tile, self.frame_no)?;
             let mode = draw_mode(camera, tile, settings, near_m);
             match mode {
@@ -174,7 +191,7 @@ impl Renderer {
                 DrawMode::Inside => stats.tiles_inside += 1,
                 DrawMode::Plain => stats.tiles_plain += 1,
             }
-            let block = TileUniform::new(camera, settings, tile, slot, mode);
+            let block = TileUniform::new(camera, settings, tile, (slot, mode), shadow_steps);
             let mut bytes = bytemuck::bytes_of(&block).to_vec();
             bytes.resize(TILE_STRIDE as usize, 0);
             blocks.extend(bytes);
@@ -258,8 +275,8 @@ impl Renderer {
 /// (`near / z`) stay far from zero, where software rasterisers lose
 /// absolute precision (lavapipe: ~3·10⁻¹³, i.e. 10⁻⁴ relative at 300 km
 /// with a 1 mm near plane).
-fn depth_camera(camera: &Camera, tiles: &[&TileData]) -> Camera {
-    let nearest = tiles.iter().map(|t| uniforms::tile_near_m(camera, t)).fold(f64::INFINITY, f64::min);
+fn depth_camera(camera: &Camera, draws: &[Draw]) -> Camera {
+    let nearest = draws.iter().map(|d| uniforms::tile_near_m(camera, d.tile)).fold(f64::INFINITY, f64::min);
     let near_m = if nearest.is_finite() { (0.5 * nearest).max(camera.near_m) } else { camera.near_m };
     Camera { near_m, ..*camera }
 }
@@ -275,9 +292,11 @@ fn draw_mode(camera: &Camera, tile: &TileData, settings: &FrameSettings, near_m:
     if uniforms::camera_inside(camera, tile) {
         return DrawMode::Inside;
     }
-    let fade_gone = settings.fade.factor(near_m) <= 0.0;
-    let mesh_px = tile.range.mesh_error_m as f64 * camera.focal_px() / near_m.max(1e-9);
-    if fade_gone && mesh_px < PLAIN_ERROR_PX { DrawMode::Plain } else { DrawMode::Hull }
+    if raycast::plain(&settings.fade, near_m, tile.range.mesh_error_m as f64) {
+        DrawMode::Plain
+    } else {
+        DrawMode::Hull
+    }
 }
 
 fn tile_buffer(device: &wgpu::Device, slots: u32) -> wgpu::Buffer {

@@ -28,7 +28,7 @@ pub struct FrameUniform {
     pub shadow: [f32; 4],
     /// Canopy tint.
     pub canopy_tint: [f32; 4],
-    /// Traversal, linear steps, shadow steps, sun on.
+    /// Traversal, linear steps, unused, sun on.
     pub mode: [u32; 4],
     /// Mipmap atlas rectangles per level.
     pub mip_rects: [[u32; 4]; MAX_MIP_LEVELS],
@@ -50,7 +50,7 @@ pub struct TileUniform {
     pub range: [f32; 4],
     /// Halo, texels per side, slot, top mipmap level.
     pub index: [i32; 4],
-    /// Draw mode, canopy whole.
+    /// Draw mode, canopy whole, shadow steps, unused.
     pub flags: [u32; 4],
     /// Highest CEM over all texels (the halo too).
     pub texels: [f32; 4],
@@ -73,7 +73,7 @@ pub enum DrawMode {
 pub struct FrameSettings {
     /// View-ray traversal.
     pub traversal: Traversal,
-    /// Shadow samples per hit.
+    /// Shadow samples per hit, for tiles drawn without a quality of their own.
     pub shadow_steps: u32,
     /// Unit direction to the sun (ECEF), or none.
     pub sun_ecef: Option<DVec3>,
@@ -101,15 +101,22 @@ impl FrameUniform {
             viewport: [camera.width_px as f32, camera.height_px as f32, camera.near_m as f32, camera.focal_px() as f32],
             shadow: [raycast::SHADOW_WEIGHT as f32, raycast::SHADOW_SOFT_M as f32, 0.0, 0.0],
             canopy_tint: rgb(raycast::CANOPY_TINT, 1.0),
-            mode: [traversal, steps, settings.shadow_steps, settings.sun_ecef.is_some() as u32],
+            mode: [traversal, steps, 0, settings.sun_ecef.is_some() as u32],
             mip_rects: rects,
         }
     }
 }
 
 impl TileUniform {
-    /// The tile block for `tile` in texture `slot`.
-    pub fn new(camera: &Camera, settings: &FrameSettings, tile: &TileData, slot: u32, mode: DrawMode) -> TileUniform {
+    /// The tile block for `tile` in texture `slot`, with `shadow_steps`
+    /// shadow samples per hit.
+    pub fn new(
+        camera: &Camera,
+        settings: &FrameSettings,
+        tile: &TileData,
+        (slot, mode): (u32, DrawMode),
+        shadow_steps: u32,
+    ) -> TileUniform {
         let frame = &tile.frame;
         let to_local = frame.basis.transpose();
         let cam = frame.to_local(camera.position_ecef);
@@ -138,7 +145,7 @@ impl TileUniform {
                 if mode == DrawMode::Plain { 0.0 } else { filler_drop_m(tile) },
             ],
             index: [tile.halo as i32, tile.size as i32, slot as i32, tile.mip.levels() as i32 - 1],
-            flags: [mode as u32, whole as u32, 0, 0],
+            flags: [mode as u32, whole as u32, shadow_steps, 0],
             texels: [tile.range.texels_max_m, 0.0, 0.0, 0.0],
             _pad: [0.0; 20],
         }

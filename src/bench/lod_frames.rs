@@ -1,0 +1,135 @@
+//! The frame-time half of `sylva bench lod` (000 Figure 2): per frame of a
+//! flight under a frame budget (the `stats.csv` of `sylva fly --lod
+//! budget`), the predicted and the measured frame time against the budget.
+//! The measured time is the GPU's (timestamp queries), else the render's
+//! wall clock. The first frame builds the GPU pipelines and is left out.
+
+use super::lod_plot;
+use std::collections::HashMap;
+
+/// Within this share of the budget a frame is on budget (the issue's ±10 %).
+pub const TOLERANCE: f64 = 0.1;
+
+/// One frame's times, ms.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameTime {
+    /// Predicted by the selection's cost model.
+    pub predicted_ms: f64,
+    /// Measured.
+    pub measured_ms: f64,
+    /// The budget.
+    pub budget_ms: f64,
+}
+
+/// The frames of a `stats.csv` (all but the first).
+pub fn parse(csv: &str) -> Result<Vec<FrameTime>, String> {
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().ok_or("an empty stats.csv")?.split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).ok_or(format!("no {name} column"));
+    let (gpu, render, predicted, budget) =
+        (column("gpu_ms")?, column("render_ms")?, column("predicted_ms")?, column("budget_ms")?);
+    let rows = lines.skip(1).enumerate().map(|(k, line)| {
+        let cells: Vec<&str> = line.split(',').collect();
+        let number = |i: usize| cells.get(i).and_then(|c| c.parse::<f64>().ok());
+        let measured = number(gpu).or(number(render));
+        match (number(predicted), measured, number(budget)) {
+            (Some(predicted_ms), Some(measured_ms), Some(budget_ms)) => {
+                Ok(FrameTime { predicted_ms, measured_ms, budget_ms })
+            }
+            _ => Err(format!("frame {}: not a flight under a budget", k + 1)),
+        }
+    });
+    rows.collect()
+}
+
+/// What a flight's frames show.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Summary {
+    /// Frames.
+    pub frames: usize,
+    /// Share of frames measured within ±[`TOLERANCE`] of the budget.
+    pub on_budget: f64,
+    /// Share of frames measured at most `1 + TOLERANCE` times the budget.
+    pub not_over: f64,
+    /// Median of |predicted − measured| / measured (the error of prediction).
+    pub prediction_error: f64,
+}
+
+/// The summary of `frames`.
+pub fn summarize(frames: &[FrameTime]) -> Summary {
+    let n = frames.len().max(1) as f64;
+    let share = |f: &dyn Fn(&FrameTime) -> bool| frames.iter().filter(|t| f(t)).count() as f64 / n;
+    let mut errors: Vec<f64> = frames.iter().map(|t| (t.predicted_ms - t.measured_ms).abs() / t.measured_ms).collect();
+    errors.sort_by(f64::total_cmp);
+    Summary {
+        frames: frames.len(),
+        on_budget: share(&|t| (t.measured_ms / t.budget_ms - 1.0).abs() <= TOLERANCE),
+        not_over: share(&|t| t.measured_ms <= t.budget_ms * (1.0 + TOLERANCE)),
+        prediction_error: errors.get(errors.len() / 2).copied().unwrap_or(f64::NAN),
+    }
+}
+
+/// The report's rows and plots for `flights` (name → stats.csv text):
+/// a table, and per flight a PNG (name → bytes).
+pub fn report(flights: &[(String, String)]) -> Result<(String, HashMap<String, Vec<u8>>), String> {
+    let mut rows = Vec::new();
+    let mut plots = HashMap::new();
+    for (name, csv) in flights {
+        let frames = parse(csv).map_err(|e| format!("{name}: {e}"))?;
+        let s = summarize(&frames);
+        let budget = frames.first().map_or(f64::NAN, |f| f.budget_ms);
+        rows.push(vec![
+            name.clone(),
+            s.frames.to_string(),
+            format!("{budget:.1}"),
+            format!("{:.1}", 100.0 * s.on_budget),
+            format!("{:.1}", 100.0 * s.not_over),
+            format!("{:.1}", 100.0 * s.prediction_error),
+        ]);
+        plots.insert(name.clone(), lod_plot::frame_times_png(name, &frames)?);
+    }
+    let header = [
+        "flight",
+        "frames",
+        "budget (ms)",
+        "on budget ±10 % (%)",
+        "≤ 110 % of budget (%)",
+        "median error of prediction (%)",
+    ];
+    Ok((super::table(&header, &rows), plots))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CSV: &str = "frame,gpu_ms,render_ms,predicted_ms,budget_ms\n\
+        0,500,510,1.0,40\n\
+        1,40,45,44,40\n\
+        2,,30,33,40\n\
+        3,80,85,40,40\n";
+
+    #[test]
+    fn frames_after_the_first_are_read_and_summarised() {
+        let frames = parse(CSV).unwrap();
+        assert_eq!(frames.len(), 3, "the first frame is left out");
+        assert_eq!(frames[1].measured_ms, 30.0, "the wall clock without a GPU time");
+        let s = summarize(&frames);
+        assert_eq!(s.frames, 3);
+        assert!((s.on_budget - 1.0 / 3.0).abs() < 1e-12, "{s:?}");
+        assert!((s.not_over - 2.0 / 3.0).abs() < 1e-12, "{s:?}");
+        // Errors 0.1, 0.1, 0.5: the median is 0.1.
+        assert!((s.prediction_error - 0.1).abs() < 1e-12, "{s:?}");
+    }
+
+    #[test]
+    fn a_flight_without_a_budget_is_refused() {
+        let sse = "frame,gpu_ms,render_ms,predicted_ms,budget_ms\n0,5,6,,\n1,5,6,,\n";
+        assert!(parse(sse).unwrap_err().contains("budget"));
+        assert!(parse("frame,gpu_ms\n").unwrap_err().contains("render_ms"));
+        let (table, plots) = report(&[("demo".into(), CSV.into())]).unwrap();
+        let row = table.lines().nth(2).unwrap();
+        assert!(row.contains("demo") && row.contains("33.3") && row.contains("66.7"), "{table}");
+        assert!(plots["demo"].starts_with(b"\x89PNG"));
+    }
+}

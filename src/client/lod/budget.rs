@@ -1,0 +1,324 @@
+//! A frame's tiles and their ray-casting quality under a frame budget
+//! (issue 7, `lod` steps 2 and 4): the candidates become the optimiser's
+//! tile forest, shadow quality its continuous variables, and its selection
+//! the cut the renderer draws.
+//!
+//! **Costs** are what the renderer spends, as [`CostFeatures`]: one tile
+//! (a draw call, its meshes), view rays on the pixels it covers
+//! (`VIEW_STEPS` nominal steps each: the calibrated constant absorbs the
+//! true mean) and shadow rays, pixels × shadow steps. The model's
+//! constants come from measured frame times ([`crate::lod::calibrate`]).
+//!
+//! **Shadow quality** is continuous: 0 to [`MAX_SHADOW_STEPS`] samples per
+//! hit. The optimiser's variables may not depend on which tiles it draws,
+//! so a variable is a *shading region* — a candidate at one level `q`, or
+//! a candidate leaf above it — and regions partition the view whatever the
+//! cut: a drawn tile at or below `q` takes its region's steps, a drawn tile
+//! above `q` the pixel-weighted mean of the regions it spans (which costs
+//! exactly what the regions were charged, cost being linear in steps).
+//! `q` is the deepest level with at most [`MAX_REGIONS`] regions.
+//! A region's full-resolution benefit is [`SHADOW_WORTH`] of the benefit of
+//! its head's geometry: shadows sharpen what the terrain shows, so they
+//! never outweigh refining it (weighed by pixels, full shadows on one
+//! coarse tile beat refining the whole view).
+//!
+//! Invariant: the cut is feasible as [`optimize`] answers it (steps are
+//! rounded down), and draws at most `max_tiles` tiles (the GPU cache's
+//! slots): a larger cut is chosen again under a smaller budget.
+
+use super::candidates::Candidate;
+use crate::grid::TileId;
+use crate::lod::model::{CostFeatures, CostModel};
+use crate::lod::optimizer::{Continuous, Forest, Node, Settings, Stop, optimize};
+use std::time::Instant;
+
+/// Most shadow samples per hit (the renderer's default is 10).
+pub const MAX_SHADOW_STEPS: u32 = 30;
+/// Shading regions at most (continuous variables).
+pub const MAX_REGIONS: usize = 256;
+/// Full shadows on a region are worth this share of what its geometry at
+/// full resolution is worth: shadows matter less than shape (a judgement,
+/// not a measurement).
+pub const SHADOW_WORTH: f64 = 0.3;
+/// Halvings of the budget searched when a cut has more tiles than slots
+/// (the budget found is within 2⁻¹⁰ of the largest that fits).
+const SLOT_BISECTIONS: usize = 10;
+/// Nominal view-ray steps per ray-cast pixel (the exact traversal's mean
+/// on the demo and rmnp paths is 15–30 fetches).
+pub const VIEW_STEPS: f64 = 20.0;
+
+/// What the budget allows.
+#[derive(Clone, Copy, Debug)]
+pub struct Budget {
+    /// Frame budget, ms.
+    pub budget_ms: f64,
+    /// Tiles at most.
+    pub max_tiles: usize,
+    /// Whether the sun is on (else shadows cost and give nothing).
+    pub shadows: bool,
+    /// When the optimiser must stop.
+    pub deadline: Option<Instant>,
+}
+
+/// A tile to draw and its quality.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Choice {
+    /// The tile.
+    pub id: TileId,
+    /// Shadow samples per hit.
+    pub shadow_steps: u32,
+}
+
+/// The chosen cut.
+#[derive(Clone, Debug, Default)]
+pub struct Cut {
+    /// Tiles to draw, none an ancestor of another.
+    pub tiles: Vec<Choice>,
+    /// What drawing them costs, as the model sees it.
+    pub features: CostFeatures,
+    /// Predicted frame time, ms.
+    pub predicted_ms: f64,
+    /// Benefit of the cut, and no feasible cut's benefit exceeds the bound.
+    pub benefit: f64,
+    /// The optimiser's upper bound on the benefit.
+    pub upper_bound: f64,
+    /// Why the optimiser stopped (`None`: no candidates).
+    pub stop: Option<Stop>,
+}
+
+/// The features of drawing candidate `c` with `steps` shadow steps.
+pub fn features(c: &Candidate, steps: u32) -> CostFeatures {
+    CostFeatures {
+        tiles: 1.0,
+        raycast_mpx_steps: c.ray_px * VIEW_STEPS / 1e6,
+        shadow_mpx_steps: c.ray_px * f64::from(steps) / 1e6,
+        ..CostFeatures::default()
+    }
+}
+
+/// Chooses the cut of `candidates` under `budget` with cost `model`.
+pub fn choose(candidates: &[Candidate], model: &CostModel, budget: &Budget) -> Cut {
+    let nodes: Vec<Node> = candidates
+        .iter()
+        .map(|c| Node { parent: c.parent, benefit: c.benefit, cost_ms: model.marginal_ms(&features(c, 0)) })
+        .collect();
+    let Ok(forest) = Forest::new(nodes) else { return Cut::default() };
+    if forest.is_empty() {
+        return Cut::default();
+    }
+    let regions = Regions::new(candidates, &forest, budget.shadows);
+    let continuous = regions.variables(candidates, model);
+    let run = |budget_ms: f64| {
+        let selection =
+            optimize(&forest, &continuous, &Settings { deadline: budget.deadline, ..Settings::budget(budget_ms) });
+        let drawn: Vec<u32> = selection.drawn(&forest).collect();
+        (selection, drawn)
+    };
+    let max_tiles = budget.max_tiles.max(1);
+    let (mut selection, mut drawn) = run(budget.budget_ms - model.constants_ms[0]);
+    if drawn.len() > max_tiles {
+        // The largest budget whose cut fits the slots, by bisection.
+        let (mut lo, mut hi) = (0.0, selection.cost_ms);
+        (selection, drawn) = run(lo);
+        for _ in 0..SLOT_BISECTIONS {
+            let mid = 0.5 * (lo + hi);
+            let (s, d) = run(mid);
+            if d.len() <= max_tiles {
+                (lo, selection, drawn) = (mid, s, d);
+            } else {
+                hi = mid;
+            }
+        }
+    }
+    let tiles: Vec<Choice> = drawn
+        .iter()
+        .map(|&i| Choice {
+            id: candidates[i as usize].id,
+            shadow_steps: regions.steps(i, &forest, candidates, &selection.resolutions),
+        })
+        .collect();
+    let features = drawn
+        .iter()
+        .zip(&tiles)
+        .map(|(&i, t)| features(&candidates[i as usize], t.shadow_steps))
+        .fold(CostFeatures::default(), |a, f| a.plus(&f));
+    Cut {
+        predicted_ms: model.predict_ms(&features),
+        features,
+        tiles,
+        benefit: selection.benefit,
+        upper_bound: selection.upper_bound,
+        stop: Some(selection.stop),
+    }
+}
+
+/// The shading regions: per candidate, its region (a variable index), if
+/// it lies in one; the candidate heading each region.
+struct Regions {
+    of: Vec<Option<u32>>,
+    heads: Vec<u32>,
+}
+
+impl Regions {
+    fn new(candidates: &[Candidate], forest: &Forest, shadows: bool) -> Regions {
+        let mut regions = Regions { of: vec![None; candidates.len()], heads: Vec::new() };
+        if !shadows {
+            return regions;
+        }
+        let q = region_level(candidates, forest);
+        for (i, c) in candidates.iter().enumerate() {
+            let inherited = c.parent.and_then(|p| regions.of[p as usize]);
+            let heads = c.id.level == q || (c.id.level < q && forest.children(i as u32).is_empty());
+            regions.of[i] = match (inherited, heads) {
+                (Some(r), _) => Some(r),
+                (None, true) => {
+                    regions.heads.push(i as u32);
+                    Some(regions.heads.len() as u32 - 1)
+                }
+                (None, false) => None,
+            };
+        }
+        regions
+    }
+
+    /// A variable per region: its geometry's worth and its pixels' cost
+    /// per step.
+    fn variables(&self, candidates: &[Candidate], model: &CostModel) -> Vec<Continuous> {
+        let per_step = CostFeatures { shadow_mpx_steps: 1e-6, ..CostFeatures::default() };
+        let ms_per_px_step = model.marginal_ms(&per_step);
+        self.heads
+            .iter()
+            .map(|&h| {
+                let c = &candidates[h as usize];
+                let casts = c.ray_px > 0.0;
+                Continuous {
+                    weight: if casts { SHADOW_WORTH * c.benefit } else { 0.0 },
+                    capacity: f64::from(MAX_SHADOW_STEPS),
+                    cost_per_unit_ms: ms_per_px_step * c.ray_px,
+                }
+            })
+            .collect()
+    }
+
+    /// Shadow steps of drawn node `i`.
+    fn steps(&self, i: u32, forest: &Forest, candidates: &[Candidate], x: &[f64]) -> u32 {
+        let at = |r: u32| x.get(r as usize).copied().unwrap_or(0.0);
+        if let Some(r) = self.of[i as usize] {
+            return at(r).floor().clamp(0.0, f64::from(MAX_SHADOW_STEPS)) as u32;
+        }
+        // Above the region level: the pixel-weighted mean of the regions below.
+        let (mut sum, mut px) = (0.0, 0.0);
+        let mut stack = vec![i];
+        while let Some(v) = stack.pop() {
+            match self.of[v as usize] {
+                Some(r) => {
+                    let w = candidates[v as usize].ray_px;
+                    sum += w * at(r);
+                    px += w;
+                }
+                None => stack.extend(forest.children(v)),
+            }
+        }
+        if px > 0.0 { (sum / px).floor().clamp(0.0, f64::from(MAX_SHADOW_STEPS)) as u32 } else { 0 }
+    }
+}
+
+/// The deepest level at which the candidates of that level and the leaves
+/// above it are at most [`MAX_REGIONS`].
+fn region_level(candidates: &[Candidate], forest: &Forest) -> u32 {
+    let deepest = candidates.iter().map(|c| c.id.level).max().unwrap_or(0);
+    let mut at = vec![0usize; deepest as usize + 2];
+    let mut leaves = vec![0usize; deepest as usize + 2];
+    for (i, c) in candidates.iter().enumerate() {
+        at[c.id.level as usize] += 1;
+        if forest.children(i as u32).is_empty() {
+            leaves[c.id.level as usize] += 1;
+        }
+    }
+    let mut above = 0;
+    let mut best = 0;
+    for level in 0..=deepest {
+        if at[level as usize] + above <= MAX_REGIONS {
+            best = level;
+        }
+        above += leaves[level as usize];
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::client::camera::Camera;
+    use crate::client::globe::Geodetic;
+    use crate::client::lod::candidates::{Scope, candidates};
+    use crate::grid::{BBox, TileGrid};
+
+    fn demo_candidates() -> Vec<Candidate> {
+        let cameras = [Camera::looking(Geodetic::new(10.1, 46.32, 2500.0), 10.0, -15.0, 60.0, (320, 240))];
+        let scope = Scope {
+            grid: TileGrid::new(36.0, 513).unwrap(),
+            bounds: BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 },
+            cameras: &cameras,
+            cone: None,
+            fade: (30.0, 0.5, 2.0),
+            known: &|_| None,
+            range: &|_| Some((500.0, 3500.0)),
+            max_level: 16,
+            limit: 100_000,
+        };
+        candidates(&scope).tiles
+    }
+
+    const MODEL: CostModel = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0] };
+
+    fn budget(ms: f64, shadows: bool) -> Budget {
+        Budget { budget_ms: ms, max_tiles: 256, shadows, deadline: None }
+    }
+
+    #[test]
+    fn cuts_fit_their_budget_and_more_budget_buys_more() {
+        let c = demo_candidates();
+        let mut last = 0.0;
+        for ms in [3.0, 6.0, 12.0, 24.0] {
+            let cut = choose(&c, &MODEL, &budget(ms, true));
+            assert!(cut.predicted_ms <= ms + 1e-9, "{ms}: {}", cut.predicted_ms);
+            assert!(cut.benefit >= last && cut.benefit <= cut.upper_bound * (1.0 + 1e-9));
+            last = cut.benefit;
+            // A cut: no drawn tile is an ancestor of another.
+            for a in &cut.tiles {
+                assert!(!cut.tiles.iter().any(|b| b.id != a.id && b.id.level > a.id.level && {
+                    let up = b.id.level - a.id.level;
+                    (b.id.row >> up, b.id.col >> up) == (a.id.row, a.id.col)
+                }));
+            }
+        }
+        let rich = choose(&c, &MODEL, &budget(1e4, true));
+        assert_eq!(rich.stop, Some(Stop::FullResolution));
+        let f = rich.features;
+        let full = f64::from(MAX_SHADOW_STEPS) * f.raycast_mpx_steps / VIEW_STEPS;
+        assert!(f.shadow_mpx_steps > 0.95 * full && f.shadow_mpx_steps <= full * (1.0 + 1e-9), "{f:?}");
+        assert!(rich.tiles.len() > choose(&c, &MODEL, &budget(3.0, true)).tiles.len());
+    }
+
+    #[test]
+    fn no_sun_no_shadow_steps_and_slots_bound_the_cut() {
+        let c = demo_candidates();
+        let dark = choose(&c, &MODEL, &budget(50.0, false));
+        assert!(dark.tiles.iter().all(|t| t.shadow_steps == 0) && dark.features.shadow_mpx_steps == 0.0);
+        let few = choose(&c, &MODEL, &Budget { max_tiles: 8, ..budget(1e4, true) });
+        assert!(few.tiles.len() <= 8 && !few.tiles.is_empty(), "{}", few.tiles.len());
+    }
+
+    #[test]
+    fn odd_input_gives_an_empty_or_coarsest_cut() {
+        assert!(choose(&[], &MODEL, &budget(10.0, true)).tiles.is_empty());
+        let c = demo_candidates();
+        for ms in [0.0, -5.0, f64::NAN] {
+            let cut = choose(&c, &MODEL, &budget(ms, true));
+            let roots = c.iter().filter(|t| t.parent.is_none()).count();
+            assert_eq!(cut.tiles.len(), roots, "{ms}");
+            assert!(cut.predicted_ms.is_finite());
+        }
+    }
+}

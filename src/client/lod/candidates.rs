@@ -1,0 +1,307 @@
+//! The tiles the LOD optimiser chooses among (issue 7, `lod` step 2): the
+//! World Wind quadtree over the region, culled, down to where refining
+//! adds nothing, each tile with its benefit and the pixels it costs.
+//!
+//! A tile is a candidate when its bounding box is in view of one of the
+//! (predicted) cameras or inside the conservative camera's cone, and not
+//! behind the horizon. Its benefit is the mean over the cameras of
+//! [`tile_benefit_seen`]: the pixels its part inside the region covers
+//! ([`coverage::visible_px`]) times the smoothed root of its samples per
+//! pixel at its nearest ([`coverage::full_px`]). Samples count less where the flat frame
+//! misplaces them: a tile of spacing `s` and flat-frame error `e` is worth
+//! `(s / (s + e))²` of its samples (the screen-space error rule refines on
+//! `s + e` the same way). Its children are candidates while it has fewer
+//! samples than pixels for some camera, down to the deepest level.
+//!
+//! Tiles holding less of the region than [`MIN_SAMPLES_PER_SIDE`]² samples
+//! are not candidates: the walk passes through them, and the first
+//! drawable tiles below are the roots (the coarsest cut).
+//!
+//! Its cost is in pixels: the most any camera sees of it, unless the
+//! renderer would draw it plain ([`raycast::plain`], from the terrain
+//! mesh's error once the tile has been loaded).
+
+use super::super::camera::Camera;
+use super::super::frame::TileFrame;
+use super::super::globe::Geodetic;
+use super::super::quadtree::{UNKNOWN_RANGE_M, behind_horizon, local_box, visible};
+use super::super::raycast::{self, Fade};
+use super::super::store::Known;
+use super::coverage;
+use crate::grid::{BBox, Sector, TileGrid, TileId};
+use crate::lod::model::{Smooth, tile_benefit_seen};
+use crate::lod::predict::Cone;
+use glam::DVec3;
+
+/// One candidate tile.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Candidate {
+    /// The tile.
+    pub id: TileId,
+    /// Its parent among the candidates (earlier in the list).
+    pub parent: Option<u32>,
+    /// Benefit of drawing it (mean over the cameras).
+    pub benefit: f64,
+    /// Pixels it covers (mean over the cameras).
+    pub seen_px: f64,
+    /// Pixels it casts rays on: the most any camera sees, 0 if drawn plain.
+    pub ray_px: f64,
+}
+
+/// Where the candidates are looked for and how they are judged.
+pub struct Scope<'a> {
+    /// The tile grid.
+    pub grid: TileGrid,
+    /// The region's bounds.
+    pub bounds: BBox,
+    /// The cameras the selection is for (at least one; the first also
+    /// culls by its horizon).
+    pub cameras: &'a [Camera],
+    /// The conservative camera, if culling is to use it.
+    pub cone: Option<Cone>,
+    /// The canopy fade (the renderer's), for the plain-tile rule.
+    pub fade: (f64, f64, f64),
+    /// What is known of loaded tiles.
+    pub known: &'a dyn Fn(TileId) -> Option<Known>,
+    /// Height range of a tile, or of its nearest loaded ancestor.
+    pub range: &'a dyn Fn(TileId) -> Option<(f64, f64)>,
+    /// Deepest level.
+    pub max_level: u32,
+    /// Candidates at most (a guard; the walk stops refining there).
+    pub limit: usize,
+}
+
+/// The candidates, parents before children.
+#[derive(Clone, Debug, Default)]
+pub struct Candidates {
+    /// The candidates.
+    pub tiles: Vec<Candidate>,
+}
+
+/// Walks the quadtree over `scope`.
+pub fn candidates(scope: &Scope) -> Candidates {
+    let mut out = Candidates::default();
+    let Some(first) = scope.cameras.first() else { return out };
+    let b = &scope.bounds;
+    let area = Sector { min_lat: b.south, max_lat: b.north, min_lon: b.west, max_lon: b.east };
+    let (rows, cols) = scope.grid.tiles_on_level(0);
+    let mut stack: Vec<(TileId, Option<u32>)> =
+        (0..rows).flat_map(|r| (0..cols).map(move |c| (TileId::new(0, r, c), None))).collect();
+    let planes: Vec<[DVec3; 4]> = scope.cameras.iter().map(Camera::side_planes).collect();
+    while let Some((id, parent)) = stack.pop() {
+        let sector = scope.grid.sector(id);
+        if !overlaps(&sector, &area) {
+            continue;
+        }
+        let (lo, hi) = (scope.range)(id).unwrap_or(UNKNOWN_RANGE_M);
+        let frame = TileFrame::new(&scope.grid, id);
+        let (box_lo, box_hi) = local_box(&frame, lo, hi);
+        let in_view = scope.cameras.iter().zip(&planes).any(|(c, p)| visible(c, &frame, p, box_lo, box_hi))
+            || scope.cone.is_some_and(|cone| in_cone(&cone, first, &frame, box_lo, box_hi));
+        if !in_view {
+            continue;
+        }
+        if !drawable(&frame, &scope.bounds) && id.level < scope.max_level {
+            stack.extend(id.children().map(|c| (c, parent)));
+            continue;
+        }
+        let judged = judge(scope, &frame, (lo, hi), (box_lo, box_hi));
+        let index = out.tiles.len() as u32;
+        out.tiles.push(Candidate { id, parent, ..judged.candidate });
+        if judged.refinable && id.level < scope.max_level && out.tiles.len() < scope.limit {
+            stack.extend(id.children().map(|c| (c, Some(index))));
+        }
+    }
+    out
+}
+
+/// Point-registered edges: a tile whose edge lies on the area's edge holds
+/// data there only on that edge; it is not needed.
+fn overlaps(s: &Sector, area: &Sector) -> bool {
+    s.min_lat < area.max_lat && area.min_lat < s.max_lat && s.min_lon < area.max_lon && area.min_lon < s.max_lon
+}
+
+/// Whether the tile's box, by its bounding sphere, meets the cone and is
+/// not entirely behind the horizon of `camera`.
+fn in_cone(cone: &Cone, camera: &Camera, frame: &TileFrame, lo: DVec3, hi: DVec3) -> bool {
+    let centre = frame.to_ecef((lo + hi) / 2.0);
+    let radius = (hi - lo).length() / 2.0;
+    let v = centre - cone.apex_m;
+    let d = v.length();
+    let meets = d <= radius
+        || cone.half_angle_rad >= std::f64::consts::PI
+        || (v.dot(cone.axis) / d).clamp(-1.0, 1.0).acos() - (radius / d).clamp(0.0, 1.0).asin() <= cone.half_angle_rad;
+    let corners = (0..8).map(|k| {
+        let local = DVec3::new([lo.x, hi.x][k & 1], [lo.y, hi.y][(k >> 1) & 1], [lo.z, hi.z][k >> 2]);
+        frame.to_ecef(local) - camera.position_ecef
+    });
+    meets && !corners.into_iter().all(|to| behind_horizon(camera.position_ecef, to))
+}
+
+struct Judged {
+    candidate: Candidate,
+    /// Fewer samples than pixels for some camera: children may add benefit.
+    refinable: bool,
+}
+
+/// Tile `id` as a candidate (no parent) for the scope's cameras, culled
+/// or not: what a drawn tile costs, measured as candidates are.
+pub fn candidate(scope: &Scope, id: TileId) -> Candidate {
+    let (lo, hi) = (scope.range)(id).unwrap_or(UNKNOWN_RANGE_M);
+    let frame = TileFrame::new(&scope.grid, id);
+    judge(scope, &frame, (lo, hi), local_box(&frame, lo, hi)).candidate
+}
+
+fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi): (DVec3, DVec3)) -> Judged {
+    let (sector, share) = &inside(&frame.sector, &scope.bounds);
+    let spacing = frame.spacing_m.max_element();
+    let flat = frame.flat_error_m(lo.abs().max(hi.abs()));
+    let n = f64::from(frame.samples.saturating_sub(1));
+    let samples = share * n * n * (spacing / (spacing + flat)).powi(2);
+    let area_m2 = share * n * n * frame.spacing_m.x * frame.spacing_m.y;
+    let mesh_error_m = (scope.known)(frame.id).map(|k| k.mesh_error_m);
+    let (canopy_ref_m, lo_px, hi_px) = scope.fade;
+    let (mut benefit, mut seen, mut ray, mut refinable) = (0.0, 0.0, 0.0f64, false);
+    for camera in scope.cameras {
+        let cam = frame.to_local(camera.position_ecef);
+        let near_m = (cam.clamp(box_lo, box_hi) - cam).length();
+        let visible = coverage::visible_px(camera, sector, surface_m(camera, lo, hi));
+        let full = coverage::full_px(camera, area_m2, near_m).max(visible);
+        benefit += tile_benefit_seen(visible, full, samples, Smooth::default());
+        seen += visible;
+        let fade = Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px };
+        if !mesh_error_m.is_some_and(|e| raycast::plain(&fade, near_m, e)) {
+            ray = ray.max(visible);
+        }
+        refinable |= visible > 0.0 && full > samples;
+    }
+    let k = scope.cameras.len().max(1) as f64;
+    Judged {
+        candidate: Candidate { id: frame.id, parent: None, benefit: benefit / k, seen_px: seen / k, ray_px: ray },
+        refinable,
+    }
+}
+
+/// Samples per side a tile must hold inside the region to be drawn: a
+/// coarser one shows a few samples of the region (the demo's level-0 tile
+/// holds 3 × 2), which the renderer draws as nothing.
+pub const MIN_SAMPLES_PER_SIDE: f64 = 32.0;
+
+/// Whether the tile of `frame` holds enough of the region to be drawn.
+fn drawable(frame: &TileFrame, bounds: &BBox) -> bool {
+    let n = f64::from(frame.samples.saturating_sub(1));
+    inside(&frame.sector, bounds).1 * n * n >= MIN_SAMPLES_PER_SIDE * MIN_SAMPLES_PER_SIDE
+}
+
+/// The part of `sector` inside the region (a coarse tile holds data only
+/// there), and its share of the sector's area.
+fn inside(sector: &Sector, b: &BBox) -> (Sector, f64) {
+    let clipped = Sector {
+        min_lat: sector.min_lat.max(b.south),
+        max_lat: sector.max_lat.min(b.north),
+        min_lon: sector.min_lon.max(b.west),
+        max_lon: sector.max_lon.min(b.east),
+    };
+    let span = |s: &Sector| (s.max_lat - s.min_lat).max(0.0) * (s.max_lon - s.min_lon).max(0.0);
+    let share = span(&clipped) / span(sector);
+    (clipped, if share.is_finite() { share.clamp(0.0, 1.0) } else { 0.0 })
+}
+
+/// The height a tile's surface is measured at from `camera`: the middle
+/// of its range, but below the camera when the range allows (a tile
+/// nobody loaded spans [`UNKNOWN_RANGE_M`], whose middle is above a low
+/// camera: measured there, the ground would face away and count nothing).
+fn surface_m(camera: &Camera, lo: f64, hi: f64) -> f64 {
+    let eye_m = Geodetic::from_ecef(camera.position_ecef).height_m;
+    (0.5 * (lo + hi)).min(eye_m - 1.0).max(lo)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn walk(camera: Camera, cone: Option<Cone>, max_level: u32) -> Candidates {
+        walk_over(camera, cone, max_level, &|_| Some((500.0, 3500.0)))
+    }
+
+    fn walk_over(
+        camera: Camera,
+        cone: Option<Cone>,
+        max_level: u32,
+        range: &dyn Fn(TileId) -> Option<(f64, f64)>,
+    ) -> Candidates {
+        let cameras = [camera];
+        let scope = Scope {
+            grid: TileGrid::new(36.0, 513).unwrap(),
+            bounds: BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 },
+            cameras: &cameras,
+            cone,
+            fade: (30.0, 0.5, 2.0),
+            known: &|_| None,
+            range,
+            max_level,
+            limit: 100_000,
+        };
+        candidates(&scope)
+    }
+
+    #[test]
+    fn candidates_refine_near_the_camera_and_list_parents_first() {
+        let camera = Camera::looking(Geodetic::new(10.1, 46.32, 2500.0), 10.0, -15.0, 60.0, (320, 240));
+        let c = walk(camera, None, 16);
+        assert!(c.tiles.len() > 20, "{}", c.tiles.len());
+        for (k, t) in c.tiles.iter().enumerate() {
+            if let Some(p) = t.parent {
+                assert!((p as usize) < k);
+                assert_eq!(c.tiles[p as usize].id, t.id.parent().unwrap());
+            }
+            assert!(t.benefit >= 0.0 && t.benefit <= t.seen_px + 1e-9 && t.ray_px >= 0.0, "{t:?}");
+        }
+        let deepest = c.tiles.iter().map(|t| t.id.level).max().unwrap();
+        assert!((10..16).contains(&deepest), "stops where samples outnumber pixels: {deepest}");
+        // The deepest tiles are near the camera, far ones are coarse.
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        let km = |t: &Candidate| {
+            let s = grid.sector(t.id);
+            let (lon, lat) = ((s.min_lon + s.max_lon) / 2.0, (s.min_lat + s.max_lat) / 2.0);
+            111.2 * ((lat - 46.32).powi(2) + ((lon - 10.1) * 46.32f64.to_radians().cos()).powi(2)).sqrt()
+        };
+        let nearest_deep = c.tiles.iter().filter(|t| t.id.level == deepest).map(km).fold(f64::MAX, f64::min);
+        assert!(nearest_deep < 1.5, "{nearest_deep} km");
+        let far_level = c.tiles.iter().filter(|t| km(t) > 8.0).map(|t| t.id.level).max().unwrap();
+        assert!(far_level + 2 <= deepest, "{far_level} far, {deepest} near");
+    }
+
+    #[test]
+    fn tiles_holding_a_few_samples_of_the_region_are_passed_through() {
+        let camera = Camera::looking(Geodetic::new(10.1, 46.32, 2500.0), 10.0, -15.0, 60.0, (320, 240));
+        let c = walk(camera, None, 16);
+        // The region is 0.25° × 0.15°: a level-4 tile (2.25°) holds ~44²
+        // samples of it, a level-3 one ~22².
+        let roots: Vec<u32> = c.tiles.iter().filter(|t| t.parent.is_none()).map(|t| t.id.level).collect();
+        assert!(!roots.is_empty() && roots.iter().all(|&l| l == 4), "{roots:?}");
+        assert!(c.tiles.iter().all(|t| t.id.level >= 4));
+    }
+
+    #[test]
+    fn a_low_camera_over_unknown_tiles_still_refines() {
+        // 1150 m up, below the middle of the unknown range (4250 m): the
+        // ground is measured below the eye, so it faces the camera.
+        let camera = Camera::looking(Geodetic::new(10.01, 46.352, 1150.0), 90.0, -8.0, 60.0, (160, 120));
+        let c = walk_over(camera, None, 13, &|_| None);
+        let deepest = c.tiles.iter().map(|t| t.id.level).max().unwrap();
+        assert!(deepest >= 9, "{deepest}");
+        assert!(c.tiles.iter().any(|t| t.seen_px > 100.0));
+    }
+
+    #[test]
+    fn the_cone_keeps_tiles_the_frustum_culls() {
+        let camera = Camera::looking(Geodetic::new(10.1, 46.32, 2500.0), 10.0, -15.0, 60.0, (320, 240));
+        let narrow = walk(camera, None, 12);
+        let cone = Cone { apex_m: camera.position_ecef, axis: camera.forward(), half_angle_rad: std::f64::consts::PI };
+        let wide = walk(camera, Some(cone), 12);
+        assert!(wide.tiles.len() > narrow.tiles.len());
+        // Behind the camera: candidates with no benefit and no pixels.
+        assert!(wide.tiles.iter().any(|t| t.seen_px == 0.0 && t.benefit == 0.0));
+    }
+}

@@ -1,0 +1,233 @@
+//! A flight under a frame budget (issue 7, `lod` steps 1 and 6): every
+//! frame the camera feeds the path predictor; every `τ` a selection for the
+//! predicted cameras and the conservative cone is handed to the selection
+//! thread ([`super::worker`]) while the last finished cut is drawn; after
+//! each frame its features and measured time go to the calibrator (001
+//! §4.2), so the next selection predicts with constants fitted to this GPU.
+//! With geomorphing on it also keeps the morphs of the cuts drawn
+//! ([`super::morphs`]).
+
+use super::super::camera::Camera;
+use super::ahead::{self, Lookahead, WINDOW};
+use super::budget::{Budget, Choice};
+use super::morphs::{Morphing, Morphs};
+use super::worker::{Request, Worker};
+use super::{Selected, Selector};
+use crate::grid::TileId;
+use crate::lod::calibrate::{CalibratorSettings, CostCalibrator};
+use crate::lod::model::{CostFeatures, CostModel};
+use crate::lod::predict::PathPredictor;
+
+/// The calibrator's settings: a strong ridge toward the (freely scaled)
+/// prior, since a flight's first frames differ little and software GPUs
+/// time them with ±50 % noise (lavapipe on a shared machine); constants
+/// separate only as frames keep disagreeing with the prior's proportions.
+pub fn calibration() -> CalibratorSettings {
+    CalibratorSettings { ridge: 0.03, ..CalibratorSettings::default() }
+}
+
+/// The selection state of a flight.
+pub struct BudgetFlight {
+    selector: Selector,
+    calibrator: CostCalibrator,
+    budget: Budget,
+    look: Lookahead,
+    predictor: PathPredictor,
+    worker: Worker,
+    /// The cut drawn now.
+    current: Option<Selected>,
+    /// A cut that coarsens the current one, drawn once the tiles it
+    /// replaces have morphed onto its coarser tiles.
+    pending: Option<Pending>,
+    /// Flight time of the last request.
+    requested_s: f64,
+    frames: usize,
+    /// The morphs, with geomorphing on.
+    morphs: Option<Morphs>,
+}
+
+impl BudgetFlight {
+    /// A flight of frames of `budget` looking ahead by `look`, starting
+    /// from the default cost model, geomorphing or not.
+    pub fn new(selector: Selector, budget: Budget, look: Lookahead, geomorph: bool) -> std::io::Result<BudgetFlight> {
+        Ok(BudgetFlight {
+            worker: Worker::spawn(selector.clone())?,
+            selector,
+            calibrator: CostCalibrator::new(CostModel::default(), calibration()),
+            budget,
+            look,
+            predictor: PathPredictor::new(WINDOW),
+            current: None,
+            pending: None,
+            requested_s: f64::NEG_INFINITY,
+            frames: 0,
+            morphs: geomorph.then(|| Morphs::new(look.tau_s)),
+        })
+    }
+
+    /// The cost model now.
+    pub fn model(&self) -> CostModel {
+        self.calibrator.model()
+    }
+
+    /// The budget.
+    pub fn budget(&self) -> &Budget {
+        &self.budget
+    }
+
+    /// The cut to draw at flight time `t_s` from `camera`: the newest
+    /// finished selection (waiting only for the first). Starts the next
+    /// selection when `τ` has passed since the last and the thread is idle.
+    pub fn frame(&mut self, t_s: f64, camera: &Camera) -> Selected {
+        self.predictor.observe(t_s, ahead::pose(camera));
+        if self.morphs.as_ref().is_none_or(Morphs::settled)
+            && let Some(p) = self.pending.take()
+        {
+            self.current = Some(p.selected);
+        }
+        if let Some(done) = self.worker.take(false) {
+            self.offer(done, t_s);
+        }
+        if !self.worker.busy() && t_s >= self.requested_s + self.look.tau_s {
+            let (cameras, cone) = ahead::ahead(&self.predictor, camera, t_s, &self.look);
+            let request = Request { cameras, cone: Some(cone), model: self.model(), budget: self.budget };
+            if self.worker.submit(request) {
+                self.requested_s = t_s;
+            }
+        }
+        if self.current.is_none() {
+            self.current = self.worker.take(true);
+        }
+        let model = self.model();
+        self.current
+            .get_or_insert_with(|| self.selector.select(std::slice::from_ref(camera), None, &model, &self.budget))
+            .clone()
+    }
+
+    /// Which tiles of `drawn`, the cut drawn at `t_s`, morph from or to a
+    /// coarser tile (over `τ`).
+    pub fn morphs(&mut self, t_s: f64, drawn: &[TileId]) -> Vec<Morphing> {
+        let next: Option<Vec<TileId>> = self.pending.as_ref().map(|p| ids(&p.selected));
+        let since_s = self.pending.as_ref().map_or(t_s, |p| p.since_s);
+        let Some(morphs) = &mut self.morphs else { return Vec::new() };
+        morphs.update(t_s, drawn, next.as_deref().map(|n| (n, since_s)))
+    }
+
+    /// A finished selection: drawn at once unless, geomorphing, it
+    /// coarsens the cut drawn: then it is held while the tiles it replaces
+    /// morph down (a newer one replaces it there, the morphs keep their
+    /// start).
+    fn offer(&mut self, next: Selected, t_s: f64) {
+        let Some(current) = &self.current else {
+            self.current = Some(next);
+            return;
+        };
+        if let Some(p) = &mut self.pending {
+            p.selected = next;
+        } else if self.morphs.is_some() && coarsens(current, &next) {
+            self.pending = Some(Pending { selected: next, since_s: t_s });
+        } else {
+            self.current = Some(next);
+        }
+    }
+
+    /// Records a drawn frame: its tiles as drawn from `camera` and its
+    /// measured time. Returns the frame's features, priced by the model
+    /// before this frame's correction. The first frame builds the GPU
+    /// pipelines and is not calibrated.
+    pub fn observe(&mut self, camera: &Camera, drawn: &[Choice], measured_ms: f64) -> CostFeatures {
+        let features = self.selector.features(camera, drawn);
+        if self.frames > 0 {
+            self.calibrator.observe(&features, measured_ms);
+        }
+        self.frames += 1;
+        features
+    }
+}
+
+/// A cut waiting for downmorphs, and when they began.
+struct Pending {
+    selected: Selected,
+    since_s: f64,
+}
+
+fn ids(s: &Selected) -> Vec<TileId> {
+    s.cut.tiles.iter().map(|c| c.id).collect()
+}
+
+/// Whether `next` draws a strict ancestor of a tile `current` draws.
+fn coarsens(current: &Selected, next: &Selected) -> bool {
+    let next: std::collections::HashSet<TileId> = ids(next).into_iter().collect();
+    ids(current).into_iter().any(|id| std::iter::successors(id.parent(), |p| p.parent()).any(|a| next.contains(&a)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::client::globe::Geodetic;
+    use crate::client::store::Knowledge;
+    use crate::grid::{BBox, TileGrid};
+    use crate::lod::predict::MotionLimits;
+
+    fn flight() -> BudgetFlight {
+        let selector = Selector {
+            grid: TileGrid::new(36.0, 513).unwrap(),
+            bounds: BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 },
+            knowledge: Knowledge::default(),
+            fade: (30.0, 0.5, 2.0),
+            max_level: 14,
+        };
+        let budget = Budget { budget_ms: 8.0, max_tiles: 256, shadows: true, deadline: None };
+        let look = Lookahead { tau_s: 1.0, limits: MotionLimits { max_speed_mps: 100.0, max_turn_radps: 0.1 } };
+        BudgetFlight::new(selector, budget, look, true).unwrap()
+    }
+
+    fn camera(lon: f64) -> Camera {
+        Camera::looking(Geodetic::new(lon, 46.33, 2000.0), 0.0, -20.0, 60.0, (160, 120))
+    }
+
+    #[test]
+    fn the_last_cut_is_drawn_while_the_thread_selects_the_next() {
+        let mut f = flight();
+        let first = f.frame(0.0, &camera(10.05));
+        assert!(!first.cut.tiles.is_empty() && first.cut.predicted_ms <= 8.0, "{:?}", first.cut);
+        // A little east a second later: the cut for the first view is still drawn
+        // while the thread selects for the new one.
+        let second = f.frame(1.0, &camera(10.08));
+        assert_eq!(ids(&second), ids(&first));
+        // It arrives within a few frames (within τ, none is started anew).
+        let adopted = (0..200).find_map(|_| {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+            let s = f.frame(1.5, &camera(10.08));
+            (ids(&s) != ids(&first)).then_some(s)
+        });
+        assert!(adopted.is_some(), "the new cut was adopted");
+    }
+
+    #[test]
+    fn a_selection_is_started_once_per_tau() {
+        let mut f = flight();
+        f.frame(0.0, &camera(10.05));
+        // Half of τ later nothing new is started; a whole τ later it is.
+        f.frame(0.5, &camera(10.06));
+        assert!(!f.worker.busy() && f.requested_s == 0.0);
+        f.frame(1.0, &camera(10.07));
+        assert_eq!(f.requested_s, 1.0);
+    }
+
+    #[test]
+    fn measured_frames_calibrate_the_model() {
+        let mut f = flight();
+        let cam = camera(10.05);
+        let cut = f.frame(0.0, &cam).cut;
+        let before = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles));
+        // The first frame builds pipelines and teaches nothing.
+        f.observe(&cam, &cut.tiles, 1000.0);
+        assert_eq!(f.model(), CostModel::default());
+        for _ in 0..5 {
+            f.observe(&cam, &cut.tiles, 4.0 * before);
+        }
+        let after = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles));
+        assert!((after / (4.0 * before) - 1.0).abs() < 0.05, "{before} → {after}");
+    }
+}

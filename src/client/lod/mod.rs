@@ -1,0 +1,105 @@
+//! The client's LOD selection under a frame budget (issue 7): what the
+//! pure [`crate::lod`] library is fed with, and what comes back to draw.
+//! `sylva fly --lod budget` uses it; `--lod sse` keeps the screen-space
+//! error rule of [`super::quadtree`].
+//!
+//! - [`coverage`]: the pixels a tile covers, and at what sample density.
+//! - [`candidates`]: the culled quadtree with each tile's benefit and cost
+//!   in pixels, for one camera or several predicted ones.
+//! - [`budget`]: the optimiser's forest and shadow-quality variables, and
+//!   the cut it selects.
+//! - [`ahead`]: the predicted cameras and the conservative cone a
+//!   selection is for.
+//! - [`worker`]: the selection thread.
+//! - [`morphs`]: geomorphs of refined tiles from the coarser tile drawn
+//!   before.
+//! - [`flight`]: a flight's selections, amortised over frames on the
+//!   selection thread, and the cost model calibrated from its measured
+//!   frame times.
+//!
+//! No wgpu and no I/O: the renderer and the flight own the GPU and tiles.
+
+pub mod ahead;
+pub mod budget;
+pub mod candidates;
+pub mod coverage;
+pub mod flight;
+pub mod morphs;
+pub mod worker;
+
+use super::camera::Camera;
+use super::store::Knowledge;
+use crate::grid::{BBox, TileGrid};
+use crate::lod::model::{CostFeatures, CostModel};
+use crate::lod::predict::Cone;
+use budget::{Budget, Choice, Cut};
+use candidates::Scope;
+use std::time::Instant;
+
+/// Candidates looked at, at most: far more than a frame draws (the GPU
+/// cache holds at most 256 tiles), few enough to select in milliseconds.
+pub const MAX_CANDIDATES: usize = 16_384;
+
+/// The fixed inputs of every selection of a flight.
+#[derive(Clone, Debug)]
+pub struct Selector {
+    /// The tile grid.
+    pub grid: TileGrid,
+    /// The region's bounds.
+    pub bounds: BBox,
+    /// What is known of loaded tiles.
+    pub knowledge: Knowledge,
+    /// The canopy fade: reference height (m), low and high (px).
+    pub fade: (f64, f64, f64),
+    /// Deepest level.
+    pub max_level: u32,
+}
+
+/// A selection and what it took.
+#[derive(Clone, Debug, Default)]
+pub struct Selected {
+    /// The cut.
+    pub cut: Cut,
+    /// Candidate tiles.
+    pub candidates: usize,
+    /// Wall-clock ms of the selection (candidates and optimiser).
+    pub ms: f64,
+}
+
+impl Selector {
+    /// The cut for `cameras` (the cone, if any, widens culling) under
+    /// `budget` with cost `model`.
+    pub fn select(&self, cameras: &[Camera], cone: Option<Cone>, model: &CostModel, budget: &Budget) -> Selected {
+        let start = Instant::now();
+        let found = self.with_scope(cameras, cone, candidates::candidates);
+        let cut = budget::choose(&found.tiles, model, budget);
+        Selected { cut, candidates: found.tiles.len(), ms: start.elapsed().as_secs_f64() * 1e3 }
+    }
+
+    /// What drawing `drawn` from `camera` costs, measured as a selection
+    /// measures its candidates (so calibrated constants fit predictions).
+    pub fn features(&self, camera: &Camera, drawn: &[Choice]) -> CostFeatures {
+        self.with_scope(std::slice::from_ref(camera), None, |scope| {
+            drawn
+                .iter()
+                .map(|c| budget::features(&candidates::candidate(scope, c.id), c.shadow_steps))
+                .fold(CostFeatures::default(), |a, f| a.plus(&f))
+        })
+    }
+
+    fn with_scope<R>(&self, cameras: &[Camera], cone: Option<Cone>, f: impl FnOnce(&Scope) -> R) -> R {
+        let known = |id| self.knowledge.get(id);
+        let range = |id| self.knowledge.range(id);
+        f(&Scope {
+            grid: self.grid,
+            bounds: self.bounds,
+            cameras,
+            cone,
+            fade: self.fade,
+            known: &known,
+            range: &range,
+            max_level: self.max_level,
+            limit: MAX_CANDIDATES,
+        })
+    }
+}

@@ -1,0 +1,348 @@
+//! Geomorphing between tile levels in the client (001 §3.4 and §4.4). For
+//! refinement, when a cut draws a tile in place of a coarser one drawn the
+//! frame before, the tile's heights start on the coarser tile's surface
+//! (bilinear between its samples, the surface the ray caster drew) and
+//! glide to its own along a [`MorphTrack`] over `τ` (an upmorph, run
+//! during the interval the selection is for), so no point of the surface
+//! jumps at the switch.
+//!
+//! A morphing tile is drawn as a tile prepared from a blended payload
+//! ([`blend`]): its own surface classes and colours, CEM and ground heights
+//! moved from the ancestor's surface toward its own by the morph weight
+//! (`crate::lod::morph::morphed_height`). Nodata stays nodata; where only
+//! the ancestor has none, the tile's own height is used. Such a tile is
+//! prepared and uploaded again every frame of its morph, so `sylva fly`
+//! geomorphs only when asked (`--geomorph`).
+//!
+//! Coarsening is a downmorph, run *before* the switch (001's asymmetry):
+//! the flight holds a cut that coarsens back for `τ` while the tiles it
+//! replaces glide onto the surface of their coarser tile in it, and draws
+//! it once a frame has shown them all there ([`Morphs::settled`]).
+
+use super::super::tile::{NODATA_M, TileData, TileError, TilePayload};
+use crate::grid::{TileGrid, TileId};
+use crate::lod::morph::{MorphTrack, morphed_height};
+use std::collections::{HashMap, HashSet};
+
+/// A tile's level track and the coarser tile at its other end.
+#[derive(Clone, Debug)]
+struct Track {
+    coarse: TileId,
+    track: MorphTrack,
+}
+
+/// The morphs of a flight.
+#[derive(Clone, Debug)]
+pub struct Morphs {
+    tau_s: f64,
+    drawn: HashSet<TileId>,
+    active: HashMap<TileId, Track>,
+    settled: bool,
+}
+
+/// A tile of this frame's cut that is morphing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Morphing {
+    /// The tile drawn.
+    pub tile: TileId,
+    /// The coarser tile whose surface it morphs from or to.
+    pub from: TileId,
+    /// Weight of its own heights, in `[0, 1)`.
+    pub weight: f64,
+}
+
+impl Morphs {
+    /// Morphs of `tau_s` seconds.
+    pub fn new(tau_s: f64) -> Morphs {
+        Morphs { tau_s, drawn: HashSet::new(), active: HashMap::new(), settled: true }
+    }
+
+    /// The cut drawn at `t_s`: which of its tiles morph, and how far.
+    /// `coarser`, the next cut and when it was offered, starts downmorphs
+    /// of the tiles it coarsens, over `τ` from then (001: before the
+    /// switch; an upmorph in the same interval collapses with it).
+    pub fn update(&mut self, t_s: f64, cut: &[TileId], coarser: Option<(&[TileId], f64)>) -> Vec<Morphing> {
+        for &id in cut.iter().filter(|id| !self.drawn.contains(id)) {
+            if let Some(coarse) = ancestors(id).find(|a| self.drawn.contains(a)) {
+                let mut track = MorphTrack::new(coarse.level as u8, self.tau_s);
+                track.request(id.level as u8, t_s);
+                self.active.insert(id, Track { coarse, track });
+            }
+        }
+        self.drawn = cut.iter().copied().collect();
+        self.settled = true;
+        if let Some((next, since_s)) = coarser {
+            self.downmorph(cut, next, since_s + self.tau_s, t_s);
+        }
+        self.active.retain(|id, m| {
+            m.track.prune(t_s);
+            self.drawn.contains(id)
+                && (m.track.level_at(t_s) < f64::from(id.level) || !m.track.transitions().is_empty())
+        });
+        let mut out: Vec<Morphing> = self
+            .active
+            .iter()
+            .map(|(&tile, m)| {
+                let coarse = f64::from(m.coarse.level);
+                let weight = (m.track.level_at(t_s) - coarse) / (f64::from(tile.level) - coarse);
+                Morphing { tile, from: m.coarse, weight: weight.clamp(0.0, 1.0) }
+            })
+            .filter(|m| m.weight < 1.0)
+            .collect();
+        out.sort_by_key(|m| m.tile);
+        out
+    }
+
+    /// Whether the downmorphs of the last cut drawn were all complete (the
+    /// next cut may be drawn: its coarse tiles lie where they ended).
+    pub fn settled(&self) -> bool {
+        self.settled
+    }
+
+    /// Requests each tile of `cut` that `next` coarsens to reach its
+    /// ancestor there by `target_s`.
+    fn downmorph(&mut self, cut: &[TileId], next: &[TileId], target_s: f64, t_s: f64) {
+        let next: HashSet<TileId> = next.iter().copied().collect();
+        for &id in cut {
+            let Some(coarse) = ancestors(id).find(|a| next.contains(a)) else { continue };
+            let tau_s = self.tau_s;
+            let m = self
+                .active
+                .entry(id)
+                .or_insert_with(|| Track { coarse, track: MorphTrack::new(id.level as u8, tau_s) });
+            m.coarse = coarse;
+            m.track.request(coarse.level as u8, target_s);
+            self.settled &= m.track.level_at(t_s) <= f64::from(coarse.level);
+        }
+    }
+}
+
+/// The strict ancestors of `id`, nearest first.
+fn ancestors(id: TileId) -> impl Iterator<Item = TileId> {
+    std::iter::successors(id.parent(), |p| p.parent())
+}
+
+/// `tile` with its heights moved from `from`'s surface toward its own by
+/// `weight`, prepared on `grid`.
+pub fn blend(grid: &TileGrid, tile: &TileData, from: &TileData, weight: f64) -> Result<TileData, TileError> {
+    let (own, coarse) = (Heights::of(tile), Heights::of(from));
+    let sector = grid.sector(tile.id());
+    let outer = grid.sector(from.id());
+    let n = f64::from(grid.samples() - 1);
+    let (step_lon, step_lat) = ((sector.max_lon - sector.min_lon) / n, (sector.max_lat - sector.min_lat) / n);
+    let (outer_lon, outer_lat) = ((outer.max_lon - outer.min_lon) / n, (outer.max_lat - outer.min_lat) / n);
+    let size = tile.size;
+    let b = tile.halo as f64;
+    // Payload order: row 0 at the north.
+    let mut payload = TilePayload {
+        id: tile.id(),
+        halo: tile.halo,
+        cem: vec![f32::NAN; size * size],
+        dem: vec![f32::NAN; size * size],
+        surface: vec![0; size * size],
+        colour: vec![[0; 4]; size * size],
+    };
+    for y in 0..size {
+        let lat = sector.min_lat + (y as f64 - b) * step_lat;
+        let fy = (lat - outer.min_lat) / outer_lat;
+        for x in 0..size {
+            let lon = sector.min_lon + (x as f64 - b) * step_lon;
+            let fx = (lon - outer.min_lon) / outer_lon;
+            let k = (size - 1 - y) * size + x;
+            for layer in 0..2 {
+                let mine = own.at(layer, x, y);
+                let theirs = coarse.bilinear(layer, fx, fy);
+                let v = if theirs.is_nan() { mine } else { morphed_height(theirs, mine, weight) };
+                [&mut payload.cem, &mut payload.dem][layer][k] = v as f32;
+            }
+            payload.surface[k] = tile.surface[y * size + x];
+            payload.colour[k] = tile.colour[y * size + x];
+        }
+    }
+    TileData::prepare(grid, payload)
+}
+
+/// A tile's CEM and ground above the ellipsoid (NaN for nodata), rows
+/// south-up, with its halo.
+struct Heights {
+    halo: usize,
+    size: usize,
+    layers: [Vec<f64>; 2],
+}
+
+impl Heights {
+    fn of(tile: &TileData) -> Heights {
+        let drops = tile.frame.drops_m(tile.halo);
+        let layer = |c: usize| -> Vec<f64> {
+            tile.texels
+                .iter()
+                .zip(&drops)
+                .map(|(t, d)| if t[c] <= NODATA_M { f64::NAN } else { f64::from(t[c]) - d })
+                .collect()
+        };
+        Heights { halo: tile.halo, size: tile.size, layers: [layer(0), layer(1)] }
+    }
+
+    /// At texel `(x, y)` (halo included).
+    fn at(&self, layer: usize, x: usize, y: usize) -> f64 {
+        self.layers[layer][y * self.size + x]
+    }
+
+    /// Bilinear at sample index `(i, j)` (east, north; 0 at the sector's
+    /// south-west corner), clamped to the texels.
+    fn bilinear(&self, layer: usize, i: f64, j: f64) -> f64 {
+        let top = (self.size - 1) as f64;
+        let (x, y) = ((i + self.halo as f64).clamp(0.0, top), (j + self.halo as f64).clamp(0.0, top));
+        let (x0, y0) = ((x.floor() as usize).min(self.size - 2), (y.floor() as usize).min(self.size - 2));
+        let (u, v) = (x - x0 as f64, y - y0 as f64);
+        let h = |dx: usize, dy: usize| self.at(layer, x0 + dx, y0 + dy);
+        (h(0, 0) * (1.0 - u) + h(1, 0) * u) * (1.0 - v) + (h(0, 1) * (1.0 - u) + h(1, 1) * u) * v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const HALO: usize = 2;
+
+    /// Heights that curve within a tile, so a child's own samples leave
+    /// its parent's bilinear surface.
+    fn f(lon: f64, lat: f64) -> f64 {
+        1000.0 + 300.0 * (lon * 500.0).sin() * (lat * 400.0).cos()
+    }
+
+    fn grid() -> TileGrid {
+        TileGrid::new(36.0, 17).unwrap()
+    }
+
+    /// The sample positions (lon, lat) of `id`, south-up rows, halo included.
+    fn positions(id: TileId) -> Vec<(f64, f64)> {
+        let s = grid().sector(id);
+        let size = 17 + 2 * HALO;
+        let step = ((s.max_lon - s.min_lon) / 16.0, (s.max_lat - s.min_lat) / 16.0);
+        let at = |k: usize| k as f64 - HALO as f64;
+        (0..size)
+            .flat_map(|y| (0..size).map(move |x| (s.min_lon + at(x) * step.0, s.min_lat + at(y) * step.1)))
+            .collect()
+    }
+
+    fn tile(id: TileId) -> TileData {
+        let size = 17 + 2 * HALO;
+        let p = positions(id);
+        let north_up = |k: usize| (size - 1 - k / size) * size + k % size;
+        let cem: Vec<f32> = (0..size * size).map(|k| f(p[north_up(k)].0, p[north_up(k)].1) as f32).collect();
+        let payload = TilePayload {
+            id,
+            halo: HALO,
+            dem: cem.iter().map(|h| h - 10.0).collect(),
+            cem,
+            surface: vec![1; size * size],
+            colour: vec![[90, 120, 60, 255]; size * size],
+        };
+        TileData::prepare(&grid(), payload).unwrap()
+    }
+
+    /// The parent's surface at `(lon, lat)`: bilinear between its samples.
+    fn parent_surface(parent: TileId, lon: f64, lat: f64) -> f64 {
+        let s = grid().sector(parent);
+        let (i, j) = (
+            (lon - s.min_lon) / ((s.max_lon - s.min_lon) / 16.0),
+            (lat - s.min_lat) / ((s.max_lat - s.min_lat) / 16.0),
+        );
+        let (i0, j0) = (i.floor(), j.floor());
+        let lattice = |a: f64, b: f64| {
+            f(s.min_lon + a * (s.max_lon - s.min_lon) / 16.0, s.min_lat + b * (s.max_lat - s.min_lat) / 16.0)
+        };
+        let (u, v) = (i - i0, j - j0);
+        (lattice(i0, j0) * (1.0 - u) + lattice(i0 + 1.0, j0) * u) * (1.0 - v)
+            + (lattice(i0, j0 + 1.0) * (1.0 - u) + lattice(i0 + 1.0, j0 + 1.0) * u) * v
+    }
+
+    #[test]
+    fn a_morphing_tile_starts_on_its_parents_surface_and_ends_on_its_own() {
+        let child_id = grid().tile_containing(10.1, 46.35, 10);
+        let parent_id = child_id.parent().unwrap();
+        let (child, parent) = (tile(child_id), tile(parent_id));
+        let p = positions(child_id);
+        let size = 17 + 2 * HALO;
+        let inner = |k: &usize| (HALO..size - HALO).contains(&(k % size)) && (HALO..size - HALO).contains(&(k / size));
+        let mut left_parent = 0.0f64;
+        for (w, want) in [(0.0, 0.0), (0.5, 0.5), (1.0, 1.0)] {
+            let blended = Heights::of(&blend(&grid(), &child, &parent, w).unwrap());
+            for k in (0..size * size).filter(inner) {
+                let (lon, lat) = p[k];
+                let (coarse, own) = (parent_surface(parent_id, lon, lat), f(lon, lat));
+                let expected = coarse + want * (own - coarse);
+                let got = blended.at(0, k % size, k / size);
+                assert!((got - expected).abs() < 0.01, "w {w} at {k}: {got} vs {expected}");
+                assert!((blended.at(1, k % size, k / size) - (expected - 10.0)).abs() < 0.01);
+                left_parent = left_parent.max((own - coarse).abs());
+            }
+        }
+        assert!(left_parent > 1.0, "the child's own samples leave the parent's surface: {left_parent}");
+    }
+
+    #[test]
+    fn a_refined_tile_morphs_from_the_switch_frame_and_is_done_in_tau() {
+        let child = grid().tile_containing(10.1, 46.35, 10);
+        let (parent, grandparent) = (child.parent().unwrap(), child.parent().unwrap().parent().unwrap());
+        let children: Vec<TileId> = parent.children().to_vec();
+        let mut m = Morphs::new(1.0);
+        assert!(m.update(0.0, &[grandparent], None).is_empty());
+        // Two levels at once: every child morphs from the grandparent.
+        let at_switch = m.update(0.25, &children, None);
+        assert_eq!(at_switch.len(), 4);
+        assert!(at_switch.iter().all(|x| x.from == grandparent && x.weight == 0.0), "{at_switch:?}");
+        let halfway = m.update(0.75, &children, None);
+        assert!(halfway.iter().all(|x| (x.weight - 0.5).abs() < 1e-12), "{halfway:?}");
+        assert!(m.update(1.25, &children, None).is_empty(), "done after τ");
+        // A tile with no coarser one drawn before does not morph.
+        let far = grid().tile_containing(12.0, 47.0, 8);
+        assert!(m.update(1.5, &[far], None).is_empty());
+    }
+
+    #[test]
+    fn coarsened_tiles_reach_the_coarser_surface_before_the_switch() {
+        let child = grid().tile_containing(10.1, 46.35, 10);
+        let parent = child.parent().unwrap();
+        let children = parent.children().to_vec();
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &children, None);
+        assert!(m.settled());
+        // The next cut coarsens back to the parent, offered at 0.5 s: the
+        // children glide onto its surface over [0.5, 1.5] s.
+        let next = [parent];
+        assert!(m.update(0.5, &children, Some((&next, 0.5))).is_empty(), "not started");
+        assert!(!m.settled());
+        let halfway = m.update(1.0, &children, Some((&next, 0.5)));
+        assert_eq!(halfway.len(), 4);
+        assert!(halfway.iter().all(|x| x.from == parent && (x.weight - 0.5).abs() < 1e-12), "{halfway:?}");
+        let done = m.update(1.5, &children, Some((&next, 0.5)));
+        assert!(done.iter().all(|x| x.weight == 0.0) && done.len() == 4, "on the parent's surface: {done:?}");
+        assert!(m.settled());
+        // The switch: the parent is drawn with its own heights, which is
+        // where the children ended (blend at weight 0 is its surface).
+        assert!(m.update(1.6, &next, None).is_empty());
+    }
+
+    #[test]
+    fn a_refinement_undone_in_its_interval_collapses_into_one_morph() {
+        let child = grid().tile_containing(10.1, 46.35, 10);
+        let parent = child.parent().unwrap();
+        let children = parent.children().to_vec();
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &[parent], None);
+        let up = m.update(0.5, &children, None);
+        assert!(up.iter().all(|x| x.weight == 0.0));
+        // The next cut, offered at once, coarsens back: the upmorph over
+        // [0.5, 1.5] and the downmorph there become one, staying on the
+        // parent's surface; no weight ever leaves it.
+        let next = [parent];
+        for t in [0.5, 0.8, 1.2, 1.5] {
+            let w = m.update(t, &children, Some((&next, 0.5)));
+            assert!(w.len() == 4 && w.iter().all(|x| x.weight == 0.0), "{t}: {w:?}");
+        }
+        assert!(m.settled());
+    }
+}
