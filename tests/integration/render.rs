@@ -144,8 +144,9 @@ fn small_grid() -> TileGrid {
     TileGrid::new(36.0, 65).unwrap()
 }
 
-#[test]
-fn gpu_matches_the_reference_on_real_tiles() {
+/// Four level-11 tiles of the demo, a camera looking over them from their
+/// south-east corner, and the afternoon sun there.
+fn demo_scene() -> (TileGrid, Vec<TileData>, Camera, Option<DVec3>) {
     let demo = RegionSource::new(Arc::new(common::demo()));
     let grid = demo.grid();
     let first = grid.tile_containing(10.12, 46.36, 11);
@@ -153,7 +154,12 @@ fn gpu_matches_the_reference_on_real_tiles() {
     let s = grid.sector(first);
     let eye = Geodetic::new(s.max_lon, s.min_lat - 0.002, 1500.0);
     let camera = Camera::looking(eye, 10.0, -20.0, 60.0, (160, 120));
-    let sun = Some(sun_at(eye.lon_deg, eye.lat_deg, 150.0, 35.0));
+    (grid, tiles, camera, Some(sun_at(eye.lon_deg, eye.lat_deg, 150.0, 35.0)))
+}
+
+#[test]
+fn gpu_matches_the_reference_on_real_tiles() {
+    let (grid, tiles, camera, sun) = demo_scene();
     let both = render_both(&tiles, &camera, &settings(Traversal::Exact, sun));
     assert!(both.cpu.view_z_m.iter().filter(|&&z| z > 0.0).count() > 5000, "the view shows the tiles");
     assert_close("demo", &both.departure);
@@ -171,14 +177,8 @@ fn gpu_matches_the_reference_on_real_tiles() {
 #[test]
 fn per_tile_shadow_quality_matches_the_reference() {
     // The LOD selection gives each tile its own shadow samples per hit.
-    let demo = RegionSource::new(Arc::new(common::demo()));
-    let grid = demo.grid();
-    let first = grid.tile_containing(10.12, 46.36, 11);
-    let tiles = block(&demo, first, 2, 32);
-    let s = grid.sector(first);
-    let eye = Geodetic::new(s.max_lon, s.min_lat - 0.002, 1500.0);
-    let camera = Camera::looking(eye, 10.0, -20.0, 60.0, (160, 120));
-    let settings = settings(Traversal::Exact, Some(sun_at(eye.lon_deg, eye.lat_deg, 150.0, 35.0)));
+    let (_, tiles, camera, sun) = demo_scene();
+    let settings = settings(Traversal::Exact, sun);
     let steps: Vec<u32> = [0, 3, 10, 30].into_iter().cycle().take(tiles.len()).collect();
     let draws: Vec<Draw> = tiles.iter().zip(&steps).map(|(tile, &shadow_steps)| Draw { tile, shadow_steps }).collect();
     let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
