@@ -135,6 +135,11 @@ enum Command {
         /// budget`; morphing tiles are uploaded again every frame).
         #[arg(long)]
         geomorph: bool,
+        /// The cost model `--lod budget` starts from: the `cost_model.json`
+        /// an earlier flight on this machine calibrated (default: constants
+        /// for a current GPU).
+        #[arg(long)]
+        cost_model: Option<PathBuf>,
         /// Largest projected tile error, pixels.
         #[arg(long, default_value_t = 2.0)]
         max_error_px: f64,
@@ -442,15 +447,24 @@ fn run(command: Command) -> Result<()> {
             budget_ms,
             select_every,
             geomorph,
+            cost_model,
             max_error_px,
             max_level,
             gpu_budget_mib,
             no_frames,
         } => {
+            let prior = match cost_model {
+                Some(file) => {
+                    let text = std::fs::read_to_string(&file).with_context(|| format!("{}", file.display()))?;
+                    sylva::lod::model::CostModel::from_json(&text)
+                        .map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?
+                }
+                None => Default::default(),
+            };
             let mode = match lod.as_str() {
                 "sse" => sylva::client::fly::LodMode::Sse,
                 "budget" if budget_ms.is_finite() && budget_ms > 0.0 => {
-                    sylva::client::fly::LodMode::Budget { budget_ms, select_every }
+                    sylva::client::fly::LodMode::Budget { budget_ms, select_every, prior }
                 }
                 "budget" => anyhow::bail!("--budget-ms {budget_ms} is not a positive number of milliseconds"),
                 other => anyhow::bail!("unknown --lod {other:?}; expected sse or budget"),

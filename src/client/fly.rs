@@ -21,6 +21,7 @@ use super::render::{Draw, Readback, Renderer};
 use super::source::TileSource;
 use super::store::{LoadError, TileStore};
 use super::tile::TileData;
+use crate::lod::model::CostModel;
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
@@ -38,6 +39,9 @@ pub enum LodMode {
         budget_ms: f64,
         /// Frames between selections (the selection period `τ`).
         select_every: u32,
+        /// The cost model the flight starts from (one a flight calibrated
+        /// on this machine: its `cost_model.json`).
+        prior: CostModel,
     },
 }
 
@@ -182,7 +186,7 @@ pub fn fly(
     }
     let mut lod = match options.mode {
         LodMode::Sse => None,
-        LodMode::Budget { budget_ms, select_every } => {
+        LodMode::Budget { budget_ms, select_every, prior } => {
             let selector = Selector {
                 grid: source.grid(),
                 bounds: source.bounds(),
@@ -199,7 +203,7 @@ pub fn fly(
             let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
             let look =
                 Lookahead { tau_s: frame_s * f64::from(select_every.max(1)), limits: path.motion_limits(MOTION_STEPS) };
-            Some(BudgetFlight::new(selector, budget, look, options.geomorph).map_err(FlyError::Thread)?)
+            Some(BudgetFlight::new(selector, budget, look, prior, options.geomorph).map_err(FlyError::Thread)?)
         }
     };
     let mut records = Vec::with_capacity(options.frames);
@@ -210,6 +214,12 @@ pub fn fly(
     if let Some(dir) = &options.out_dir {
         let csv = dir.join("stats.csv");
         std::fs::write(&csv, to_csv(&records)).map_err(|e| io(&csv, e))?;
+        if let Some(lod) = &lod {
+            // The calibrated model, for `--cost-model` on the next flight.
+            let file = dir.join("cost_model.json");
+            let json = serde_json::to_string_pretty(&lod.model()).map_err(|e| io(&file, e.into()))?;
+            std::fs::write(&file, json).map_err(|e| io(&file, e))?;
+        }
     }
     Ok(records)
 }

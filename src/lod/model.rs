@@ -136,8 +136,10 @@ impl CostFeatures {
 }
 
 /// Milliseconds per unit of each feature: `predicted = Σ cᵢ fᵢ` (000 §5.3:
-/// `cost_d = c_vertex n`, `cost_c = c_splat N x + c_tree`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// `cost_d = c_vertex n`, `cost_c = c_splat N x + c_tree`). Serialised as
+/// `{"constants_ms": [...]}`, so a model calibrated on one machine can start
+/// the next flight there.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CostModel {
     /// Fixed per-frame ms, then ms per unit of each [`CostFeatures`] field.
     pub constants_ms: [f64; FEATURES],
@@ -154,6 +156,16 @@ impl Default for CostModel {
 }
 
 impl CostModel {
+    /// A model from its JSON form; every constant must be finite and not
+    /// negative.
+    pub fn from_json(text: &str) -> Result<CostModel, String> {
+        let model: CostModel = serde_json::from_str(text).map_err(|e| format!("not a cost model: {e}"))?;
+        match model.constants_ms.iter().position(|c| !c.is_finite() || *c < 0.0) {
+            Some(i) => Err(format!("constant {i} is {}, not a finite non-negative ms", model.constants_ms[i])),
+            None => Ok(model),
+        }
+    }
+
     /// Predicted milliseconds for `features`.
     pub fn predict_ms(&self, features: &CostFeatures) -> f64 {
         features.vector().iter().zip(&self.constants_ms).map(|(f, c)| f * c).sum()
@@ -174,6 +186,17 @@ fn finite_non_negative(x: f64) -> f64 {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn cost_models_round_trip_through_json_and_bad_ones_are_refused() {
+        let model = CostModel { constants_ms: [2.5, 0.3, 40.0, 12.0, 0.0, 1e-3] };
+        let text = serde_json::to_string(&model).unwrap();
+        assert_eq!(CostModel::from_json(&text), Ok(model));
+        assert!(CostModel::from_json("{\"constants_ms\": [1, 2]}").unwrap_err().contains("not a cost model"));
+        let negative = "{\"constants_ms\": [1, 2, 3, -4, 5, 6]}";
+        assert!(CostModel::from_json(negative).unwrap_err().contains("constant 3 is -4"));
+        assert!(CostModel::from_json("ms").is_err());
+    }
 
     #[test]
     fn phi_is_normalised_with_finite_slope_at_zero() {

@@ -99,6 +99,20 @@ fn bad_flight_input_is_explained() {
     assert!(String::from_utf8_lossy(&e.stderr).contains("--budget-ms 0 is not a positive"));
     let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--server", "http://127.0.0.1:9"]);
     assert!(String::from_utf8_lossy(&e.stderr).contains("tiles.json"), "{}", String::from_utf8_lossy(&e.stderr));
+    let model = dir.join("model.json");
+    std::fs::write(&model, r#"{"constants_ms": [1, 1, 1, -1, 1, 1]}"#).unwrap();
+    let e = run(&[
+        "--path",
+        path.to_str().unwrap(),
+        "--out",
+        o,
+        "--lod",
+        "budget",
+        "--cost-model",
+        model.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&e.stderr);
+    assert!(!e.status.success() && stderr.contains("model.json") && stderr.contains("constant 3"), "{stderr}");
 }
 
 #[test]
@@ -133,4 +147,32 @@ fn a_flight_under_a_frame_budget_reports_its_predicted_frame_time() {
         // The sun is up: a rich budget buys shadows, a poor one none.
         assert!(number(l, "shadow_steps_mean") > number(t, "shadow_steps_mean"), "{t:?} {l:?}");
     }
+}
+
+#[test]
+fn a_calibrated_cost_model_starts_the_next_flight() {
+    let dir = TempDir::new("fly-prior");
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    let flight = |name: &str, more: &[&str]| {
+        let out = dir.join(name);
+        let args = ["--frames", "6", "--size", "96x64", "--no-frames", "--lod", "budget", "--budget-ms", "50"];
+        fly(&[&["--path", path.to_str().unwrap()][..], &args[..], more].concat(), &out);
+        stats(&out)
+    };
+    let first = flight("first", &[]);
+    let saved = dir.join("first/cost_model.json");
+    let model = sylva::lod::model::CostModel::from_json(&std::fs::read_to_string(&saved).expect("cost_model.json"))
+        .expect("a valid model");
+    assert_ne!(model, sylva::lod::model::CostModel::default(), "the flight calibrated its model");
+    let second = flight("second", &["--cost-model", saved.to_str().unwrap()]);
+    // Frame 1 draws the first selection, priced by the prior alone (frame 0
+    // builds the pipelines): the calibrated prior prices it within 2×, or
+    // better than the default constants do.
+    let error = |rows: &[std::collections::HashMap<String, String>]| {
+        let row = &rows[1];
+        let measured: f64 = row["gpu_ms"].parse().or_else(|_| row["render_ms"].parse()).unwrap();
+        (row["predicted_ms"].parse::<f64>().unwrap() / measured).ln().abs()
+    };
+    let (before, after) = (error(&first), error(&second));
+    assert!(after < before.max(2f64.ln()), "prediction error of frame 1: {before:.2} → {after:.2} (|ln ratio|)");
 }

@@ -48,12 +48,18 @@ pub struct BudgetFlight {
 
 impl BudgetFlight {
     /// A flight of frames of `budget` looking ahead by `look`, starting
-    /// from the default cost model, geomorphing or not.
-    pub fn new(selector: Selector, budget: Budget, look: Lookahead, geomorph: bool) -> std::io::Result<BudgetFlight> {
+    /// from the cost model `prior`, geomorphing or not.
+    pub fn new(
+        selector: Selector,
+        budget: Budget,
+        look: Lookahead,
+        prior: CostModel,
+        geomorph: bool,
+    ) -> std::io::Result<BudgetFlight> {
         Ok(BudgetFlight {
             worker: Worker::spawn(selector.clone())?,
             selector,
-            calibrator: CostCalibrator::new(CostModel::default(), calibration()),
+            calibrator: CostCalibrator::new(prior, calibration()),
             budget,
             look,
             predictor: PathPredictor::new(WINDOW),
@@ -179,7 +185,7 @@ mod tests {
         };
         let budget = Budget { budget_ms: 8.0, max_tiles: 256, shadows: true, deadline: None };
         let look = Lookahead { tau_s: 1.0, limits: MotionLimits { max_speed_mps: 100.0, max_turn_radps: 0.1 } };
-        BudgetFlight::new(selector, budget, look, true).unwrap()
+        BudgetFlight::new(selector, budget, look, CostModel::default(), true).unwrap()
     }
 
     fn camera(lon: f64) -> Camera {
