@@ -64,11 +64,5 @@ fn panel<T>(area: &Area<'_>, caption: &str, unit: &str, frames: &[T], series: &S
             .label(name)
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], color));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| e.to_string())?;
-    Ok(())
+    plot::legend(&mut chart)
 }

@@ -22,3 +22,15 @@ pub fn png(size: (u32, u32), draw: impl FnOnce(&Area<'_>) -> Result<(), String>)
     crate::encode::png(&buf, size.0 as usize, size.1 as usize, image::ExtendedColorType::Rgb8)
         .map_err(|e| e.to_string())
 }
+
+/// Draws the legend of `chart`'s labelled series, boxed on a light ground.
+pub fn legend<'a, CT: plotters::coord::CoordTranslate>(
+    chart: &mut ChartContext<'a, BitMapBackend<'a>, CT>,
+) -> Result<(), String> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| e.to_string())
+}

@@ -260,12 +260,7 @@ pub fn plot(rows: &[Row]) -> Result<Vec<u8>, String> {
                     .label(*kind)
                     .legend(move |(x, y)| Circle::new((x, y), 4, colour.filled()));
             }
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| e.to_string())?;
+            super::plot::legend(&mut chart)?;
         }
         Ok(())
     })

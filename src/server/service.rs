@@ -92,15 +92,15 @@ impl TileService {
             return self.compute(product).await.map(|c| Arc::new(tile_of(c)));
         };
         let (this, k) = (self.clone(), key.clone());
-        let loading = async move {
-            let detached = async move {
-                let tile = this.load(k.clone(), product).await?;
-                this.memory.insert(k, tile.clone()).await;
-                Ok::<_, ServeError>(tile)
-            };
-            tokio::spawn(detached).await.map_err(ServeError::internal)?
+        // Inserts itself: the request that started it may be gone by then.
+        let load = async move {
+            let tile = this.load(k.clone(), product).await?;
+            this.memory.insert(k, tile.clone()).await;
+            Ok::<_, ServeError>(tile)
         };
-        let entry = self.memory.entry(key.clone()).or_try_insert_with(loading).await.map_err(|e| (*e).clone())?;
+        // Spawned only by the request that initialises the entry.
+        let spawned = async { tokio::spawn(load).await.map_err(ServeError::internal)? };
+        let entry = self.memory.entry(key).or_try_insert_with(spawned).await.map_err(|e| (*e).clone())?;
         if !entry.is_fresh() {
             self.metrics.cache(CacheResult::Memory);
         }

@@ -115,16 +115,24 @@ fn bad_flight_input_is_explained() {
     assert!(!e.status.success() && stderr.contains("model.json") && stderr.contains("constant 3"), "{stderr}");
 }
 
+/// The rows of a `--lod budget` flight of `frames` 96×64 frames along the
+/// demo valley under `ms`, written to `out`.
+fn budget_flight(
+    out: &std::path::Path,
+    frames: &str,
+    ms: &str,
+    more: &[&str],
+) -> Vec<std::collections::HashMap<String, String>> {
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    let args = ["--frames", frames, "--size", "96x64", "--no-frames", "--lod", "budget", "--budget-ms", ms];
+    fly(&[&["--path", path.to_str().unwrap()][..], &args[..], more].concat(), out);
+    stats(out)
+}
+
 #[test]
 fn a_flight_under_a_frame_budget_reports_its_predicted_frame_time() {
     let dir = TempDir::new("fly-budget");
-    let path = common::repo().join("config/paths/demo_valley.toml");
-    let flight = |ms: &str, name: &str, more: &[&str]| {
-        let out = dir.join(name);
-        let args = ["--frames", "3", "--size", "96x64", "--no-frames", "--lod", "budget", "--budget-ms", ms];
-        fly(&[&["--path", path.to_str().unwrap()][..], &args[..], more].concat(), &out);
-        stats(&out)
-    };
+    let flight = |ms: &str, name: &str, more: &[&str]| budget_flight(&dir.join(name), "3", ms, more);
     let number = |row: &std::collections::HashMap<String, String>, c: &str| {
         row[c].parse::<f64>().unwrap_or_else(|_| panic!("{c} = {:?}", row[c]))
     };
@@ -152,13 +160,7 @@ fn a_flight_under_a_frame_budget_reports_its_predicted_frame_time() {
 #[test]
 fn a_calibrated_cost_model_starts_the_next_flight() {
     let dir = TempDir::new("fly-prior");
-    let path = common::repo().join("config/paths/demo_valley.toml");
-    let flight = |name: &str, more: &[&str]| {
-        let out = dir.join(name);
-        let args = ["--frames", "6", "--size", "96x64", "--no-frames", "--lod", "budget", "--budget-ms", "50"];
-        fly(&[&["--path", path.to_str().unwrap()][..], &args[..], more].concat(), &out);
-        stats(&out)
-    };
+    let flight = |name: &str, more: &[&str]| budget_flight(&dir.join(name), "6", "50", more);
     let first = flight("first", &[]);
     let saved = dir.join("first/cost_model.json");
     let model = sylva::lod::model::CostModel::from_json(&std::fs::read_to_string(&saved).expect("cost_model.json"))
