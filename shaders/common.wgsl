@@ -20,6 +20,9 @@ struct Frame {
     shadow: vec4<f32>,
     // rgb: canopy tint.
     canopy_tint: vec4<f32>,
+    // Trees as splats (splat.wgsl): range (m; 0 without trees), blend band
+    // (m), unused, unused.
+    trees: vec4<f32>,
     // traversal (0 exact, 1 linear), linear steps, unused, sun on.
     mode: vec4<u32>,
     // The maximum mipmap's levels in the atlas: x, y, width, height.

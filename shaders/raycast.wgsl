@@ -53,9 +53,10 @@ fn vs_hull(v: HullIn) -> VertexOut {
     let xy = (v.sample - vec2<f32>(tile.grid.z)) * tile.grid.xy;
     var f = 1.0;
     if tile.flags.y == 0u {
-        // The canopy factor of the nearest sample this vertex must bound.
+        // The far fade of the nearest sample this vertex must bound (the
+        // trees' near blend only lowers the canopy: left out, it bounds).
         let d = length(vec3<f32>(xy, v.hull.y) - tile.camera.xyz) - tile.camera.w;
-        f = fade_factor(max(d, 0.0));
+        f = fade_far(max(d, 0.0));
     }
     let local = vec3<f32>(xy, v.hull.x + f * (v.hull.y - v.hull.x));
     return VertexOut(project(local), local);

@@ -1,16 +1,30 @@
 // The surface the rays meet (src/client/raycast.rs): per cell the bilinear
 // patch of its corners' ground + f * canopy, f fading the canopy with the
-// corner's distance from the camera; and the exact ray-patch intersection.
+// corner's distance from the camera (out far away, and in from under the
+// trees drawn as splats near the camera); and the exact ray-patch
+// intersection.
 
 fn smoothstep01(lo: f32, hi: f32, x: f32) -> f32 {
     let t = clamp((x - lo) / (hi - lo), 0.0, 1.0);
     return t * t * (3.0 - 2.0 * t);
 }
 
-// Canopy factor at `distance` metres from the camera.
-fn fade_factor(distance: f32) -> f32 {
+// Canopy factor of the far fade at `distance` metres from the camera: it
+// never grows with distance, so the nearest distance bounds it.
+fn fade_far(distance: f32) -> f32 {
     let px = frame.fade.x * frame.fade.w / max(distance, 1.0e-9);
     return smoothstep01(frame.fade.y, frame.fade.z, px);
+}
+
+// Canopy factor at `distance` metres from the camera: the far fade times
+// the share the trees' splats leave to the canopy (raycast::Fade::factor).
+fn fade_factor(distance: f32) -> f32 {
+    var near = 1.0;
+    if frame.trees.x > 0.0 {
+        let band = max(frame.trees.y, 1.0e-6);
+        near = smoothstep01(frame.trees.x - 0.5 * band, frame.trees.x + 0.5 * band, distance);
+    }
+    return fade_far(distance) * near;
 }
 
 fn sample_local(s: vec2<f32>, z: f32) -> vec3<f32> {

@@ -15,7 +15,7 @@ use super::table;
 use crate::client::camera::Camera;
 use crate::client::fly::{self, FlyOptions};
 use crate::client::path::CameraPath;
-use crate::client::raycast::{Fade, Traversal};
+use crate::client::raycast::{Fade, Traversal, TreeBlend};
 use crate::client::reference::{self, Image, Lighting};
 use crate::client::render::uniforms::FrameSettings;
 use crate::client::render::{Readback, Rendered, Renderer};
@@ -151,7 +151,7 @@ fn camera_at(path: &CameraPath, t_s: f64, size: (u32, u32)) -> Camera {
 /// The fade `sylva fly` uses.
 fn default_fade(camera: &Camera) -> Fade {
     let (canopy_ref_m, lo_px, hi_px) = FlyOptions::default().fade;
-    Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px }
+    Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px, trees: TreeBlend::NONE }
 }
 
 /// One plotted quantity of a benchmark row.

@@ -5,7 +5,9 @@
 //! time, tiles drawn per level and how, texture fetches per pixel (the ray
 //! steps), bytes fetched and memory resident; under a budget also the
 //! predicted frame time, which the measured one calibrates, and, asked to,
-//! tiles geomorph between levels ([`super::lod::morphs`]).
+//! tiles geomorph between levels ([`super::lod::morphs`]). Trees near the
+//! camera are drawn as splats ([`super::trees`]): at the resolution their
+//! screen size asks for, or under a budget as the selection allots.
 
 use super::lod::ahead::Lookahead;
 use super::lod::budget::{Budget, Choice};
@@ -14,13 +16,14 @@ use super::lod::morphs;
 use super::lod::{Selected, Selector};
 use super::path::CameraPath;
 use super::quadtree::{self, LodRule};
-use super::raycast::{Fade, Traversal};
+use super::raycast::{Fade, Traversal, TreeBlend};
 use super::render::cache::CacheFull;
 use super::render::uniforms::FrameSettings;
 use super::render::{Draw, Readback, Renderer};
 use super::source::TileSource;
 use super::store::{LoadError, TileStore};
 use super::tile::TileData;
+use super::trees::{self, TreeSettings};
 use crate::lod::model::CostModel;
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -78,6 +81,8 @@ pub struct FlyOptions {
     pub fade: (f64, f64, f64),
     /// Tiles fetched at once, at most.
     pub in_flight: usize,
+    /// Trees near the camera as splats (none: the ray-cast canopy only).
+    pub trees: Option<TreeSettings>,
 }
 
 impl Default for FlyOptions {
@@ -95,6 +100,7 @@ impl Default for FlyOptions {
             halo: 32,
             fade: (30.0, 0.5, 2.0),
             in_flight: 8,
+            trees: Some(TreeSettings::default()),
         }
     }
 }
@@ -148,6 +154,10 @@ pub struct FrameRecord {
     pub shadow_steps_mean: f64,
     /// Tiles drawn morphing from a coarser one (budget mode).
     pub morphing: usize,
+    /// Trees drawn as splats.
+    pub trees: usize,
+    /// Tree splats drawn.
+    pub splats: usize,
 }
 
 /// Why a flight stopped.
@@ -282,14 +292,24 @@ fn frame(
     let (tiles, error_px) = (&chosen.tiles, chosen.error_px);
     let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
     let (canopy_ref_m, lo_px, hi_px) = options.fade;
+    let blend = options.trees.map_or(TreeBlend::NONE, |t| t.blend(camera.focal_px()));
     let settings = FrameSettings {
         traversal: options.traversal,
         shadow_steps: options.shadow_steps,
         sun_ecef: path.sun_ecef(),
-        fade: Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px },
+        fade: Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px, trees: blend },
     };
-    let draws: Vec<Draw> =
-        tiles.iter().zip(&chosen.steps).map(|(t, &shadow_steps)| Draw { tile: t.as_ref(), shadow_steps }).collect();
+    let budgets = chosen.selected.as_ref().map(|s| &s.cut.tree_budgets);
+    let trees = tree_splats(options, tiles, &camera, (&blend, budgets));
+    if let (Some(lod), Some(settings)) = (lod.as_deref_mut(), options.trees) {
+        lod.set_trees(settings, tiles.clone());
+    }
+    let draws: Vec<Draw> = tiles
+        .iter()
+        .zip(&chosen.steps)
+        .zip(&trees.splats)
+        .map(|((t, &shadow_steps), splats)| Draw { tile: t.as_ref(), shadow_steps, splats })
+        .collect();
     let out = renderer.render_draws(&camera, &draws, &settings, Readback::All)?;
     let selected = chosen.selected.as_ref();
     let predicted_ms = selected.map(|s| s.cut.predicted_ms);
@@ -299,7 +319,8 @@ fn frame(
     if let Some(lod) = lod.filter(|_| chosen.morphing == 0) {
         let drawn: Vec<Choice> =
             draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
-        lod.observe(&camera, &drawn, out.stats.gpu_ms.unwrap_or(out.stats.wall_ms));
+        let drawn_trees = (trees.drawn.splats, trees.drawn.groups);
+        lod.observe(&camera, &drawn, drawn_trees, out.stats.gpu_ms.unwrap_or(out.stats.wall_ms));
     }
     if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
         let file = dir.join(format!("frame_{k:05}.png"));
@@ -342,7 +363,33 @@ fn frame(
         benefit_bound: selected.map(|s| s.cut.benefit / s.cut.upper_bound),
         morphing: chosen.morphing,
         shadow_steps_mean: chosen.steps.iter().map(|&s| f64::from(s)).sum::<f64>() / chosen.steps.len().max(1) as f64,
+        trees: trees.drawn.trees,
+        splats: out.stats.splats as usize,
     })
+}
+
+/// A frame's trees.
+#[derive(Default)]
+struct FrameTrees {
+    /// Splats, a list per tile.
+    splats: Vec<Vec<trees::Splat>>,
+    drawn: trees::Drawn,
+}
+
+/// The trees near the camera on `tiles`, by screen size or, under a
+/// budget, with the selection's splat budgets.
+fn tree_splats(
+    options: &FlyOptions,
+    tiles: &[Arc<TileData>],
+    camera: &super::camera::Camera,
+    (blend, budgets): (&TreeBlend, Option<&trees::TreeBudgets>),
+) -> FrameTrees {
+    let mut out = FrameTrees { splats: vec![Vec::new(); tiles.len()], ..FrameTrees::default() };
+    let Some(settings) = &options.trees else { return out };
+    let refs: Vec<&TileData> = tiles.iter().map(|t| t.as_ref()).collect();
+    let groups = trees::groups_near(settings, &refs, camera, blend);
+    out.drawn = trees::splats(settings, &groups, budgets, (blend, camera.focal_px()), &mut out.splats);
+    out
 }
 
 /// The frame's tiles, coarsening the error threshold until they fit the
@@ -380,7 +427,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     let mut out = Vec::new();
     let _ = writeln!(
         out,
-        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,morphing"
+        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,morphing,trees,splats"
     );
     for r in records {
         let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
@@ -388,7 +435,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
         let gpu = optional(r.gpu_ms);
         let _ = writeln!(
             out,
-            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{}",
+            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{},{},{}",
             r.frame,
             r.cpu_ms,
             r.render_ms,
@@ -411,7 +458,9 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             r.shadow_steps_mean,
             r.candidates.map_or(String::new(), |n| n.to_string()),
             optional(r.benefit_bound),
-            r.morphing
+            r.morphing,
+            r.trees,
+            r.splats
         );
     }
     String::from_utf8_lossy(&out).into_owned()

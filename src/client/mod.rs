@@ -5,7 +5,8 @@
 //! camera ([`camera`]), prepared tiles and their hulls ([`tile`],
 //! [`hull`]), the ray-casting model shared by both ray casters
 //! ([`raycast`]), the exact CPU reference ([`reference`]) and the LOD
-//! selection under a frame budget ([`lod`]) — know nothing of wgpu; the GPU
+//! selection under a frame budget ([`lod`]) and the trees drawn as splats
+//! near the camera ([`trees`]) — know nothing of wgpu; the GPU
 //! path lives in `render` (feature `client`).
 //!
 //! Positions are `f64` on the CPU; the GPU sees tile-local `f32` values only.
@@ -29,3 +30,4 @@ pub mod source;
 pub mod store;
 pub mod terrain;
 pub mod tile;
+pub mod trees;

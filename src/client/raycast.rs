@@ -9,7 +9,10 @@
 //!   vertical offset and thickness of the rendered vegetation according to
 //!   the view distance"). `f` is evaluated per corner sample, from the
 //!   distance of the sample's ground point to the camera, so neighbouring
-//!   tiles agree on shared samples.
+//!   tiles agree on shared samples. Near the camera, where trees are drawn
+//!   as point splats ([`super::trees`]), `f` also takes the canopy's share
+//!   of the splat blend ([`TreeBlend`]), so the trees replace the canopy
+//!   rather than stand in it.
 //! - **Shadows** (6.4, "Illumination Calculation"): from the hit toward the
 //!   sun, `n` samples at horizontal distances growing linearly step by step
 //!   up to the tile's halo; each sample below the surface adds an occlusion
@@ -56,7 +59,8 @@ pub enum Traversal {
 }
 
 /// The canopy fade: full canopy where a canopy of `canopy_ref_m` looks at
-/// least `hi_px` tall, none below `lo_px`.
+/// least `hi_px` tall, none below `lo_px`; and near the camera, the share
+/// that trees drawn as splats leave to the canopy.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Fade {
     /// The camera's focal length, pixels.
@@ -67,14 +71,23 @@ pub struct Fade {
     pub lo_px: f64,
     /// Projected height above which the canopy is whole, pixels.
     pub hi_px: f64,
+    /// Trees drawn as splats near the camera.
+    pub trees: TreeBlend,
 }
 
 impl Fade {
     /// A fade that keeps the canopy whole at any distance.
-    pub const NONE: Fade = Fade { focal_px: 1.0, canopy_ref_m: 1.0, lo_px: -2.0, hi_px: -1.0 };
+    pub const NONE: Fade = Fade { focal_px: 1.0, canopy_ref_m: 1.0, lo_px: -2.0, hi_px: -1.0, trees: TreeBlend::NONE };
 
-    /// The canopy factor at `distance_m` from the camera.
+    /// The canopy factor at `distance_m` from the camera: the far fade
+    /// times the canopy's share of the tree blend.
     pub fn factor(&self, distance_m: f64) -> f64 {
+        self.far_factor(distance_m) * self.trees.shares(distance_m).1
+    }
+
+    /// The far fade alone, which never grows with distance (so the nearest
+    /// distance bounds it over a tile).
+    pub fn far_factor(&self, distance_m: f64) -> f64 {
         let px = self.canopy_ref_m * self.focal_px / distance_m.max(1e-9);
         smoothstep(self.lo_px, self.hi_px, px)
     }
@@ -82,6 +95,32 @@ impl Fade {
     /// The distance beyond which the canopy is gone.
     pub fn end_m(&self) -> f64 {
         if self.lo_px <= 0.0 { f64::INFINITY } else { self.canopy_ref_m * self.focal_px / self.lo_px }
+    }
+}
+
+/// Where trees drawn as point splats take over from the ray-cast canopy
+/// (issue 7, 000 §5): splats inside `range_m − band_m / 2`, canopy beyond
+/// `range_m + band_m / 2`, shares summing to 1 between
+/// ([`crate::lod::splats::canopy_blend`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TreeBlend {
+    /// Distance of the middle of the blend band, metres (0: no trees).
+    pub range_m: f64,
+    /// Width of the band, metres.
+    pub band_m: f64,
+}
+
+impl TreeBlend {
+    /// No trees: the canopy everywhere.
+    pub const NONE: TreeBlend = TreeBlend { range_m: 0.0, band_m: 0.0 };
+
+    /// Splat opacity and canopy share at `distance_m` from the camera.
+    pub fn shares(&self, distance_m: f64) -> (f64, f64) {
+        if self.range_m > 0.0 {
+            crate::lod::splats::canopy_blend(distance_m, self.range_m, self.band_m)
+        } else {
+            (0.0, 1.0)
+        }
     }
 }
 
@@ -95,7 +134,7 @@ pub const PLAIN_ERROR_PX: f64 = 0.5;
 /// rays (the renderer's rule, which the LOD cost model predicts too).
 pub fn plain(fade: &Fade, near_m: f64, mesh_error_m: f64) -> bool {
     let mesh_px = mesh_error_m * fade.focal_px / near_m.max(1e-9);
-    fade.factor(near_m) <= 0.0 && mesh_px < PLAIN_ERROR_PX
+    fade.far_factor(near_m) <= 0.0 && mesh_px < PLAIN_ERROR_PX
 }
 
 fn smoothstep(lo: f64, hi: f64, x: f64) -> f64 {

@@ -16,7 +16,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 use sylva::client::camera::Camera;
 use sylva::client::globe::{self, Geodetic};
-use sylva::client::raycast::{Fade, Traversal};
+use sylva::client::raycast::{Fade, Traversal, TreeBlend};
 use sylva::client::reference::{self, Departure, Image, Lighting};
 use sylva::client::render::gpu::Gpu;
 use sylva::client::render::uniforms::FrameSettings;
@@ -180,7 +180,8 @@ fn per_tile_shadow_quality_matches_the_reference() {
     let (_, tiles, camera, sun) = demo_scene();
     let settings = settings(Traversal::Exact, sun);
     let steps: Vec<u32> = [0, 3, 10, 30].into_iter().cycle().take(tiles.len()).collect();
-    let draws: Vec<Draw> = tiles.iter().zip(&steps).map(|(tile, &shadow_steps)| Draw { tile, shadow_steps }).collect();
+    let draws: Vec<Draw> =
+        tiles.iter().zip(&steps).map(|(tile, &shadow_steps)| Draw { tile, shadow_steps, splats: &[] }).collect();
     let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
     let gpu =
         with_renderer(samples, halo, |r| r.render_draws(&camera, &draws, &settings, Readback::All).expect("fits"));
@@ -519,10 +520,54 @@ fn no_sun_casts_no_shadow_rays_and_far_tiles_cast_no_rays() {
     // Far enough that a 30 m canopy would look 1.5 px tall, below the
     // fade's 2 px: no rays (the plane has no mesh error).
     let far = view(1000.0 + 30.0 * near.focal_px() / 1.5);
-    let fade = Fade { focal_px: far.focal_px(), canopy_ref_m: 30.0, lo_px: 2.0, hi_px: 4.0 };
+    let fade = Fade { focal_px: far.focal_px(), canopy_ref_m: 30.0, lo_px: 2.0, hi_px: 4.0, trees: TreeBlend::NONE };
     let faded = FrameSettings { fade, ..settings(Traversal::Exact, None) };
     let out = render_both(&tiles, &far, &faded);
     assert_eq!(out.gpu.stats.tiles_plain, 4, "{:?}", out.gpu.stats);
     assert!(out.gpu.fetches.iter().all(|f| f[0] == 0), "no view rays on far tiles");
     assert!(out.gpu.view_z_m.iter().filter(|&&z| z > 0.0).count() > 1000, "the tiles are drawn");
+}
+
+#[test]
+fn trees_stand_in_front_of_the_ground_where_they_replace_the_canopy() {
+    use sylva::client::trees::{self, TreeSettings};
+    let grid = small_grid();
+    let (lon0, lat0) = (7.3, 45.1);
+    let tiles = synthetic_block(&grid, lon0, lat0, 13, 8, &hills(lon0, lat0));
+    let s = grid.sector(tiles[0].id());
+    let eye = Geodetic::new(s.max_lon, s.max_lat, 1060.0);
+    let camera = Camera::looking(eye, 45.0, -25.0, 60.0, (160, 120));
+    let settings_of_trees = TreeSettings::default();
+    let blend = settings_of_trees.blend(camera.focal_px());
+    let fade = Fade { trees: blend, ..Fade::NONE };
+    let settings = FrameSettings { fade, ..settings(Traversal::Exact, Some(sun_at(lon0, lat0, 120.0, 30.0))) };
+    // Without splats the GPU's canopy, flattened under the trees, is the
+    // reference's.
+    let bare = render_both(&tiles, &camera, &settings);
+    assert_close("canopy blended out near the camera", &bare.departure);
+    let whole = render_both(&tiles, &camera, &FrameSettings { fade: Fade::NONE, ..settings });
+    let lowered = bare.gpu.view_z_m.iter().zip(&whole.gpu.view_z_m).filter(|(b, w)| **b > **w * 1.001).count();
+    assert!(lowered * 10 > bare.gpu.view_z_m.len(), "the canopy is lowered near the camera ({lowered} pixels)");
+
+    let refs: Vec<&TileData> = tiles.iter().collect();
+    let groups = trees::groups_near(&settings_of_trees, &refs, &camera, &blend);
+    let mut splats = vec![Vec::new(); tiles.len()];
+    let drawn = trees::splats(&settings_of_trees, &groups, None, (&blend, camera.focal_px()), &mut splats).splats;
+    let draws: Vec<Draw> =
+        tiles.iter().zip(&splats).map(|(tile, s)| Draw { tile, shadow_steps: 10, splats: s }).collect();
+    let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
+    let wooded =
+        with_renderer(samples, halo, |r| r.render_draws(&camera, &draws, &settings, Readback::All).expect("fits"));
+    assert_eq!(wooded.stats.splats as usize, drawn);
+    assert!(drawn > 1000, "{drawn} splats");
+    let (mut nearer, mut hit) = (0, 0);
+    for (with, without) in wooded.view_z_m.iter().zip(&bare.gpu.view_z_m) {
+        if *without > 0.0 {
+            hit += 1;
+            assert!(*with > 0.0 && *with <= without * (1.0 + 1e-5), "a tree behind the ground: {with} vs {without}");
+            nearer += usize::from(*with < without * 0.999);
+        }
+    }
+    eprintln!("trees: {drawn} splats in front of {nearer} of {hit} pixels");
+    assert!(nearer * 20 > hit, "trees cover more than 5 % of the view ({nearer} of {hit})");
 }

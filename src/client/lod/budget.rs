@@ -1,7 +1,7 @@
-//! A frame's tiles and their ray-casting quality under a frame budget
-//! (issue 7, `lod` steps 2 and 4): the candidates become the optimiser's
-//! tile forest, shadow quality its continuous variables, and its selection
-//! the cut the renderer draws.
+//! A frame's tiles, their ray-casting quality and the trees' splats under
+//! a frame budget (issue 7, `lod` steps 2 and 4): the candidates become the
+//! optimiser's tile forest, shadow quality and tree groups' splat budgets
+//! its continuous variables, and its selection the cut the renderer draws.
 //!
 //! **Costs** are what the renderer spends, as [`CostFeatures`]: one tile
 //! (a draw call, its meshes), view rays on the pixels it covers
@@ -22,14 +22,23 @@
 //! never outweigh refining it (weighed by pixels, full shadows on one
 //! coarse tile beat refining the whole view).
 //!
+//! **Trees** near the camera ([`crate::client::trees`]) come as groups of
+//! at most 64, each a continuous variable of up to its trees × splats per
+//! tree: worth 000's `k S (N/64) φ(x/capacity)` with `S` its projected
+//! pixels ([`TREE_WORTH`] is `k`), costing per splat the splat constant;
+//! the group constant of every group in view is set aside first, so the
+//! cut stays feasible however many groups get splats.
+//!
 //! Invariant: the cut is feasible as [`optimize`] answers it (steps are
 //! rounded down), and draws at most `max_tiles` tiles (the GPU cache's
 //! slots): a larger cut is chosen again under a smaller budget.
 
 use super::candidates::Candidate;
+use crate::client::trees::TreeBudgets;
 use crate::grid::TileId;
-use crate::lod::model::{CostFeatures, CostModel};
+use crate::lod::model::{CostFeatures, CostModel, group_weight};
 use crate::lod::optimizer::{Continuous, Forest, Node, Settings, Stop, optimize};
+use glam::DVec3;
 use std::time::Instant;
 
 /// Most shadow samples per hit (the renderer's default is 10).
@@ -43,6 +52,10 @@ pub const SHADOW_WORTH: f64 = 0.3;
 /// Halvings of the budget searched when a cut has more tiles than slots
 /// (the budget found is within 2⁻¹⁰ of the largest that fits).
 const SLOT_BISECTIONS: usize = 10;
+/// A tree group's full-resolution benefit per projected pixel at full
+/// density (000's `k`): trees are the canopy's near field, worth half the
+/// terrain they stand on (a judgement, not a measurement).
+pub const TREE_WORTH: f64 = 0.5;
 /// Nominal view-ray steps per ray-cast pixel (the exact traversal's mean
 /// on the demo and rmnp paths is 15–30 fetches).
 pub const VIEW_STEPS: f64 = 20.0;
@@ -69,11 +82,28 @@ pub struct Choice {
     pub shadow_steps: u32,
 }
 
+/// A group of trees as the selection sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TreeItem {
+    /// Its block on the tree lattice (the key of its budget).
+    pub block: (i64, i64),
+    /// Bounding sphere: centre (ECEF) and radius, metres.
+    pub centre_ecef: DVec3,
+    /// Radius, metres.
+    pub radius_m: f64,
+    /// Trees in the group.
+    pub trees: u32,
+    /// Splats at full resolution.
+    pub capacity: f64,
+}
+
 /// The chosen cut.
 #[derive(Clone, Debug, Default)]
 pub struct Cut {
     /// Tiles to draw, none an ancestor of another.
     pub tiles: Vec<Choice>,
+    /// Splat budget per tree group, by block.
+    pub tree_budgets: TreeBudgets,
     /// What drawing them costs, as the model sees it.
     pub features: CostFeatures,
     /// Predicted frame time, ms.
@@ -96,8 +126,14 @@ pub fn features(c: &Candidate, steps: u32) -> CostFeatures {
     }
 }
 
-/// Chooses the cut of `candidates` under `budget` with cost `model`.
-pub fn choose(candidates: &[Candidate], model: &CostModel, budget: &Budget) -> Cut {
+/// The features of `splats` splats in `groups` groups.
+pub fn tree_features(splats: f64, groups: f64) -> CostFeatures {
+    CostFeatures { splats_k: splats / 1e3, groups_h: groups / 1e2, ..CostFeatures::default() }
+}
+
+/// Chooses the cut of `candidates` and the budgets of tree groups `trees`
+/// (each with its projected pixels) under `budget` with cost `model`.
+pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostModel, budget: &Budget) -> Cut {
     let nodes: Vec<Node> = candidates
         .iter()
         .map(|c| Node { parent: c.parent, benefit: c.benefit, cost_ms: model.marginal_ms(&features(c, 0)) })
@@ -107,7 +143,8 @@ pub fn choose(candidates: &[Candidate], model: &CostModel, budget: &Budget) -> C
         return Cut::default();
     }
     let regions = Regions::new(candidates, &forest, budget.shadows);
-    let continuous = regions.variables(candidates, model);
+    let mut continuous = regions.variables(candidates, model);
+    continuous.extend(trees.iter().map(|(t, px)| tree_variable(t, *px, model)));
     let run = |budget_ms: f64| {
         let selection =
             optimize(&forest, &continuous, &Settings { deadline: budget.deadline, ..Settings::budget(budget_ms) });
@@ -115,7 +152,9 @@ pub fn choose(candidates: &[Candidate], model: &CostModel, budget: &Budget) -> C
         (selection, drawn)
     };
     let max_tiles = budget.max_tiles.max(1);
-    let (mut selection, mut drawn) = run(budget.budget_ms - model.constants_ms[0]);
+    let in_view = trees.iter().filter(|(_, px)| *px > 0.0).count() as f64;
+    let reserved_ms = model.marginal_ms(&tree_features(0.0, in_view));
+    let (mut selection, mut drawn) = run(budget.budget_ms - model.constants_ms[0] - reserved_ms);
     if drawn.len() > max_tiles {
         // The largest budget whose cut fits the slots, by bisection.
         let (mut lo, mut hi) = (0.0, selection.cost_ms);
@@ -137,18 +176,34 @@ pub fn choose(candidates: &[Candidate], model: &CostModel, budget: &Budget) -> C
             shadow_steps: regions.steps(i, &forest, candidates, &selection.resolutions),
         })
         .collect();
+    let tree_budgets: TreeBudgets = trees
+        .iter()
+        .zip(&selection.resolutions[regions.heads.len().min(selection.resolutions.len())..])
+        .filter(|(_, x)| **x >= 1.0)
+        .map(|((t, _), x)| (t.block, x.floor()))
+        .collect();
     let features = drawn
         .iter()
         .zip(&tiles)
         .map(|(&i, t)| features(&candidates[i as usize], t.shadow_steps))
-        .fold(CostFeatures::default(), |a, f| a.plus(&f));
+        .fold(tree_features(tree_budgets.values().sum(), tree_budgets.len() as f64), |a, f| a.plus(&f));
     Cut {
         predicted_ms: model.predict_ms(&features),
         features,
         tiles,
+        tree_budgets,
         benefit: selection.benefit,
         upper_bound: selection.upper_bound,
         stop: Some(selection.stop),
+    }
+}
+
+/// A tree group's variable: its worth and its cost per splat.
+fn tree_variable(t: &TreeItem, px: f64, model: &CostModel) -> Continuous {
+    Continuous {
+        weight: group_weight(px, t.trees, TREE_WORTH),
+        capacity: t.capacity.max(0.0),
+        cost_per_unit_ms: model.marginal_ms(&tree_features(1.0, 0.0)),
     }
 }
 
@@ -281,7 +336,7 @@ mod tests {
         let c = demo_candidates();
         let mut last = 0.0;
         for ms in [3.0, 6.0, 12.0, 24.0] {
-            let cut = choose(&c, &MODEL, &budget(ms, true));
+            let cut = choose(&c, &[], &MODEL, &budget(ms, true));
             assert!(cut.predicted_ms <= ms + 1e-9, "{ms}: {}", cut.predicted_ms);
             assert!(cut.benefit >= last && cut.benefit <= cut.upper_bound * (1.0 + 1e-9));
             last = cut.benefit;
@@ -293,29 +348,60 @@ mod tests {
                 }));
             }
         }
-        let rich = choose(&c, &MODEL, &budget(1e4, true));
+        let rich = choose(&c, &[], &MODEL, &budget(1e4, true));
         assert_eq!(rich.stop, Some(Stop::FullResolution));
         let f = rich.features;
         let full = f64::from(MAX_SHADOW_STEPS) * f.raycast_mpx_steps / VIEW_STEPS;
         assert!(f.shadow_mpx_steps > 0.95 * full && f.shadow_mpx_steps <= full * (1.0 + 1e-9), "{f:?}");
-        assert!(rich.tiles.len() > choose(&c, &MODEL, &budget(3.0, true)).tiles.len());
+        assert!(rich.tiles.len() > choose(&c, &[], &MODEL, &budget(3.0, true)).tiles.len());
     }
 
     #[test]
     fn no_sun_no_shadow_steps_and_slots_bound_the_cut() {
         let c = demo_candidates();
-        let dark = choose(&c, &MODEL, &budget(50.0, false));
+        let dark = choose(&c, &[], &MODEL, &budget(50.0, false));
         assert!(dark.tiles.iter().all(|t| t.shadow_steps == 0) && dark.features.shadow_mpx_steps == 0.0);
-        let few = choose(&c, &MODEL, &Budget { max_tiles: 8, ..budget(1e4, true) });
+        let few = choose(&c, &[], &MODEL, &Budget { max_tiles: 8, ..budget(1e4, true) });
         assert!(few.tiles.len() <= 8 && !few.tiles.is_empty(), "{}", few.tiles.len());
     }
 
     #[test]
+    fn tree_groups_get_splats_by_their_worth_within_the_budget() {
+        let c = demo_candidates();
+        // A full group costs 3.1 ms: the groups compete with the terrain.
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01] };
+        let item = |k: i64| TreeItem {
+            block: (k, 0),
+            centre_ecef: DVec3::ZERO,
+            radius_m: 30.0,
+            trees: 64,
+            capacity: 64.0 * 24.0,
+        };
+        let trees = [(item(0), 20_000.0), (item(1), 2_000.0), (item(2), 0.0)];
+        let cut = choose(&c, &trees, &model, &budget(8.0, true));
+        let got = |k: i64| cut.tree_budgets.get(&(k, 0)).copied().unwrap_or(0.0);
+        assert!(got(0) > got(1) && got(1) > 0.0 && got(1) < 64.0 * 24.0, "{:?}", cut.tree_budgets);
+        assert_eq!(got(2), 0.0, "a group out of view gets nothing");
+        assert!(cut.predicted_ms <= 8.0 + 1e-9, "{}", cut.predicted_ms);
+        assert!((cut.features.splats_k - (got(0) + got(1)) / 1e3).abs() < 1e-12);
+        // The terrain is whole at 3.8 ms; the splats take the rest.
+        let terrain = model.predict_ms(&CostFeatures { splats_k: 0.0, groups_h: 0.0, ..cut.features });
+        let bare = choose(&c, &[], &model, &budget(8.0, true));
+        assert_eq!(bare.stop, Some(Stop::FullResolution));
+        assert!((terrain - bare.predicted_ms).abs() < 1e-9 && cut.predicted_ms > 7.9, "{terrain} {}", cut.predicted_ms);
+        // With less, the terrain gives way too.
+        let tight = choose(&c, &trees, &model, &budget(4.0, true));
+        assert!(tight.predicted_ms <= 4.0 + 1e-9 && !tight.tree_budgets.is_empty());
+        let rich = choose(&c, &trees, &model, &budget(1e4, true));
+        assert_eq!(rich.tree_budgets.get(&(0, 0)), Some(&(64.0 * 24.0)));
+    }
+
+    #[test]
     fn odd_input_gives_an_empty_or_coarsest_cut() {
-        assert!(choose(&[], &MODEL, &budget(10.0, true)).tiles.is_empty());
+        assert!(choose(&[], &[], &MODEL, &budget(10.0, true)).tiles.is_empty());
         let c = demo_candidates();
         for ms in [0.0, -5.0, f64::NAN] {
-            let cut = choose(&c, &MODEL, &budget(ms, true));
+            let cut = choose(&c, &[], &MODEL, &budget(ms, true));
             let roots = c.iter().filter(|t| t.parent.is_none()).count();
             assert_eq!(cut.tiles.len(), roots, "{ms}");
             assert!(cut.predicted_ms.is_finite());

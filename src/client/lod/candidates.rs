@@ -25,7 +25,7 @@ use super::super::camera::Camera;
 use super::super::frame::TileFrame;
 use super::super::globe::Geodetic;
 use super::super::quadtree::{UNKNOWN_RANGE_M, behind_horizon, local_box, visible};
-use super::super::raycast::{self, Fade};
+use super::super::raycast::{self, Fade, TreeBlend};
 use super::super::store::Known;
 use super::coverage;
 use crate::grid::{BBox, Sector, TileGrid, TileId};
@@ -169,7 +169,7 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
         let full = coverage::full_px(camera, area_m2, near_m).max(visible);
         benefit += tile_benefit_seen(visible, full, samples, Smooth::default());
         seen += visible;
-        let fade = Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px };
+        let fade = Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px, trees: TreeBlend::NONE };
         if !mesh_error_m.is_some_and(|e| raycast::plain(&fade, near_m, e)) {
             ray = ray.max(visible);
         }

@@ -1,15 +1,19 @@
 //! A flight under a frame budget (issue 7, `lod` steps 1 and 6): every
 //! frame the camera feeds the path predictor; every `τ` a selection for the
 //! predicted cameras and the conservative cone is handed to the selection
-//! thread ([`super::worker`]) while the last finished cut is drawn; after
+//! thread ([`super::worker`]) with the tree groups near those cameras
+//! (grown on the tiles last drawn) while the last finished cut is drawn;
+//! after
 //! each frame its features and measured time go to the calibrator (001
 //! §4.2), so the next selection predicts with constants fitted to this GPU.
 //! With geomorphing on it also keeps the morphs of the cuts drawn
 //! ([`super::morphs`]).
 
 use super::super::camera::Camera;
+use super::super::tile::TileData;
+use super::super::trees::{self, TreeSettings};
 use super::ahead::{self, Lookahead, WINDOW};
-use super::budget::{Budget, Choice};
+use super::budget::{self, Budget, Choice, TreeItem};
 use super::morphs::{Morphing, Morphs};
 use super::worker::{Request, Worker};
 use super::{Selected, Selector};
@@ -17,6 +21,7 @@ use crate::grid::TileId;
 use crate::lod::calibrate::{CalibratorSettings, CostCalibrator};
 use crate::lod::model::{CostFeatures, CostModel};
 use crate::lod::predict::PathPredictor;
+use std::sync::Arc;
 
 /// The calibrator's settings: a strong ridge toward the (freely scaled)
 /// prior, since a flight's first frames differ little and software GPUs
@@ -44,6 +49,8 @@ pub struct BudgetFlight {
     frames: usize,
     /// The morphs, with geomorphing on.
     morphs: Option<Morphs>,
+    /// The tiles last drawn and how trees grow on them.
+    trees: Option<(TreeSettings, Vec<Arc<TileData>>)>,
 }
 
 impl BudgetFlight {
@@ -68,6 +75,7 @@ impl BudgetFlight {
             requested_s: f64::NEG_INFINITY,
             frames: 0,
             morphs: geomorph.then(|| Morphs::new(look.tau_s)),
+            trees: None,
         })
     }
 
@@ -96,7 +104,8 @@ impl BudgetFlight {
         }
         if !self.worker.busy() && t_s >= self.requested_s + self.look.tau_s {
             let (cameras, cone) = ahead::ahead(&self.predictor, camera, t_s, &self.look);
-            let request = Request { cameras, cone: Some(cone), model: self.model(), budget: self.budget };
+            let trees = self.tree_items(&cameras);
+            let request = Request { cameras, cone: Some(cone), trees, model: self.model(), budget: self.budget };
             if self.worker.submit(request) {
                 self.requested_s = t_s;
             }
@@ -105,9 +114,34 @@ impl BudgetFlight {
             self.current = self.worker.take(true);
         }
         let model = self.model();
-        self.current
-            .get_or_insert_with(|| self.selector.select(std::slice::from_ref(camera), None, &model, &self.budget))
-            .clone()
+        if self.current.is_none() {
+            let cameras = std::slice::from_ref(camera);
+            let trees = self.tree_items(cameras);
+            self.current = Some(self.selector.select(cameras, None, &trees, &model, &self.budget));
+        }
+        self.current.clone().unwrap_or_default()
+    }
+
+    /// The tiles drawn and how trees grow on them, for the next
+    /// selections' tree groups.
+    pub fn set_trees(&mut self, settings: TreeSettings, drawn: Vec<Arc<TileData>>) {
+        self.trees = Some((settings, drawn));
+    }
+
+    /// The tree groups near `cameras` on the tiles last drawn, each once.
+    fn tree_items(&self, cameras: &[Camera]) -> Vec<TreeItem> {
+        let Some((settings, tiles)) = &self.trees else { return Vec::new() };
+        let refs: Vec<&TileData> = tiles.iter().map(|t| t.as_ref()).collect();
+        let mut items: Vec<TreeItem> = Vec::new();
+        for camera in cameras {
+            let blend = settings.blend(camera.focal_px());
+            for g in trees::groups_near(settings, &refs, camera, &blend) {
+                if !items.iter().any(|i| i.block == g.block) {
+                    items.push(g.item(&refs, &settings.field));
+                }
+            }
+        }
+        items
     }
 
     /// Which tiles of `drawn`, the cut drawn at `t_s`, morph from or to a
@@ -137,12 +171,19 @@ impl BudgetFlight {
         }
     }
 
-    /// Records a drawn frame: its tiles as drawn from `camera` and its
-    /// measured time. Returns the frame's features, priced by the model
-    /// before this frame's correction. The first frame builds the GPU
-    /// pipelines and is not calibrated.
-    pub fn observe(&mut self, camera: &Camera, drawn: &[Choice], measured_ms: f64) -> CostFeatures {
-        let features = self.selector.features(camera, drawn);
+    /// Records a drawn frame: its tiles as drawn from `camera`, its
+    /// `(splats, tree groups)` and its measured time. Returns the frame's
+    /// features, priced by the model before this frame's correction. The
+    /// first frame builds the GPU pipelines and is not calibrated.
+    pub fn observe(
+        &mut self,
+        camera: &Camera,
+        drawn: &[Choice],
+        trees: (usize, usize),
+        measured_ms: f64,
+    ) -> CostFeatures {
+        let splats = budget::tree_features(trees.0 as f64, trees.1 as f64);
+        let features = self.selector.features(camera, drawn).plus(&splats);
         if self.frames > 0 {
             self.calibrator.observe(&features, measured_ms);
         }
@@ -228,10 +269,10 @@ mod tests {
         let cut = f.frame(0.0, &cam).cut;
         let before = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles));
         // The first frame builds pipelines and teaches nothing.
-        f.observe(&cam, &cut.tiles, 1000.0);
+        f.observe(&cam, &cut.tiles, (0, 0), 1000.0);
         assert_eq!(f.model(), CostModel::default());
         for _ in 0..5 {
-            f.observe(&cam, &cut.tiles, 4.0 * before);
+            f.observe(&cam, &cut.tiles, (0, 0), 4.0 * before);
         }
         let after = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles));
         assert!((after / (4.0 * before) - 1.0).abs() < 0.05, "{before} → {after}");

@@ -6,8 +6,8 @@
 //! - [`coverage`]: the pixels a tile covers, and at what sample density.
 //! - [`candidates`]: the culled quadtree with each tile's benefit and cost
 //!   in pixels, for one camera or several predicted ones.
-//! - [`budget`]: the optimiser's forest and shadow-quality variables, and
-//!   the cut it selects.
+//! - [`budget`]: the optimiser's forest, its shadow-quality and tree-group
+//!   variables, and the cut it selects.
 //! - [`ahead`]: the predicted cameras and the conservative cone a
 //!   selection is for.
 //! - [`worker`]: the selection thread.
@@ -32,7 +32,7 @@ use super::store::Knowledge;
 use crate::grid::{BBox, TileGrid};
 use crate::lod::model::{CostFeatures, CostModel};
 use crate::lod::predict::Cone;
-use budget::{Budget, Choice, Cut};
+use budget::{Budget, Choice, Cut, TreeItem};
 use candidates::Scope;
 use std::time::Instant;
 
@@ -67,12 +67,21 @@ pub struct Selected {
 }
 
 impl Selector {
-    /// The cut for `cameras` (the cone, if any, widens culling) under
-    /// `budget` with cost `model`.
-    pub fn select(&self, cameras: &[Camera], cone: Option<Cone>, model: &CostModel, budget: &Budget) -> Selected {
+    /// The cut for `cameras` (the cone, if any, widens culling) and the
+    /// splat budgets of tree groups `trees` under `budget` with cost
+    /// `model`.
+    pub fn select(
+        &self,
+        cameras: &[Camera],
+        cone: Option<Cone>,
+        trees: &[TreeItem],
+        model: &CostModel,
+        budget: &Budget,
+    ) -> Selected {
         let start = Instant::now();
         let found = self.with_scope(cameras, cone, candidates::candidates);
-        let cut = budget::choose(&found.tiles, model, budget);
+        let seen: Vec<(TreeItem, f64)> = trees.iter().map(|t| (*t, tree_px(cameras, t))).collect();
+        let cut = budget::choose(&found.tiles, &seen, model, budget);
         Selected { cut, candidates: found.tiles.len(), ms: start.elapsed().as_secs_f64() * 1e3 }
     }
 
@@ -102,4 +111,19 @@ impl Selector {
             limit: MAX_CANDIDATES,
         })
     }
+}
+
+/// Pixels a tree group covers from the best placed of `cameras`: its
+/// bounding sphere's projected disc, at most the screen, none outside the
+/// view.
+fn tree_px(cameras: &[Camera], t: &TreeItem) -> f64 {
+    cameras
+        .iter()
+        .filter(|c| c.side_planes().iter().all(|n| n.dot(t.centre_ecef - c.position_ecef) >= -t.radius_m))
+        .map(|c| {
+            let d = (t.centre_ecef.distance(c.position_ecef) - t.radius_m).max(1.0);
+            let r_px = t.radius_m * c.focal_px() / d;
+            (std::f64::consts::PI * r_px * r_px).min(f64::from(c.width_px) * f64::from(c.height_px))
+        })
+        .fold(0.0, f64::max)
 }

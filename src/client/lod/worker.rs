@@ -5,7 +5,7 @@
 //! dropped.
 
 use super::super::camera::Camera;
-use super::budget::Budget;
+use super::budget::{Budget, TreeItem};
 use super::{Selected, Selector};
 use crate::lod::model::CostModel;
 use crate::lod::predict::Cone;
@@ -19,6 +19,8 @@ pub struct Request {
     pub cameras: Vec<Camera>,
     /// The conservative camera, widening culling.
     pub cone: Option<Cone>,
+    /// The tree groups near the camera.
+    pub trees: Vec<TreeItem>,
     /// The cost model.
     pub model: CostModel,
     /// The budget.
@@ -40,7 +42,7 @@ impl Worker {
         let (outbox, results) = channel();
         let thread = std::thread::Builder::new().name("lod-select".into()).spawn(move || {
             for r in inbox {
-                if outbox.send(selector.select(&r.cameras, r.cone, &r.model, &r.budget)).is_err() {
+                if outbox.send(selector.select(&r.cameras, r.cone, &r.trees, &r.model, &r.budget)).is_err() {
                     break;
                 }
             }

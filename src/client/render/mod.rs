@@ -1,11 +1,12 @@
 //! The wgpu renderer (feature `client`): each visible tile's hull is
 //! rasterised and its fragments ray cast into the tile's textures
 //! (dissertation 6.4); tiles too far for their canopy and relief to show are
-//! texture-mapped terrain meshes instead. Headless: frames are rendered to
+//! texture-mapped terrain meshes instead; trees near the camera are drawn
+//! as splats in their tiles' frames. Headless: frames are rendered to
 //! textures and read back.
 //!
 //! - `gpu`: the adapter and device; `cache`: tile texture slots within a
-//!   memory budget; `pipeline`: the three pipelines; `uniforms`: the
+//!   memory budget; `pipeline`: the four pipelines; `uniforms`: the
 //!   uniform blocks; `targets`: render targets and readback; `timer`: GPU
 //!   pass time; `shaders`: the WGSL table.
 
@@ -20,6 +21,7 @@ pub mod uniforms;
 use super::camera::Camera;
 use super::raycast::{self, SKY};
 use super::tile::TileData;
+use super::trees::Splat;
 use cache::{CacheFull, TileCache};
 use gpu::Gpu;
 use pipeline::Pipelines;
@@ -54,6 +56,8 @@ pub struct FrameStats {
     pub tiles_plain: u32,
     /// Tile bytes resident on the GPU.
     pub resident_bytes: usize,
+    /// Tree splats drawn.
+    pub splats: u32,
 }
 
 /// A rendered frame, row 0 at the top; empty buffers where not read back.
@@ -76,6 +80,17 @@ pub struct Draw<'a> {
     pub tile: &'a TileData,
     /// Shadow samples per hit on this tile (0: none).
     pub shadow_steps: u32,
+    /// Trees' splats in this tile's frame.
+    pub splats: &'a [Splat],
+}
+
+/// How one tile of a frame is drawn: its texture slot, its mode and the
+/// range of its splats in the frame's instance buffer.
+#[derive(Clone, Debug)]
+struct Prepared {
+    slot: u32,
+    mode: DrawMode,
+    splats: std::ops::Range<u32>,
 }
 
 /// The renderer and its GPU resources.
@@ -87,6 +102,7 @@ pub struct Renderer {
     frame_group: wgpu::BindGroup,
     tile_buffer: wgpu::Buffer,
     tile_group: wgpu::BindGroup,
+    splat_buffer: Option<wgpu::Buffer>,
     targets: Option<Targets>,
     timer: Option<PassTimer>,
     frame_no: u64,
@@ -117,6 +133,7 @@ impl Renderer {
             frame_group,
             tile_buffer,
             tile_group,
+            splat_buffer: None,
             targets: None,
             timer,
             frame_no: 0,
@@ -134,7 +151,7 @@ impl Renderer {
     }
 
     /// Renders `tiles` (all the frame's tiles, at most [`Self::cache_slots`])
-    /// with the settings' shadow steps on every tile.
+    /// with the settings' shadow steps on every tile, without trees.
     pub fn render(
         &mut self,
         camera: &Camera,
@@ -142,7 +159,8 @@ impl Renderer {
         settings: &FrameSettings,
         readback: Readback,
     ) -> Result<Rendered, CacheFull> {
-        let draws: Vec<Draw> = tiles.iter().map(|&tile| Draw { tile, shadow_steps: settings.shadow_steps }).collect();
+        let draws: Vec<Draw> =
+            tiles.iter().map(|&tile| Draw { tile, shadow_steps: settings.shadow_steps, splats: &[] }).collect();
         self.render_draws(camera, &draws, settings, readback)
     }
 
@@ -170,20 +188,22 @@ impl Renderer {
         Ok(self.read(readback, stats))
     }
 
-    /// Uploads tiles, decides how each is drawn and writes the uniforms.
+    /// Uploads tiles and splats, decides how each tile is drawn and writes
+    /// the uniforms.
     fn prepare(
         &mut self,
         camera: &Camera,
         tiles: &[Draw],
         settings: &FrameSettings,
         stats: &mut FrameStats,
-    ) -> Result<Vec<(u32, DrawMode)>, CacheFull> {
+    ) -> Result<Vec<Prepared>, CacheFull> {
         let (device, queue) = (&self.gpu.device, &self.gpu.queue);
         let mut order: Vec<(f64, &Draw)> = tiles.iter().map(|d| (uniforms::tile_near_m(camera, d.tile), d)).collect();
         order.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut blocks = Vec::with_capacity(order.len());
         let mut draws = Vec::with_capacity(order.len());
-        for (near_m, &Draw { tile, shadow_steps }) in order {
+        let mut splats: Vec<Splat> = Vec::new();
+        for (near_m, &Draw { tile, shadow_steps, splats: tile_splats }) in order {
             let slot = self.cache.insert(device, queue, tile, self.frame_no)?;
             let mode = draw_mode(camera, tile, settings, near_m);
             match mode {
@@ -195,15 +215,39 @@ impl Renderer {
             let mut bytes = bytemuck::bytes_of(&block).to_vec();
             bytes.resize(TILE_STRIDE as usize, 0);
             blocks.extend(bytes);
-            draws.push((slot, mode));
+            let start = splats.len() as u32;
+            splats.extend_from_slice(tile_splats);
+            draws.push(Prepared { slot, mode, splats: start..splats.len() as u32 });
         }
         let frame = FrameUniform::new(camera, settings, &self.cache.mip_rects);
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
         queue.write_buffer(&self.tile_buffer, 0, &blocks);
+        stats.splats = splats.len() as u32;
+        self.upload_splats(&splats);
         Ok(draws)
     }
 
-    fn encode_and_submit(&self, draws: &[(u32, DrawMode)]) {
+    /// Writes the frame's splats to the instance buffer, growing it to the
+    /// next power of two when they do not fit.
+    fn upload_splats(&mut self, splats: &[Splat]) {
+        if splats.is_empty() {
+            return;
+        }
+        let bytes: &[u8] = bytemuck::cast_slice(splats);
+        if self.splat_buffer.as_ref().is_none_or(|b| b.size() < bytes.len() as u64) {
+            self.splat_buffer = Some(self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("splats"),
+                size: (bytes.len() as u64).next_power_of_two(),
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }));
+        }
+        if let Some(buffer) = &self.splat_buffer {
+            self.gpu.queue.write_buffer(buffer, 0, bytes);
+        }
+    }
+
+    fn encode_and_submit(&self, draws: &[Prepared]) {
         let Some(targets) = &self.targets else { return };
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
         let (colour, pixel_data, depth) = (view(&targets.colour), view(&targets.pixel_data), view(&targets.depth));
@@ -233,18 +277,26 @@ impl Renderer {
             pass.set_bind_group(0, &self.frame_group, &[]);
             // Ray-cast tiles first, then the terrain meshes: far tiles, and
             // under ray-cast tiles the lowered crack fillers.
-            for (k, &(slot, mode)) in draws.iter().enumerate().filter(|(_, d)| d.1 != DrawMode::Plain) {
-                let Some((hull, _)) = self.cache.meshes(slot) else { continue };
-                pass.set_pipeline(if mode == DrawMode::Hull { &self.pipelines.hull } else { &self.pipelines.inside });
+            for (k, d) in draws.iter().enumerate().filter(|(_, d)| d.mode != DrawMode::Plain) {
+                let Some((hull, _)) = self.cache.meshes(d.slot) else { continue };
+                pass.set_pipeline(if d.mode == DrawMode::Hull { &self.pipelines.hull } else { &self.pipelines.inside });
                 pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
                 draw(&mut pass, hull, hull.index_count);
             }
             pass.set_pipeline(&self.pipelines.plain);
-            for (k, &(slot, mode)) in draws.iter().enumerate() {
-                let Some((_, terrain)) = self.cache.meshes(slot) else { continue };
+            for (k, d) in draws.iter().enumerate() {
+                let Some((_, terrain)) = self.cache.meshes(d.slot) else { continue };
                 pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
-                let count = if mode == DrawMode::Plain { terrain.index_count } else { terrain.grid_count };
+                let count = if d.mode == DrawMode::Plain { terrain.index_count } else { terrain.grid_count };
                 draw(&mut pass, terrain, count);
+            }
+            if let Some(instances) = &self.splat_buffer {
+                pass.set_pipeline(&self.pipelines.splat);
+                pass.set_vertex_buffer(0, instances.slice(..));
+                for (k, d) in draws.iter().enumerate().filter(|(_, d)| !d.splats.is_empty()) {
+                    pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
+                    pass.draw(0..4, d.splats.clone());
+                }
             }
         }
         if let Some(t) = &self.timer {

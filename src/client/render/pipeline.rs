@@ -1,11 +1,13 @@
 //! The render pipelines and their bindings: hull fragments that ray cast
 //! (front faces), the same from a camera inside the hull (back faces), and
 //! plain texture mapping of the terrain mesh (far tiles, and crack filling
-//! under ray-cast ones). All write colour, per-pixel fetch counts, the
-//! view-axis distance and reversed-Z depth (greater is nearer).
+//! under ray-cast ones), and trees' splats as instanced quads. All write
+//! colour, per-pixel fetch counts, the view-axis distance and reversed-Z
+//! depth (greater is nearer).
 
 use super::super::hull::HullVertex;
 use super::super::terrain::TerrainVertex;
+use super::super::trees::Splat;
 use super::cache::TileCache;
 use super::shaders;
 use super::uniforms::{FrameUniform, TILE_STRIDE, TileUniform};
@@ -27,6 +29,8 @@ pub struct Pipelines {
     pub inside: wgpu::RenderPipeline,
     /// Texture-mapped terrain mesh.
     pub plain: wgpu::RenderPipeline,
+    /// Trees' splats: a quad of four strip vertices per instance.
+    pub splat: wgpu::RenderPipeline,
     /// Group 0: frame uniform, tile textures, sampler.
     pub frame_layout: wgpu::BindGroupLayout,
     /// Group 1: the tile uniform at a dynamic offset.
@@ -76,13 +80,27 @@ impl Pipelines {
             step_mode: wgpu::VertexStepMode::Vertex,
             attributes: &terrain_attributes,
         };
-        let make = |vs, fs, cull, vertex: &wgpu::VertexBufferLayout| {
-            pipeline(device, &layout, &module, (vs, vertex.clone()), fs, cull)
+        let splat_attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32, 2 => Unorm8x4];
+        let splat_instance = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<Splat>() as u64,
+            step_mode: wgpu::VertexStepMode::Instance,
+            attributes: &splat_attributes,
+        };
+        let triangles = |cull| wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            front_face: wgpu::FrontFace::Ccw,
+            cull_mode: Some(cull),
+            ..Default::default()
+        };
+        let quads = wgpu::PrimitiveState { topology: wgpu::PrimitiveTopology::TriangleStrip, ..Default::default() };
+        let make = |vs, fs, primitive, vertex: &wgpu::VertexBufferLayout| {
+            pipeline(device, &layout, &module, (vs, vertex.clone()), fs, primitive)
         };
         Pipelines {
-            hull: make("vs_hull", "fs_ray", wgpu::Face::Back, &hull_vertex),
-            inside: make("vs_hull", "fs_ray", wgpu::Face::Front, &hull_vertex),
-            plain: make("vs_plain", "fs_plain", wgpu::Face::Back, &terrain_vertex),
+            hull: make("vs_hull", "fs_ray", triangles(wgpu::Face::Back), &hull_vertex),
+            inside: make("vs_hull", "fs_ray", triangles(wgpu::Face::Front), &hull_vertex),
+            plain: make("vs_plain", "fs_plain", triangles(wgpu::Face::Back), &terrain_vertex),
+            splat: make("vs_splat", "fs_splat", quads, &splat_instance),
             frame_layout,
             tile_layout,
         }
@@ -160,7 +178,7 @@ fn pipeline(
     module: &wgpu::ShaderModule,
     (vs, vertex): (&str, wgpu::VertexBufferLayout),
     fs: &str,
-    cull: wgpu::Face,
+    primitive: wgpu::PrimitiveState,
 ) -> wgpu::RenderPipeline {
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(fs),
@@ -171,12 +189,7 @@ fn pipeline(
             compilation_options: Default::default(),
             buffers: &[Some(vertex)],
         },
-        primitive: wgpu::PrimitiveState {
-            topology: wgpu::PrimitiveTopology::TriangleList,
-            front_face: wgpu::FrontFace::Ccw,
-            cull_mode: Some(cull),
-            ..Default::default()
-        },
+        primitive,
         depth_stencil: Some(wgpu::DepthStencilState {
             format: DEPTH_FORMAT,
             depth_write_enabled: Some(true),

@@ -3,12 +3,13 @@
 //! declarations first, entry points last.
 
 /// `(file name, source)` in module order.
-pub const RAYCAST_PARTS: [(&str, &str); 5] = [
+pub const RAYCAST_PARTS: [(&str, &str); 6] = [
     ("common.wgsl", include_str!("../../../shaders/common.wgsl")),
     ("surface.wgsl", include_str!("../../../shaders/surface.wgsl")),
     ("traverse.wgsl", include_str!("../../../shaders/traverse.wgsl")),
     ("shade.wgsl", include_str!("../../../shaders/shade.wgsl")),
     ("raycast.wgsl", include_str!("../../../shaders/raycast.wgsl")),
+    ("splat.wgsl", include_str!("../../../shaders/splat.wgsl")),
 ];
 
 /// The ray-casting module's source.

@@ -28,6 +28,8 @@ pub struct FrameUniform {
     pub shadow: [f32; 4],
     /// Canopy tint.
     pub canopy_tint: [f32; 4],
+    /// Tree range and blend band (m), unused × 2.
+    pub trees: [f32; 4],
     /// Traversal, linear steps, unused, sun on.
     pub mode: [u32; 4],
     /// Mipmap atlas rectangles per level.
@@ -101,6 +103,7 @@ impl FrameUniform {
             viewport: [camera.width_px as f32, camera.height_px as f32, camera.near_m as f32, camera.focal_px() as f32],
             shadow: [raycast::SHADOW_WEIGHT as f32, raycast::SHADOW_SOFT_M as f32, 0.0, 0.0],
             canopy_tint: rgb(raycast::CANOPY_TINT, 1.0),
+            trees: [f.trees.range_m as f32, f.trees.band_m as f32, 0.0, 0.0],
             mode: [traversal, steps, 0, settings.sun_ecef.is_some() as u32],
             mip_rects: rects,
         }
@@ -170,10 +173,13 @@ fn hull_quad_m(tile: &TileData) -> f64 {
     q * tile.frame.spacing_m.max_element()
 }
 
-/// Whether every sample of the tile is close enough for the whole canopy.
+/// Whether every sample of the tile is close enough for the whole canopy
+/// and far enough from the trees' splats: the far fade shrinks with
+/// distance and the canopy's share of the tree blend grows, so both ends
+/// of the tile's distances tell.
 fn canopy_whole(camera: &Camera, tile: &TileData, fade: &Fade) -> bool {
-    let far = tile_far_m(camera, tile);
-    fade.factor(far) >= 1.0
+    let (near, far) = (tile_near_m(camera, tile), tile_far_m(camera, tile));
+    fade.factor(near) >= 1.0 && fade.factor(far) >= 1.0
 }
 
 /// The farthest distance from the camera to the tile's box.
@@ -233,6 +239,7 @@ mod tests {
             ("viewport", offset_of!(FrameUniform, viewport)),
             ("shadow", offset_of!(FrameUniform, shadow)),
             ("canopy_tint", offset_of!(FrameUniform, canopy_tint)),
+            ("trees", offset_of!(FrameUniform, trees)),
             ("mode", offset_of!(FrameUniform, mode)),
             ("mip_rects", offset_of!(FrameUniform, mip_rects)),
         ];

@@ -1,0 +1,65 @@
+// Trees near the camera as point splats (issue 7; paper 000 §5): each splat
+// is a camera-facing disc, drawn as an instanced quad in its tile's frame
+// and shaded as a small sphere (src/client/trees.rs places them). A splat's
+// opacity fades it out toward the edge of the tree range, where the
+// ray-cast canopy fades in (surface.wgsl): a screen-door keeps depth writes
+// exact without sorting. Lighting follows the canopy's: ambient plus the
+// sun, shadowed by the terrain toward the sun (shade.wgsl's shadow()).
+
+struct SplatIn {
+    // Centre, tile-local metres.
+    @location(0) centre: vec3<f32>,
+    // Radius, metres.
+    @location(1) radius: f32,
+    // sRGB colour; alpha: opacity.
+    @location(2) colour: vec4<f32>,
+};
+
+struct SplatOut {
+    @builtin(position) clip: vec4<f32>,
+    // Position on the disc, −1..1 on both axes.
+    @location(0) disc: vec2<f32>,
+    @location(1) @interpolate(flat) colour: vec4<f32>,
+    // Centre in camera space; radius.
+    @location(2) @interpolate(flat) centre: vec4<f32>,
+    // Centre in the tile frame (for its shadow).
+    @location(3) @interpolate(flat) local: vec3<f32>,
+};
+
+@vertex
+fn vs_splat(@builtin(vertex_index) v: u32, s: SplatIn) -> SplatOut {
+    let disc = vec2<f32>(f32(v & 1u), f32(v >> 1u)) * 2.0 - 1.0;
+    let centre = (tile.model_view * vec4<f32>(s.centre, 1.0)).xyz;
+    let corner = centre + vec3<f32>(disc * s.radius, 0.0);
+    return SplatOut(frame.proj * vec4<f32>(corner, 1.0), disc, s.colour, vec4<f32>(centre, s.radius), s.centre);
+}
+
+// A hash of the pixel in [0, 1): the screen door's threshold.
+fn pixel_hash(p: vec2<u32>) -> f32 {
+    var h = p.x * 0x8da6b343u ^ p.y * 0xd8163841u;
+    h = (h ^ (h >> 15u)) * 0x2c1b3c6du;
+    h = h ^ (h >> 12u);
+    return f32(h >> 8u) / 16777216.0;
+}
+
+@fragment
+fn fs_splat(in: SplatOut) -> FragmentOut {
+    let r2 = dot(in.disc, in.disc);
+    if r2 > 1.0 || pixel_hash(vec2<u32>(in.clip.xy)) >= in.colour.a {
+        discard;
+    }
+    let bulge = sqrt(1.0 - r2);
+    let normal = vec3<f32>(in.disc, bulge);
+    let distance = max(-in.centre.z - bulge * in.centre.w, 1.0e-30);
+    var colour = in.colour.rgb;
+    if frame.mode.w == 1u {
+        let r = mat3x3<f32>(tile.model_view[0].xyz, tile.model_view[1].xyz, tile.model_view[2].xyz);
+        let lambert = max(dot(normal, r * tile.sun.xyz), 0.0);
+        let s = to_samples(in.local);
+        let light = shadow(s.xy, s.z, tile.sun.xyz);
+        let ambient = frame.sky.a;
+        colour = colour * frame.canopy_tint.rgb * (ambient + (1.0 - ambient) * light * (0.5 + 0.5 * lambert));
+    }
+    let data = vec4<u32>(0u, shadow_fetches, bitcast<u32>(distance), 0u);
+    return FragmentOut(vec4<f32>(colour, 1.0), data, frame.viewport.z / distance);
+}
