@@ -299,6 +299,20 @@ enum Bench {
         #[arg(long, num_args = 0..)]
         flights: Vec<PathBuf>,
     },
+    /// The client's screen-space error selection along the recorded
+    /// flyovers: nodes touched with the deferral table against full
+    /// re-evaluation every frame (equal selections checked).
+    Sse {
+        /// A real-data region.
+        #[arg(long, default_value = "config/examples/rmnp.toml")]
+        rmnp: PathBuf,
+        /// Directory of the camera paths (`demo_*.toml`, `rmnp_*.toml`).
+        #[arg(long, default_value = "config/paths")]
+        paths: PathBuf,
+        /// Frames per path.
+        #[arg(long, default_value_t = 300)]
+        frames: usize,
+    },
     /// The server over loopback HTTP beside MapServer and MapProxy: GetMap,
     /// uncached and cached tile latency and throughput, memory.
     #[cfg(feature = "server")]
@@ -412,6 +426,10 @@ fn run(command: Command) -> Result<()> {
         }
         Command::Bench { what: Bench::Lod { rmnp, frames, plots, flights } } => {
             println!("{}", sylva::bench::lod_report(&rmnp, frames, plots.as_deref(), &flights)?);
+            Ok(())
+        }
+        Command::Bench { what: Bench::Sse { rmnp, paths, frames } } => {
+            println!("{}", sylva::bench::lod_sse::report(&rmnp, &paths, frames).map_err(anyhow::Error::msg)?);
             Ok(())
         }
         #[cfg(feature = "server")]

@@ -6,6 +6,7 @@ pub mod lod;
 pub mod lod_frames;
 mod lod_plot;
 pub mod lod_scene;
+pub mod lod_sse;
 pub mod pipeline;
 pub mod plot;
 pub mod quality;

@@ -1,6 +1,6 @@
 //! `sylva fly`: renders a camera path headless, frame by frame — select
-//! tiles (by screen-space error, [`super::quadtree`], or under a frame
-//! budget, [`super::lod`]), load the missing ones ([`super::store`]), ray
+//! tiles (by screen-space error, kept across frames by the deferral table,
+//! [`super::sse`], or under a frame budget, [`super::lod`]), load the missing ones ([`super::store`]), ray
 //! cast them on the GPU — and records per-frame statistics: CPU and GPU
 //! time, tiles drawn per level and how, texture fetches per pixel (the ray
 //! steps), bytes fetched and memory resident; under a budget also the
@@ -21,6 +21,7 @@ use super::render::cache::CacheFull;
 use super::render::uniforms::FrameSettings;
 use super::render::{Draw, Readback, Renderer};
 use super::source::TileSource;
+use super::sse::SseSelector;
 use super::store::{LoadError, TileStore};
 use super::tile::TileData;
 use super::trees::{self, TreeSettings};
@@ -158,6 +159,9 @@ pub struct FrameRecord {
     pub trees: usize,
     /// Tree splats drawn.
     pub splats: usize,
+    /// Quadtree nodes the screen-space error selection touched:
+    /// refinement and visibility tests (sse mode).
+    pub nodes_touched: Option<usize>,
 }
 
 /// Why a flight stopped.
@@ -194,6 +198,10 @@ pub fn fly(
     if let Some(dir) = &options.out_dir {
         std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
     }
+    let mut sse = match options.mode {
+        LodMode::Sse => SseSelector::for_source(source, options.lod.max_level).map_err(LoadError::from)?,
+        LodMode::Budget { .. } => None,
+    };
     let mut lod = match options.mode {
         LodMode::Sse => None,
         LodMode::Budget { budget_ms, select_every, prior } => {
@@ -218,7 +226,7 @@ pub fn fly(
     };
     let mut records = Vec::with_capacity(options.frames);
     for k in 0..options.frames {
-        let record = frame(source, path, renderer, (&mut store, lod.as_mut()), options, k)?;
+        let record = frame(source, path, renderer, (&mut store, lod.as_mut(), sse.as_mut()), options, k)?;
         records.push(record);
     }
     if let Some(dir) = &options.out_dir {
@@ -243,20 +251,21 @@ struct Chosen {
     selected: Option<Selected>,
     /// Tiles drawn morphing from a coarser one.
     morphing: usize,
+    /// Nodes the screen-space error selection touched.
+    touched: Option<usize>,
 }
 
 /// The frame's tiles: by screen-space error, or under the budget.
 fn choose(
     source: &dyn TileSource,
-    store: &mut TileStore,
-    lod: Option<&mut BudgetFlight>,
+    (store, lod, sse): (&mut TileStore, Option<&mut BudgetFlight>, Option<&mut SseSelector>),
     (t_s, camera): (f64, &super::camera::Camera),
     (options, slots): (&FlyOptions, u32),
 ) -> Result<Chosen, FlyError> {
     let Some(lod) = lod else {
-        let (tiles, error_px) = visible_tiles(source, store, camera, options, slots)?;
+        let (tiles, error_px, touched) = visible_tiles(source, store, sse, camera, options, slots)?;
         let steps = vec![options.shadow_steps; tiles.len()];
-        return Ok(Chosen { tiles, steps, error_px, selected: None, morphing: 0 });
+        return Ok(Chosen { tiles, steps, error_px, selected: None, morphing: 0, touched: Some(touched) });
     };
     let selected = lod.frame(t_s, camera);
     let ids: Vec<_> = selected.cut.tiles.iter().map(|c| c.id).collect();
@@ -273,14 +282,14 @@ fn choose(
     }
     let steps_of: std::collections::HashMap<_, _> = selected.cut.tiles.iter().map(|c| (c.id, c.shadow_steps)).collect();
     let steps = tiles.iter().map(|t| steps_of.get(&t.id()).copied().unwrap_or(0)).collect();
-    Ok(Chosen { tiles, steps, error_px: f64::NAN, selected: Some(selected), morphing: morphing.len() })
+    Ok(Chosen { tiles, steps, error_px: f64::NAN, selected: Some(selected), morphing: morphing.len(), touched: None })
 }
 
 fn frame(
     source: &dyn TileSource,
     path: &CameraPath,
     renderer: &mut Renderer,
-    (store, mut lod): (&mut TileStore, Option<&mut BudgetFlight>),
+    (store, mut lod, sse): (&mut TileStore, Option<&mut BudgetFlight>, Option<&mut SseSelector>),
     options: &FlyOptions,
     k: usize,
 ) -> Result<FrameRecord, FlyError> {
@@ -288,7 +297,7 @@ fn frame(
     let bytes_before = source.bytes_fetched();
     let camera = path.camera(k, options.frames, options.size);
     let t_s = path.time(k, options.frames);
-    let chosen = choose(source, store, lod.as_deref_mut(), (t_s, &camera), (options, renderer.cache_slots()))?;
+    let chosen = choose(source, (store, lod.as_deref_mut(), sse), (t_s, &camera), (options, renderer.cache_slots()))?;
     let (tiles, error_px) = (&chosen.tiles, chosen.error_px);
     let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
     let (canopy_ref_m, lo_px, hi_px) = options.fade;
@@ -362,6 +371,7 @@ fn frame(
         candidates: selected.map(|s| s.candidates),
         benefit_bound: selected.map(|s| s.cut.benefit / s.cut.upper_bound),
         morphing: chosen.morphing,
+        nodes_touched: chosen.touched,
         shadow_steps_mean: chosen.steps.iter().map(|&s| f64::from(s)).sum::<f64>() / chosen.steps.len().max(1) as f64,
         trees: trees.drawn.trees,
         splats: out.stats.splats as usize,
@@ -393,20 +403,27 @@ fn tree_splats(
 }
 
 /// The frame's tiles, coarsening the error threshold until they fit the
-/// GPU cache.
+/// GPU cache, with the threshold and the nodes the selections touched: by
+/// a flight's `sse` selector, or by the stateless walk.
 pub fn visible_tiles(
     source: &dyn TileSource,
     store: &mut TileStore,
+    mut sse: Option<&mut SseSelector>,
     camera: &super::camera::Camera,
     options: &FlyOptions,
     slots: u32,
-) -> Result<(Vec<Arc<TileData>>, f64), FlyError> {
+) -> Result<(Vec<Arc<TileData>>, f64, usize), FlyError> {
     let mut rule = options.lod;
+    let mut touched = 0;
     loop {
-        let selection = quadtree::select(&source.grid(), &source.bounds(), camera, &|id| store.range(id), &rule);
+        let selection = match sse.as_deref_mut() {
+            Some(sse) => sse.select(camera, rule.max_error_px),
+            None => quadtree::select(&source.grid(), &source.bounds(), camera, &|id| store.range(id), &rule),
+        };
+        touched += selection.visited;
         if selection.tiles.len() <= slots as usize || rule.max_error_px > 1e6 {
             let ids: Vec<_> = selection.tiles.iter().map(|s| s.id).collect();
-            return Ok((store.get(source, &ids)?, rule.max_error_px));
+            return Ok((store.get(source, &ids)?, rule.max_error_px, touched));
         }
         rule.max_error_px *= 1.25;
     }
@@ -427,7 +444,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     let mut out = Vec::new();
     let _ = writeln!(
         out,
-        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,morphing,trees,splats"
+        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,morphing,trees,splats,nodes_touched"
     );
     for r in records {
         let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
@@ -435,7 +452,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
         let gpu = optional(r.gpu_ms);
         let _ = writeln!(
             out,
-            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{},{},{}",
+            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{},{},{},{}",
             r.frame,
             r.cpu_ms,
             r.render_ms,
@@ -460,7 +477,8 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             optional(r.benefit_bound),
             r.morphing,
             r.trees,
-            r.splats
+            r.splats,
+            r.nodes_touched.map_or(String::new(), |n| n.to_string())
         );
     }
     String::from_utf8_lossy(&out).into_owned()

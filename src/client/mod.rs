@@ -12,6 +12,8 @@
 //! Positions are `f64` on the CPU; the GPU sees tile-local `f32` values only.
 
 pub mod camera;
+pub mod cull;
+pub mod envelope;
 #[cfg(feature = "client")]
 pub mod fly;
 pub mod frame;
@@ -27,7 +29,9 @@ pub mod reference;
 #[cfg(feature = "client")]
 pub mod render;
 pub mod source;
+pub mod sse;
 pub mod store;
 pub mod terrain;
 pub mod tile;
+pub mod tiletree;
 pub mod trees;

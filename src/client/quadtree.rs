@@ -1,7 +1,10 @@
 //! Which tiles to draw: the World Wind quadtree walked from level 0 over the
 //! region, culled against the view frustum, refined while a tile's
 //! screen-space error exceeds a threshold (the first LOD rule; the mixed
-//! LOD optimiser refines it).
+//! LOD optimiser refines it). This stateless walk serves single views and
+//! regions too large for a flight's tile tree; flights keep their selection
+//! across frames with the distance deferral table ([`super::sse`]), which
+//! shares the culling below.
 //!
 //! Culling: a tile is dropped when its bounding box is outside a side plane
 //! of the view frustum, or entirely behind the horizon (every corner hidden
@@ -41,13 +44,16 @@ pub struct Selected {
     pub error_px: f64,
 }
 
-/// The tiles to draw, and how many nodes the walk visited.
+/// The tiles to draw, and how many nodes the selection touched.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Selection {
     /// Tiles, coarse to fine, none an ancestor of another.
     pub tiles: Vec<Selected>,
-    /// Quadtree nodes visited.
+    /// Nodes touched: refinement tests plus visibility tests (a node the
+    /// walk visits is tested for both at once).
     pub visited: usize,
+    /// Refinement tests among them.
+    pub evaluated: usize,
 }
 
 /// Selects tiles of `grid` over `bounds` for `camera`. `range(id)` gives
@@ -86,10 +92,12 @@ pub fn select(
         }
     }
     out.tiles.sort_by_key(|s| (s.id.level, s.id.row, s.id.col));
+    out.evaluated = out.visited;
     out
 }
 
-fn touches(grid: &TileGrid, id: TileId, area: &Sector) -> bool {
+/// Whether tile `id` overlaps `area`.
+pub fn touches(grid: &TileGrid, id: TileId, area: &Sector) -> bool {
     let s = grid.sector(id);
     // Point-registered edges: a tile whose edge lies on the area's edge
     // holds data there only on that edge; it is not needed.
@@ -116,7 +124,7 @@ pub fn local_box(frame: &TileFrame, lo_m: f64, hi_m: f64) -> (DVec3, DVec3) {
 
 /// A sphere inside the ellipsoid and below any ground (the polar radius
 /// less 11 km): what it hides, the Earth hides.
-const OCCLUDER_RADIUS_M: f64 = 6_356_752.0 - 11_000.0;
+pub const OCCLUDER_RADIUS_M: f64 = 6_356_752.0 - 11_000.0;
 
 /// False when the box is entirely outside one side plane of the frustum or
 /// entirely behind the horizon.

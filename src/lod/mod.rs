@@ -53,8 +53,8 @@
 //! Between selections, [`deferral::ThresholdRefiner`] keeps the tile cut
 //! for a screen-error threshold `μ` exact every frame while evaluating only
 //! the tiles whose status could have changed since the eye moved (the
-//! client can take `μ` from the last selection); [`quadtree::TileQuadtree`]
-//! is a ready hierarchy for it and for benchmarks.
+//! client's `--lod sse` flights select with it: `client::sse`);
+//! [`quadtree::TileQuadtree`] is a ready hierarchy for it and for benchmarks.
 //!
 //! Units are in the names: `_m` metres, `_ms` milliseconds, `_px` pixels,
 //! `_s` seconds, `_rad` radians. Nothing here panics or returns NaN on

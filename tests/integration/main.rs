@@ -23,4 +23,5 @@ mod seed_shared; // many seeders and servers on one directory or Redis cache, sh
 mod server; // the server over HTTP: WMS, tiles, cache, concurrency, bad input, shutdown
 mod skipped_work; // stages nobody needs do not run (counted)
 mod sources; // broken and hostile files give errors that name them
+mod sse; // the flight's SSE selection: deferred equals full re-evaluation along the flyovers, fewer nodes
 mod upstream; // proxy sources over HTTP: WMS and Terrarium upstreams, failures, stale tiles

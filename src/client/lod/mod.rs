@@ -1,7 +1,7 @@
 //! The client's LOD selection under a frame budget (issue 7): what the
 //! pure [`crate::lod`] library is fed with, and what comes back to draw.
 //! `sylva fly --lod budget` uses it; `--lod sse` keeps the screen-space
-//! error rule of [`super::quadtree`].
+//! error rule of [`super::sse`].
 //!
 //! - [`coverage`]: the pixels a tile covers, and at what sample density.
 //! - [`candidates`]: the culled quadtree with each tile's benefit and cost

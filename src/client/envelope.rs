@@ -1,0 +1,115 @@
+//! Heights known before a flight: the few coarse tiles that cover the
+//! region (the deepest level whose tiles are at least as large as the
+//! region, so at most 2 × 2 of them), fetched once. They give any sector's
+//! lowest ground and highest CEM ([`HeightEnvelope::range`]) for the static
+//! bounds of [`super::tiletree::TileTree`].
+//!
+//! The coarse samples miss what lies between them, so a sector's range is
+//! taken over its samples and one more on every side, and widened by the
+//! largest step between neighbouring samples there (what a surface that
+//! varies like its samples can hide between two of them). These bounds only
+//! steer refinement; hulls and culling of drawn tiles use their own data.
+
+use super::source::{FetchError, TileSource};
+use crate::grid::{Sector, TileId};
+
+/// One coarse tile's samples (no halo), row 0 at the north.
+struct Coarse {
+    sector: Sector,
+    samples: usize,
+    ground: Vec<f32>,
+    cem: Vec<f32>,
+}
+
+/// The coarse tiles over a region.
+pub struct HeightEnvelope {
+    tiles: Vec<Coarse>,
+}
+
+impl HeightEnvelope {
+    /// Fetches the coarse tiles over `source`'s region.
+    pub fn fetch(source: &dyn TileSource) -> Result<HeightEnvelope, FetchError> {
+        let (grid, b) = (source.grid(), source.bounds());
+        let extent = (b.east - b.west).max(b.north - b.south);
+        let level = (0..30).take_while(|&l| grid.tile_delta_deg(l) >= extent).last().unwrap_or(0);
+        let a = grid.tile_containing(b.west, b.south, level);
+        let z = grid.tile_containing(b.east, b.north, level);
+        let mut tiles = Vec::new();
+        for row in a.row.min(z.row)..=a.row.max(z.row) {
+            for col in a.col.min(z.col)..=a.col.max(z.col) {
+                let id = TileId::new(level, row, col);
+                if let Some(p) = source.fetch(id, 0)? {
+                    let sector = grid.sector(id);
+                    tiles.push(Coarse { sector, samples: grid.samples() as usize, ground: p.dem, cem: p.cem });
+                }
+            }
+        }
+        Ok(HeightEnvelope { tiles })
+    }
+
+    /// The lowest ground and highest CEM over `sector`, widened (see the
+    /// module doc); `None` where no coarse sample lies near it.
+    pub fn range(&self, sector: &Sector) -> Option<(f64, f64)> {
+        let ranges = self.tiles.iter().filter_map(|t| t.range(sector));
+        ranges.reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)))
+    }
+}
+
+impl Coarse {
+    /// Sample indices `(x0..x1, y0..y1)` of `s` with one more on each side.
+    fn window(&self, s: &Sector) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>)> {
+        let (t, n) = (&self.sector, self.samples as f64 - 1.0);
+        let (step_x, step_y) = ((t.max_lon - t.min_lon) / n, (t.max_lat - t.min_lat) / n);
+        let x0 = ((s.min_lon - t.min_lon) / step_x).floor() - 1.0;
+        let x1 = ((s.max_lon - t.min_lon) / step_x).ceil() + 1.0;
+        let y0 = ((t.max_lat - s.max_lat) / step_y).floor() - 1.0;
+        let y1 = ((t.max_lat - s.min_lat) / step_y).ceil() + 1.0;
+        let clamp = |v: f64| v.clamp(0.0, n) as usize;
+        let (xs, ys) = (clamp(x0)..clamp(x1) + 1, clamp(y0)..clamp(y1) + 1);
+        (x1 >= 0.0 && y1 >= 0.0 && x0 <= n && y0 <= n).then_some((xs, ys))
+    }
+
+    fn range(&self, s: &Sector) -> Option<(f64, f64)> {
+        let (xs, ys) = self.window(s)?;
+        let n = self.samples;
+        let (mut lo, mut hi, mut step) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f32);
+        for y in ys.clone() {
+            for x in xs.clone() {
+                let (g, c) = (self.ground[y * n + x], self.cem[y * n + x]);
+                lo = lo.min(g);
+                hi = hi.max(c);
+                for (dx, dy) in [(1, 0), (0, 1)] {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if xs.contains(&nx) && ys.contains(&ny) {
+                        step = step.max((self.ground[ny * n + nx] - g).abs()).max((self.cem[ny * n + nx] - c).abs());
+                    }
+                }
+            }
+        }
+        // NaN (nodata) drops out of min, max and the steps.
+        (lo <= hi).then(|| (f64::from(lo - step), f64::from(hi + step)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::client::source::RegionSource;
+    use std::sync::Arc;
+
+    #[test]
+    fn the_demo_envelope_holds_finer_tiles_heights() {
+        let region = Arc::new(crate::config::load(None).unwrap());
+        let source = RegionSource::new(region.clone());
+        let envelope = HeightEnvelope::fetch(&source).unwrap();
+        assert!(!envelope.tiles.is_empty() && envelope.tiles.len() <= 4);
+        let b = region.bounds;
+        let id = region.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), 11);
+        let fine = source.fetch(id, 0).unwrap().unwrap();
+        let (lo, hi) = envelope.range(&region.tiles.sector(id)).unwrap();
+        let finite = |v: &Vec<f32>| v.iter().copied().filter(|h| h.is_finite()).map(f64::from).collect::<Vec<_>>();
+        assert!(finite(&fine.dem).iter().all(|&h| h >= lo), "ground below {lo}");
+        assert!(finite(&fine.cem).iter().all(|&h| h <= hi), "CEM above {hi}");
+        assert!(hi - lo < 3000.0, "{lo}..{hi} is a useful bound");
+    }
+}

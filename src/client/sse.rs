@@ -1,0 +1,125 @@
+//! The screen-space error selection of a flight (`sylva fly --lod sse`),
+//! kept from frame to frame so that its work follows the camera's motion,
+//! not the number of tiles (004 §V).
+//!
+//! The rule, in the sphere form the deferral table needs: a tile is refined
+//! while the eye is within `r + ξ μ` of its bounding sphere's centre — its
+//! error `ξ` (sample spacing plus flat-frame error, [`super::tiletree`])
+//! projects to more than `max_error_px` pixels at the nearest point of its
+//! sphere, `μ = focal / max_error_px`. The sphere holds the tile's culling
+//! box, so this refines wherever the box rule of [`super::quadtree::select`]
+//! does, and a little further (never a coarser image); its bounds are static
+//! (heights known before the flight), so the rule has bounded variation.
+//!
+//! [`SseSelector::deferred`] keeps the refined set with a
+//! [`ThresholdRefiner`]: a frame re-tests only the tiles whose buckets the
+//! eye's travel has passed. [`SseSelector::full`] re-tests every tile from
+//! the roots each frame (the reference: both refine exactly alike, tested
+//! along the recorded flyovers). Culling follows refinement ([`super::cull`]).
+//! A new threshold (the flight raises it when the GPU cache is too small)
+//! starts the table again.
+
+use super::camera::Camera;
+use super::cull;
+use super::envelope::HeightEnvelope;
+use super::quadtree::Selection;
+use super::source::{FetchError, TileSource};
+use super::tiletree::TileTree;
+use crate::lod::deferral::{Hierarchy, ThresholdRefiner, full_refinement};
+
+/// Buckets of each deferral table.
+const BUCKETS: usize = 1024;
+/// Travel the tables span, metres: about the reach `r + ξ μ` of a level-8
+/// tile (36° / 513-sample grid, μ ≈ 200), beyond which slacks are rounded
+/// down; a bucket is then ~10 m of travel.
+const TABLE_RANGE_M: f64 = 10_000.0;
+
+/// How the refined set is kept.
+#[derive(Clone, Debug)]
+enum Refinement {
+    /// By the deferral table, with the `μ` it was started for.
+    Deferred(Option<(f64, ThresholdRefiner)>),
+    /// Tested in full every frame (flags per node).
+    Full(Vec<bool>),
+}
+
+/// A flight's screen-space error selection.
+#[derive(Clone, Debug)]
+pub struct SseSelector {
+    tree: TileTree,
+    refinement: Refinement,
+}
+
+impl SseSelector {
+    /// Deferred re-evaluation over `tree`.
+    pub fn deferred(tree: TileTree) -> SseSelector {
+        SseSelector { tree, refinement: Refinement::Deferred(None) }
+    }
+
+    /// Full re-evaluation over `tree` every frame.
+    pub fn full(tree: TileTree) -> SseSelector {
+        let flags = vec![false; tree.len()];
+        SseSelector { tree, refinement: Refinement::Full(flags) }
+    }
+
+    /// The deferred selector over `source`'s region down to `max_level`,
+    /// bounds from its coarse tiles; `None` if the region's tree is too
+    /// large to hold ([`super::tiletree::MAX_NODES`]).
+    pub fn for_source(source: &dyn TileSource, max_level: u32) -> Result<Option<SseSelector>, FetchError> {
+        let envelope = HeightEnvelope::fetch(source)?;
+        let tree = TileTree::build(&source.grid(), &source.bounds(), max_level, &|s| envelope.range(s));
+        Ok(tree.ok().map(SseSelector::deferred))
+    }
+
+    /// The tree selected from.
+    pub fn tree(&self) -> &TileTree {
+        &self.tree
+    }
+
+    /// The tiles for `camera` at `max_error_px`; `visited` counts the
+    /// refinement and visibility tests.
+    pub fn select(&mut self, camera: &Camera, max_error_px: f64) -> Selection {
+        let mu = camera.focal_px() / max_error_px;
+        let eye = camera.position_ecef;
+        let tree = &self.tree;
+        let (evaluated, refined): (usize, &[bool]) = match &mut self.refinement {
+            Refinement::Full(flags) => (full_refinement(tree, mu, eye, flags), flags),
+            Refinement::Deferred(state) => {
+                if state.as_ref().is_some_and(|(m, _)| *m != mu) {
+                    *state = None;
+                }
+                let (_, refiner) =
+                    state.get_or_insert_with(|| (mu, ThresholdRefiner::new(tree.len(), mu, BUCKETS, TABLE_RANGE_M)));
+                (refiner.update(tree, eye), refiner.refined())
+            }
+        };
+        let (tiles, tests) = cull::drawn(tree, refined, camera);
+        Selection { tiles, visited: evaluated + tests, evaluated }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::client::globe::Geodetic;
+    use crate::grid::{BBox, TileGrid};
+
+    fn tree() -> TileTree {
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        let bounds = BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 };
+        TileTree::build(&grid, &bounds, 13, &|_| Some((800.0, 3300.0))).unwrap()
+    }
+
+    #[test]
+    fn a_changed_threshold_restarts_the_table_and_stays_exact() {
+        let (mut deferred, mut full) = (SseSelector::deferred(tree()), SseSelector::full(tree()));
+        for (k, px) in [2.0, 2.0, 2.5, 2.5, 2.0, 8.0].into_iter().enumerate() {
+            let eye = Geodetic::new(10.1 + 0.002 * k as f64, 46.35, 2500.0 - 100.0 * k as f64);
+            let camera = Camera::looking(eye, 30.0 * k as f64, -20.0, 60.0, (640, 480));
+            let (d, f) = (deferred.select(&camera, px), full.select(&camera, px));
+            assert_eq!(d.tiles, f.tiles, "frame {k}");
+            assert!(!d.tiles.is_empty());
+            assert!(d.tiles.iter().all(|t| t.error_px <= px || t.id.level == 13), "frame {k}");
+        }
+    }
+}
