@@ -11,6 +11,7 @@
 //! this.
 
 pub mod blur;
+pub mod mesh;
 pub mod morphology;
 pub mod resample;
 
