@@ -65,14 +65,21 @@ impl Mesh {
         let u = (gy & (self.m - 1)) as f64 * inv;
         let top = ((gy >> shift) - self.k0.1) as usize * self.cols;
         let (upper, lower) = (&self.points[top..top + self.cols], &self.points[top + self.cols..top + 2 * self.cols]);
-        let column: Vec<(f64, f64)> =
-            upper.iter().zip(lower).map(|(a, c)| (lerp(a.0, c.0, u), lerp(a.1, c.1, u))).collect();
-        for (c, o) in out.iter_mut().enumerate() {
-            let gx = self.first.0 + c as i64;
-            let k = ((gx >> shift) - self.k0.0) as usize;
-            let t = (gx & (self.m - 1)) as f64 * inv;
-            let (a, b) = (column[k], column[k + 1]);
-            *o = (lerp(a.0, b.0, t), lerp(a.1, b.1, t));
+        let column = upper.iter().zip(lower).map(|(a, c)| (lerp(a.0, c.0, u), lerp(a.1, c.1, u)));
+        // Samples between two control columns: from the first sample's
+        // offset in its cell to the cell's end, then whole cells.
+        let mut cells = column.clone().zip(column.skip(1));
+        let mut t0 = self.first.0 & (self.m - 1);
+        let mut rest = out;
+        while !rest.is_empty() {
+            let Some((a, b)) = cells.next() else { break };
+            let n = ((self.m - t0) as usize).min(rest.len());
+            let (cell, tail) = rest.split_at_mut(n);
+            for (i, o) in cell.iter_mut().enumerate() {
+                let t = (t0 + i as i64) as f64 * inv;
+                *o = (lerp(a.0, b.0, t), lerp(a.1, b.1, t));
+            }
+            (rest, t0) = (tail, 0);
         }
     }
 }
