@@ -185,8 +185,10 @@ fn quantize(
     to_bytes: impl Fn(i32) -> [u8; 2],
 ) -> (Vec<u8>, usize) {
     let mut clamped = 0;
-    let mut bytes = Vec::with_capacity(2 * values.len());
-    for &v in values {
+    // Written into place: pushing two bytes at a time checked the capacity
+    // per sample and kept the loop from unrolling.
+    let mut bytes = vec![0u8; 2 * values.len()];
+    for (out, &v) in bytes.chunks_exact_mut(2).zip(values) {
         let code = if v.is_nan() {
             nodata
         } else {
@@ -194,7 +196,7 @@ fn quantize(
             clamped += usize::from(was);
             c
         };
-        bytes.extend_from_slice(&to_bytes(code));
+        out.copy_from_slice(&to_bytes(code));
     }
     (bytes, clamped)
 }

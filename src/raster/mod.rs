@@ -11,6 +11,7 @@
 //! this.
 
 pub mod blur;
+pub mod mesh;
 pub mod morphology;
 pub mod resample;
 
@@ -163,13 +164,25 @@ impl<T: Copy> Raster<T> {
 
     /// Copies `window` (in this raster's pixel coordinates) out; pixels outside
     /// the raster take `outside`.
+    /// Built row by row, each sample written once (no fill, then copy).
     pub fn crop(&self, window: Window, outside: T) -> Raster<T> {
-        let mut out = Raster::filled(window.width, window.height, outside);
         let own = Window::new(0, 0, self.width, self.height);
-        if let Some(common) = own.intersect(&window) {
-            out.paste(self, common, (common.x - window.x) as usize, (common.y - window.y) as usize);
+        let Some(common) = own.intersect(&window) else {
+            return Raster::filled(window.width, window.height, outside);
+        };
+        let (x0, x1) = (common.x as usize, common.x_end() as usize);
+        let right = (window.x_end() - common.x_end()) as usize;
+        let mut data = Vec::with_capacity(window.area());
+        for y in window.y..window.y_end() {
+            if (common.y..common.y_end()).contains(&y) {
+                data.resize(data.len() + (common.x - window.x) as usize, outside);
+                data.extend_from_slice(&self.row(y as usize)[x0..x1]);
+                data.resize(data.len() + right, outside);
+            } else {
+                data.resize(data.len() + window.width, outside);
+            }
         }
-        out
+        Raster { width: window.width, height: window.height, data }
     }
 
     /// Copies `src_window` of `src` into this raster with its corner at `(x, y)`.

@@ -8,6 +8,7 @@
 //! kernel taps are clamped to the edge pixels. NaN taps with a non-zero weight
 //! make the sample NaN (nodata propagates).
 
+use super::mesh::Mesh;
 use super::{Raster, Window};
 use rayon::prelude::*;
 
@@ -99,6 +100,9 @@ pub enum PixelCoords {
         /// `(px, py)` per sample.
         xy: Vec<(f64, f64)>,
     },
+    /// Interpolated on a projection mesh a row at a time when read (a grid's
+    /// pairs would be 16 bytes per sample, written once and read twice).
+    Mesh(Mesh),
 }
 
 impl PixelCoords {
@@ -107,15 +111,24 @@ impl PixelCoords {
         match self {
             PixelCoords::Separable { x, y } => (x.len(), y.len()),
             PixelCoords::Dense { width, xy } => (*width, xy.len().checked_div(*width).unwrap_or(0)),
+            PixelCoords::Mesh(mesh) => mesh.size(),
         }
     }
 
-    /// The coordinate of output sample `(c, r)`.
-    #[inline]
-    pub fn at(&self, c: usize, r: usize) -> (f64, f64) {
+    /// The coordinates of output row `r`: stored ones, or computed into `buf`.
+    pub fn row<'a>(&'a self, r: usize, buf: &'a mut Vec<(f64, f64)>) -> &'a [(f64, f64)] {
         match self {
-            PixelCoords::Separable { x, y } => (x[c], y[r]),
-            PixelCoords::Dense { width, xy } => xy[r * width + c],
+            PixelCoords::Separable { x, y } => {
+                buf.clear();
+                buf.extend(x.iter().map(|&px| (px, y[r])));
+                buf
+            }
+            PixelCoords::Dense { width, xy } => &xy[r * width..(r + 1) * width],
+            PixelCoords::Mesh(mesh) => {
+                buf.resize(mesh.size().0, (0.0, 0.0));
+                mesh.row(r, buf);
+                buf
+            }
         }
     }
 
@@ -128,16 +141,7 @@ impl PixelCoords {
                 let (y0, y1) = min_max(y.iter().copied().filter(|&v| extent.contains_y(v)))?;
                 (x0, y0, x1, y1)
             }
-            PixelCoords::Dense { xy, .. } => {
-                let mut b = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-                for &(px, py) in xy.iter().filter(|&&(px, py)| extent.contains(px, py)) {
-                    b = (b.0.min(px), b.1.min(py), b.2.max(px), b.3.max(py));
-                }
-                if b.0 > b.2 {
-                    return None;
-                }
-                b
-            }
+            PixelCoords::Dense { .. } | PixelCoords::Mesh(_) => self.bounds_inside(extent)?,
         };
         let s = kind.support();
         let clamp_x = |v: i64| v.clamp(0, extent.width as i64 - 1);
@@ -145,6 +149,18 @@ impl PixelCoords {
         let (ax, ay) = (clamp_x(x0.floor() as i64 - s + 1), clamp_y(y0.floor() as i64 - s + 1));
         let (bx, by) = (clamp_x(x1.floor() as i64 + s), clamp_y(y1.floor() as i64 + s));
         Some(Window::new(ax, ay, (bx - ax + 1) as usize, (by - ay + 1) as usize))
+    }
+
+    /// Smallest and largest `px` and `py` of the samples inside `extent`.
+    fn bounds_inside(&self, extent: &Extent) -> Option<(f64, f64, f64, f64)> {
+        let mut buf = Vec::new();
+        let mut b = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        for r in 0..self.shape().1 {
+            for &(px, py) in self.row(r, &mut buf).iter().filter(|&&(px, py)| extent.contains(px, py)) {
+                b = (b.0.min(px), b.1.min(py), b.2.max(px), b.3.max(py));
+            }
+        }
+        (b.0 <= b.2).then_some(b)
     }
 }
 
@@ -162,26 +178,34 @@ pub fn resample(
     kind: Resampling,
 ) -> Raster<f32> {
     let view = View { src, window, extent };
-    let (w, h) = coords.shape();
     match (kind, coords) {
         (Resampling::Bilinear, PixelCoords::Separable { x, y }) => view.bilinear_separable(x, y),
-        (Resampling::Bilinear, PixelCoords::Dense { width, xy }) => view.bilinear_dense(*width, xy),
-        (Resampling::Nearest, _) => run(w, h, coords, extent, |px, py| view.nearest(px, py)),
-        (Resampling::Bicubic, _) => run(w, h, coords, extent, |px, py| view.bicubic(px, py)),
+        (Resampling::Bilinear, _) => by_rows(coords, |xy, line| view.bilinear_row(xy, line)),
+        (Resampling::Nearest, _) => by_rows(coords, per_sample(extent, |px, py| view.nearest(px, py))),
+        (Resampling::Bicubic, _) => by_rows(coords, per_sample(extent, |px, py| view.bicubic(px, py))),
     }
 }
 
-fn run(
-    w: usize,
-    h: usize,
-    coords: &PixelCoords,
-    extent: &Extent,
-    kernel: impl Fn(f64, f64) -> f32 + Sync,
-) -> Raster<f32> {
-    Raster::par_from_fn(w, h, |c, r| {
-        let (px, py) = coords.at(c, r);
-        if extent.contains(px, py) { kernel(px, py) } else { f32::NAN }
-    })
+/// The output rows in parallel, each from its row of coordinates; samples
+/// the kernel leaves are NaN.
+fn by_rows(coords: &PixelCoords, kernel: impl Fn(&[(f64, f64)], &mut [f32]) + Sync) -> Raster<f32> {
+    let (w, h) = coords.shape();
+    let mut out = Raster::filled(w, h, f32::NAN);
+    out.data_mut().par_chunks_mut(w.max(1)).enumerate().for_each_init(Vec::new, |buf, (r, line)| {
+        kernel(coords.row(r, buf), line);
+    });
+    out
+}
+
+/// A row kernel from a kernel of one in-extent sample.
+fn per_sample(extent: &Extent, kernel: impl Fn(f64, f64) -> f32 + Sync) -> impl Fn(&[(f64, f64)], &mut [f32]) + Sync {
+    move |xy, line| {
+        for (o, &(px, py)) in line.iter_mut().zip(xy) {
+            if extent.contains(px, py) {
+                *o = kernel(px, py);
+            }
+        }
+    }
 }
 
 /// `x.floor()` without a libm call (baseline x86-64 has no rounding
@@ -190,6 +214,14 @@ fn run(
 fn floor(x: f64) -> f64 {
     let t = x as i64 as f64;
     if t > x { t - 1.0 } else { t }
+}
+
+/// [`floor`] as an integer, converted once (`x as i64` saturates, so each
+/// conversion costs a few instructions in the per-sample loops).
+#[inline]
+fn floor_int(x: f64) -> i64 {
+    let t = x as i64;
+    if t as f64 > x { t - 1 } else { t }
 }
 
 /// Bilinear taps along one axis: the two clamped window indices and the
@@ -241,36 +273,32 @@ impl View<'_> {
             let (r0, r1) = (self.src.row(y0), self.src.row(y1));
             for (o, col) in line.iter_mut().zip(&cols) {
                 if let Some((x0, x1, fx)) = *col {
-                    let top = lerp(r0[x0], || r0[x1], fx);
-                    *o = lerp(top, || lerp(r1[x0], || r1[x1], fx), fy);
+                    let top = lerp(r0[x0], r0[x1], fx);
+                    *o = lerp(top, lerp(r1[x0], r1[x1], fx), fy);
                 }
             }
         });
         out
     }
 
-    /// Bilinear at scattered coordinates, rows in parallel; the same
-    /// arithmetic as the separable path.
-    fn bilinear_dense(&self, width: usize, xy: &[(f64, f64)]) -> Raster<f32> {
+    /// Bilinear at the scattered coordinates of one output row; the same
+    /// arithmetic as the separable path. Every tap is read (the footprint
+    /// holds them all).
+    fn bilinear_row(&self, xy: &[(f64, f64)], line: &mut [f32]) {
         let (w, h) = (self.extent.width as i64 - 1, self.extent.height as i64 - 1);
         let (ox, oy) = (self.window.x, self.window.y);
-        let mut out = Raster::filled(width, xy.len() / width.max(1), f32::NAN);
-        out.data_mut().par_chunks_mut(width.max(1)).zip(xy.par_chunks(width.max(1))).for_each(|(line, coords)| {
-            for (o, &(px, py)) in line.iter_mut().zip(coords) {
-                if !self.extent.contains(px, py) {
-                    continue;
-                }
-                let (x0, y0) = (floor(px), floor(py));
-                let (fx, fy) = ((px - x0) as f32, (py - y0) as f32);
-                let (x0, y0) = (x0 as i64, y0 as i64);
-                let (xa, xb) = ((x0.clamp(0, w) - ox) as usize, ((x0 + 1).clamp(0, w) - ox) as usize);
-                let (r0, r1) =
-                    (self.src.row((y0.clamp(0, h) - oy) as usize), self.src.row(((y0 + 1).clamp(0, h) - oy) as usize));
-                let top = lerp(r0[xa], || r0[xb], fx);
-                *o = lerp(top, || lerp(r1[xa], || r1[xb], fx), fy);
+        let (stride, data) = (self.src.width(), self.src.data());
+        for (o, &(px, py)) in line.iter_mut().zip(xy) {
+            if !self.extent.contains(px, py) {
+                continue;
             }
-        });
-        out
+            let (x0, y0) = (floor_int(px), floor_int(py));
+            let (fx, fy) = ((px - x0 as f64) as f32, (py - y0 as f64) as f32);
+            let (xa, xb) = ((x0.clamp(0, w) - ox) as usize, ((x0 + 1).clamp(0, w) - ox) as usize);
+            let (ya, yb) = ((y0.clamp(0, h) - oy) as usize * stride, ((y0 + 1).clamp(0, h) - oy) as usize * stride);
+            let top = lerp(data[ya + xa], data[ya + xb], fx);
+            *o = lerp(top, lerp(data[yb + xa], data[yb + xb], fx), fy);
+        }
     }
 
     fn bicubic(&self, px: f64, py: f64) -> f32 {
@@ -294,11 +322,13 @@ impl View<'_> {
     }
 }
 
-/// `a + t (b - a)`, not touching `b` when `t` is zero so that a NaN neighbour
-/// with no weight does not poison an exact hit.
+/// `a + t (b - a)`, and `a` when `t` is zero whatever `b` is, so that a NaN
+/// neighbour with no weight does not poison an exact hit. Both are computed
+/// and one selected: no branch in the kernels' loops.
 #[inline]
-fn lerp(a: f32, b: impl FnOnce() -> f32, t: f32) -> f32 {
-    if t == 0.0 { a } else { a + t * (b() - a) }
+fn lerp(a: f32, b: f32, t: f32) -> f32 {
+    let v = a + t * (b - a);
+    if t == 0.0 { a } else { v }
 }
 
 /// Catmull–Rom weights (Keys, a = −0.5) for taps at −1, 0, 1, 2.

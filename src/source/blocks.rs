@@ -117,29 +117,41 @@ impl Blocks {
     /// Like [`Blocks::read`], only the first `bands` bands.
     pub fn read_bands(&self, window: Window, bands: usize) -> Result<Vec<Raster<f32>>, SourceError> {
         let bands = bands.min(self.source.bands());
-        let mut out = vec![Raster::filled(window.width, window.height, f32::NAN); bands];
         let (w, h) = self.source.size();
         let Some(inside) = window.intersect(&Window::new(0, 0, w, h)) else {
-            return Ok(out);
+            return Ok(vec![Raster::filled(window.width, window.height, f32::NAN); bands]);
         };
         let (bw, bh) = self.source.block_size();
         let (x0, y0) = (inside.x as usize, inside.y as usize);
         let (x1, y1) = (inside.x_end() as usize, inside.y_end() as usize);
-        let indices: Vec<(usize, usize)> =
-            (y0 / bh..y1.div_ceil(bh)).flat_map(|by| (x0 / bw..x1.div_ceil(bw)).map(move |bx| (bx, by))).collect();
+        let (cols, rows) = (x0 / bw..x1.div_ceil(bw), y0 / bh..y1.div_ceil(bh));
+        let indices: Vec<(usize, usize)> = rows.flat_map(|by| cols.clone().map(move |bx| (bx, by))).collect();
         // Blocks are independent: compute missing ones in parallel.
         let blocks: Vec<Block> = indices.par_iter().map(|&(bx, by)| self.block(bx, by)).collect::<Result<_, _>>()?;
-        for (&(bx, by), block) in indices.iter().zip(&blocks) {
-            let origin = ((bx * bw) as i64, (by * bh) as i64);
-            let extent = Window::new(origin.0, origin.1, block[0].width(), block[0].height());
-            let Some(common) = extent.intersect(&inside) else { continue };
-            let local = Window::new(common.x - origin.0, common.y - origin.1, common.width, common.height);
-            let (dx, dy) = ((common.x - window.x) as usize, (common.y - window.y) as usize);
-            for (dst, src) in out.iter_mut().zip(block.iter()) {
-                dst.paste(src, local, dx, dy);
+        // Each band's inside rows, block row segments appended in order.
+        let mosaic = |band: usize| -> Option<Raster<f32>> {
+            let mut data = Vec::with_capacity(inside.area());
+            for y in y0..y1 {
+                let first = (y / bh - y0 / bh) * cols.len();
+                for (bx, block) in cols.clone().zip(&blocks[first..first + cols.len()]) {
+                    let (a, b) = (x0.max(bx * bw) - bx * bw, x1.min((bx + 1) * bw) - bx * bw);
+                    let pixels = block.get(band).filter(|r| b <= r.width() && y % bh < r.height())?;
+                    data.extend_from_slice(&pixels.row(y % bh)[a..b]);
+                }
             }
-        }
-        Ok(out)
+            Raster::from_vec(inside.width, inside.height, data)
+        };
+        let local = Window::new(window.x - inside.x, window.y - inside.y, window.width, window.height);
+        let short = || SourceError::Malformed {
+            path: self.source.name().to_path_buf(),
+            problem: "a block is smaller than the block size says".into(),
+        };
+        (0..bands)
+            .map(|band| {
+                let m = mosaic(band).ok_or_else(short)?;
+                Ok(if inside == window { m } else { m.crop(local, f32::NAN) })
+            })
+            .collect()
     }
 
     /// One band of `window`.

@@ -11,7 +11,8 @@
 use super::pyramid::{self, Reducer};
 use super::{BlockCache, Blocks, Crs, SourceError};
 use crate::geo::METRES_PER_DEGREE;
-use crate::grid::{Axis, SampleGrid, Sector};
+use crate::grid::{SampleGrid, Sector};
+use crate::raster::mesh::Mesh;
 use crate::raster::resample::{self, Extent, PixelCoords, Resampling};
 use crate::raster::{Raster, Window};
 use rayon::prelude::*;
@@ -192,7 +193,12 @@ impl GeoRaster {
                 None => (f64::NAN, f64::NAN),
             }
         };
-        let mesh = Mesh::new(grid, m, &pixel);
+        let first = (grid.lon.first, grid.lat.first);
+        let mesh = Mesh::new(m, first, (grid.width(), grid.height()), |c, r| pixel(grid.on_globe(c, r)));
+        if mesh.is_finite() {
+            return PixelCoords::Mesh(mesh);
+        }
+        // A corner failed: project the samples whose positions it spoils.
         let mut xy = vec![(0.0, 0.0); grid.width() * grid.height()];
         xy.par_chunks_mut(grid.width().max(1)).enumerate().for_each(|(r, row)| {
             mesh.row(r, row);
@@ -261,62 +267,6 @@ fn mesh_step(grid: &SampleGrid) -> i64 {
         m /= 2;
     }
     m
-}
-
-/// Exactly projected control points every `m` lattice indices.
-struct Mesh {
-    m: i64,
-    lon: Axis,
-    lat: Axis,
-    kx0: i64,
-    ky0: i64,
-    cols: usize,
-    points: Vec<(f64, f64)>,
-}
-
-impl Mesh {
-    fn new(grid: &SampleGrid, m: i64, pixel: &impl Fn((f64, f64)) -> (f64, f64)) -> Mesh {
-        let (lon, lat) = (grid.lon, grid.lat);
-        let kx0 = lon.first.div_euclid(m);
-        let kx1 = (lon.first + lon.len as i64 - 1).div_euclid(m) + 1;
-        let ky0 = lat.first.div_euclid(m);
-        let ky1 = (lat.first + lat.len as i64 - 1).div_euclid(m) + 1;
-        let cols = (kx1 - kx0 + 1) as usize;
-        let mut points = Vec::with_capacity(cols * (ky1 - ky0 + 1) as usize);
-        for ky in ky0..=ky1 {
-            for kx in kx0..=kx1 {
-                points.push(pixel(grid.on_globe(kx * m - lon.first, ky * m - lat.first)));
-            }
-        }
-        Mesh { m, lon, lat, kx0, ky0, cols, points }
-    }
-
-    /// Interpolated positions of row `r`'s samples (NaN where a corner
-    /// failed): first between the control rows above and below, then along
-    /// the row. Depends only on global lattice indices, so every grid that
-    /// holds a sample gives it the same position.
-    fn row(&self, r: usize, out: &mut [(f64, f64)]) {
-        // m is a power of two: shifts and masks are floor division and
-        // remainder, and k / m is exact as k · (1/m).
-        let shift = self.m.trailing_zeros();
-        let inv = 1.0 / self.m as f64;
-        let gy = self.lat.first + r as i64;
-        let u = (gy & (self.m - 1)) as f64 * inv;
-        let top = ((gy >> shift) - self.ky0) as usize * self.cols;
-        let lerp = |a: f64, b: f64, t: f64| (1.0 - t) * a + t * b;
-        let column: Vec<(f64, f64)> = (0..self.cols)
-            .map(|k| {
-                let (a, c) = (self.points[top + k], self.points[top + self.cols + k]);
-                (lerp(a.0, c.0, u), lerp(a.1, c.1, u))
-            })
-            .collect();
-        for (c, o) in out.iter_mut().enumerate() {
-            let gx = self.lon.first + c as i64;
-            let k = ((gx >> shift) - self.kx0) as usize;
-            let t = (gx & (self.m - 1)) as f64 * inv;
-            *o = (lerp(column[k].0, column[k + 1].0, t), lerp(column[k].1, column[k + 1].1, t));
-        }
-    }
 }
 
 /// The lat/lon box of a source, from its boundary densely sampled.

@@ -214,14 +214,15 @@ fn projection_mesh_is_within_a_hundredth_of_a_pixel_of_exact() {
         let tile = region.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), level);
         let grid = region.tiles.tile_samples(tile, 3);
         let g = region.dem.georef();
-        let PixelCoords::Dense { xy, width } = region.dem.pixel_coords(&grid, 0) else {
-            panic!("projected sources use dense coordinates")
-        };
-        let mut worst = 0.0f64;
-        for (i, &(px, py)) in xy.iter().enumerate() {
-            let (lon, lat) = grid.lon_lat(i % width, i / width);
-            let (e, n) = crs.from_lon_lat(lon, lat).expect("projects");
-            worst = worst.max(((e - g.x0) / g.dx - px).abs()).max(((n - g.y0) / g.dy - py).abs());
+        let coords = region.dem.pixel_coords(&grid, 0);
+        assert!(matches!(coords, PixelCoords::Mesh(_)), "projected sources use the mesh");
+        let (mut worst, mut buf) = (0.0f64, Vec::new());
+        for r in 0..grid.height() {
+            for (c, &(px, py)) in coords.row(r, &mut buf).iter().enumerate() {
+                let (lon, lat) = grid.lon_lat(c, r);
+                let (e, n) = crs.from_lon_lat(lon, lat).expect("projects");
+                worst = worst.max(((e - g.x0) / g.dx - px).abs()).max(((n - g.y0) / g.dy - py).abs());
+            }
         }
         println!("{config} level {level}: worst mesh error {worst:.2e} px");
         assert!(worst < 0.01, "{config} level {level}: {worst} px");
