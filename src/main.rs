@@ -152,6 +152,10 @@ enum Command {
         /// Statistics only, no PNG frames.
         #[arg(long)]
         no_frames: bool,
+        /// Draw the canopy by ray casting alone, without trees as point
+        /// splats near the camera.
+        #[arg(long)]
+        no_trees: bool,
     },
     /// Pregenerate tiles into the tile cache (resumable, parallel, sharded).
     #[cfg(feature = "server")]
@@ -470,6 +474,7 @@ fn run(command: Command) -> Result<()> {
             max_level,
             gpu_budget_mib,
             no_frames,
+            no_trees,
         } => {
             let prior = match cost_model {
                 Some(file) => {
@@ -499,6 +504,7 @@ fn run(command: Command) -> Result<()> {
                 lod: sylva::client::quadtree::LodRule { max_error_px, max_level },
                 mode,
                 geomorph,
+                trees: if no_trees { None } else { Some(Default::default()) },
                 ..Default::default()
             };
             let path = sylva::client::path::CameraPath::load(&path)?;
