@@ -4,7 +4,8 @@
 // opacity fades it out toward the edge of the tree range, where the
 // ray-cast canopy fades in (surface.wgsl): a screen-door keeps depth writes
 // exact without sorting. Lighting follows the canopy's: ambient plus the
-// sun, shadowed by the terrain toward the sun (shade.wgsl's shadow()).
+// sun, shadowed by the terrain toward the sun (shade.wgsl's shadow(), once
+// per splat in the vertex stage: a splat is small, its fragments many).
 
 struct SplatIn {
     // Centre, tile-local metres.
@@ -22,8 +23,8 @@ struct SplatOut {
     @location(1) @interpolate(flat) colour: vec4<f32>,
     // Centre in camera space; radius.
     @location(2) @interpolate(flat) centre: vec4<f32>,
-    // Centre in the tile frame (for its shadow).
-    @location(3) @interpolate(flat) local: vec3<f32>,
+    // Light reaching the centre through the terrain, in [0, 1].
+    @location(3) @interpolate(flat) light: f32,
 };
 
 @vertex
@@ -31,7 +32,12 @@ fn vs_splat(@builtin(vertex_index) v: u32, s: SplatIn) -> SplatOut {
     let disc = vec2<f32>(f32(v & 1u), f32(v >> 1u)) * 2.0 - 1.0;
     let centre = (tile.model_view * vec4<f32>(s.centre, 1.0)).xyz;
     let corner = centre + vec3<f32>(disc * s.radius, 0.0);
-    return SplatOut(frame.proj * vec4<f32>(corner, 1.0), disc, s.colour, vec4<f32>(centre, s.radius), s.centre);
+    var light = 1.0;
+    if frame.mode.w == 1u {
+        let at = to_samples(s.centre);
+        light = shadow(at.xy, at.z, tile.sun.xyz);
+    }
+    return SplatOut(frame.proj * vec4<f32>(corner, 1.0), disc, s.colour, vec4<f32>(centre, s.radius), light);
 }
 
 // A hash of the pixel in [0, 1): the screen door's threshold.
@@ -55,11 +61,9 @@ fn fs_splat(in: SplatOut) -> FragmentOut {
     if frame.mode.w == 1u {
         let r = mat3x3<f32>(tile.model_view[0].xyz, tile.model_view[1].xyz, tile.model_view[2].xyz);
         let lambert = max(dot(normal, r * tile.sun.xyz), 0.0);
-        let s = to_samples(in.local);
-        let light = shadow(s.xy, s.z, tile.sun.xyz);
         let ambient = frame.sky.a;
-        colour = colour * frame.canopy_tint.rgb * (ambient + (1.0 - ambient) * light * (0.5 + 0.5 * lambert));
+        colour = colour * frame.canopy_tint.rgb * (ambient + (1.0 - ambient) * in.light * (0.5 + 0.5 * lambert));
     }
-    let data = vec4<u32>(0u, shadow_fetches, bitcast<u32>(distance), 0u);
+    let data = vec4<u32>(0u, 0u, bitcast<u32>(distance), 0u);
     return FragmentOut(vec4<f32>(colour, 1.0), data, frame.viewport.z / distance);
 }
