@@ -1,7 +1,7 @@
 //! `sylva fly`: renders a camera path headless, frame by frame — select
 //! tiles (by screen-space error, kept across frames by the deferral table,
-//! [`super::sse`], or under a frame budget, [`super::lod`]), load the missing ones ([`super::store`]), ray
-//! cast them on the GPU — and records per-frame statistics: CPU and GPU
+//! [`super::sse`], or under a frame budget, [`super::lod`]), load the
+//! missing ones ([`super::store`]), ray cast them on the GPU — and records per-frame statistics: CPU and GPU
 //! time, tiles drawn per level and how, texture fetches per pixel (the ray
 //! steps), bytes fetched and memory resident; under a budget also the
 //! predicted frame time, which the measured one calibrates, and, asked to,

@@ -231,7 +231,9 @@ pub fn shade(view: &TileView, s: DVec2, z: f64, dir: DVec3) -> [f64; 3] {
     }
 }
 
-fn texel_index(tile: &TileData, i: i64, j: i64) -> usize {
+/// Index of texel `(i, j)` (sample indices, halo included), clamped to
+/// the texels.
+pub(super) fn texel_index(tile: &TileData, i: i64, j: i64) -> usize {
     let b = tile.halo as i64;
     let last = tile.size as i64 - 1;
     ((j + b).clamp(0, last) * tile.size as i64 + (i + b).clamp(0, last)) as usize

@@ -27,10 +27,11 @@
 
 use super::camera::Camera;
 use super::lod::budget::TreeItem;
-use super::raycast::TreeBlend;
+use super::raycast::{TreeBlend, texel_index};
 use super::tile::{NODATA_M, TileData};
 use crate::cem::surface::SurfaceType;
 use crate::lod::splats::{TreeField, distribute};
+use crate::lod::split::Item;
 use crate::noise::{hash2, unit};
 use glam::{DVec2, DVec3};
 use std::collections::HashMap;
@@ -119,19 +120,17 @@ pub struct TreeGroup {
     pub block: (i64, i64),
     /// Its trees on the drawn tiles, by rank.
     pub trees: Vec<PlacedTree>,
-    /// Distance from the camera to its nearest tree, metres.
-    pub near_m: f64,
 }
 
 /// The groups with a tree in view within the blend's reach of `camera`,
 /// grown on `tiles` (the frame's tiles, so a tree's tile index is its
 /// index there).
 pub fn groups_near(settings: &TreeSettings, tiles: &[&TileData], camera: &Camera, blend: &TreeBlend) -> Vec<TreeGroup> {
-    let reach_m = blend.range_m + blend.band_m / 2.0;
-    let mut blocks: HashMap<(i64, i64), Vec<PlacedTree>> = HashMap::new();
     if blend.range_m <= 0.0 {
         return Vec::new();
     }
+    let reach_m = blend.range_m + blend.band_m / 2.0;
+    let mut blocks: HashMap<(i64, i64), Vec<PlacedTree>> = HashMap::new();
     for (k, tile) in tiles.iter().enumerate() {
         for (block, tree) in grow(&settings.field, tile, k, camera, reach_m) {
             blocks.entry(block).or_default().push(tree);
@@ -141,8 +140,7 @@ pub fn groups_near(settings: &TreeSettings, tiles: &[&TileData], camera: &Camera
         .into_iter()
         .map(|(block, mut trees)| {
             trees.sort_by_key(|t| (t.rank, t.hash));
-            let near_m = trees.iter().map(|t| t.distance_m).fold(f64::INFINITY, f64::min);
-            TreeGroup { block, trees, near_m }
+            TreeGroup { block, trees }
         })
         .collect();
     groups.sort_by_key(|g| g.block);
@@ -176,14 +174,13 @@ fn grow(field: &TreeField, tile: &TileData, k: usize, camera: &Camera, reach_m: 
             if height_m < MIN_TREE_M || distance_m > reach_m || !in_view(middle, height_m + field.spacing_m) {
                 continue;
             }
-            let (i, j) = ((t.position_m / field.spacing_m).floor()).as_i64vec2().into();
             let tree = PlacedTree {
                 tile: k,
                 foot,
                 height_m,
                 scale: t.scale,
                 rank: t.rank,
-                hash: hash2(i, j, field.seed ^ 0x5B1A7),
+                hash: hash2(t.cell.0, t.cell.1, field.seed ^ 0x5B1A7),
                 colour: colour(tile, s),
                 distance_m,
             };
@@ -254,11 +251,6 @@ impl Lattice {
     }
 }
 
-fn texel_index(tile: &TileData, i: i64, j: i64) -> usize {
-    let b = tile.halo as i64;
-    ((j + b) * tile.size as i64 + i + b) as usize
-}
-
 /// Ground and CEM (local metres) at fractional sample `s`, where all four
 /// samples around it have data.
 fn surface(tile: &TileData, s: DVec2) -> Option<(f64, f64)> {
@@ -293,12 +285,10 @@ fn colour(tile: &TileData, s: DVec2) -> [f64; 3] {
 
 fn greenest(tile: &TileData, s: DVec2, reach: i64, greenness: impl Fn(&[u8; 4]) -> i32) -> [u8; 4] {
     let (i, j) = (s.x.round() as i64, s.y.round() as i64);
-    let b = tile.halo as i64;
-    let (lo, hi) = (-b, tile.size as i64 - b - 1);
     let offsets = -reach..=reach;
     offsets
         .clone()
-        .flat_map(|dj| offsets.clone().map(move |di| ((i + di).clamp(lo, hi), (j + dj).clamp(lo, hi))))
+        .flat_map(|dj| offsets.clone().map(move |di| (i + di, j + dj)))
         .map(|(i, j)| tile.colour[texel_index(tile, i, j)])
         .max_by_key(|c| greenness(c))
         .unwrap_or_default()
@@ -361,13 +351,13 @@ impl TreeGroup {
             .collect();
         let centre = middles.iter().map(|m| m.0).sum::<DVec3>() / middles.len().max(1) as f64;
         let radius_m = middles.iter().map(|(p, h)| p.distance(centre) + h / 2.0 + field.spacing_m).fold(0.0, f64::max);
-        TreeItem {
-            block: self.block,
-            centre_ecef: centre,
+        let group = Item {
+            center_m: centre,
             radius_m,
             trees: self.trees.len() as u32,
             capacity: (self.trees.len() as u64 * u64::from(field.splats_per_tree)) as f64,
-        }
+        };
+        TreeItem { block: self.block, group }
     }
 }
 

@@ -47,6 +47,8 @@ pub struct Tree {
     pub scale: f64,
     /// Drawing order within partial budgets (lower first).
     pub rank: u16,
+    /// Its lattice cell `(i, j)`.
+    pub cell: (i64, i64),
 }
 
 /// A group of at most 64 trees: the 8 × 8 cells of block `(gi, gj)`.
@@ -69,6 +71,7 @@ impl TreeField {
             position_m,
             scale: 0.7 + 0.6 * unit(h, 3),
             rank: (hash2(j, i, self.seed ^ 0x5EED) & 0xFFFF) as u16,
+            cell: (i, j),
         })
     }
 

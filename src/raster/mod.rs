@@ -164,6 +164,7 @@ impl<T: Copy> Raster<T> {
 
     /// Copies `window` (in this raster's pixel coordinates) out; pixels outside
     /// the raster take `outside`.
+    ///
     /// Built row by row, each sample written once (no fill, then copy).
     pub fn crop(&self, window: Window, outside: T) -> Raster<T> {
         let own = Window::new(0, 0, self.width, self.height);

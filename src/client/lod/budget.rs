@@ -38,7 +38,7 @@ use crate::client::trees::TreeBudgets;
 use crate::grid::TileId;
 use crate::lod::model::{CostFeatures, CostModel, group_weight};
 use crate::lod::optimizer::{Continuous, Forest, Node, Settings, Stop, optimize};
-use glam::DVec3;
+use crate::lod::split::Item;
 use std::time::Instant;
 
 /// Most shadow samples per hit (the renderer's default is 10).
@@ -82,19 +82,14 @@ pub struct Choice {
     pub shadow_steps: u32,
 }
 
-/// A group of trees as the selection sees it.
+/// A group of trees as the selection sees it: its block on the tree
+/// lattice (the key of its budget) and the group (centre in ECEF).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TreeItem {
-    /// Its block on the tree lattice (the key of its budget).
+    /// Block index.
     pub block: (i64, i64),
-    /// Bounding sphere: centre (ECEF) and radius, metres.
-    pub centre_ecef: DVec3,
-    /// Radius, metres.
-    pub radius_m: f64,
-    /// Trees in the group.
-    pub trees: u32,
-    /// Splats at full resolution.
-    pub capacity: f64,
+    /// Bounding sphere, trees and splats at full resolution.
+    pub group: Item,
 }
 
 /// The chosen cut.
@@ -201,8 +196,8 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
 /// A tree group's variable: its worth and its cost per splat.
 fn tree_variable(t: &TreeItem, px: f64, model: &CostModel) -> Continuous {
     Continuous {
-        weight: group_weight(px, t.trees, TREE_WORTH),
-        capacity: t.capacity.max(0.0),
+        weight: group_weight(px, t.group.trees, TREE_WORTH),
+        capacity: t.group.capacity.max(0.0),
         cost_per_unit_ms: model.marginal_ms(&tree_features(1.0, 0.0)),
     }
 }
@@ -308,6 +303,7 @@ mod tests {
     use crate::client::globe::Geodetic;
     use crate::client::lod::candidates::{Scope, candidates};
     use crate::grid::{BBox, TileGrid};
+    use glam::DVec3;
 
     fn demo_candidates() -> Vec<Candidate> {
         let cameras = [Camera::looking(Geodetic::new(10.1, 46.32, 2500.0), 10.0, -15.0, 60.0, (320, 240))];
@@ -370,13 +366,8 @@ mod tests {
         let c = demo_candidates();
         // A full group costs 3.1 ms: the groups compete with the terrain.
         let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01] };
-        let item = |k: i64| TreeItem {
-            block: (k, 0),
-            centre_ecef: DVec3::ZERO,
-            radius_m: 30.0,
-            trees: 64,
-            capacity: 64.0 * 24.0,
-        };
+        let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
+        let item = |k: i64| TreeItem { block: (k, 0), group };
         let trees = [(item(0), 20_000.0), (item(1), 2_000.0), (item(2), 0.0)];
         let cut = choose(&c, &trees, &model, &budget(8.0, true));
         let got = |k: i64| cut.tree_budgets.get(&(k, 0)).copied().unwrap_or(0.0);

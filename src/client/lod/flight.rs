@@ -3,9 +3,9 @@
 //! predicted cameras and the conservative cone is handed to the selection
 //! thread ([`super::worker`]) with the tree groups near those cameras
 //! (grown on the tiles last drawn) while the last finished cut is drawn;
-//! after
-//! each frame its features and measured time go to the calibrator (001
-//! §4.2), so the next selection predicts with constants fitted to this GPU.
+//! after each frame its features and measured time go to the calibrator
+//! (001 §4.2), so the next selection predicts with constants fitted to this
+//! GPU.
 //! With geomorphing on it also keeps the morphs of the cuts drawn
 //! ([`super::morphs`]).
 

@@ -119,10 +119,10 @@ impl Selector {
 fn tree_px(cameras: &[Camera], t: &TreeItem) -> f64 {
     cameras
         .iter()
-        .filter(|c| c.side_planes().iter().all(|n| n.dot(t.centre_ecef - c.position_ecef) >= -t.radius_m))
+        .filter(|c| c.side_planes().iter().all(|n| n.dot(t.group.center_m - c.position_ecef) >= -t.group.radius_m))
         .map(|c| {
-            let d = (t.centre_ecef.distance(c.position_ecef) - t.radius_m).max(1.0);
-            let r_px = t.radius_m * c.focal_px() / d;
+            let d = (t.group.center_m.distance(c.position_ecef) - t.group.radius_m).max(1.0);
+            let r_px = t.group.radius_m * c.focal_px() / d;
             (std::f64::consts::PI * r_px * r_px).min(f64::from(c.width_px) * f64::from(c.height_px))
         })
         .fold(0.0, f64::max)
