@@ -37,12 +37,27 @@ pub use tileset::{Layout, TileSet};
 use crate::grid::SampleGrid;
 use crate::raster::Raster;
 
+/// Maximal runs `start..end` of the columns of row `r` (of `width`) where
+/// `cover` is positive; the whole row without a cover.
+pub fn covered_runs(cover: Option<&Raster<f32>>, r: usize, width: usize) -> Vec<(usize, usize)> {
+    let Some(cover) = cover else { return vec![(0, width)] };
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    for (c, _) in cover.row(r).iter().enumerate().filter(|(_, v)| **v > 0.0) {
+        match out.last_mut() {
+            Some(last) if last.1 == c => last.1 = c + 1,
+            _ => out.push((c, c + 1)),
+        }
+    }
+    out
+}
+
 /// A canopy height field over the globe.
 pub trait CanopyProxy: Send + Sync {
-    /// Canopy height above ground (m) at every sample of `grid` where `wanted`
-    /// is true; other samples are left at 0. The proxy is filtered to the
-    /// grid's sample spacing.
-    fn heights(&self, grid: &SampleGrid, wanted: &(dyn Fn(usize, usize) -> bool + Sync)) -> Raster<f32>;
+    /// Canopy height above ground (m) at every sample of `grid` where
+    /// `cover` (a raster the size of the grid) is positive, or at every
+    /// sample without one; other samples are left at 0. The proxy is
+    /// filtered to the grid's sample spacing.
+    fn heights(&self, grid: &SampleGrid, cover: Option<&Raster<f32>>) -> Raster<f32>;
 
     /// True if the proxy is filtered the same way at both sample spacings
     /// (metres), so a sample shared by grids of both has one value. The

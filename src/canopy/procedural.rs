@@ -396,20 +396,8 @@ fn monotone_segments(start: usize, end: usize, lon_of: &impl Fn(usize) -> f64) -
     segments
 }
 
-/// Maximal runs of consecutive columns where `wanted` holds.
-fn runs(len: usize, wanted: impl Fn(usize) -> bool) -> Vec<(usize, usize)> {
-    let mut out: Vec<(usize, usize)> = Vec::new();
-    for c in (0..len).filter(|&c| wanted(c)) {
-        match out.last_mut() {
-            Some(last) if last.1 == c => last.1 = c + 1,
-            _ => out.push((c, c + 1)),
-        }
-    }
-    out
-}
-
 impl CanopyProxy for ProceduralProxy {
-    fn heights(&self, grid: &SampleGrid, wanted: &(dyn Fn(usize, usize) -> bool + Sync)) -> Raster<f32> {
+    fn heights(&self, grid: &SampleGrid, cover: Option<&Raster<f32>>) -> Raster<f32> {
         use rayon::prelude::*;
         let mut out = Raster::filled(grid.width(), grid.height(), 0.0f32);
         let blend = self.blend(grid.lat.step_deg() * crate::geo::METRES_PER_DEGREE);
@@ -418,7 +406,7 @@ impl CanopyProxy for ProceduralProxy {
             let mut splat = Splat::new(self, grid);
             for (k, row) in rows.chunks_mut(width).enumerate() {
                 let r = band * BAND_ROWS + k;
-                let spans = runs(row.len(), |c| wanted(c, r));
+                let spans = super::covered_runs(cover, r, row.len());
                 if blend < 1.0 {
                     splat.row(r, row, &spans);
                 }
@@ -491,7 +479,7 @@ mod tests {
             [TileId::new(16, 200_000, 300_000), TileId::new(15, 0, 0), TileId::new(16, 5 * 65536 - 1, 10 * 65536 - 1)]
         {
             let grid = tiles.tile_samples(tile, 3);
-            let h = p.heights(&grid, &|_, _| true);
+            let h = p.heights(&grid, None);
             for y in 0..grid.height() {
                 for x in 0..grid.width() {
                     assert_eq!(
@@ -511,7 +499,7 @@ mod tests {
             .unwrap()
             .point_grid(200, 200, &TileGrid::new(36.0, 513).unwrap())
             .unwrap();
-        let h = p.heights(&grid, &|_, _| true);
+        let h = p.heights(&grid, None);
         let (lo, hi) = h.min_max().unwrap();
         assert_eq!(lo, 0.0);
         assert!(hi > 0.8 * p.params.height_m && hi <= p.params.height_m);
@@ -523,7 +511,8 @@ mod tests {
         let p = proxy();
         let grid =
             BBox::parse("10,46,10.1,46.1").unwrap().point_grid(20, 20, &TileGrid::new(36.0, 513).unwrap()).unwrap();
-        let h = p.heights(&grid, &|x, _| x < 10);
+        let left = Raster::from_fn(20, 20, |x, _| if x < 10 { 1.0 } else { 0.0 });
+        let h = p.heights(&grid, Some(&left));
         assert!(h.data().iter().enumerate().all(|(i, &v)| if i % 20 < 10 { v == p.mean_height_m() } else { v == 0.0 }));
     }
 }

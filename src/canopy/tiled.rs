@@ -123,16 +123,18 @@ impl TiledProxy {
 }
 
 impl CanopyProxy for TiledProxy {
-    fn heights(&self, grid: &SampleGrid, wanted: &(dyn Fn(usize, usize) -> bool + Sync)) -> Raster<f32> {
+    fn heights(&self, grid: &SampleGrid, cover: Option<&Raster<f32>>) -> Raster<f32> {
         use rayon::prelude::*;
         let mut out = Raster::filled(grid.width(), grid.height(), 0.0f32);
         let spacing_m = grid.lat.step_deg() * METRES_PER_DEGREE;
         let globe = grid.globe();
         let width = grid.width().max(1);
         out.data_mut().par_chunks_mut(width).enumerate().for_each(|(r, row)| {
-            for (c, v) in row.iter_mut().enumerate().filter(|(c, _)| wanted(*c, r)) {
-                let (lon, lat) = globe.at(c as i64, r as i64);
-                *v = self.height(lon, lat, spacing_m);
+            for (start, end) in super::covered_runs(cover, r, row.len()) {
+                for (c, v) in row.iter_mut().enumerate().take(end).skip(start) {
+                    let (lon, lat) = globe.at(c as i64, r as i64);
+                    *v = self.height(lon, lat, spacing_m);
+                }
             }
         });
         out
@@ -190,11 +192,12 @@ mod tests {
         let p = labelled();
         let tiles = TileGrid::new(36.0, 513).unwrap();
         let coarse = BBox::parse("10,46,10.1,46.1").unwrap().point_grid(9, 9, &tiles).unwrap();
-        let h = p.heights(&coarse, &|x, _| x > 0);
+        let east = Raster::from_fn(9, 9, |x, _| if x > 0 { 1.0 } else { 0.0 });
+        let h = p.heights(&coarse, Some(&east));
         assert!(h.data().iter().enumerate().all(|(i, &v)| if i % 9 == 0 { v == 0.0 } else { v == p.set.stats().mean }));
         // 0.25 m spacing: bilinear between texels, within the texel range.
         let fine = BBox::parse("10,46,10.00002,46.00002").unwrap().point_grid(9, 9, &tiles).unwrap();
-        let h = p.heights(&fine, &|_, _| true);
+        let h = p.heights(&fine, None);
         assert!(h.data().iter().all(|&v| (0.0..=255.0).contains(&v)));
     }
 }

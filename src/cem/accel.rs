@@ -15,7 +15,7 @@
 //! Nodata samples (NaN) bound nothing; a zone or cell with only nodata is NaN.
 
 use crate::raster::Raster;
-use crate::raster::morphology::dilate;
+use crate::raster::morphology::dilate_inner;
 
 /// The near safety zone's radius, in samples ("4 and 32 texel safety zones").
 pub const ZONE_NEAR: usize = 4;
@@ -36,24 +36,19 @@ pub fn margin(near: bool, far: bool) -> usize {
 
 /// The requested safety zones of the centre of `cem`, which carries
 /// [`margin`] extra samples on every side: `(near, far)`, each the size of the
-/// centre. With both, the far zone is the near one dilated further.
+/// centre. With both, the far zone is the near one dilated further. Only the
+/// squares that fit in `cem` are evaluated, so no zone reads past its data.
 pub fn safety_zones(cem: &Raster<f32>, near: bool, far: bool) -> (Option<Raster<f32>>, Option<Raster<f32>>) {
-    let m = margin(near, far);
-    let inner = crate::raster::Window::new(
-        m as i64,
-        m as i64,
-        cem.width().saturating_sub(2 * m),
-        cem.height().saturating_sub(2 * m),
-    );
-    let crop = |r: &Raster<f32>| r.crop(inner, f32::NAN);
     match (near, far) {
         (true, true) => {
-            let n = dilate(cem, ZONE_NEAR);
-            let f = dilate(&n, ZONE_FAR - ZONE_NEAR);
-            (Some(crop(&n)), Some(crop(&f)))
+            let n = dilate_inner(cem, ZONE_NEAR);
+            let f = dilate_inner(&n, ZONE_FAR - ZONE_NEAR);
+            let m = (ZONE_FAR - ZONE_NEAR) as i64;
+            let inner = crate::raster::Window::new(m, m, f.width(), f.height());
+            (Some(n.crop(inner, f32::NAN)), Some(f))
         }
-        (false, true) => (None, Some(crop(&dilate(cem, ZONE_FAR)))),
-        (true, false) => (Some(crop(&dilate(cem, ZONE_NEAR))), None),
+        (false, true) => (None, Some(dilate_inner(cem, ZONE_FAR))),
+        (true, false) => (Some(dilate_inner(cem, ZONE_NEAR)), None),
         (false, false) => (None, None),
     }
 }
@@ -139,7 +134,7 @@ mod tests {
         let (Some(near), Some(far)) = safety_zones(&cem, true, true) else { panic!("both zones") };
         assert_eq!(safety_zones(&cem, false, true).1.as_ref(), Some(&far));
         assert_eq!((near.width(), near.height()), (36, 26));
-        let direct = dilate(&cem, ZONE_FAR);
+        let direct = crate::raster::morphology::dilate(&cem, ZONE_FAR);
         for y in 0..26 {
             for x in 0..36 {
                 assert_eq!(far.get(x, y), direct.get(x + 32, y + 32));

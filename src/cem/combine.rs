@@ -10,7 +10,7 @@ use crate::raster::Raster;
 /// Vegetation height above ground: the proxy where the cover is positive,
 /// times the cover.
 pub fn canopy(proxy: &dyn CanopyProxy, grid: &SampleGrid, cover: &Raster<f32>) -> Raster<f32> {
-    proxy.heights(grid, &|x, y| cover.get(x, y) > 0.0).zip_map(cover, |h, c| h * c.max(0.0))
+    proxy.heights(grid, Some(cover)).zip_map(cover, |h, c| h * c.max(0.0))
 }
 
 /// Vegetation height with one proxy per forest type: Σₖ proxyₖ × coverₖ,

@@ -53,6 +53,27 @@ impl Mesh {
         self.points.iter().all(|p| p.0.is_finite() && p.1.is_finite())
     }
 
+    /// The smallest and largest x and y of every position on the grid:
+    /// `(x0, y0, x1, y1)`, NaN positions ignored, `None` if all are NaN.
+    /// Positions in a mesh cell are bilinear in the sample index, so the
+    /// extremes over the part of a cell inside the grid lie at that part's
+    /// corners, which are on the grid's first and last rows or on control
+    /// rows: only those rows are evaluated.
+    pub fn bounds(&self) -> Option<(f64, f64, f64, f64)> {
+        let (w, h) = self.size;
+        let on_control_line = |r: &usize| (self.first.1 + *r as i64) & (self.m - 1) == 0;
+        let rows = (0..h).filter(|r| *r == 0 || *r + 1 == h || on_control_line(r));
+        let mut line = vec![(0.0, 0.0); w];
+        let mut b = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        for r in rows {
+            self.row(r, &mut line);
+            for &(x, y) in line.iter().filter(|p| !p.0.is_nan() && !p.1.is_nan()) {
+                b = (b.0.min(x), b.1.min(y), b.2.max(x), b.3.max(y));
+            }
+        }
+        (b.0 <= b.2).then_some(b)
+    }
+
     /// Interpolated positions of row `r`'s samples into `out` (one per
     /// column; NaN where a corner is NaN): first between the control rows
     /// above and below, then along the row.
@@ -109,5 +130,26 @@ mod tests {
         }
         assert!(big.is_finite());
         assert!(!Mesh::new(4, (0, 0), (3, 3), |c, _| (if c > 0 { f64::NAN } else { 0.0 }, 0.0)).is_finite());
+    }
+
+    #[test]
+    fn bounds_are_those_of_every_position() {
+        // A curved mapping, a grid starting and ending inside mesh cells.
+        let warp = |gx: i64, gy: i64| {
+            let (x, y) = (gx as f64, gy as f64);
+            (x + 0.02 * y * y - 0.3 * (0.2 * x).sin() * y, y - 0.01 * x * x + (0.1 * y).cos() * x)
+        };
+        for (first, size) in [((-13, 5), (40, 30)), ((3, -7), (5, 33)), ((0, 0), (17, 1))] {
+            let mesh = Mesh::new(8, first, size, |c, r| warp(c + first.0, r + first.1));
+            let mut line = vec![(0.0, 0.0); size.0];
+            let mut hull = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+            for r in 0..size.1 {
+                mesh.row(r, &mut line);
+                for &(x, y) in &line {
+                    hull = (hull.0.min(x), hull.1.min(y), hull.2.max(x), hull.3.max(y));
+                }
+            }
+            assert_eq!(mesh.bounds(), Some(hull), "grid from {first:?}, {size:?}");
+        }
     }
 }

@@ -41,12 +41,20 @@ impl MorphOp {
 
 /// Maximum over the `(2r+1)²` square around each sample.
 pub fn dilate(src: &Raster<f32>, radius: usize) -> Raster<f32> {
-    separable(src, radius, f32::max)
+    separable(src, radius, radius, f32::max)
 }
 
 /// Minimum over the `(2r+1)²` square around each sample.
 pub fn erode(src: &Raster<f32>, radius: usize) -> Raster<f32> {
-    separable(src, radius, f32::min)
+    separable(src, radius, radius, f32::min)
+}
+
+/// [`dilate`] where the square fits the buffer only (`radius` samples in
+/// from every edge): `(w − 2r) × (h − 2r)` samples, sample `(x, y)` the
+/// maximum around source sample `(x + r, y + r)`. No work is spent on the
+/// margin that a caller would crop away.
+pub fn dilate_inner(src: &Raster<f32>, radius: usize) -> Raster<f32> {
+    separable(src, radius, 0, f32::max)
 }
 
 /// Applies `ops` in order, each with a square kernel of `radius`.
@@ -66,18 +74,27 @@ pub fn sequence_margin(ops: &[MorphOp], radius: usize) -> usize {
     ops.len() * radius
 }
 
-fn separable(src: &Raster<f32>, radius: usize, op: impl Fn(f32, f32) -> f32 + Copy + Send + Sync) -> Raster<f32> {
+/// The running extreme over squares of `radius` on `src` padded with `pad`
+/// NaN samples per side (`pad` ≤ `radius`): the output is `2 (radius − pad)`
+/// samples smaller than `src` in each direction.
+fn separable(
+    src: &Raster<f32>,
+    radius: usize,
+    pad: usize,
+    op: impl Fn(f32, f32) -> f32 + Copy + Send + Sync,
+) -> Raster<f32> {
     if radius == 0 {
         return src.clone();
     }
-    let mut horizontal = Raster::filled(src.width(), src.height(), f32::NAN);
-    let w = src.width().max(1);
+    let shrink = 2 * (radius - pad);
+    let mut horizontal = Raster::filled(src.width().saturating_sub(shrink), src.height(), f32::NAN);
+    let w = horizontal.width().max(1);
     horizontal
         .data_mut()
         .par_chunks_mut(w)
         .enumerate()
-        .for_each_init(|| Lines::new(src.width(), radius), |line, (y, row)| line.run(src.row(y), row, op));
-    vertical(&horizontal, radius, op)
+        .for_each_init(|| Lines::new(src.width(), radius, pad), |line, (y, row)| line.run(src.row(y), row, op));
+    vertical(&horizontal, radius, pad, op)
 }
 
 /// Scratch space for the running extreme along one line, by doubling: after
@@ -89,19 +106,24 @@ struct Lines {
     a: Vec<f32>,
     b: Vec<f32>,
     radius: usize,
+    pad: usize,
 }
 
 impl Lines {
-    fn new(len: usize, radius: usize) -> Self {
-        Lines { a: vec![f32::NAN; len + 2 * radius], b: vec![f32::NAN; len + 2 * radius], radius }
+    fn new(len: usize, radius: usize, pad: usize) -> Self {
+        Lines { a: vec![f32::NAN; len + 2 * pad], b: vec![f32::NAN; len + 2 * pad], radius, pad }
     }
 
-    /// `dst[i] = op` over `src[i - r ..= i + r]` (clipped to the line).
+    /// `dst[i] = op` over `padded[i ..= i + 2r]`, where `padded` is `src`
+    /// with `pad` NaN samples on each side.
     fn run(&mut self, src: &[f32], dst: &mut [f32], op: impl Fn(f32, f32) -> f32 + Copy + Send + Sync) {
-        let (r, k) = (self.radius, 2 * self.radius + 1);
-        let n = src.len() + 2 * r;
+        let (p, k) = (self.pad, 2 * self.radius + 1);
+        let n = src.len() + 2 * p;
+        if n < k {
+            return;
+        }
         self.a[..n].fill(f32::NAN);
-        self.a[r..r + src.len()].copy_from_slice(src);
+        self.a[p..p + src.len()].copy_from_slice(src);
         let mut span = 1;
         while 2 * span <= k {
             let len = n - span;
@@ -119,12 +141,22 @@ impl Lines {
     }
 }
 
-/// The vertical pass, done on whole rows so that the inner loops are contiguous.
-fn vertical(src: &Raster<f32>, radius: usize, op: impl Fn(f32, f32) -> f32 + Copy + Send + Sync) -> Raster<f32> {
+/// The vertical pass, done on whole rows so that the inner loops are
+/// contiguous; `src` is padded with `pad` NaN rows above and below.
+fn vertical(
+    src: &Raster<f32>,
+    radius: usize,
+    pad: usize,
+    op: impl Fn(f32, f32) -> f32 + Copy + Send + Sync,
+) -> Raster<f32> {
     let (w, h, k) = (src.width(), src.height(), 2 * radius + 1);
-    let rows = (h + 2 * radius).div_ceil(k) * k;
-    // Padded row p holds source row p - radius (NaN outside).
-    let padded_row = |p: usize| -> Option<&[f32]> { p.checked_sub(radius).filter(|&y| y < h).map(|y| src.row(y)) };
+    let mut out = Raster::filled(w, (h + 2 * pad).saturating_sub(2 * radius), f32::NAN);
+    if out.data().is_empty() {
+        return out;
+    }
+    let rows = (h + 2 * pad).div_ceil(k) * k;
+    // Padded row p holds source row p - pad (NaN outside).
+    let padded_row = |p: usize| -> Option<&[f32]> { p.checked_sub(pad).filter(|&y| y < h).map(|y| src.row(y)) };
     let mut forward = vec![f32::NAN; rows * w];
     let mut backward = vec![f32::NAN; rows * w];
     // Blocks of k rows are independent.
@@ -139,7 +171,6 @@ fn vertical(src: &Raster<f32>, radius: usize, op: impl Fn(f32, f32) -> f32 + Cop
             combine_row(&mut head[i * w..], (i + 1 < k).then(|| &tail[..w]), padded_row(s + i), op);
         }
     });
-    let mut out = Raster::filled(w, h, f32::NAN);
     out.data_mut().par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row)| {
         let b = &backward[y * w..(y + 1) * w];
         let f = &forward[(y + 2 * radius) * w..(y + 2 * radius + 1) * w];
@@ -206,6 +237,13 @@ mod tests {
             });
             prop_assert!(same(&dilate(&src, radius), &brute(&src, radius, f32::max)));
             prop_assert!(same(&erode(&src, radius), &brute(&src, radius, f32::min)));
+            let inner = dilate_inner(&src, radius);
+            prop_assert_eq!(
+                (inner.width(), inner.height()),
+                (w.saturating_sub(2 * radius), h.saturating_sub(2 * radius))
+            );
+            let window = super::super::Window::new(radius as i64, radius as i64, inner.width(), inner.height());
+            prop_assert!(same(&inner, &dilate(&src, radius).crop(window, f32::NAN)));
         }
     }
 

@@ -295,9 +295,8 @@ fn each_forest_type_gets_its_own_proxy_and_tiles_stay_seamless() {
     let grid = region.tiles.tile_samples(tile, 0);
     let p = cem::compute(&region, &grid, &[Layer::Cover, Layer::Canopy]).expect("tile");
     let (cover, canopy) = (p.cover.expect("cover"), p.canopy.expect("canopy"));
-    let all = |_: usize, _: usize| true;
-    let conifer = region.forests[0].proxy.heights(&grid, &all);
-    let broadleaf = region.forests[1].proxy.heights(&grid, &all);
+    let conifer = region.forests[0].proxy.heights(&grid, None);
+    let broadleaf = region.forests[1].proxy.heights(&grid, None);
     let (mut as_conifer, mut as_broadleaf) = (0, 0);
     for i in 0..canopy.data().len() {
         let (c, h, a, b) = (cover.data()[i], canopy.data()[i], conifer.data()[i], broadleaf.data()[i]);

@@ -141,7 +141,7 @@ fn check_identity(region: &Region, level: u32, crs: &Crs, (fx, fy): (f64, f64)) 
     let grid = region.tiles.tile_samples(tile, 0);
     let p = cem::compute(region, &grid, &[Layer::Dem, Layer::Cover, Layer::Canopy, Layer::Cem]).expect("tile");
     let (dem, cover, canopy, cem) = (p.dem.unwrap(), p.cover.unwrap(), p.canopy.unwrap(), p.cem.unwrap());
-    let proxy = region.proxy.heights(&grid, &|x, y| cover.get(x, y) > 0.0);
+    let proxy = region.proxy.heights(&grid, Some(&cover));
     let mut checked = 0;
     for (x, y, q, (fx, fy), _) in uniform_samples(region, tile, &region.dem, crs) {
         let by_hand = (1.0 - fy) * ((1.0 - fx) * q[0] as f64 + fx * q[1] as f64)
