@@ -98,25 +98,9 @@ pub fn sources() -> Result<DemoSources, SourceError> {
     Ok(DemoSources { dem: Arc::new(dem::DemSource::new()?), dem_georef: dem::georef(), map: Arc::new(map), map_georef })
 }
 
-/// `⌊x⌋` for |x| < 2⁶³. The x86-64 baseline has no rounding instruction
-/// (SSE4.1's `roundsd`), so `f64::floor` is a libm call: it was 6 % of a map
-/// block's time under `perf`; this is two instructions.
-#[inline]
-fn floor_i(x: f64) -> i64 {
-    let i = x as i64;
-    i - i64::from(x < i as f64)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn floor_i_is_floor() {
-        for x in [-2.5, -2.0, -1e-12, 0.0, 0.3, 1.0, 7.999, -7.999, 1e12 + 0.5] {
-            assert_eq!(floor_i(x), x.floor() as i64, "{x}");
-        }
-    }
 
     #[test]
     fn sources_have_the_documented_sizes_and_georefs() {

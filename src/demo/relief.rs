@@ -9,8 +9,8 @@
 //!
 //! Invariant: pure functions of their arguments.
 
-use super::floor_i;
 use crate::noise::{hash2, unit};
+use crate::raster::floor_i64;
 
 /// Gully noise: parallel stripes running along the unit direction
 /// `(dir_x, dir_y)` (downhill), in `[-1, 1]`. Each lattice cell (one
@@ -23,7 +23,7 @@ use crate::noise::{hash2, unit};
 pub fn gullies(x_m: f64, y_m: f64, wavelength_m: f64, dir_x: f64, dir_y: f64, seed: u64) -> f64 {
     // Cell centres sit at half-integers: the four nearest start at floor(p − ½).
     let (x, y) = (x_m / wavelength_m - 0.5, y_m / wavelength_m - 0.5);
-    let (ix, iy) = (floor_i(x), floor_i(y));
+    let (ix, iy) = (floor_i64(x), floor_i64(y));
     let (fx, fy) = (x - ix as f64, y - iy as f64);
     // Across the slope: the stripes' phase changes across it, so they run downhill.
     let (ax, ay) = (-dir_y, dir_x);
@@ -40,7 +40,7 @@ pub fn gullies(x_m: f64, y_m: f64, wavelength_m: f64, dir_x: f64, dir_y: f64, se
 /// `cos(2π·t)` to within 3e-5 (a degree-8 Taylor polynomial on the
 /// quarter turn around 0 or ½), about four times faster than `f64::cos`.
 fn cos_turns(t: f64) -> f64 {
-    let r = (t - floor_i(t + 0.5) as f64).abs(); // in [0, ½]
+    let r = (t - floor_i64(t + 0.5) as f64).abs(); // in [0, ½]
     let (r, sign) = if r > 0.25 { (0.5 - r, -1.0) } else { (r, 1.0) };
     let x2 = (std::f64::consts::TAU * r).powi(2);
     sign * (1.0 - x2 / 2.0 * (1.0 - x2 / 12.0 * (1.0 - x2 / 30.0 * (1.0 - x2 / 56.0))))

@@ -21,9 +21,10 @@
 //! Colours carry ±3 levels of per-pixel "scanner" noise, so a colour key needs
 //! its tolerance, as with a real scan.
 
+use super::palette;
 use super::terrain::{self, Ground};
-use super::{floor_i, palette};
 use crate::noise::{self, hash2, unit};
+use crate::raster::floor_i64;
 
 /// Contour interval and index-contour interval, metres (Swiss 1:50,000).
 const CONTOUR_M: f64 = 20.0;
@@ -130,8 +131,8 @@ impl Corners {
         let bit = |on: bool, b: u8| if on { b } else { 0 };
         self.height_m.push(g.height_m);
         self.river_m.push(g.river_m);
-        self.contour.push(floor_i(g.height_m * (1.0 / CONTOUR_M)) as i32);
-        self.index.push(floor_i(g.height_m * (1.0 / INDEX_M)) as i32);
+        self.contour.push(floor_i64(g.height_m * (1.0 / CONTOUR_M)) as i32);
+        self.index.push(floor_i64(g.height_m * (1.0 / INDEX_M)) as i32);
         let north = g.across_m > 0.0;
         self.bits.push(
             bit(g.lake_m > 0.0, WET)

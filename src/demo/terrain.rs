@@ -24,8 +24,8 @@
 //! that contains a point give it bitwise the same values; heights are
 //! continuous; the lake is exactly flat at [`LAKE_LEVEL_M`].
 
-use super::floor_i;
 use super::shape::{self, NO_STREAM_M};
+use crate::raster::floor_i64;
 use crate::source::Crs;
 
 pub use super::shape::LAKE_LEVEL_M;
@@ -110,8 +110,8 @@ impl Patch {
     /// The nodes that points in `[x0, x1] × [y0, y1]` interpolate from.
     pub fn covering(x0_m: f64, y0_m: f64, x1_m: f64, y1_m: f64) -> Patch {
         // Catmull–Rom at t ∈ [i, i + 1) reads nodes i − 1 … i + 2.
-        let (i0, i1) = (floor_i(x0_m / NODE_M) - 1, floor_i(x1_m / NODE_M) + 2);
-        let (j0, j1) = (floor_i(y0_m / NODE_M) - 1, floor_i(y1_m / NODE_M) + 2);
+        let (i0, i1) = (floor_i64(x0_m / NODE_M) - 1, floor_i64(x1_m / NODE_M) + 2);
+        let (j0, j1) = (floor_i64(y0_m / NODE_M) - 1, floor_i64(y1_m / NODE_M) + 2);
         let (cols, rows) = ((i1 - i0 + 1) as usize, (j1 - j0 + 1) as usize);
         // Shapes with one more node on every side, for the slopes.
         let scols = cols + 2;
@@ -247,7 +247,7 @@ impl Patch {
     /// First of the four nodes along one axis (relative to the patch) and
     /// their Catmull–Rom weights at lattice coordinate `t`.
     fn weights(&self, t: f64, first: i64) -> (usize, [f64; 4]) {
-        let i = floor_i(t);
+        let i = floor_i64(t);
         let f = t - i as f64;
         let (f2, f3) = (f * f, f * f * f);
         let w = [

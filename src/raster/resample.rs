@@ -9,7 +9,7 @@
 //! make the sample NaN (nodata propagates).
 
 use super::mesh::Mesh;
-use super::{Raster, Window};
+use super::{Raster, Window, floor_i64};
 use rayon::prelude::*;
 
 /// How to interpolate between source pixels.
@@ -219,22 +219,6 @@ fn per_sample(extent: &Extent, kernel: impl Fn(f64, f64) -> f32 + Sync) -> impl 
     }
 }
 
-/// `x.floor()` without a libm call (baseline x86-64 has no rounding
-/// instruction); exact for |x| < 2⁶³.
-#[inline]
-fn floor(x: f64) -> f64 {
-    let t = x as i64 as f64;
-    if t > x { t - 1.0 } else { t }
-}
-
-/// [`floor`] as an integer, converted once (`x as i64` saturates, so each
-/// conversion costs a few instructions in the per-sample loops).
-#[inline]
-fn floor_int(x: f64) -> i64 {
-    let t = x as i64;
-    if t as f64 > x { t - 1 } else { t }
-}
-
 /// Bilinear taps along one axis: the two clamped window indices and the
 /// weight of the second, or `None` outside the extent.
 fn taps(
@@ -245,7 +229,7 @@ fn taps(
     coords
         .iter()
         .map(|&p| {
-            let p0 = floor(p);
+            let p0 = p.floor();
             inside(p).then(|| (clamp(p0 as i64), clamp(p0 as i64 + 1), (p - p0) as f32))
         })
         .collect()
@@ -271,7 +255,7 @@ impl View<'_> {
     }
 
     fn nearest(&self, px: f64, py: f64) -> f32 {
-        self.tap(floor(px + 0.5) as i64, floor(py + 0.5) as i64)
+        self.tap(floor_i64(px + 0.5), floor_i64(py + 0.5))
     }
 
     /// Bilinear over a separable grid: taps computed once per row and
@@ -353,7 +337,7 @@ impl View<'_> {
             if !self.extent.contains(px, py) {
                 continue;
             }
-            let (x0, y0) = (floor_int(px), floor_int(py));
+            let (x0, y0) = (floor_i64(px), floor_i64(py));
             let (fx, fy) = ((px - x0 as f64) as f32, (py - y0 as f64) as f32);
             let (xa, xb) = ((x0.clamp(0, w) - ox) as usize, ((x0 + 1).clamp(0, w) - ox) as usize);
             let (ya, yb) = ((y0.clamp(0, h) - oy) as usize * stride, ((y0 + 1).clamp(0, h) - oy) as usize * stride);
@@ -363,7 +347,7 @@ impl View<'_> {
     }
 
     fn bicubic(&self, px: f64, py: f64) -> f32 {
-        let (x0, y0) = (floor(px), floor(py));
+        let (x0, y0) = (px.floor(), py.floor());
         let wx = catmull_rom((px - x0) as f32);
         let wy = catmull_rom((py - y0) as f32);
         let (x0, y0) = (x0 as i64, y0 as i64);
