@@ -30,14 +30,13 @@ use super::lod::budget::TreeItem;
 use super::raycast::{TreeBlend, texel_index};
 use super::tile::{NODATA_M, TileData};
 use crate::cem::surface::SurfaceType;
+use crate::geo::METRES_PER_DEGREE;
 use crate::lod::splats::{TreeField, distribute};
 use crate::lod::split::Item;
 use crate::noise::{hash2, unit};
 use glam::{DVec2, DVec3};
 use std::collections::HashMap;
 
-/// Metres of latitude per degree on the lattice (the WGS84 equator's).
-pub const METRES_PER_DEGREE: f64 = 6_378_137.0 * std::f64::consts::PI / 180.0;
 /// Trees lower than this grow no splats (the canopy there is scrub), metres.
 pub const MIN_TREE_M: f64 = 2.0;
 /// Projected distance between splats a tree's crown asks for without a
