@@ -61,7 +61,7 @@ const NO_HIT: f32 = -1.0;
 @group(0) @binding(1) var texels: texture_2d_array<f32>;
 // sRGB map colour; alpha holds the surface class.
 @group(0) @binding(2) var colours: texture_2d_array<f32>;
-// Maximum mipmap levels packed in an atlas (frame.mip_rects).
+// Maximum mipmap levels 1 and up packed in an atlas (frame.mip_rects).
 @group(0) @binding(3) var mip: texture_2d_array<f32>;
 @group(0) @binding(4) var gather_sampler: sampler;
 @group(1) @binding(0) var<uniform> tile: Tile;
@@ -86,6 +86,9 @@ fn mip_bound(level: i32, cell: vec2<i32>) -> f32 {
     return textureLoad(mip, vec2<i32>(r.xy) + cell, tile.index.z, 0).r;
 }
 
+// Cells per side of `level`: the N + 1 cast cells halved, rounding up, per
+// level (as MaxMipmap builds them; level 0 has no rectangle in the atlas).
 fn mip_cells(level: i32) -> vec2<i32> {
-    return vec2<i32>(frame.mip_rects[level].zw);
+    let cells = i32(tile.grid.w) + 1;
+    return vec2<i32>((cells + (1 << u32(level)) - 1) >> u32(level));
 }

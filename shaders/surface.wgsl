@@ -48,16 +48,18 @@ fn fetch_cell_heights(ci: i32, cj: i32, counter: ptr<private, u32>) -> vec4<f32>
     let uv = (vec2<f32>(vec2<i32>(ci + b, cj + b)) + 1.0) / size;
     // Gather order: (i, j+1), (i+1, j+1), (i+1, j), (i, j).
     let cem = textureGather(0, texels, gather_sampler, uv, tile.index.z);
-    let dem = textureGather(1, texels, gather_sampler, uv, tile.index.z);
-    *counter += 2u;
+    *counter += 1u;
     let c = vec4<f32>(cem.w, cem.z, cem.x, cem.y);
-    let g = vec4<f32>(dem.w, dem.z, dem.x, dem.y);
     if min(min(c.x, c.y), min(c.z, c.w)) <= NODATA_BELOW {
         return vec4<f32>(NODATA_BELOW * 10.0);
     }
     if tile.flags.y == 1u {
         return c;
     }
+    // The ground under the canopy only where the canopy fades.
+    let dem = textureGather(1, texels, gather_sampler, uv, tile.index.z);
+    *counter += 1u;
+    let g = vec4<f32>(dem.w, dem.z, dem.x, dem.y);
     let cam = tile.camera.xyz;
     let s = vec2<f32>(f32(ci), f32(cj));
     let f = vec4<f32>(

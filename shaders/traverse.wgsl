@@ -4,7 +4,8 @@
 //   stepping on each level; a cell the ray passes above (its lowest point
 //   over the cell is above the cell's bound) is skipped whole, then the walk
 //   climbs a level when it leaves its parent; a cell the ray may enter is
-//   descended into; on level 0 the bilinear patch is intersected exactly.
+//   descended into; on level 0 the cell's corners bound it and its bilinear
+//   patch is intersected exactly.
 //   Bounds are conservative, so no hit is ever skipped, at any angle.
 // - linear: the dissertation's fixed-step march (6.4) with its 4- and
 //   32-sample safety zones, giving up after a fixed number of steps.
@@ -12,7 +13,7 @@
 // Rays are in sample space: origin o, direction d per metre of the ray
 // parameter t (samples east/north, metres up). Both return t or NO_HIT.
 
-const START_LEVEL: i32 = 4;
+const START_LEVEL: i32 = 2;
 const MAX_ITERATIONS: u32 = 8192u;
 
 // A ray's constants for cell stepping: the inverse direction, and which
@@ -50,17 +51,19 @@ fn traverse_exact(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> f32 {
         let size = f32(1 << u32(level));
         let exits = cell_exit(cell, size, o.xy, stepping);
         let t_out = min(min(exits.x, exits.y), t1);
-        let bound = mip_bound(level, cell);
-        view_fetches += 1u;
-        if min(o.z + d.z * t, o.z + d.z * t_out) <= bound {
-            if level > 0 {
+        let z_low = min(o.z + d.z * t, o.z + d.z * t_out);
+        if level > 0 {
+            view_fetches += 1u;
+            if z_low <= mip_bound(level, cell) {
                 level -= 1;
                 let first = cell * 2;
                 cell = cell_of(o.xy + d.xy * t, size / 2.0, first, first + 1);
                 continue;
             }
+        } else {
+            // A leaf's bound is the highest of its corners: read them at once.
             let h = cell_heights(cell.x - 1, cell.y - 1, &view_fetches);
-            if has_data(h) {
+            if has_data(h) && z_low <= max(max(h.x, h.y), max(h.z, h.w)) {
                 let p = o.xy + d.xy * t;
                 let tau = patch_hit(h, p - vec2<f32>(cell - 1), d, o.z + d.z * t, t_out - t);
                 if tau != NO_HIT {

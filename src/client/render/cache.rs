@@ -187,7 +187,8 @@ impl TileCache {
             tile.colour.iter().zip(&tile.surface).map(|(c, &s)| [c[0], c[1], c[2], s]).collect();
         write_layer(queue, &self.texels, slot, [0, 0, size, size], bytemuck::cast_slice(&tile.texels), 16);
         write_layer(queue, &self.colours, slot, [0, 0, size, size], bytemuck::cast_slice(&colours), 4);
-        for (level, rect) in self.mip_rects.iter().enumerate().take(tile.mip.levels()) {
+        let levels = self.mip_rects.iter().enumerate().take(tile.mip.levels());
+        for (level, rect) in levels.filter(|(_, r)| r[2] > 0) {
             write_layer(queue, &self.mip, slot, *rect, bytemuck::cast_slice(tile.mip.level(level).data()), 4);
         }
     }
@@ -219,14 +220,16 @@ fn write_layer(
 }
 
 /// Where the levels of a maximum mipmap over `cells²` cells go in one
-/// atlas: level 0 at the origin, the others stacked in a column beside it
-/// (each level `ceil(previous / 2)` wide, as `MaxMipmap` builds them).
+/// atlas: levels 1 and up stacked in a column (each `ceil(previous / 2)`
+/// wide, as `MaxMipmap` builds them). Level 0 gets an empty rectangle and is
+/// not uploaded: the traversal bounds a leaf by the corners it reads anyway
+/// (traverse.wgsl), which saves the largest level's memory in every slot.
 pub fn atlas(cells: u32) -> Vec<[u32; 4]> {
-    let mut rects = vec![[0, 0, cells, cells]];
+    let mut rects = vec![[0, 0, 0, 0]];
     let (mut side, mut y) = (cells, 0);
     while side > 1 {
         side = side.div_ceil(2);
-        rects.push([cells, y, side, side]);
+        rects.push([0, y, side, side]);
         y += side;
     }
     rects
@@ -241,6 +244,8 @@ mod tests {
         let rects = atlas(514);
         assert_eq!(rects.len(), 11);
         assert_eq!(rects.last().map(|r| (r[2], r[3])), Some((1, 1)));
+        assert_eq!(rects[0][2] * rects[0][3], 0, "level 0 is not uploaded");
+        assert_eq!(rects[1][2..], [257, 257]);
         for (a, ra) in rects.iter().enumerate() {
             for rb in rects.iter().skip(a + 1) {
                 let apart = ra[0] + ra[2] <= rb[0]
