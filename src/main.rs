@@ -313,9 +313,12 @@ enum Bench {
         /// Directory of the camera paths (`demo_*.toml`, `rmnp_*.toml`).
         #[arg(long, default_value = "config/paths")]
         paths: PathBuf,
-        /// Frames per path.
-        #[arg(long, default_value_t = 300)]
-        frames: usize,
+        /// Frames per second of each path's own time (a real-time flight).
+        #[arg(long, default_value_t = 60.0, conflicts_with = "frames")]
+        fps: f64,
+        /// Frames per path instead, spread over it whatever its length.
+        #[arg(long)]
+        frames: Option<usize>,
     },
     /// The server over loopback HTTP beside MapServer and MapProxy: GetMap,
     /// uncached and cached tile latency and throughput, memory.
@@ -454,8 +457,13 @@ fn run(command: Command) -> Result<()> {
             println!("{}", sylva::bench::lod_report(&rmnp, frames, plots.as_deref(), &flights)?);
             Ok(())
         }
-        Command::Bench { what: Bench::Sse { rmnp, paths, frames } } => {
-            println!("{}", sylva::bench::lod_sse::report(&rmnp, &paths, frames).map_err(anyhow::Error::msg)?);
+        Command::Bench { what: Bench::Sse { rmnp, paths, fps, frames } } => {
+            use sylva::bench::lod_sse::Pace;
+            if !(fps.is_finite() && fps > 0.0) {
+                anyhow::bail!("--fps {fps}: a positive number of frames a second");
+            }
+            let pace = frames.map_or(Pace::PerSecond(fps), Pace::Frames);
+            println!("{}", sylva::bench::lod_sse::report(&rmnp, &paths, pace).map_err(anyhow::Error::msg)?);
             Ok(())
         }
         #[cfg(feature = "server")]

@@ -27,6 +27,8 @@ pub struct FrameCounts {
     pub touched: (usize, usize),
     /// Selection ms, deferred and full.
     pub ms: (f64, f64),
+    /// How far the eye moved since the frame before, metres.
+    pub moved_m: f64,
 }
 
 /// A frame where the two selections differ.
@@ -35,6 +37,35 @@ pub struct FrameCounts {
 pub struct Differs {
     /// The frame.
     pub frame: usize,
+}
+
+/// How many frames a path is flown in: the deferral's work follows the
+/// eye's travel per frame, so the rate matters.
+#[derive(Clone, Copy, Debug)]
+pub enum Pace {
+    /// This many frames spread over the path.
+    Frames(usize),
+    /// The path's own seconds at this many frames a second.
+    PerSecond(f64),
+}
+
+impl Pace {
+    /// Frames for `path` (at least 2).
+    pub fn frames(self, path: &CameraPath) -> usize {
+        match self {
+            Pace::Frames(n) => n.max(2),
+            Pace::PerSecond(fps) => ((path.duration_s() * fps).round() as usize + 1).max(2),
+        }
+    }
+}
+
+impl std::fmt::Display for Pace {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        match self {
+            Pace::Frames(n) => write!(f, "{n} frames a path"),
+            Pace::PerSecond(fps) => write!(f, "each path in its own time at {fps} frames/s"),
+        }
+    }
 }
 
 /// How a flight is selected: frames, image size and error threshold (as
@@ -54,9 +85,12 @@ pub struct Flight {
 pub fn compare(tree: &TileTree, path: &CameraPath, flight: &Flight) -> Result<Vec<FrameCounts>, Differs> {
     let mut deferred = SseSelector::deferred(tree.clone());
     let mut full = SseSelector::full(tree.clone());
+    let mut last_eye = None;
     (0..flight.frames)
         .map(|k| {
             let camera = path.camera(k, flight.frames, flight.size);
+            let eye = camera.position_ecef;
+            let moved_m = last_eye.replace(eye).map_or(0.0, |e: glam::DVec3| e.distance(eye));
             let (d, d_ms) = timed(&mut deferred, &camera, flight.max_error_px);
             let (f, f_ms) = timed(&mut full, &camera, flight.max_error_px);
             if d.tiles != f.tiles {
@@ -67,6 +101,7 @@ pub fn compare(tree: &TileTree, path: &CameraPath, flight: &Flight) -> Result<Ve
                 evaluated: (d.evaluated, f.evaluated),
                 touched: (d.visited, f.visited),
                 ms: (d_ms, f_ms),
+                moved_m,
             })
         })
         .collect()
@@ -80,10 +115,9 @@ fn timed(sse: &mut SseSelector, camera: &Camera, max_error_px: f64) -> (Selectio
 }
 
 /// The table for the demo region and rmnp (`rmnp_config`), every path of
-/// `paths_dir` named after its region, `frames` frames each, at `sylva
-/// fly`'s defaults (640 × 480, 2 px, level 13).
-pub fn report(rmnp_config: &Path, paths_dir: &Path, frames: usize) -> Result<String, String> {
-    let flight = Flight { frames, size: (640, 480), max_error_px: 2.0 };
+/// `paths_dir` named after its region, flown at `pace`, at `sylva fly`'s
+/// defaults (640 × 480, 2 px, level 13).
+pub fn report(rmnp_config: &Path, paths_dir: &Path, pace: Pace) -> Result<String, String> {
     let mut rows = Vec::new();
     for (key, config) in [("demo", None), ("rmnp", Some(rmnp_config))] {
         let region = crate::config::load(config).map_err(|e| e.to_string())?;
@@ -92,6 +126,7 @@ pub fn report(rmnp_config: &Path, paths_dir: &Path, frames: usize) -> Result<Str
         let tree = sse.ok_or("the region's tile tree is too large")?.tree().clone();
         for path_file in paths_of(paths_dir, key)? {
             let path = CameraPath::load(&path_file).map_err(|e| e.to_string())?;
+            let flight = Flight { frames: pace.frames(&path), size: (640, 480), max_error_px: 2.0 };
             let counts = compare(&tree, &path, &flight).map_err(|e| format!("{}: {e}", path_file.display()))?;
             let name = path_file.file_stem().map_or(String::new(), |s| s.to_string_lossy().into_owned());
             rows.push(row(&name, tree.nodes.len(), &counts));
@@ -99,6 +134,8 @@ pub fn report(rmnp_config: &Path, paths_dir: &Path, frames: usize) -> Result<Str
     }
     let header = [
         "path",
+        "frames",
+        "m / frame",
         "tree nodes",
         "tiles",
         "refinement tests, full",
@@ -111,7 +148,7 @@ pub fn report(rmnp_config: &Path, paths_dir: &Path, frames: usize) -> Result<Str
         "ms deferred",
     ];
     Ok(format!(
-        "SSE selection along the recorded flyovers: {frames} frames, 640 × 480, 2 px, level 13; means per frame (the first frame included); the selections are equal in every frame\n\n{}\n",
+        "SSE selection along the recorded flyovers, {pace}: 640 × 480, 2 px, level 13; means per frame (the first frame included); the selections are equal in every frame\n\n{}\n",
         table(&header, &rows)
     ))
 }
@@ -139,6 +176,8 @@ fn row(name: &str, nodes: usize, counts: &[FrameCounts]) -> Vec<String> {
     let (td, tf) = (mean(&|c| c.touched.0 as f64), mean(&|c| c.touched.1 as f64));
     vec![
         name.to_string(),
+        counts.len().to_string(),
+        format!("{:.1}", mean(&|c| c.moved_m) * n / (n - 1.0).max(1.0)),
         nodes.to_string(),
         format!("{:.0}", mean(&|c| c.tiles as f64)),
         format!("{ef:.0}"),

@@ -142,6 +142,11 @@ impl CameraPath {
         }
     }
 
+    /// Seconds from the first key to the last.
+    pub fn duration_s(&self) -> f64 {
+        self.key[self.key.len() - 1].t - self.key[0].t
+    }
+
     /// The time of frame `index` of `frames`, spread evenly over the path.
     pub fn time(&self, index: usize, frames: usize) -> f64 {
         let (first, last) = (self.key[0].t, self.key[self.key.len() - 1].t);
