@@ -128,20 +128,51 @@ impl CostCalibrator {
     /// are small, and the fixed per-frame cost moves only as frames
     /// separate it. With `M = A + Λ`, the prior split into its fixed part
     /// `p₀` and per-item part `p̃`: `c(s) = M⁻¹(b + Λp₀) + s M⁻¹Λp̃`, `s`
-    /// minimising the fit plus the ridge. Clamped to non-negative constants.
+    /// minimising the fit plus the ridge.
+    ///
+    /// Constants are non-negative (active set): the most negative one is
+    /// fixed at 0 and the others fitted again, until none is negative.
+    /// Clamping alone would keep the others' share of the negative one's
+    /// (a biased prediction whenever its feature moves).
     fn solve(&self) -> Option<[f64; FEATURES]> {
-        let mut m = self.a;
+        let mut free = [true; FEATURES];
+        loop {
+            let c = self.solve_free(&free)?;
+            let worst = (0..FEATURES).filter(|&i| free[i] && c[i] < 0.0).min_by(|&i, &j| c[i].total_cmp(&c[j]));
+            match worst {
+                Some(i) => free[i] = false,
+                None => return Some(c.map(|x| x.max(0.0))),
+            }
+        }
+    }
+
+    /// The ridge fit with the constants not `free` fixed at 0.
+    fn solve_free(&self, free: &[bool; FEATURES]) -> Option<[f64; FEATURES]> {
+        let a = self.restricted(free);
+        let mut m = a;
         let mut lambda = [0.0; FEATURES];
         for (i, l) in lambda.iter_mut().enumerate() {
-            *l = self.settings.ridge.max(0.0) * self.a[i][i] + 1e-12;
+            *l = if free[i] { self.settings.ridge.max(0.0) * a[i][i] + 1e-12 } else { 0.0 };
             m[i][i] += *l;
         }
+        let keep = |i: usize, x: f64| if free[i] { x } else { 0.0 };
         let (fixed, scaled) = self.prior_parts();
-        let c0 = gauss(m, std::array::from_fn(|i| self.b[i] + lambda[i] * fixed[i]))?;
-        let c1 = gauss(m, std::array::from_fn(|i| lambda[i] * scaled[i]))?;
-        let s = self.prior_scale((&c0, &c1), &lambda);
+        let c0 = gauss(m, std::array::from_fn(|i| keep(i, self.b[i] + lambda[i] * fixed[i])))?;
+        let c1 = gauss(m, std::array::from_fn(|i| keep(i, lambda[i] * scaled[i])))?;
+        let s = self.prior_scale(&a, (&c0, &c1), &lambda, free);
         let c: [f64; FEATURES] = std::array::from_fn(|i| c0[i] + s * c1[i]);
-        c.iter().all(|x| x.is_finite()).then(|| c.map(|x| x.max(0.0)))
+        c.iter().all(|x| x.is_finite()).then_some(c)
+    }
+
+    /// `A` with the rows and columns of fixed constants replaced by those
+    /// of the identity (their constants solve to 0).
+    fn restricted(&self, free: &[bool; FEATURES]) -> [[f64; FEATURES]; FEATURES] {
+        std::array::from_fn(|i| {
+            std::array::from_fn(|j| match (free[i], free[j]) {
+                (true, true) => self.a[i][j],
+                _ => f64::from(u8::from(i == j)),
+            })
+        })
     }
 
     /// The prior's fixed per-frame cost and its per-item constants, apart.
@@ -154,13 +185,20 @@ impl CostCalibrator {
     }
 
     /// The `s` minimising `cᵀAc − 2bᵀc + Σ λᵢ (cᵢ − p₀ᵢ − s p̃ᵢ)²` over
-    /// `c = c0 + s c1` (its derivative set to zero); 1 if degenerate.
-    fn prior_scale(&self, (c0, c1): (&[f64; FEATURES], &[f64; FEATURES]), lambda: &[f64; FEATURES]) -> f64 {
+    /// `c = c0 + s c1` (its derivative set to zero), over the `free`
+    /// constants of `a`; 1 if degenerate.
+    fn prior_scale(
+        &self,
+        a: &[[f64; FEATURES]; FEATURES],
+        (c0, c1): (&[f64; FEATURES], &[f64; FEATURES]),
+        lambda: &[f64; FEATURES],
+        free: &[bool; FEATURES],
+    ) -> f64 {
         let (fixed, scaled) = self.prior_parts();
         let a_form = |x: &[f64; FEATURES], y: &[f64; FEATURES]| -> f64 {
-            (0..FEATURES).map(|i| (0..FEATURES).map(|j| x[i] * self.a[i][j] * y[j]).sum::<f64>()).sum()
+            (0..FEATURES).map(|i| (0..FEATURES).map(|j| x[i] * a[i][j] * y[j]).sum::<f64>()).sum()
         };
-        let b_c1: f64 = (0..FEATURES).map(|i| self.b[i] * c1[i]).sum();
+        let b_c1: f64 = (0..FEATURES).filter(|&i| free[i]).map(|i| self.b[i] * c1[i]).sum();
         let ridge_num: f64 = (0..FEATURES).map(|i| lambda[i] * (c0[i] - fixed[i]) * (c1[i] - scaled[i])).sum();
         let ridge_den: f64 = (0..FEATURES).map(|i| lambda[i] * (c1[i] - scaled[i]).powi(2)).sum();
         let (num, den) = (a_form(c1, c0) - b_c1 + ridge_num, a_form(c1, c1) + ridge_den);
@@ -302,6 +340,23 @@ mod tests {
         assert_eq!(used[..4], [false, false, true, true]);
         let error = relative_error(&cal.model(), &slow, 10_000);
         assert!(error < 0.05, "{error} after {} frames used", used.iter().filter(|u| **u).count());
+    }
+
+    #[test]
+    fn a_constant_fixed_at_zero_leaves_the_others_refitted() {
+        // Frames that a negative splat constant would fit best: with it
+        // held at 0 the others absorb what they can, so the fit stays
+        // unbiased (clamping alone over-predicts by the dropped share).
+        let mut cal = CostCalibrator::new(CostModel::default(), CalibratorSettings::default());
+        let fitted = |k: i64| 20.0 + 4.0 * frame(k).raycast_mpx_steps - 0.01 * frame(k).splats_k;
+        for k in 0..200 {
+            cal.observe(&frame(k), fitted(k));
+        }
+        let c = cal.model().constants_ms;
+        assert_eq!(c[4], 0.0, "{c:?}");
+        assert!(c.iter().all(|x| x.is_finite() && *x >= 0.0), "{c:?}");
+        let bias = (150..200).map(|k| cal.model().predict_ms(&frame(k)) - fitted(k)).sum::<f64>() / 50.0;
+        assert!(bias.abs() < 0.5, "mean error {bias} ms over frames of ~{} ms", fitted(150));
     }
 
     #[test]

@@ -25,13 +25,19 @@
 //! **Trees** near the camera ([`crate::client::trees`]) come as groups of
 //! at most 64, each a continuous variable of up to its trees × splats per
 //! tree: worth 000's `k S (N/64) φ(x/capacity)` with `S` its projected
-//! pixels ([`TREE_WORTH`] is `k`), costing per splat the splat constant;
-//! the group constant of every group in view is set aside first, so the
-//! cut stays feasible however many groups get splats.
+//! pixels ([`TREE_WORTH`] is `k`), costing per splat the splat constant
+//! plus the group constant spread over the group's capacity (a fixed
+//! charge is not convex; spread, it is). Groups left part-full, which
+//! that under-charges, are then trimmed or dropped, fewest splats first,
+//! until the cut fits. (Setting the group constant of every group in view aside
+//! first let one miscalibrated constant starve the terrain: fifty groups
+//! at a fitted 12 ms each left a 640 × 480 flight one tile for good, since
+//! frames without trees never corrected it.)
 //!
 //! Invariant: the cut is feasible as [`optimize`] answers it (steps are
-//! rounded down), and draws at most `max_tiles` tiles (the GPU cache's
-//! slots): a larger cut is chosen again under a smaller budget.
+//! rounded down, part-full groups trimmed until it fits), and draws at
+//! most `max_tiles` tiles (the GPU cache's slots): a larger cut is chosen
+//! again under a smaller budget.
 
 use super::candidates::Candidate;
 use crate::client::trees::TreeBudgets;
@@ -147,9 +153,7 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
         (selection, drawn)
     };
     let max_tiles = budget.max_tiles.max(1);
-    let in_view = trees.iter().filter(|(_, px)| *px > 0.0).count() as f64;
-    let reserved_ms = model.marginal_ms(&tree_features(0.0, in_view));
-    let (mut selection, mut drawn) = run(budget.budget_ms - model.constants_ms[0] - reserved_ms);
+    let (mut selection, mut drawn) = run(budget.budget_ms - model.constants_ms[0]);
     if drawn.len() > max_tiles {
         // The largest budget whose cut fits the slots, by bisection.
         let (mut lo, mut hi) = (0.0, selection.cost_ms);
@@ -171,17 +175,35 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
             shadow_steps: regions.steps(i, &forest, candidates, &selection.resolutions),
         })
         .collect();
-    let tree_budgets: TreeBudgets = trees
+    let mut groups: Vec<((i64, i64), f64)> = trees
         .iter()
         .zip(&selection.resolutions[regions.heads.len().min(selection.resolutions.len())..])
         .filter(|(_, x)| **x >= 1.0)
         .map(|((t, _), x)| (t.block, x.floor()))
         .collect();
-    let features = drawn
+    let terrain = drawn
         .iter()
         .zip(&tiles)
         .map(|(&i, t)| features(&candidates[i as usize], t.shadow_steps))
-        .fold(tree_features(tree_budgets.values().sum(), tree_budgets.len() as f64), |a, f| a.plus(&f));
+        .fold(CostFeatures::default(), |a, f| a.plus(&f));
+    let with_trees = |groups: &[((i64, i64), f64)]| {
+        terrain.plus(&tree_features(groups.iter().map(|g| g.1).sum(), groups.len() as f64))
+    };
+    // Fewest splats last: the loop trims that group, or drops it.
+    groups.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let splat_ms = model.marginal_ms(&tree_features(1.0, 0.0));
+    loop {
+        let over_ms = model.predict_ms(&with_trees(&groups)) - budget.budget_ms;
+        let Some(last) = groups.last_mut().filter(|_| over_ms > 0.0) else { break };
+        let trim = (over_ms / splat_ms).ceil();
+        if splat_ms > 0.0 && last.1 - trim >= 1.0 {
+            last.1 -= trim;
+        } else {
+            groups.pop();
+        }
+    }
+    let features = with_trees(&groups);
+    let tree_budgets: TreeBudgets = groups.into_iter().collect();
     Cut {
         predicted_ms: model.predict_ms(&features),
         features,
@@ -193,12 +215,15 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
     }
 }
 
-/// A tree group's variable: its worth and its cost per splat.
+/// A tree group's variable: its worth and its cost per splat, the group
+/// constant spread over its capacity.
 fn tree_variable(t: &TreeItem, px: f64, model: &CostModel) -> Continuous {
+    let capacity = t.group.capacity.max(0.0);
+    let group_ms = model.marginal_ms(&tree_features(0.0, 1.0));
     Continuous {
         weight: group_weight(px, t.group.trees, TREE_WORTH),
-        capacity: t.group.capacity.max(0.0),
-        cost_per_unit_ms: model.marginal_ms(&tree_features(1.0, 0.0)),
+        capacity,
+        cost_per_unit_ms: model.marginal_ms(&tree_features(1.0, 0.0)) + group_ms / capacity.max(1.0),
     }
 }
 
@@ -385,6 +410,25 @@ mod tests {
         assert!(tight.predicted_ms <= 4.0 + 1e-9 && !tight.tree_budgets.is_empty());
         let rich = choose(&c, &trees, &model, &budget(1e4, true));
         assert_eq!(rich.tree_budgets.get(&(0, 0)), Some(&(64.0 * 24.0)));
+    }
+
+    #[test]
+    fn a_costly_group_constant_does_not_starve_the_terrain() {
+        // Fifty groups in view at 12 ms each (a fit gone wrong): the
+        // terrain still gets what the budget allows, and the cut fits.
+        let c = demo_candidates();
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 1200.0] };
+        let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
+        let trees: Vec<_> = (0..50).map(|k| (TreeItem { block: (k, 0), group }, 2_000.0)).collect();
+        let cut = choose(&c, &trees, &model, &budget(8.0, true));
+        let bare = choose(&c, &[], &model, &budget(8.0, true));
+        assert!(cut.predicted_ms <= 8.0 + 1e-9, "{}", cut.predicted_ms);
+        assert_eq!(cut.tiles.len(), bare.tiles.len(), "{:?}", cut.tree_budgets);
+        // Affordable, a group gets its splats with the constant paid once.
+        let cheap = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 100.0] };
+        let rich = choose(&c, &trees, &cheap, &budget(1e4, true));
+        assert_eq!(rich.tree_budgets.len(), 50);
+        assert!((rich.features.groups_h - 0.5).abs() < 1e-12 && rich.predicted_ms <= 1e4);
     }
 
     #[test]
