@@ -14,8 +14,12 @@
 //! samples than pixels for some camera, down to the deepest level.
 //!
 //! Tiles holding less of the region than [`MIN_SAMPLES_PER_SIDE`]² samples
-//! are not candidates: the walk passes through them, and the first
-//! drawable tiles below are the roots (the coarsest cut).
+//! are not candidates, nor are tiles whose samples some camera sees larger
+//! than [`MAX_SAMPLE_PX`] pixels at their nearest point (taken no nearer
+//! than the tile's lowest ground is below the eye): the walk passes
+//! through them, and the first drawable tiles below are the roots (the
+//! coarsest cut). So however the budget and the cost model weigh the
+//! terrain against the trees, the terrain keeps its shape.
 //!
 //! Its cost is in pixels: the most any camera sees of it, unless the
 //! renderer would draw it plain ([`raycast::plain`], from the terrain
@@ -106,6 +110,10 @@ pub fn candidates(scope: &Scope) -> Candidates {
             continue;
         }
         let judged = judge(scope, &frame, (lo, hi), (box_lo, box_hi));
+        if judged.too_coarse && id.level < scope.max_level {
+            stack.extend(id.children().map(|c| (c, parent)));
+            continue;
+        }
         let index = out.tiles.len() as u32;
         out.tiles.push(Candidate { id, parent, ..judged.candidate });
         if judged.refinable && id.level < scope.max_level && out.tiles.len() < scope.limit {
@@ -142,6 +150,8 @@ struct Judged {
     candidate: Candidate,
     /// Fewer samples than pixels for some camera: children may add benefit.
     refinable: bool,
+    /// Samples larger than [`MAX_SAMPLE_PX`] for some camera.
+    too_coarse: bool,
 }
 
 /// Tile `id` as a candidate (no parent) for the scope's cameras, culled
@@ -161,7 +171,7 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
     let area_m2 = share * n * n * frame.spacing_m.x * frame.spacing_m.y;
     let mesh_error_m = (scope.known)(frame.id).map(|k| k.mesh_error_m);
     let (canopy_ref_m, lo_px, hi_px) = scope.fade;
-    let (mut benefit, mut seen, mut ray, mut refinable) = (0.0, 0.0, 0.0f64, false);
+    let (mut benefit, mut seen, mut ray, mut refinable, mut too_coarse) = (0.0, 0.0, 0.0f64, false, false);
     for camera in scope.cameras {
         let cam = frame.to_local(camera.position_ecef);
         let near_m = (cam.clamp(box_lo, box_hi) - cam).length();
@@ -174,13 +184,26 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
             ray = ray.max(visible);
         }
         refinable |= visible > 0.0 && full > samples;
+        // Measured no nearer than the lowest ground below the eye: a camera
+        // inside the tile's box would otherwise see its samples unbounded.
+        let above_m = Geodetic::from_ecef(camera.position_ecef).height_m - lo;
+        let sample_px2 = coverage::full_px(camera, area_m2, near_m.max(above_m)) / samples;
+        too_coarse |= visible > 0.0 && sample_px2 > MAX_SAMPLE_PX * MAX_SAMPLE_PX;
     }
     let k = scope.cameras.len().max(1) as f64;
     Judged {
         candidate: Candidate { id: frame.id, parent: None, benefit: benefit / k, seen_px: seen / k, ray_px: ray },
         refinable,
+        too_coarse,
     }
 }
+
+/// The largest a sample may look, pixels per side at the tile's nearest
+/// point, for the tile to be drawn (16 times `sylva fly`'s 2 px error):
+/// the coarsest cut the budget can fall back to. Without it a flight on a
+/// software rasteriser (tiles ~8 ms each) traded the whole terrain for
+/// trees, one level-4 tile under them.
+pub const MAX_SAMPLE_PX: f64 = 32.0;
 
 /// Samples per side a tile must hold inside the region to be drawn: a
 /// coarser one shows a few samples of the region (the demo's level-0 tile
@@ -274,13 +297,35 @@ mod tests {
 
     #[test]
     fn tiles_holding_a_few_samples_of_the_region_are_passed_through() {
-        let camera = Camera::looking(Geodetic::new(10.1, 46.32, 2500.0), 10.0, -15.0, 60.0, (320, 240));
+        // From high up, where the sample floor does not bind.
+        let camera = Camera::looking(Geodetic::new(10.1, 46.32, 40_000.0), 10.0, -15.0, 60.0, (320, 240));
         let c = walk(camera, None, 16);
         // The region is 0.25° × 0.15°: a level-4 tile (2.25°) holds ~44²
         // samples of it, a level-3 one ~22².
         let roots: Vec<u32> = c.tiles.iter().filter(|t| t.parent.is_none()).map(|t| t.id.level).collect();
         assert!(!roots.is_empty() && roots.iter().all(|&l| l == 4), "{roots:?}");
         assert!(c.tiles.iter().all(|t| t.id.level >= 4));
+    }
+
+    #[test]
+    fn no_root_shows_samples_larger_than_the_floor() {
+        // 250 m above the valley floor (1150 m): a level-7 sample (61 m)
+        // would look ~50 px wide at the nearest point, a level-8 one ~25 px.
+        let eye = Geodetic::new(10.05, 46.35, 1400.0);
+        let camera = Camera::looking(eye, 90.0, -20.0, 60.0, (320, 240));
+        let c = walk_over(camera, None, 13, &|_| Some((1100.0, 1200.0)));
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        let holds = |t: &&Candidate| {
+            let s = grid.sector(t.id);
+            (s.min_lon..s.max_lon).contains(&10.05) && (s.min_lat..s.max_lat).contains(&46.35)
+        };
+        let under = c.tiles.iter().filter(|t| t.parent.is_none()).find(holds);
+        let level = under.expect("a root under the camera").id.level;
+        assert!((8..13).contains(&level), "{level}");
+        // Without a camera nearby the roots stay coarse.
+        let high = Camera::looking(Geodetic::new(10.1, 46.32, 60_000.0), 10.0, -89.0, 60.0, (320, 240));
+        let roots = walk(high, None, 13).tiles.into_iter().filter(|t| t.parent.is_none());
+        assert!(roots.map(|t| t.id.level).all(|l| l == 4));
     }
 
     #[test]
