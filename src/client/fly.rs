@@ -84,6 +84,9 @@ pub struct FlyOptions {
     pub in_flight: usize,
     /// Trees near the camera as splats (none: the ray-cast canopy only).
     pub trees: Option<TreeSettings>,
+    /// Hull quads this many times the tiles' 16 samples
+    /// ([`Renderer::with_hull_factor`]; 4 suits software rasterisers).
+    pub hull_factor: usize,
 }
 
 impl Default for FlyOptions {
@@ -102,6 +105,7 @@ impl Default for FlyOptions {
             fade: (30.0, 0.5, 2.0),
             in_flight: 8,
             trees: Some(TreeSettings::default()),
+            hull_factor: 1,
         }
     }
 }
@@ -531,7 +535,8 @@ pub fn run(
 ) -> Result<Vec<FrameRecord>, RunError> {
     let gpu = super::render::gpu::Gpu::open()?;
     let grid = source.grid();
-    let mut renderer = Renderer::new(gpu, grid.samples(), options.halo as u32, gpu_budget_bytes);
+    let mut renderer =
+        Renderer::new(gpu, grid.samples(), options.halo as u32, gpu_budget_bytes).with_hull_factor(options.hull_factor);
     Ok(fly(source, path, &mut renderer, options)?)
 }
 

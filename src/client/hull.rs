@@ -91,6 +91,70 @@ impl Hull {
         let indices = indices(k, &ring, top_count, true);
         Hull { vertices, indices, quads: k, bottom_m }
     }
+
+    /// The side of its largest quad, in samples.
+    pub fn quad_samples(&self) -> f32 {
+        let row = &self.vertices[..=self.quads];
+        row.windows(2).map(|w| w[1].sample[0] - w[0].sample[0]).fold(0.0, f32::max)
+    }
+
+    /// The same hull with quads `factor` times as large (the last row and
+    /// column of quads take what is left): a corner bounds the larger quads
+    /// around it by the highest of their vertices, each of which already
+    /// bounds the quads around it, so the coarse hull still encloses the
+    /// surface. For rasterisers that pay per triangle (software ones shade
+    /// whole pixel blocks along every triangle's edges).
+    pub fn coarsened(&self, factor: usize) -> Hull {
+        let k = self.quads;
+        if factor <= 1 || k <= 1 {
+            return self.clone();
+        }
+        let mut lines: Vec<usize> = (0..k).step_by(factor).collect();
+        lines.push(k);
+        let kc = lines.len() - 1;
+        let fine = |a: usize, b: usize| self.vertices[b * (k + 1) + a];
+        let quad_max = |qa: usize, qb: usize| {
+            let mut m = [f32::NAN; 2];
+            for b in lines[qb]..=lines[qb + 1] {
+                for a in lines[qa]..=lines[qa + 1] {
+                    let h = fine(a, b).hull_m;
+                    m = [m[0].max(h[0]), m[1].max(h[1])];
+                }
+            }
+            m
+        };
+        let around = |a: usize, b: usize| {
+            let mut m = [f32::NAN; 2];
+            for (qa, qb) in
+                [(a.wrapping_sub(1), b.wrapping_sub(1)), (a, b.wrapping_sub(1)), (a.wrapping_sub(1), b), (a, b)]
+            {
+                if qa < kc && qb < kc {
+                    let q = quad_max(qa, qb);
+                    m = [m[0].max(q[0]), m[1].max(q[1])];
+                }
+            }
+            m
+        };
+        let mut vertices = Vec::with_capacity((kc + 1) * (kc + 1) + 4 * kc);
+        for &b in &lines {
+            for &a in &lines {
+                vertices.push(HullVertex { sample: fine(a, b).sample, hull_m: [0.0; 2] });
+            }
+        }
+        for cb in 0..=kc {
+            for ca in 0..=kc {
+                vertices[cb * (kc + 1) + ca].hull_m = around(ca, cb);
+            }
+        }
+        let ring = ring(kc);
+        let top_count = vertices.len() as u32;
+        for &(a, b) in &ring {
+            let v = vertices[b * (kc + 1) + a];
+            vertices.push(HullVertex { sample: v.sample, hull_m: [self.bottom_m; 2] });
+        }
+        let indices = indices(kc, &ring, top_count, true);
+        Hull { vertices, indices, quads: kc, bottom_m: self.bottom_m }
+    }
 }
 
 /// Top-grid positions `(a, b)` around the boundary, counter-clockwise seen
@@ -144,23 +208,39 @@ mod tests {
         Vec3::new(v.sample[0], v.sample[1], v.hull_m[0] + f * (v.hull_m[1] - v.hull_m[0]))
     }
 
-    #[test]
-    fn faces_point_outward() {
+    /// The hull of a bumpy 67² tile (5 quads a side), and coarsened by 3
+    /// (2 quads a side, the second narrower).
+    fn hulls() -> ((Raster<f32>, Raster<f32>), [Hull; 2]) {
         let (cem, dem) = bumpy(67);
         let hull = Hull::build(&cem, &dem);
-        let centre = Vec3::new(32.0, 32.0, hull.bottom_m + 1.0);
-        for t in hull.indices.chunks(3) {
-            let [p, q, r] = [0, 1, 2].map(|i| position(&hull.vertices[t[i] as usize], 1.0));
-            let normal = (q - p).cross(r - p);
-            let mid = (p + q + r) / 3.0;
-            assert!(normal.dot(mid - centre) > 0.0, "triangle {t:?} faces inward");
+        let coarse = hull.coarsened(3);
+        assert_eq!((hull.quads, coarse.quads), (5, 2));
+        assert!((hull.quad_samples() - 13.2).abs() < 1e-4 && (coarse.quad_samples() - 39.6).abs() < 1e-4);
+        ((cem, dem), [hull, coarse])
+    }
+
+    #[test]
+    fn faces_point_outward() {
+        for hull in hulls().1 {
+            let centre = Vec3::new(32.0, 32.0, hull.bottom_m + 1.0);
+            for t in hull.indices.chunks(3) {
+                let [p, q, r] = [0, 1, 2].map(|i| position(&hull.vertices[t[i] as usize], 1.0));
+                let normal = (q - p).cross(r - p);
+                let mid = (p + q + r) / 3.0;
+                assert!(normal.dot(mid - centre) > 0.0, "triangle {t:?} faces inward");
+            }
         }
     }
 
     #[test]
     fn the_hull_bounds_the_surface_for_any_fade() {
-        let (cem, dem) = bumpy(67);
-        let hull = Hull::build(&cem, &dem);
+        let ((cem, dem), hulls) = hulls();
+        for hull in hulls {
+            bounds_the_surface(&hull, &cem, &dem);
+        }
+    }
+
+    fn bounds_the_surface(hull: &Hull, cem: &Raster<f32>, dem: &Raster<f32>) {
         let k = hull.quads;
         for f in [0.0f32, 0.3, 1.0] {
             for t in hull.indices.chunks(3).take(2 * k * k) {

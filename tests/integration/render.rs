@@ -175,6 +175,23 @@ fn gpu_matches_the_reference_on_real_tiles() {
 }
 
 #[test]
+fn a_coarser_hull_keeps_the_exact_traversal_on_the_reference() {
+    // Hull quads of 64 samples (for software rasterisers): rays start
+    // farther from the surface, so they fetch more, and still hit the same.
+    let (_, tiles, camera, sun) = demo_scene();
+    let settings = settings(Traversal::Exact, sun);
+    let fine = render_both(&tiles, &camera, &settings);
+    let gpu = Gpu::open().expect("a GPU adapter");
+    let mut coarse = Renderer::new(gpu, tiles[0].frame.samples, tiles[0].halo as u32, 256 << 20).with_hull_factor(4);
+    let refs: Vec<&TileData> = tiles.iter().collect();
+    let rendered = coarse.render(&camera, &refs, &settings, Readback::All).expect("fits the cache");
+    let departure = reference::compare(&rendered.colour, &rendered.view_z_m, &fine.cpu);
+    assert_close("demo, 64-sample hull quads", &departure);
+    let fetches = |r: &Rendered| r.fetches.iter().map(|f| u64::from(f[0])).sum::<u64>();
+    assert!(fetches(&rendered) > fetches(&fine.gpu), "{} vs {}", fetches(&rendered), fetches(&fine.gpu));
+}
+
+#[test]
 fn per_tile_shadow_quality_matches_the_reference() {
     // The LOD selection gives each tile its own shadow samples per hit.
     let (_, tiles, camera, sun) = demo_scene();

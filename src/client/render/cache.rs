@@ -19,6 +19,8 @@ struct Resident {
     serial: u64,
     last_frame: u64,
     hull: Mesh,
+    /// Side of the uploaded hull's largest quad, samples.
+    hull_quad_samples: f32,
     terrain: Mesh,
 }
 
@@ -73,6 +75,7 @@ pub struct TileCache {
     size: u32,
     slots: Vec<Option<Resident>>,
     slot_bytes: usize,
+    hull_factor: usize,
 }
 
 impl TileCache {
@@ -106,7 +109,14 @@ impl TileCache {
             size,
             slots: (0..count).map(|_| None).collect(),
             slot_bytes,
+            hull_factor: 1,
         }
+    }
+
+    /// Uploads hulls with quads `factor` times as large as the tiles'
+    /// ([`crate::client::hull::Hull::coarsened`]) from now on.
+    pub fn set_hull_factor(&mut self, factor: usize) {
+        self.hull_factor = factor.max(1);
     }
 
     /// Number of slots.
@@ -140,6 +150,12 @@ impl TileCache {
         Some((&r.hull, &r.terrain))
     }
 
+    /// Side of the largest quad of the hull uploaded for the tile in
+    /// `slot`, samples.
+    pub fn hull_quad_samples(&self, slot: u32) -> Option<f32> {
+        Some(self.slots.get(slot as usize)?.as_ref()?.hull_quad_samples)
+    }
+
     /// Makes `tile` resident (if it is not), evicting the least recently
     /// drawn tile not used in `frame`; returns its slot.
     pub fn insert(
@@ -155,15 +171,18 @@ impl TileCache {
         let slot = self.victim(frame).ok_or(CacheFull { slots: self.capacity() })?;
         self.write(queue, tile, slot);
         let t = &tile.terrain;
+        let coarse = tile.hull.coarsened(self.hull_factor);
         let hull = Mesh::new(
             device,
-            bytemuck::cast_slice::<HullVertex, u8>(&tile.hull.vertices),
-            &tile.hull.indices,
-            tile.hull.indices.len(),
+            bytemuck::cast_slice::<HullVertex, u8>(&coarse.vertices),
+            &coarse.indices,
+            coarse.indices.len(),
         );
         let terrain =
             Mesh::new(device, bytemuck::cast_slice::<TerrainVertex, u8>(&t.vertices), &t.indices, t.grid_indices);
-        self.slots[slot as usize] = Some(Resident { serial: tile.serial, last_frame: frame, hull, terrain });
+        let hull_quad_samples = coarse.quad_samples();
+        let resident = Resident { serial: tile.serial, last_frame: frame, hull, hull_quad_samples, terrain };
+        self.slots[slot as usize] = Some(resident);
         Ok(slot)
     }
 

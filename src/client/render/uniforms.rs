@@ -117,7 +117,7 @@ impl TileUniform {
         camera: &Camera,
         settings: &FrameSettings,
         tile: &TileData,
-        (slot, mode): (u32, DrawMode),
+        (slot, mode, hull_quad_samples): (u32, DrawMode, f32),
         shadow_steps: u32,
     ) -> TileUniform {
         let frame = &tile.frame;
@@ -127,7 +127,7 @@ impl TileUniform {
         let hull = &tile.hull;
         // A hull vertex bounds samples up to a quad diagonal away and the
         // tile's height range apart.
-        let quad = hull_quad_m(tile);
+        let quad = f64::from(hull_quad_samples) * tile.frame.spacing_m.max_element();
         let rise = (tile.range.max_m - tile.range.min_m) as f64;
         let reach = (quad * quad * 2.0 + rise * rise).sqrt();
         let whole = canopy_whole(camera, tile, &settings.fade);
@@ -164,13 +164,6 @@ fn filler_drop_m(tile: &TileData) -> f32 {
     (tile.range.mesh_error_m as f64
         + 3.0 * tile.frame.flat_error_m(heights)
         + 0.01 * tile.frame.spacing_m.min_element()) as f32
-}
-
-/// Side of a hull quad, metres (the larger axis).
-fn hull_quad_m(tile: &TileData) -> f64 {
-    let cells = tile.frame.samples as f64 + 1.0;
-    let q = cells / tile.hull.quads as f64;
-    q * tile.frame.spacing_m.max_element()
 }
 
 /// Whether every sample of the tile is close enough for the whole canopy
