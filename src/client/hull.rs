@@ -54,42 +54,17 @@ impl Hull {
         let quad_max = |layer: &Raster<f32>, a: usize, b: usize| {
             let (x0, x1) = (pos[a].floor() as usize, (pos[a + 1].ceil() as usize).min(cells));
             let (y0, y1) = (pos[b].floor() as usize, (pos[b + 1].ceil() as usize).min(cells));
-            let mut m = f32::NAN;
-            for y in y0..=y1 {
-                for &v in &layer.row(y)[x0..=x1] {
-                    m = m.max(v);
-                }
-            }
-            m
+            (y0..=y1).flat_map(|y| layer.row(y)[x0..=x1].iter().copied()).fold(f32::NAN, f32::max)
         };
         let around = |layer: &Raster<f32>, a: usize, b: usize| {
-            let mut m = f32::NAN;
-            for (qa, qb) in
-                [(a.wrapping_sub(1), b.wrapping_sub(1)), (a, b.wrapping_sub(1)), (a.wrapping_sub(1), b), (a, b)]
-            {
-                if qa < k && qb < k {
-                    m = m.max(quad_max(layer, qa, qb));
-                }
-            }
+            let m = around_vertex(k, a, b, |qa, qb| quad_max(layer, qa, qb));
             if m.is_nan() { bottom_m } else { m }
         };
-        let mut vertices = Vec::with_capacity((k + 1) * (k + 1) + 4 * k);
-        for b in 0..=k {
-            for a in 0..=k {
-                vertices.push(HullVertex {
-                    sample: [(pos[a] - 1.0) as f32, (pos[b] - 1.0) as f32],
-                    hull_m: [around(dem, a, b), around(cem, a, b).max(around(dem, a, b))],
-                });
-            }
-        }
-        let ring = ring(k);
-        let top_count = vertices.len() as u32;
-        for &(a, b) in &ring {
-            let v = vertices[b * (k + 1) + a];
-            vertices.push(HullVertex { sample: v.sample, hull_m: [bottom_m; 2] });
-        }
-        let indices = indices(k, &ring, top_count, true);
-        Hull { vertices, indices, quads: k, bottom_m }
+        let top = (0..=k).flat_map(|b| (0..=k).map(move |a| (a, b))).map(|(a, b)| HullVertex {
+            sample: [(pos[a] - 1.0) as f32, (pos[b] - 1.0) as f32],
+            hull_m: [around(dem, a, b), around(cem, a, b).max(around(dem, a, b))],
+        });
+        closed(top.collect(), k, bottom_m)
     }
 
     /// The side of its largest quad, in samples.
@@ -105,56 +80,50 @@ impl Hull {
     /// surface. For rasterisers that pay per triangle (software ones shade
     /// whole pixel blocks along every triangle's edges).
     pub fn coarsened(&self, factor: usize) -> Hull {
-        let k = self.quads;
-        if factor <= 1 || k <= 1 {
+        if factor <= 1 {
             return self.clone();
         }
+        let k = self.quads;
         let mut lines: Vec<usize> = (0..k).step_by(factor).collect();
         lines.push(k);
         let kc = lines.len() - 1;
         let fine = |a: usize, b: usize| self.vertices[b * (k + 1) + a];
-        let quad_max = |qa: usize, qb: usize| {
-            let mut m = [f32::NAN; 2];
-            for b in lines[qb]..=lines[qb + 1] {
-                for a in lines[qa]..=lines[qa + 1] {
-                    let h = fine(a, b).hull_m;
-                    m = [m[0].max(h[0]), m[1].max(h[1])];
-                }
-            }
-            m
+        let quad_max = |layer: usize, qa: usize, qb: usize| {
+            let rows = lines[qb]..=lines[qb + 1];
+            rows.flat_map(|b| (lines[qa]..=lines[qa + 1]).map(move |a| (a, b)))
+                .map(|(a, b)| fine(a, b).hull_m[layer])
+                .fold(f32::NAN, f32::max)
         };
-        let around = |a: usize, b: usize| {
-            let mut m = [f32::NAN; 2];
-            for (qa, qb) in
-                [(a.wrapping_sub(1), b.wrapping_sub(1)), (a, b.wrapping_sub(1)), (a.wrapping_sub(1), b), (a, b)]
-            {
-                if qa < kc && qb < kc {
-                    let q = quad_max(qa, qb);
-                    m = [m[0].max(q[0]), m[1].max(q[1])];
-                }
-            }
-            m
-        };
-        let mut vertices = Vec::with_capacity((kc + 1) * (kc + 1) + 4 * kc);
-        for &b in &lines {
-            for &a in &lines {
-                vertices.push(HullVertex { sample: fine(a, b).sample, hull_m: [0.0; 2] });
-            }
-        }
-        for cb in 0..=kc {
-            for ca in 0..=kc {
-                vertices[cb * (kc + 1) + ca].hull_m = around(ca, cb);
-            }
-        }
-        let ring = ring(kc);
-        let top_count = vertices.len() as u32;
-        for &(a, b) in &ring {
-            let v = vertices[b * (kc + 1) + a];
-            vertices.push(HullVertex { sample: v.sample, hull_m: [self.bottom_m; 2] });
-        }
-        let indices = indices(kc, &ring, top_count, true);
-        Hull { vertices, indices, quads: kc, bottom_m: self.bottom_m }
+        let top = (0..=kc).flat_map(|cb| (0..=kc).map(move |ca| (ca, cb))).map(|(ca, cb)| HullVertex {
+            sample: fine(lines[ca], lines[cb]).sample,
+            hull_m: [0, 1].map(|layer| around_vertex(kc, ca, cb, |qa, qb| quad_max(layer, qa, qb))),
+        });
+        closed(top.collect(), kc, self.bottom_m)
     }
+}
+
+/// The highest `quad_max` of the quads of a `k × k` grid around top vertex
+/// `(a, b)` (up to four); NaN if none has data.
+fn around_vertex(k: usize, a: usize, b: usize, quad_max: impl Fn(usize, usize) -> f32) -> f32 {
+    [(a.wrapping_sub(1), b.wrapping_sub(1)), (a, b.wrapping_sub(1)), (a.wrapping_sub(1), b), (a, b)]
+        .into_iter()
+        .filter(|&(qa, qb)| qa < k && qb < k)
+        .map(|(qa, qb)| quad_max(qa, qb))
+        .fold(f32::NAN, f32::max)
+}
+
+/// A hull from its `(k + 1)²` top grid: skirts down to `bottom_m` and the
+/// bottom face close it.
+fn closed(mut vertices: Vec<HullVertex>, k: usize, bottom_m: f32) -> Hull {
+    let ring = ring(k);
+    let top_count = vertices.len() as u32;
+    vertices.reserve(ring.len());
+    for &(a, b) in &ring {
+        let v = vertices[b * (k + 1) + a];
+        vertices.push(HullVertex { sample: v.sample, hull_m: [bottom_m; 2] });
+    }
+    let indices = indices(k, &ring, top_count, true);
+    Hull { vertices, indices, quads: k, bottom_m }
 }
 
 /// Top-grid positions `(a, b)` around the boundary, counter-clockwise seen

@@ -149,8 +149,8 @@ impl CameraPath {
 
     /// The time of frame `index` of `frames`, spread evenly over the path.
     pub fn time(&self, index: usize, frames: usize) -> f64 {
-        let (first, last) = (self.key[0].t, self.key[self.key.len() - 1].t);
-        if frames > 1 { first + (last - first) * index as f64 / (frames - 1) as f64 } else { first }
+        let first = self.key[0].t;
+        if frames > 1 { first + self.duration_s() * index as f64 / (frames - 1) as f64 } else { first }
     }
 
     /// The camera of frame `index` of `frames`, spread evenly over the path.

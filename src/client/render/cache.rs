@@ -171,16 +171,22 @@ impl TileCache {
         let slot = self.victim(frame).ok_or(CacheFull { slots: self.capacity() })?;
         self.write(queue, tile, slot);
         let t = &tile.terrain;
-        let coarse = tile.hull.coarsened(self.hull_factor);
+        let coarse;
+        let uploaded = if self.hull_factor > 1 {
+            coarse = tile.hull.coarsened(self.hull_factor);
+            &coarse
+        } else {
+            &tile.hull
+        };
         let hull = Mesh::new(
             device,
-            bytemuck::cast_slice::<HullVertex, u8>(&coarse.vertices),
-            &coarse.indices,
-            coarse.indices.len(),
+            bytemuck::cast_slice::<HullVertex, u8>(&uploaded.vertices),
+            &uploaded.indices,
+            uploaded.indices.len(),
         );
         let terrain =
             Mesh::new(device, bytemuck::cast_slice::<TerrainVertex, u8>(&t.vertices), &t.indices, t.grid_indices);
-        let hull_quad_samples = coarse.quad_samples();
+        let hull_quad_samples = uploaded.quad_samples();
         let resident = Resident { serial: tile.serial, last_frame: frame, hull, hull_quad_samples, terrain };
         self.slots[slot as usize] = Some(resident);
         Ok(slot)
