@@ -44,10 +44,13 @@ struct Tile {
     // halo B, texels per side, texture slot, top mipmap level.
     index: vec4<i32>,
     // draw mode (0 hull, 1 camera inside the hull, 2 plain), canopy whole (1),
-    // shadow steps (the tile's ray-casting quality), unused.
+    // shadow steps (the tile's ray-casting quality), morph layer + 1 (0: the
+    // tile does not morph).
     flags: vec4<u32>,
     // highest CEM over all texels, halo included (local m), unused x3.
     texels: vec4<f32>,
+    // weight of the tile's own heights against its morph layer's, unused x3.
+    morph: vec4<f32>,
 };
 
 const MODE_HULL: u32 = 0u;
@@ -64,6 +67,12 @@ const NO_HIT: f32 = -1.0;
 // Maximum mipmap levels 1 and up packed in an atlas (frame.mip_rects).
 @group(0) @binding(3) var mip: texture_2d_array<f32>;
 @group(0) @binding(4) var gather_sampler: sampler;
+// Morphing tiles' coarser surfaces: CEM, ground per texel (tile.flags.w).
+@group(0) @binding(5) var morph_from: texture_2d_array<f32>;
+
+// Whether the pipeline draws morphing tiles (render/pipeline.rs): the
+// blend is compiled only into theirs.
+override MORPHING: bool = false;
 @group(1) @binding(0) var<uniform> tile: Tile;
 
 // Texture accesses of this invocation: view ray (with the two gathers of the
@@ -78,6 +87,11 @@ var<private> memo_heights: vec4<f32>;
 fn texel(i: i32, j: i32) -> vec4<f32> {
     let b = tile.index.x;
     return textureLoad(texels, vec2<i32>(i + b, j + b), tile.index.z, 0);
+}
+
+// The layer of the morphing tile's coarser surface.
+fn morph_layer() -> i32 {
+    return i32(tile.flags.w) - 1;
 }
 
 // Bound of the surface over mipmap texel `cell` of `level`.

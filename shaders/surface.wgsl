@@ -46,10 +46,7 @@ fn fetch_cell_heights(ci: i32, cj: i32, counter: ptr<private, u32>) -> vec4<f32>
     let size = f32(tile.index.y);
     let b = tile.index.x;
     let uv = (vec2<f32>(vec2<i32>(ci + b, cj + b)) + 1.0) / size;
-    // Gather order: (i, j+1), (i+1, j+1), (i+1, j), (i, j).
-    let cem = textureGather(0, texels, gather_sampler, uv, tile.index.z);
-    *counter += 1u;
-    let c = vec4<f32>(cem.w, cem.z, cem.x, cem.y);
+    let c = cem_corners(uv, counter);
     if min(min(c.x, c.y), min(c.z, c.w)) <= NODATA_BELOW {
         return vec4<f32>(NODATA_BELOW * 10.0);
     }
@@ -57,9 +54,7 @@ fn fetch_cell_heights(ci: i32, cj: i32, counter: ptr<private, u32>) -> vec4<f32>
         return c;
     }
     // The ground under the canopy only where the canopy fades.
-    let dem = textureGather(1, texels, gather_sampler, uv, tile.index.z);
-    *counter += 1u;
-    let g = vec4<f32>(dem.w, dem.z, dem.x, dem.y);
+    let g = ground_corners(uv, counter);
     let cam = tile.camera.xyz;
     let s = vec2<f32>(f32(ci), f32(cj));
     let f = vec4<f32>(
@@ -69,6 +64,36 @@ fn fetch_cell_heights(ci: i32, cj: i32, counter: ptr<private, u32>) -> vec4<f32>
         fade_factor(length(sample_local(s + vec2<f32>(1.0, 1.0), g.w) - cam)),
     );
     return g + f * (c - g);
+}
+
+// The cell's corners at `uv` of the CEM (ground_corners: of the ground), in
+// the order h00, h10, h01, h11, blended with the coarser surface's when the
+// tile morphs (its nodata is the tile's own, so nodata stays nodata). Two
+// functions: a gather's channel must be a constant.
+fn cem_corners(uv: vec2<f32>, counter: ptr<private, u32>) -> vec4<f32> {
+    let own = textureGather(0, texels, gather_sampler, uv, tile.index.z);
+    if !MORPHING {
+        *counter += 1u;
+        return corner_order(own);
+    }
+    *counter += 2u;
+    return corner_order(mix(textureGather(0, morph_from, gather_sampler, uv, morph_layer()), own, tile.morph.x));
+}
+
+fn ground_corners(uv: vec2<f32>, counter: ptr<private, u32>) -> vec4<f32> {
+    let own = textureGather(1, texels, gather_sampler, uv, tile.index.z);
+    if !MORPHING {
+        *counter += 1u;
+        return corner_order(own);
+    }
+    *counter += 2u;
+    return corner_order(mix(textureGather(1, morph_from, gather_sampler, uv, morph_layer()), own, tile.morph.x));
+}
+
+// A gather's texels, (i, j+1), (i+1, j+1), (i+1, j), (i, j), as h00, h10,
+// h01, h11.
+fn corner_order(v: vec4<f32>) -> vec4<f32> {
+    return vec4<f32>(v.w, v.z, v.x, v.y);
 }
 
 fn has_data(h: vec4<f32>) -> bool {

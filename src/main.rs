@@ -132,7 +132,8 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         select_every: u32,
         /// Geomorph between tile levels over the selection period (`--lod
-        /// budget`; morphing tiles are uploaded again every frame).
+        /// budget`; a morphing tile is prepared and uploaded once, with the
+        /// coarser surface the GPU blends it with).
         #[arg(long)]
         geomorph: bool,
         /// The cost model `--lod budget` starts from: the `cost_model.json`
@@ -573,7 +574,7 @@ fn run(command: Command) -> Result<()> {
             let size = parse_size(&size)?;
             let gpu = sylva::client::render::gpu::Gpu::open()?;
             let name = gpu.describe();
-            let mut renderer = sylva::client::render::Renderer::new(gpu, 513, 32, gpu_budget_mib << 20);
+            let mut renderer = sylva::client::render::Renderer::new(gpu, 513, 32, gpu_budget_mib << 20, false);
             let views = sylva::bench::raycast::default_views(&rmnp);
             let rows = sylva::bench::raycast::run(&views, size, &mut renderer).map_err(anyhow::Error::msg)?;
             println!("{}", sylva::bench::raycast::report(&rows, size, &name));

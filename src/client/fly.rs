@@ -12,7 +12,6 @@
 use super::lod::ahead::Lookahead;
 use super::lod::budget::{Budget, Choice};
 use super::lod::flight::BudgetFlight;
-use super::lod::morphs;
 use super::lod::{Selected, Selector};
 use super::path::CameraPath;
 use super::quadtree::{self, LodRule};
@@ -73,8 +72,8 @@ pub struct FlyOptions {
     pub lod: LodRule,
     /// How tiles are chosen.
     pub mode: LodMode,
-    /// Geomorph between tile levels (budget mode): morphing tiles are
-    /// prepared and uploaded again every frame of their morph.
+    /// Geomorph between tile levels (budget mode): a morphing tile is
+    /// prepared and uploaded once per morph, and blended on the GPU.
     pub geomorph: bool,
     /// Halo requested with every tile, samples.
     pub halo: usize,
@@ -251,6 +250,8 @@ struct Chosen {
     tiles: Vec<Arc<TileData>>,
     /// Shadow steps per tile, in the order of `tiles`.
     steps: Vec<u32>,
+    /// Morph weight of each tile's own heights (1: not morphing).
+    weights: Vec<f32>,
     error_px: f64,
     selected: Option<Selected>,
     /// Tiles drawn morphing from a coarser one.
@@ -268,25 +269,27 @@ fn choose(
 ) -> Result<Chosen, FlyError> {
     let Some(lod) = lod else {
         let (tiles, error_px, touched) = visible_tiles(source, store, sse, camera, options, slots)?;
-        let steps = vec![options.shadow_steps; tiles.len()];
-        return Ok(Chosen { tiles, steps, error_px, selected: None, morphing: 0, touched: Some(touched) });
+        let (steps, weights) = (vec![options.shadow_steps; tiles.len()], vec![1.0; tiles.len()]);
+        return Ok(Chosen { tiles, steps, weights, error_px, selected: None, morphing: 0, touched: Some(touched) });
     };
     let selected = lod.frame(t_s, camera);
     let ids: Vec<_> = selected.cut.tiles.iter().map(|c| c.id).collect();
     let mut tiles = store.get(source, &ids)?;
     let drawn: Vec<_> = tiles.iter().map(|t| t.id()).collect();
     let morphing = lod.morphs(t_s, &drawn);
+    let mut weights = vec![1.0; tiles.len()];
     for m in &morphing {
         let (Some(k), Some(from)) = (drawn.iter().position(|&id| id == m.tile), store.get(source, &[m.from])?.pop())
         else {
             continue;
         };
-        let blended = morphs::blend(&source.grid(), &tiles[k], &from, m.weight).map_err(LoadError::from)?;
-        tiles[k] = Arc::new(blended);
+        tiles[k] = lod.morph_tile(&source.grid(), &tiles[k], &from);
+        weights[k] = m.weight as f32;
     }
     let steps_of: std::collections::HashMap<_, _> = selected.cut.tiles.iter().map(|c| (c.id, c.shadow_steps)).collect();
     let steps = tiles.iter().map(|t| steps_of.get(&t.id()).copied().unwrap_or(0)).collect();
-    Ok(Chosen { tiles, steps, error_px: f64::NAN, selected: Some(selected), morphing: morphing.len(), touched: None })
+    let morphing = morphing.len();
+    Ok(Chosen { tiles, steps, weights, error_px: f64::NAN, selected: Some(selected), morphing, touched: None })
 }
 
 fn frame(
@@ -317,19 +320,19 @@ fn frame(
     if let (Some(lod), Some(settings)) = (lod.as_deref_mut(), options.trees) {
         lod.set_trees(settings, tiles.clone());
     }
-    let draws: Vec<Draw> = tiles
-        .iter()
-        .zip(&chosen.steps)
-        .zip(&trees.splats)
-        .map(|((t, &shadow_steps), splats)| Draw { tile: t.as_ref(), shadow_steps, splats })
+    let draws: Vec<Draw> = (0..tiles.len())
+        .map(|k| Draw {
+            tile: tiles[k].as_ref(),
+            shadow_steps: chosen.steps[k],
+            splats: &trees.splats[k],
+            morph_weight: chosen.weights[k],
+        })
         .collect();
     let out = renderer.render_draws(&camera, &draws, &settings, Readback::All)?;
     let selected = chosen.selected.as_ref();
     let predicted_ms = selected.map(|s| s.cut.predicted_ms);
     let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
-    // Morphing tiles are prepared and uploaded again every frame, a cost the
-    // model has no term for: such frames do not calibrate it.
-    if let Some(lod) = lod.filter(|_| chosen.morphing == 0) {
+    if let Some(lod) = lod {
         let drawn: Vec<Choice> =
             draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
         let drawn_trees = (trees.drawn.splats, trees.drawn.groups);
@@ -535,8 +538,8 @@ pub fn run(
 ) -> Result<Vec<FrameRecord>, RunError> {
     let gpu = super::render::gpu::Gpu::open()?;
     let grid = source.grid();
-    let mut renderer =
-        Renderer::new(gpu, grid.samples(), options.halo as u32, gpu_budget_bytes).with_hull_factor(options.hull_factor);
+    let mut renderer = Renderer::new(gpu, grid.samples(), options.halo as u32, gpu_budget_bytes, options.geomorph)
+        .with_hull_factor(options.hull_factor);
     Ok(fly(source, path, &mut renderer, options)?)
 }
 

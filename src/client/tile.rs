@@ -96,6 +96,9 @@ pub struct TileData {
     pub terrain: TerrainMesh,
     /// Height statistics.
     pub range: TileRange,
+    /// The coarser surface the tile is drawn morphing from or to, CEM and
+    /// ground per texel ([`Self::morphing`]); none for a tile drawn as it is.
+    pub morph_from: Option<Vec<[f32; 2]>>,
 }
 
 /// Why a payload cannot become a tile.
@@ -143,43 +146,81 @@ impl TileData {
             })
         };
         let (cem, dem) = (local(&payload.cem), local(&payload.dem));
-        let near = dilate(&cem, ZONE_NEAR);
-        let far = dilate(&near, ZONE_FAR - ZONE_NEAR);
-        let texels = (0..expected)
-            .map(|k| [cem.data()[k], dem.data()[k], near.data()[k], far.data()[k]].map(nodata_low))
-            .collect();
-        let reorder = |k: usize| south_up(k);
-        let colour = (0..expected).map(|k| payload.colour[reorder(k)]).collect();
-        let surface = (0..expected).map(|k| payload.surface[reorder(k)]).collect();
-        let cast = cast_window(&cem, halo, grid.samples() as usize);
-        let mip = MaxMipmap::build(&cast);
+        let colour = (0..expected).map(|k| payload.colour[south_up(k)]).collect();
+        let surface = (0..expected).map(|k| payload.surface[south_up(k)]).collect();
         let n = grid.samples() as usize;
-        let cast_dem = cast_window(&dem, halo, n);
-        let hull = Hull::build(&cast, &cast_dem);
         let terrain =
             TerrainMesh::build(&frame, &dem.crop(crate::raster::Window::new(halo as i64, halo as i64, n, n), f32::NAN));
-        let range = TileRange {
-            min_m: hull.bottom_m,
-            max_m: cast.min_max().map_or(0.0, |(_, hi)| hi),
-            texels_max_m: cem.min_max().map_or(0.0, |(_, hi)| hi),
-            canopy_max_m: canopy_max(&cast, &cast_dem),
-            mesh_error_m: terrain.mesh_error_m,
-            heights_m: height_range(&payload.dem, &payload.cem),
-        };
+        let bounded = Bounded::new((&cem, &dem), (&cem, &dem), halo, n);
         Ok(TileData {
             frame,
             base_m: base,
             serial: next_serial(),
             halo,
             size,
-            texels,
+            texels: bounded.texels,
             colour,
             surface,
-            mip,
-            hull,
+            mip: bounded.mip,
+            hull: bounded.hull,
+            range: TileRange {
+                mesh_error_m: terrain.mesh_error_m,
+                heights_m: height_range(&payload.dem, &payload.cem),
+                ..bounded.range
+            },
             terrain,
-            range,
+            morph_from: None,
         })
+    }
+
+    /// This tile drawn morphing between its own surface and a coarser one:
+    /// `from` holds that surface's CEM and ground per texel in this tile's
+    /// frame (as [`Self::texels`]; NaN where it has no data), `from_heights_m`
+    /// its range above the ellipsoid. The texels keep the tile's own
+    /// heights, which the GPU blends with `from` by each draw's weight; every
+    /// bound (zones, mipmap, hull, range) encloses both ends, so no ray
+    /// misses the surface at any weight, and the terrain mesh under it is
+    /// lowered as far as the coarser ground lies below its own.
+    pub fn morphing(&self, from: &[[f32; 2]], (lowest_m, highest_m): (f64, f64)) -> TileData {
+        let size = self.size;
+        let own = |c: usize| Raster::from_fn(size, size, |x, y| nodata_nan(self.texels[y * size + x][c]));
+        let (cem, dem) = (own(0), own(1));
+        // Where the coarser tile has no data the tile keeps its own heights.
+        let from: Vec<[f32; 2]> = from
+            .iter()
+            .zip(&self.texels)
+            .map(|(f, t)| [0, 1].map(|c| if f[c].is_nan() { t[c] } else { f[c] }))
+            .collect();
+        let end = |c: usize, pick: fn(f32, f32) -> f32| {
+            Raster::from_fn(size, size, |x, y| {
+                let mine = if c == 0 { cem.get(x, y) } else { dem.get(x, y) };
+                if mine.is_nan() { mine } else { pick(mine, from[y * size + x][c]) }
+            })
+        };
+        let (upper, lower) = (end(0, f32::max), end(1, f32::min));
+        let n = self.frame.samples as usize;
+        let bounded = Bounded::new((&cem, &dem), (&upper, &lower), self.halo, n);
+        let sink = cast_window(&dem, self.halo, n)
+            .data()
+            .iter()
+            .zip(cast_window(&lower, self.halo, n).data())
+            .map(|(mine, low)| mine - low)
+            .filter(|v| v.is_finite())
+            .fold(0.0, f32::max);
+        let (lo, hi) = self.range.heights_m;
+        TileData {
+            serial: next_serial(),
+            texels: bounded.texels,
+            mip: bounded.mip,
+            hull: bounded.hull,
+            range: TileRange {
+                mesh_error_m: self.range.mesh_error_m + sink,
+                heights_m: (lo.min(lowest_m), hi.max(highest_m)),
+                ..bounded.range
+            },
+            morph_from: Some(from),
+            ..self.clone()
+        }
     }
 
     /// The tile.
@@ -230,6 +271,47 @@ fn cast_window(layer: &Raster<f32>, halo: usize, samples: usize) -> Raster<f32> 
     layer.crop(w, f32::NAN)
 }
 
+fn nodata_nan(v: f32) -> f32 {
+    if v <= NODATA_M { f32::NAN } else { v }
+}
+
+/// A tile's texels and what bounds its surface, from its own CEM and
+/// ground and the envelope that surface stays in (the highest CEM and
+/// lowest ground it can take; its own heights unless it morphs). Layers
+/// are local metres, rows south-up, halo included, NaN for nodata.
+struct Bounded {
+    texels: Vec<[f32; 4]>,
+    mip: MaxMipmap,
+    hull: Hull,
+    /// Without the terrain mesh's error and the heights above the ellipsoid.
+    range: TileRange,
+}
+
+impl Bounded {
+    fn new(
+        (cem, dem): (&Raster<f32>, &Raster<f32>),
+        (upper, lower): (&Raster<f32>, &Raster<f32>),
+        halo: usize,
+        n: usize,
+    ) -> Bounded {
+        let near = dilate(upper, ZONE_NEAR);
+        let far = dilate(&near, ZONE_FAR - ZONE_NEAR);
+        let texels = (0..cem.data().len())
+            .map(|k| [cem.data()[k], dem.data()[k], near.data()[k], far.data()[k]].map(nodata_low))
+            .collect();
+        let (cast, cast_lower) = (cast_window(upper, halo, n), cast_window(lower, halo, n));
+        let hull = Hull::build(&cast, &cast_lower);
+        let range = TileRange {
+            min_m: hull.bottom_m,
+            max_m: cast.min_max().map_or(0.0, |(_, hi)| hi),
+            texels_max_m: upper.min_max().map_or(0.0, |(_, hi)| hi),
+            canopy_max_m: canopy_max(&cast, &cast_lower),
+            ..TileRange::default()
+        };
+        Bounded { texels, mip: MaxMipmap::build(&cast), hull, range }
+    }
+}
+
 fn canopy_max(cem: &Raster<f32>, dem: &Raster<f32>) -> f32 {
     cem.data().iter().zip(dem.data()).map(|(c, d)| c - d).filter(|v| v.is_finite()).fold(0.0, f32::max)
 }
@@ -262,6 +344,52 @@ mod tests {
         for tx in &t.texels {
             assert!(tx[2] >= tx[0] && tx[3] >= tx[2]);
         }
+    }
+
+    #[test]
+    fn a_morphing_tile_is_bounded_at_every_weight() {
+        let grid = TileGrid::new(36.0, 33).unwrap();
+        let id = grid.tile_containing(10.2, 46.4, 12);
+        let own = TileData::prepare(&grid, ramp(&grid, id, 2)).unwrap();
+        // A coarser surface waving 40 m above and below, without data in a corner.
+        let from: Vec<[f32; 2]> = own
+            .texels
+            .iter()
+            .enumerate()
+            .map(|(k, t)| {
+                let wave = 40.0 * ((k % 37) as f32 * 0.7).sin() * ((k / 37) as f32 * 0.4).cos();
+                if k < 5 { [f32::NAN; 2] } else { [t[0] + wave, t[1] + wave] }
+            })
+            .collect();
+        let m = own.morphing(&from, (900.0, 1200.0));
+        assert_eq!(m.range.heights_m, (900.0, own.range.heights_m.1.max(1200.0)));
+        assert_ne!(m.serial, own.serial);
+        let stored = m.morph_from.as_ref().expect("the coarser surface");
+        assert_eq!(stored[0], [own.texels[0][0], own.texels[0][1]], "the tile's own where the coarser has no data");
+        let (b, n, size) = (2, 33, 37);
+        let mut sank = 0.0f32;
+        for w in [0.0f32, 0.3, 0.7, 1.0] {
+            let at = |x: usize, y: usize, c: usize| {
+                let k = y * size + x;
+                stored[k][c] + w * (m.texels[k][c] - stored[k][c])
+            };
+            // Cast cell (cx, cy) has its south-west corner at texel (b - 1 + cx, b - 1 + cy).
+            for cy in 0..=n {
+                for cx in 0..=n {
+                    let (x, y) = (b - 1 + cx, b - 1 + cy);
+                    let corners = [(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)];
+                    let top = corners.iter().map(|&(i, j)| at(i, j, 0)).fold(f32::MIN, f32::max);
+                    assert!(top <= m.mip.level(0).get(cx, cy) + 1e-3, "w {w} cell {cx},{cy}");
+                    assert!(top <= m.texels[y * size + x][2] + 1e-3, "w {w}: the 4-sample zone at {x},{y}");
+                    for &(i, j) in &corners {
+                        assert!(at(i, j, 1) >= m.range.min_m, "w {w} ground at {i},{j} below the hull");
+                        sank = sank.max(own.texels[j * size + i][1] - at(i, j, 1));
+                    }
+                }
+            }
+        }
+        assert!(sank > 10.0, "the coarser ground lies below the tile's: {sank}");
+        assert!(m.range.mesh_error_m >= own.range.mesh_error_m + sank - 1e-3, "the filler mesh sinks with it");
     }
 
     #[test]

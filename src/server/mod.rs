@@ -159,6 +159,7 @@ pub async fn bind(config: Option<&Path>, options: ServeOptions) -> anyhow::Resul
 /// Loads the configuration, binds, serves until SIGTERM or SIGINT, then
 /// finishes the requests in flight.
 pub async fn serve(config: Option<&Path>, options: ServeOptions) -> anyhow::Result<()> {
+    let shutdown = shutdown_signal()?;
     let bound = bind(config, options).await?;
     let (state, cache) = (bound.state.clone(), bound.cache.clone());
     tracing::info!(
@@ -169,32 +170,34 @@ pub async fn serve(config: Option<&Path>, options: ServeOptions) -> anyhow::Resu
         workers = state.settings.workers,
         "serving"
     );
-    bound.run(shutdown_signal()).await?;
+    bound.run(shutdown).await?;
     tracing::info!("stopped");
     Ok(())
 }
 
-/// Resolves on SIGTERM or Ctrl-C.
-async fn shutdown_signal() {
-    let ctrl_c = async {
-        let _ = tokio::signal::ctrl_c().await;
-    };
+/// Registers for SIGTERM and Ctrl-C at once (a signal that comes before
+/// the first poll must not take the default action and kill the server
+/// uncleanly) and resolves on either.
+fn shutdown_signal() -> std::io::Result<impl std::future::Future<Output = ()> + Send + 'static> {
     #[cfg(unix)]
-    let term = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut s) => {
-                s.recv().await;
+    let signalled = {
+        use tokio::signal::unix::{SignalKind, signal};
+        let (mut term, mut interrupt) = (signal(SignalKind::terminate())?, signal(SignalKind::interrupt())?);
+        async move {
+            tokio::select! {
+                _ = term.recv() => {},
+                _ = interrupt.recv() => {},
             }
-            Err(_) => std::future::pending::<()>().await,
         }
     };
     #[cfg(not(unix))]
-    let term = std::future::pending::<()>();
-    tokio::select! {
-        _ = ctrl_c => {},
-        _ = term => {},
-    }
-    tracing::info!("shutting down: finishing requests in flight");
+    let signalled = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    Ok(async move {
+        signalled.await;
+        tracing::info!("shutting down: finishing requests in flight");
+    })
 }
 
 /// Seconds as a duration, refusing nonsense.

@@ -14,9 +14,10 @@ use super::super::tile::TileData;
 use super::super::trees::{self, TreeSettings};
 use super::ahead::{self, Lookahead, WINDOW};
 use super::budget::{self, Budget, Choice, TreeItem};
-use super::morphs::{Morphing, Morphs};
+use super::morphs::{Morphing, Morphs, Pairs};
 use super::worker::{Request, Worker};
 use super::{Selected, Selector};
+use crate::grid::TileGrid;
 use crate::grid::TileId;
 use crate::lod::calibrate::{CalibratorSettings, CostCalibrator};
 use crate::lod::model::{CostFeatures, CostModel};
@@ -47,8 +48,9 @@ pub struct BudgetFlight {
     /// Flight time of the last request.
     requested_s: f64,
     frames: usize,
-    /// The morphs, with geomorphing on.
+    /// The morphs, with geomorphing on, and the tiles they draw.
     morphs: Option<Morphs>,
+    pairs: Pairs,
     /// The tiles last drawn and how trees grow on them.
     trees: Option<(TreeSettings, Vec<Arc<TileData>>)>,
 }
@@ -75,6 +77,7 @@ impl BudgetFlight {
             requested_s: f64::NEG_INFINITY,
             frames: 0,
             morphs: geomorph.then(|| Morphs::new(look.tau_s)),
+            pairs: Pairs::default(),
             trees: None,
         })
     }
@@ -145,12 +148,19 @@ impl BudgetFlight {
     }
 
     /// Which tiles of `drawn`, the cut drawn at `t_s`, morph from or to a
-    /// coarser tile (over `τ`).
+    /// coarser tile (over `τ`); the frame's [`Self::morph_tile`]s follow.
     pub fn morphs(&mut self, t_s: f64, drawn: &[TileId]) -> Vec<Morphing> {
+        self.pairs.next_frame();
         let next: Option<Vec<TileId>> = self.pending.as_ref().map(|p| ids(&p.selected));
         let since_s = self.pending.as_ref().map_or(t_s, |p| p.since_s);
         let Some(morphs) = &mut self.morphs else { return Vec::new() };
         morphs.update(t_s, drawn, next.as_deref().map(|n| (n, since_s)))
+    }
+
+    /// `tile` prepared to be drawn morphing with `from`, kept while the
+    /// morph lasts.
+    pub fn morph_tile(&mut self, grid: &TileGrid, tile: &TileData, from: &TileData) -> Arc<TileData> {
+        self.pairs.get(grid, tile, from)
     }
 
     /// A finished selection: drawn at once unless, geomorphing, it

@@ -6,13 +6,15 @@
 //! during the interval the selection is for), so no point of the surface
 //! jumps at the switch.
 //!
-//! A morphing tile is drawn as a tile prepared from a blended payload
-//! ([`blend`]): its own surface classes and colours, CEM and ground heights
-//! moved from the ancestor's surface toward its own by the morph weight
-//! (`crate::lod::morph::morphed_height`). Nodata stays nodata; where only
-//! the ancestor has none, the tile's own height is used. Such a tile is
-//! prepared and uploaded again every frame of its morph, so `sylva fly`
-//! geomorphs only when asked (`--geomorph`).
+//! A morphing tile is drawn from a tile prepared once per morph ([`pair`],
+//! kept in [`Pairs`] while the morph lasts): its own texels, and the
+//! ancestor's surface resampled to them, which the GPU blends by the
+//! frame's morph weight (`crate::lod::morph::morphed_height`); its bounds
+//! enclose both surfaces. Nodata stays nodata; where only the ancestor has
+//! none, the tile's own height is used; a morphing tile far enough to be
+//! drawn plain (no rays, its relief below a pixel) shows its own ground.
+//! [`blend`] prepares the surface of one weight as a tile of its own, for
+//! the CPU reference.
 //!
 //! Coarsening is a downmorph, run *before* the switch (001's asymmetry):
 //! the flight holds a cut that coarsens back for `τ` while the tiles it
@@ -23,6 +25,7 @@ use super::super::tile::{NODATA_M, TileData, TileError, TilePayload};
 use crate::grid::{TileGrid, TileId};
 use crate::lod::morph::{MorphTrack, morphed_height};
 use std::collections::{HashMap, HashSet};
+use std::sync::Arc;
 
 /// A tile's level track and the coarser tile at its other end.
 #[derive(Clone, Debug)]
@@ -122,17 +125,50 @@ fn ancestors(id: TileId) -> impl Iterator<Item = TileId> {
     std::iter::successors(id.parent(), |p| p.parent())
 }
 
+/// The tiles prepared to draw morphs, by the serials of the tile and of
+/// the coarser one: each is prepared once and kept while its morph lasts
+/// (dropped on the first frame that does not ask for it).
+#[derive(Default)]
+pub struct Pairs {
+    last: HashMap<(u64, u64), Arc<TileData>>,
+    this: HashMap<(u64, u64), Arc<TileData>>,
+}
+
+impl Pairs {
+    /// Starts a frame: the pairs the last one did not ask for are dropped.
+    pub fn next_frame(&mut self) {
+        self.last = std::mem::take(&mut self.this);
+    }
+
+    /// `tile` drawn morphing with `from` ([`pair`]).
+    pub fn get(&mut self, grid: &TileGrid, tile: &TileData, from: &TileData) -> Arc<TileData> {
+        let key = (tile.serial, from.serial);
+        let prepared = match self.last.remove(&key).or_else(|| self.this.get(&key).cloned()) {
+            Some(p) => p,
+            None => Arc::new(pair(grid, tile, from)),
+        };
+        self.this.insert(key, prepared.clone());
+        prepared
+    }
+}
+
+/// `tile` drawn morphing from or to `from`'s surface, on `grid`: prepared
+/// once per morph, its weight given per draw (the GPU blends the two
+/// surfaces, [`TileData::morphing`]).
+pub fn pair(grid: &TileGrid, tile: &TileData, from: &TileData) -> TileData {
+    let drops = tile.frame.drops_m(tile.halo);
+    let local: Vec<[f32; 2]> =
+        coarse_surface(grid, tile, from).iter().zip(&drops).map(|(h, d)| h.map(|v| (v + d) as f32)).collect();
+    tile.morphing(&local, from.range.heights_m)
+}
+
 /// `tile` with its heights moved from `from`'s surface toward its own by
-/// `weight`, prepared on `grid`.
+/// `weight`, prepared on `grid` as a tile of its own: what [`pair`] draws
+/// at that weight (the CPU reference renders it).
 pub fn blend(grid: &TileGrid, tile: &TileData, from: &TileData, weight: f64) -> Result<TileData, TileError> {
-    let (own, coarse) = (Heights::of(tile), Heights::of(from));
-    let sector = grid.sector(tile.id());
-    let outer = grid.sector(from.id());
-    let n = f64::from(grid.samples() - 1);
-    let (step_lon, step_lat) = ((sector.max_lon - sector.min_lon) / n, (sector.max_lat - sector.min_lat) / n);
-    let (outer_lon, outer_lat) = ((outer.max_lon - outer.min_lon) / n, (outer.max_lat - outer.min_lat) / n);
+    let own = Heights::of(tile);
+    let coarse = coarse_surface(grid, tile, from);
     let size = tile.size;
-    let b = tile.halo as f64;
     // Payload order: row 0 at the north.
     let mut payload = TilePayload {
         id: tile.id(),
@@ -143,15 +179,11 @@ pub fn blend(grid: &TileGrid, tile: &TileData, from: &TileData, weight: f64) -> 
         colour: vec![[0; 4]; size * size],
     };
     for y in 0..size {
-        let lat = sector.min_lat + (y as f64 - b) * step_lat;
-        let fy = (lat - outer.min_lat) / outer_lat;
         for x in 0..size {
-            let lon = sector.min_lon + (x as f64 - b) * step_lon;
-            let fx = (lon - outer.min_lon) / outer_lon;
             let k = (size - 1 - y) * size + x;
             for layer in 0..2 {
                 let mine = own.at(layer, x, y);
-                let theirs = coarse.bilinear(layer, fx, fy);
+                let theirs = coarse[y * size + x][layer];
                 let v = if theirs.is_nan() { mine } else { morphed_height(theirs, mine, weight) };
                 [&mut payload.cem, &mut payload.dem][layer][k] = v as f32;
             }
@@ -160,6 +192,27 @@ pub fn blend(grid: &TileGrid, tile: &TileData, from: &TileData, weight: f64) -> 
         }
     }
     TileData::prepare(grid, payload)
+}
+
+/// `from`'s CEM and ground at each texel of `tile` (halo included, rows
+/// south-up), metres above the ellipsoid, NaN where it has none: bilinear
+/// between its samples, the surface the ray caster drew.
+fn coarse_surface(grid: &TileGrid, tile: &TileData, from: &TileData) -> Vec<[f64; 2]> {
+    let coarse = Heights::of(from);
+    let sector = grid.sector(tile.id());
+    let outer = grid.sector(from.id());
+    let n = f64::from(grid.samples() - 1);
+    let (step_lon, step_lat) = ((sector.max_lon - sector.min_lon) / n, (sector.max_lat - sector.min_lat) / n);
+    let (outer_lon, outer_lat) = ((outer.max_lon - outer.min_lon) / n, (outer.max_lat - outer.min_lat) / n);
+    let b = tile.halo as f64;
+    (0..tile.size * tile.size)
+        .map(|k| {
+            let (x, y) = ((k % tile.size) as f64, (k / tile.size) as f64);
+            let fx = (sector.min_lon + (x - b) * step_lon - outer.min_lon) / outer_lon;
+            let fy = (sector.min_lat + (y - b) * step_lat - outer.min_lat) / outer_lat;
+            [0, 1].map(|layer| coarse.bilinear(layer, fx, fy))
+        })
+        .collect()
 }
 
 /// A tile's CEM and ground above the ellipsoid (NaN for nodata), rows

@@ -2,9 +2,12 @@
 //! ground, safety zones), colour + surface class, and the maximum mipmap
 //! packed in an atlas — plus each resident tile's hull mesh. The number of
 //! slots follows from the memory budget; a full cache evicts the least
-//! recently drawn tile that the current frame does not use.
+//! recently drawn tile that the current frame does not use. With
+//! geomorphing, a pool of layers holds the coarser surfaces that morphing
+//! tiles blend with (a third of a slot each, one layer per two slots).
 //!
-//! Invariant: bytes resident ≤ the budget (slots are allocated up front).
+//! Invariant: bytes resident ≤ the budget (slots and layers are allocated
+//! up front).
 
 use super::super::hull::HullVertex;
 use super::super::terrain::TerrainVertex;
@@ -73,23 +76,30 @@ pub struct TileCache {
     /// Atlas rectangle of each mipmap level: x, y, width, height.
     pub mip_rects: Vec<[u32; 4]>,
     size: u32,
+    /// The coarser surfaces of morphing tiles: CEM and ground per texel.
+    pub morph_from: wgpu::Texture,
     slots: Vec<Option<Resident>>,
     slot_bytes: usize,
+    /// Per morph layer: the serial of the tile it holds, when last drawn.
+    morph_layers: Vec<Option<(u64, u64)>>,
     hull_factor: usize,
 }
 
 impl TileCache {
     /// A cache for tiles of `samples` per side with `halo`, within
-    /// `budget_bytes` (at least one slot).
-    pub fn new(device: &wgpu::Device, samples: u32, halo: u32, budget_bytes: usize) -> TileCache {
+    /// `budget_bytes` (at least one slot), with a pool of morph layers if
+    /// `geomorph`.
+    pub fn new(device: &wgpu::Device, samples: u32, halo: u32, budget_bytes: usize, geomorph: bool) -> TileCache {
         let size = samples + 2 * halo;
         let mip_rects = atlas(samples + 1);
         let atlas_w = mip_rects.iter().map(|r| r[0] + r[2]).max().unwrap_or(1);
         let atlas_h = mip_rects.iter().map(|r| r[1] + r[3]).max().unwrap_or(1);
         let slot_bytes = (size * size * (16 + 4) + atlas_w * atlas_h * 4) as usize;
-        let count =
-            ((budget_bytes / slot_bytes) as u32).clamp(1, MAX_SLOTS.min(device.limits().max_texture_array_layers));
-        let array = |label, w, h, format| {
+        let share = if geomorph { morph_bytes(size) / 2 } else { 0 };
+        let count = ((budget_bytes / (slot_bytes + share)) as u32)
+            .clamp(1, MAX_SLOTS.min(device.limits().max_texture_array_layers));
+        let layers = if geomorph { (count / 2).max(1) } else { 0 };
+        let array = |label, (w, h, count), format| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
                 size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: count },
@@ -101,14 +111,18 @@ impl TileCache {
                 view_formats: &[],
             })
         };
+        // Without geomorphing the pool is one texel, for the bind group.
+        let pool = if geomorph { (size, size, layers) } else { (1, 1, 1) };
         TileCache {
-            texels: array("tile texels", size, size, wgpu::TextureFormat::Rgba32Float),
-            colours: array("tile colours", size, size, wgpu::TextureFormat::Rgba8Unorm),
-            mip: array("tile max mipmaps", atlas_w, atlas_h, wgpu::TextureFormat::R32Float),
+            texels: array("tile texels", (size, size, count), wgpu::TextureFormat::Rgba32Float),
+            colours: array("tile colours", (size, size, count), wgpu::TextureFormat::Rgba8Unorm),
+            mip: array("tile max mipmaps", (atlas_w, atlas_h, count), wgpu::TextureFormat::R32Float),
+            morph_from: array("morph surfaces", pool, wgpu::TextureFormat::Rg32Float),
             mip_rects,
             size,
             slots: (0..count).map(|_| None).collect(),
             slot_bytes,
+            morph_layers: vec![None; layers as usize],
             hull_factor: 1,
         }
     }
@@ -129,9 +143,31 @@ impl TileCache {
         self.slot_bytes
     }
 
-    /// Bytes of tiles resident now (textures and meshes).
+    /// Bytes of tiles resident now (textures, meshes and morph layers).
     pub fn resident_bytes(&self) -> usize {
-        self.slots.iter().flatten().map(|r| self.slot_bytes + r.hull.bytes() + r.terrain.bytes()).sum()
+        let tiles: usize =
+            self.slots.iter().flatten().map(|r| self.slot_bytes + r.hull.bytes() + r.terrain.bytes()).sum();
+        tiles + self.morph_layers.iter().flatten().count() * morph_bytes(self.size)
+    }
+
+    /// The morph layer holding the coarser surface of `tile` (uploading
+    /// it if it is not there), marked used in `frame`; none for a tile
+    /// that does not morph, or when every layer is used in `frame` (the
+    /// tile is then drawn with its own heights).
+    pub fn morph_layer(&mut self, queue: &wgpu::Queue, tile: &TileData, frame: u64) -> Option<u32> {
+        let from = tile.morph_from.as_ref()?;
+        let held = self.morph_layers.iter().position(|l| l.is_some_and(|(serial, _)| serial == tile.serial));
+        let k = match held {
+            Some(k) => k,
+            None => {
+                let k = least_recent(self.morph_layers.iter().map(|l| l.map(|(_, used)| used)), frame)?;
+                let size = self.size;
+                write_layer(queue, &self.morph_from, k as u32, [0, 0, size, size], bytemuck::cast_slice(from), 8);
+                k
+            }
+        };
+        self.morph_layers[k] = Some((tile.serial, frame));
+        Some(k as u32)
     }
 
     /// The slot of a resident tile (by [`TileData::serial`]), marking it
@@ -193,17 +229,7 @@ impl TileCache {
     }
 
     fn victim(&self, frame: u64) -> Option<u32> {
-        if let Some(free) = self.slots.iter().position(Option::is_none) {
-            return Some(free as u32);
-        }
-        let (k, _) = self
-            .slots
-            .iter()
-            .enumerate()
-            .filter_map(|(k, s)| s.as_ref().map(|r| (k, r.last_frame)))
-            .filter(|&(_, used)| used < frame)
-            .min_by_key(|&(_, used)| used)?;
-        Some(k as u32)
+        least_recent(self.slots.iter().map(|s| s.as_ref().map(|r| r.last_frame)), frame).map(|k| k as u32)
     }
 
     fn write(&self, queue: &wgpu::Queue, tile: &TileData, slot: u32) {
@@ -217,6 +243,25 @@ impl TileCache {
             write_layer(queue, &self.mip, slot, *rect, bytemuck::cast_slice(tile.mip.level(level).data()), 4);
         }
     }
+}
+
+/// Bytes of one morph layer: two `f32` per texel.
+fn morph_bytes(size: u32) -> usize {
+    (size * size * 8) as usize
+}
+
+/// A free entry, else the least recently used one not used in `frame`,
+/// from each entry's last use (none: free).
+fn least_recent(last_used: impl Iterator<Item = Option<u64>>, frame: u64) -> Option<usize> {
+    let mut oldest: Option<(usize, u64)> = None;
+    for (k, used) in last_used.enumerate() {
+        match used {
+            None => return Some(k),
+            Some(used) if used < frame && oldest.is_none_or(|(_, o)| used < o) => oldest = Some((k, used)),
+            Some(_) => {}
+        }
+    }
+    oldest.map(|(k, _)| k)
 }
 
 fn write_layer(

@@ -28,7 +28,7 @@ use pipeline::Pipelines;
 use std::time::Instant;
 use targets::Targets;
 use timer::PassTimer;
-use uniforms::{DrawMode, FrameSettings, FrameUniform, TILE_STRIDE, TileUniform};
+use uniforms::{DrawMode, FrameSettings, FrameUniform, Placement, TILE_STRIDE, TileUniform};
 
 /// What to read back after a frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -82,6 +82,9 @@ pub struct Draw<'a> {
     pub shadow_steps: u32,
     /// Trees' splats in this tile's frame.
     pub splats: &'a [Splat],
+    /// Weight of the tile's own heights against the coarser surface it
+    /// morphs from or to (1 for a tile that does not morph).
+    pub morph_weight: f32,
 }
 
 /// How one tile of a frame is drawn: its texture slot, its mode and the
@@ -90,6 +93,7 @@ pub struct Draw<'a> {
 struct Prepared {
     slot: u32,
     mode: DrawMode,
+    morphing: bool,
     splats: std::ops::Range<u32>,
 }
 
@@ -122,11 +126,12 @@ impl Renderer {
     }
 
     /// A renderer for tiles of `samples` per side with `halo`, keeping at
-    /// most `budget_bytes` of tiles on the GPU.
-    pub fn new(gpu: Gpu, samples: u32, halo: u32, budget_bytes: usize) -> Renderer {
+    /// most `budget_bytes` of tiles on the GPU, and, if `geomorph`, room for
+    /// morphing tiles' coarser surfaces within that budget.
+    pub fn new(gpu: Gpu, samples: u32, halo: u32, budget_bytes: usize, geomorph: bool) -> Renderer {
         let device = &gpu.device;
         let pipelines = Pipelines::new(device);
-        let cache = TileCache::new(device, samples, halo, budget_bytes);
+        let cache = TileCache::new(device, samples, halo, budget_bytes, geomorph);
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),
             size: std::mem::size_of::<FrameUniform>() as u64,
@@ -171,8 +176,10 @@ impl Renderer {
         settings: &FrameSettings,
         readback: Readback,
     ) -> Result<Rendered, CacheFull> {
-        let draws: Vec<Draw> =
-            tiles.iter().map(|&tile| Draw { tile, shadow_steps: settings.shadow_steps, splats: &[] }).collect();
+        let draws: Vec<Draw> = tiles
+            .iter()
+            .map(|&tile| Draw { tile, shadow_steps: settings.shadow_steps, splats: &[], morph_weight: 1.0 })
+            .collect();
         self.render_draws(camera, &draws, settings, readback)
     }
 
@@ -215,22 +222,24 @@ impl Renderer {
         let mut blocks = Vec::with_capacity(order.len());
         let mut draws = Vec::with_capacity(order.len());
         let mut splats: Vec<Splat> = Vec::new();
-        for (near_m, &Draw { tile, shadow_steps, splats: tile_splats }) in order {
+        for (near_m, &Draw { tile, shadow_steps, splats: tile_splats, morph_weight }) in order {
             let slot = self.cache.insert(device, queue, tile, self.frame_no)?;
+            let morph = self.cache.morph_layer(queue, tile, self.frame_no).map(|layer| (layer, morph_weight));
             let mode = draw_mode(camera, tile, settings, near_m);
             match mode {
                 DrawMode::Hull => stats.tiles_hull += 1,
                 DrawMode::Inside => stats.tiles_inside += 1,
                 DrawMode::Plain => stats.tiles_plain += 1,
             }
-            let quad = self.cache.hull_quad_samples(slot).unwrap_or_else(|| tile.hull.quad_samples());
-            let block = TileUniform::new(camera, settings, tile, (slot, mode, quad), shadow_steps);
+            let hull_quad_samples = self.cache.hull_quad_samples(slot).unwrap_or_else(|| tile.hull.quad_samples());
+            let at = Placement { slot, mode, hull_quad_samples, morph };
+            let block = TileUniform::new(camera, settings, tile, at, shadow_steps);
             let mut bytes = bytemuck::bytes_of(&block).to_vec();
             bytes.resize(TILE_STRIDE as usize, 0);
             blocks.extend(bytes);
             let start = splats.len() as u32;
             splats.extend_from_slice(tile_splats);
-            draws.push(Prepared { slot, mode, splats: start..splats.len() as u32 });
+            draws.push(Prepared { slot, mode, morphing: morph.is_some(), splats: start..splats.len() as u32 });
         }
         let frame = FrameUniform::new(camera, settings, &self.cache.mip_rects);
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
@@ -292,7 +301,8 @@ impl Renderer {
             // under ray-cast tiles the lowered crack fillers.
             for (k, d) in draws.iter().enumerate().filter(|(_, d)| d.mode != DrawMode::Plain) {
                 let Some((hull, _)) = self.cache.meshes(d.slot) else { continue };
-                pass.set_pipeline(if d.mode == DrawMode::Hull { &self.pipelines.hull } else { &self.pipelines.inside });
+                let rays = if d.mode == DrawMode::Hull { &self.pipelines.hull } else { &self.pipelines.inside };
+                pass.set_pipeline(&rays[usize::from(d.morphing)]);
                 pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
                 draw(&mut pass, hull, hull.index_count);
             }

@@ -23,15 +23,17 @@ pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// The pipelines and bind group layouts.
 pub struct Pipelines {
-    /// Rays from the hull's front faces.
-    pub hull: wgpu::RenderPipeline,
-    /// Rays from the camera, on the hull's back faces.
-    pub inside: wgpu::RenderPipeline,
+    /// Rays from the hull's front faces: for tiles drawn as they are, and
+    /// for morphing ones (shaders specialised by the `MORPHING` override,
+    /// so a tile that does not morph pays nothing for it).
+    pub hull: [wgpu::RenderPipeline; 2],
+    /// Rays from the camera, on the hull's back faces (the same two).
+    pub inside: [wgpu::RenderPipeline; 2],
     /// Texture-mapped terrain mesh.
     pub plain: wgpu::RenderPipeline,
     /// Trees' splats: a quad of four strip vertices per instance.
     pub splat: wgpu::RenderPipeline,
-    /// Group 0: frame uniform, tile textures, sampler.
+    /// Group 0: frame uniform, tile textures, sampler, morph layers.
     pub frame_layout: wgpu::BindGroupLayout,
     /// Group 1: the tile uniform at a dynamic offset.
     pub tile_layout: wgpu::BindGroupLayout,
@@ -57,6 +59,7 @@ impl Pipelines {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
                     count: None,
                 },
+                texture_entry(5),
             ],
         });
         let tile_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -93,14 +96,15 @@ impl Pipelines {
             ..Default::default()
         };
         let quads = wgpu::PrimitiveState { topology: wgpu::PrimitiveTopology::TriangleStrip, ..Default::default() };
-        let make = |vs, fs, primitive, vertex: &wgpu::VertexBufferLayout| {
-            pipeline(device, &layout, &module, (vs, vertex.clone()), fs, primitive)
+        let make = |vs, (fs, morphing), primitive, vertex: &wgpu::VertexBufferLayout| {
+            pipeline(device, &layout, &module, (vs, vertex.clone()), (fs, morphing), primitive)
         };
+        let rays = |cull| [false, true].map(|m| make("vs_hull", ("fs_ray", m), triangles(cull), &hull_vertex));
         Pipelines {
-            hull: make("vs_hull", "fs_ray", triangles(wgpu::Face::Back), &hull_vertex),
-            inside: make("vs_hull", "fs_ray", triangles(wgpu::Face::Front), &hull_vertex),
-            plain: make("vs_plain", "fs_plain", triangles(wgpu::Face::Back), &terrain_vertex),
-            splat: make("vs_splat", "fs_splat", quads, &splat_instance),
+            hull: rays(wgpu::Face::Back),
+            inside: rays(wgpu::Face::Front),
+            plain: make("vs_plain", ("fs_plain", false), triangles(wgpu::Face::Back), &terrain_vertex),
+            splat: make("vs_splat", ("fs_splat", false), quads, &splat_instance),
             frame_layout,
             tile_layout,
         }
@@ -115,6 +119,7 @@ impl Pipelines {
             })
         };
         let (texels, colours, mip) = (view(&cache.texels), view(&cache.colours), view(&cache.mip));
+        let morph_from = view(&cache.morph_from);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor { label: Some("gather"), ..Default::default() });
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("frame"),
@@ -125,6 +130,7 @@ impl Pipelines {
                 wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&colours) },
                 wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&mip) },
                 wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::Sampler(&sampler) },
+                wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(&morph_from) },
             ],
         })
     }
@@ -177,9 +183,10 @@ fn pipeline(
     layout: &wgpu::PipelineLayout,
     module: &wgpu::ShaderModule,
     (vs, vertex): (&str, wgpu::VertexBufferLayout),
-    fs: &str,
+    (fs, morphing): (&str, bool),
     primitive: wgpu::PrimitiveState,
 ) -> wgpu::RenderPipeline {
+    let constants = [("MORPHING", f64::from(u8::from(morphing)))];
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(fs),
         layout: Some(layout),
@@ -201,7 +208,7 @@ fn pipeline(
         fragment: Some(wgpu::FragmentState {
             module,
             entry_point: Some(fs),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
             targets: &[
                 Some(wgpu::ColorTargetState { format: COLOUR_FORMAT, blend: None, write_mask: wgpu::ColorWrites::ALL }),
                 Some(wgpu::ColorTargetState {

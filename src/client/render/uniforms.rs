@@ -52,11 +52,27 @@ pub struct TileUniform {
     pub range: [f32; 4],
     /// Halo, texels per side, slot, top mipmap level.
     pub index: [i32; 4],
-    /// Draw mode, canopy whole, shadow steps, unused.
+    /// Draw mode, canopy whole, shadow steps, morph layer + 1 (0: none).
     pub flags: [u32; 4],
     /// Highest CEM over all texels (the halo too).
     pub texels: [f32; 4],
-    _pad: [f32; 20],
+    /// Morph weight of the tile's own heights (against the coarser
+    /// surface in its morph layer), unused × 3.
+    pub morph: [f32; 4],
+    _pad: [f32; 16],
+}
+
+/// Where and how a tile is drawn.
+#[derive(Clone, Copy, Debug)]
+pub struct Placement {
+    /// Its texture slot.
+    pub slot: u32,
+    /// Its draw mode.
+    pub mode: DrawMode,
+    /// Side of the largest quad of its hull as uploaded, samples.
+    pub hull_quad_samples: f32,
+    /// Its morph layer and the weight of its own heights, if it morphs.
+    pub morph: Option<(u32, f32)>,
 }
 
 /// How a tile is drawn.
@@ -111,15 +127,16 @@ impl FrameUniform {
 }
 
 impl TileUniform {
-    /// The tile block for `tile` in texture `slot`, with `shadow_steps`
+    /// The tile block for `tile` placed by `at`, with `shadow_steps`
     /// shadow samples per hit.
     pub fn new(
         camera: &Camera,
         settings: &FrameSettings,
         tile: &TileData,
-        (slot, mode, hull_quad_samples): (u32, DrawMode, f32),
+        at: Placement,
         shadow_steps: u32,
     ) -> TileUniform {
+        let Placement { slot, mode, hull_quad_samples, morph } = at;
         let frame = &tile.frame;
         let to_local = frame.basis.transpose();
         let cam = frame.to_local(camera.position_ecef);
@@ -148,9 +165,10 @@ impl TileUniform {
                 if mode == DrawMode::Plain { 0.0 } else { filler_drop_m(tile) },
             ],
             index: [tile.halo as i32, tile.size as i32, slot as i32, tile.mip.levels() as i32 - 1],
-            flags: [mode as u32, whole as u32, shadow_steps, 0],
+            flags: [mode as u32, whole as u32, shadow_steps, morph.map_or(0, |(layer, _)| layer + 1)],
             texels: [tile.range.texels_max_m, 0.0, 0.0, 0.0],
-            _pad: [0.0; 20],
+            morph: [morph.map_or(1.0, |(_, weight)| weight), 0.0, 0.0, 0.0],
+            _pad: [0.0; 16],
         }
     }
 }
@@ -245,6 +263,7 @@ mod tests {
             ("index", offset_of!(TileUniform, index)),
             ("flags", offset_of!(TileUniform, flags)),
             ("texels", offset_of!(TileUniform, texels)),
+            ("morph", offset_of!(TileUniform, morph)),
         ];
         for (name, rust) in [("Frame", &frame[..]), ("Tile", &tile[..])] {
             let (wgsl, size) = wgsl_offsets(name);
