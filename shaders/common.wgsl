@@ -43,7 +43,7 @@ struct Tile {
     range: vec4<f32>,
     // halo B, texels per side, texture slot, top mipmap level.
     index: vec4<i32>,
-    // draw mode (0 hull, 1 camera inside the hull, 2 plain), canopy whole (1),
+    // draw mode (0 hull, 1 camera inside the hull, 2 plain), unused,
     // shadow steps (the tile's ray-casting quality), morph layer + 1 (0: the
     // tile does not morph).
     flags: vec4<u32>,
@@ -70,9 +70,11 @@ const NO_HIT: f32 = -1.0;
 // Morphing tiles' coarser surfaces: CEM, ground per texel (tile.flags.w).
 @group(0) @binding(5) var morph_from: texture_2d_array<f32>;
 
-// Whether the pipeline draws morphing tiles (render/pipeline.rs): the
-// blend is compiled only into theirs.
+// What the ray-casting pipeline is specialised for (render/pipeline.rs,
+// RayVariant): morphing tiles (the blend is compiled only into theirs), and
+// tiles whose whole canopy is drawn unfaded (no ground or fade is read).
 override MORPHING: bool = false;
+override CANOPY_WHOLE: bool = false;
 @group(1) @binding(0) var<uniform> tile: Tile;
 
 // Texture accesses of this invocation: view ray (with the two gathers of the

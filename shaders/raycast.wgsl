@@ -52,7 +52,7 @@ fn project(local: vec3<f32>) -> vec4<f32> {
 fn vs_hull(v: HullIn) -> VertexOut {
     let xy = (v.sample - vec2<f32>(tile.grid.z)) * tile.grid.xy;
     var f = 1.0;
-    if tile.flags.y == 0u {
+    if !CANOPY_WHOLE {
         // The far fade of the nearest sample this vertex must bound (the
         // trees' near blend only lowers the canopy: left out, it bounds).
         let d = length(vec3<f32>(xy, v.hull.y) - tile.camera.xyz) - tile.camera.w;

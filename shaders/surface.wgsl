@@ -50,7 +50,7 @@ fn fetch_cell_heights(ci: i32, cj: i32, counter: ptr<private, u32>) -> vec4<f32>
     if min(min(c.x, c.y), min(c.z, c.w)) <= NODATA_BELOW {
         return vec4<f32>(NODATA_BELOW * 10.0);
     }
-    if tile.flags.y == 1u {
+    if CANOPY_WHOLE {
         return c;
     }
     // The ground under the canopy only where the canopy fades.

@@ -24,7 +24,7 @@ use super::tile::TileData;
 use super::trees::Splat;
 use cache::{CacheFull, TileCache};
 use gpu::Gpu;
-use pipeline::Pipelines;
+use pipeline::{Pipelines, RayVariant};
 use std::time::Instant;
 use targets::Targets;
 use timer::PassTimer;
@@ -93,7 +93,7 @@ pub struct Draw<'a> {
 struct Prepared {
     slot: u32,
     mode: DrawMode,
-    morphing: bool,
+    variant: RayVariant,
     splats: std::ops::Range<u32>,
 }
 
@@ -225,6 +225,7 @@ impl Renderer {
         for (near_m, &Draw { tile, shadow_steps, splats: tile_splats, morph_weight }) in order {
             let slot = self.cache.insert(device, queue, tile, self.frame_no)?;
             let morph = self.cache.morph_layer(queue, tile, self.frame_no).map(|layer| (layer, morph_weight));
+            let whole = uniforms::canopy_whole(camera, tile, &settings.fade);
             let mode = draw_mode(camera, tile, settings, near_m);
             match mode {
                 DrawMode::Hull => stats.tiles_hull += 1,
@@ -239,7 +240,11 @@ impl Renderer {
             blocks.extend(bytes);
             let start = splats.len() as u32;
             splats.extend_from_slice(tile_splats);
-            draws.push(Prepared { slot, mode, morphing: morph.is_some(), splats: start..splats.len() as u32 });
+            let variant = RayVariant { inside: mode == DrawMode::Inside, morphing: morph.is_some(), whole };
+            if mode != DrawMode::Plain {
+                self.pipelines.prepare_ray(device, variant);
+            }
+            draws.push(Prepared { slot, mode, variant, splats: start..splats.len() as u32 });
         }
         let frame = FrameUniform::new(camera, settings, &self.cache.mip_rects);
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
@@ -300,9 +305,10 @@ impl Renderer {
             // Ray-cast tiles first, then the terrain meshes: far tiles, and
             // under ray-cast tiles the lowered crack fillers.
             for (k, d) in draws.iter().enumerate().filter(|(_, d)| d.mode != DrawMode::Plain) {
-                let Some((hull, _)) = self.cache.meshes(d.slot) else { continue };
-                let rays = if d.mode == DrawMode::Hull { &self.pipelines.hull } else { &self.pipelines.inside };
-                pass.set_pipeline(&rays[usize::from(d.morphing)]);
+                let (Some((hull, _)), Some(rays)) = (self.cache.meshes(d.slot), self.pipelines.ray(d.variant)) else {
+                    continue;
+                };
+                pass.set_pipeline(rays);
                 pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
                 draw(&mut pass, hull, hull.index_count);
             }

@@ -3,7 +3,8 @@
 //! plain texture mapping of the terrain mesh (far tiles, and crack filling
 //! under ray-cast ones), and trees' splats as instanced quads. All write
 //! colour, per-pixel fetch counts, the view-axis distance and reversed-Z
-//! depth (greater is nearer).
+//! depth (greater is nearer). The ray-casting pipelines are specialised per
+//! [`RayVariant`] and built when a frame first needs one.
 
 use super::super::hull::HullVertex;
 use super::super::terrain::TerrainVertex;
@@ -11,6 +12,7 @@ use super::super::trees::Splat;
 use super::cache::TileCache;
 use super::shaders;
 use super::uniforms::{FrameUniform, TILE_STRIDE, TileUniform};
+use std::collections::HashMap;
 
 /// Colour target format.
 pub const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
@@ -21,14 +23,29 @@ pub const PIXEL_DATA_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Ui
 /// Depth format.
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
+/// Vertex attributes of the hull (sample position; ground and CEM bound).
+const HULL_ATTRIBUTES: [wgpu::VertexAttribute; 2] = wgpu::vertex_attr_array![0 => Float32x2, 1 => Float32x2];
+
+/// What a ray-casting pipeline's shaders are specialised for (WGSL
+/// overrides): a tile pays only for the work it needs, which matters most
+/// on software rasterisers, which run both sides of every branch under a
+/// mask (lavapipe: the canopy fade and the morph blend behind uniform
+/// branches cost 1.3–1.5× on every tile without them).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct RayVariant {
+    /// The camera is inside the hull: rays start on its back faces.
+    pub inside: bool,
+    /// The tile morphs: its heights are blended with its morph layer's
+    /// (`MORPHING`).
+    pub morphing: bool,
+    /// The whole canopy, unfaded, everywhere on the tile (`CANOPY_WHOLE`).
+    pub whole: bool,
+}
+
 /// The pipelines and bind group layouts.
 pub struct Pipelines {
-    /// Rays from the hull's front faces: for tiles drawn as they are, and
-    /// for morphing ones (shaders specialised by the `MORPHING` override,
-    /// so a tile that does not morph pays nothing for it).
-    pub hull: [wgpu::RenderPipeline; 2],
-    /// Rays from the camera, on the hull's back faces (the same two).
-    pub inside: [wgpu::RenderPipeline; 2],
+    /// Ray casting from the hull, per variant (built when first needed).
+    rays: HashMap<RayVariant, wgpu::RenderPipeline>,
     /// Texture-mapped terrain mesh.
     pub plain: wgpu::RenderPipeline,
     /// Trees' splats: a quad of four strip vertices per instance.
@@ -37,6 +54,8 @@ pub struct Pipelines {
     pub frame_layout: wgpu::BindGroupLayout,
     /// Group 1: the tile uniform at a dynamic offset.
     pub tile_layout: wgpu::BindGroupLayout,
+    module: wgpu::ShaderModule,
+    layout: wgpu::PipelineLayout,
 }
 
 impl Pipelines {
@@ -71,13 +90,7 @@ impl Pipelines {
             bind_group_layouts: &[Some(&frame_layout), Some(&tile_layout)],
             immediate_size: 0,
         });
-        let hull_attributes = wgpu::vertex_attr_array![0 => Float32x2, 1 => Float32x2];
         let terrain_attributes = wgpu::vertex_attr_array![0 => Float32x2, 1 => Float32, 2 => Float32x3];
-        let hull_vertex = wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<HullVertex>() as u64,
-            step_mode: wgpu::VertexStepMode::Vertex,
-            attributes: &hull_attributes,
-        };
         let terrain_vertex = wgpu::VertexBufferLayout {
             array_stride: std::mem::size_of::<TerrainVertex>() as u64,
             step_mode: wgpu::VertexStepMode::Vertex,
@@ -89,25 +102,47 @@ impl Pipelines {
             step_mode: wgpu::VertexStepMode::Instance,
             attributes: &splat_attributes,
         };
-        let triangles = |cull| wgpu::PrimitiveState {
-            topology: wgpu::PrimitiveTopology::TriangleList,
-            front_face: wgpu::FrontFace::Ccw,
-            cull_mode: Some(cull),
-            ..Default::default()
-        };
         let quads = wgpu::PrimitiveState { topology: wgpu::PrimitiveTopology::TriangleStrip, ..Default::default() };
-        let make = |vs, (fs, morphing), primitive, vertex: &wgpu::VertexBufferLayout| {
-            pipeline(device, &layout, &module, (vs, vertex.clone()), (fs, morphing), primitive)
-        };
-        let rays = |cull| [false, true].map(|m| make("vs_hull", ("fs_ray", m), triangles(cull), &hull_vertex));
+        let plain = ("vs_plain", terrain_vertex);
+        let splat = ("vs_splat", splat_instance);
         Pipelines {
-            hull: rays(wgpu::Face::Back),
-            inside: rays(wgpu::Face::Front),
-            plain: make("vs_plain", ("fs_plain", false), triangles(wgpu::Face::Back), &terrain_vertex),
-            splat: make("vs_splat", ("fs_splat", false), quads, &splat_instance),
+            plain: pipeline(device, (&layout, &module), plain, "fs_plain", (triangles(wgpu::Face::Back), &[])),
+            splat: pipeline(device, (&layout, &module), splat, "fs_splat", (quads, &[])),
+            rays: HashMap::new(),
             frame_layout,
             tile_layout,
+            module,
+            layout,
         }
+    }
+
+    /// Builds the ray-casting pipeline of `variant` if it is not built yet.
+    pub fn prepare_ray(&mut self, device: &wgpu::Device, variant: RayVariant) {
+        if self.rays.contains_key(&variant) {
+            return;
+        }
+        let vertex = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<HullVertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &HULL_ATTRIBUTES,
+        };
+        // Back faces when the camera is inside the hull.
+        let cull = if variant.inside { wgpu::Face::Front } else { wgpu::Face::Back };
+        let constants =
+            [("MORPHING", f64::from(u8::from(variant.morphing))), ("CANOPY_WHOLE", f64::from(u8::from(variant.whole)))];
+        let built = pipeline(
+            device,
+            (&self.layout, &self.module),
+            ("vs_hull", vertex),
+            "fs_ray",
+            (triangles(cull), &constants),
+        );
+        self.rays.insert(variant, built);
+    }
+
+    /// The ray-casting pipeline of `variant`, once prepared.
+    pub fn ray(&self, variant: RayVariant) -> Option<&wgpu::RenderPipeline> {
+        self.rays.get(&variant)
     }
 
     /// The frame bind group over the cache's textures.
@@ -178,22 +213,32 @@ fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     }
 }
 
+fn triangles(cull: wgpu::Face) -> wgpu::PrimitiveState {
+    wgpu::PrimitiveState {
+        topology: wgpu::PrimitiveTopology::TriangleList,
+        front_face: wgpu::FrontFace::Ccw,
+        cull_mode: Some(cull),
+        ..Default::default()
+    }
+}
+
+/// A pipeline of `module`'s `vs` and `fs` with the pipeline-overridable
+/// `constants` set in both stages.
 fn pipeline(
     device: &wgpu::Device,
-    layout: &wgpu::PipelineLayout,
-    module: &wgpu::ShaderModule,
+    (layout, module): (&wgpu::PipelineLayout, &wgpu::ShaderModule),
     (vs, vertex): (&str, wgpu::VertexBufferLayout),
-    (fs, morphing): (&str, bool),
-    primitive: wgpu::PrimitiveState,
+    fs: &str,
+    (primitive, constants): (wgpu::PrimitiveState, &[(&str, f64)]),
 ) -> wgpu::RenderPipeline {
-    let constants = [("MORPHING", f64::from(u8::from(morphing)))];
+    let options = || wgpu::PipelineCompilationOptions { constants, ..Default::default() };
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(fs),
         layout: Some(layout),
         vertex: wgpu::VertexState {
             module,
             entry_point: Some(vs),
-            compilation_options: Default::default(),
+            compilation_options: options(),
             buffers: &[Some(vertex)],
         },
         primitive,
@@ -208,7 +253,7 @@ fn pipeline(
         fragment: Some(wgpu::FragmentState {
             module,
             entry_point: Some(fs),
-            compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
+            compilation_options: options(),
             targets: &[
                 Some(wgpu::ColorTargetState { format: COLOUR_FORMAT, blend: None, write_mask: wgpu::ColorWrites::ALL }),
                 Some(wgpu::ColorTargetState {

@@ -52,7 +52,7 @@ pub struct TileUniform {
     pub range: [f32; 4],
     /// Halo, texels per side, slot, top mipmap level.
     pub index: [i32; 4],
-    /// Draw mode, canopy whole, shadow steps, morph layer + 1 (0: none).
+    /// Draw mode, unused, shadow steps, morph layer + 1 (0: none).
     pub flags: [u32; 4],
     /// Highest CEM over all texels (the halo too).
     pub texels: [f32; 4],
@@ -147,7 +147,6 @@ impl TileUniform {
         let quad = f64::from(hull_quad_samples) * tile.frame.spacing_m.max_element();
         let rise = (tile.range.max_m - tile.range.min_m) as f64;
         let reach = (quad * quad * 2.0 + rise * rise).sqrt();
-        let whole = canopy_whole(camera, tile, &settings.fade);
         TileUniform {
             model_view: camera.model_view(frame).to_cols_array_2d(),
             camera: [cam.x as f32, cam.y as f32, cam.z as f32, reach as f32],
@@ -165,7 +164,7 @@ impl TileUniform {
                 if mode == DrawMode::Plain { 0.0 } else { filler_drop_m(tile) },
             ],
             index: [tile.halo as i32, tile.size as i32, slot as i32, tile.mip.levels() as i32 - 1],
-            flags: [mode as u32, whole as u32, shadow_steps, morph.map_or(0, |(layer, _)| layer + 1)],
+            flags: [mode as u32, 0, shadow_steps, morph.map_or(0, |(layer, _)| layer + 1)],
             texels: [tile.range.texels_max_m, 0.0, 0.0, 0.0],
             morph: [morph.map_or(1.0, |(_, weight)| weight), 0.0, 0.0, 0.0],
             _pad: [0.0; 16],
@@ -188,7 +187,7 @@ fn filler_drop_m(tile: &TileData) -> f32 {
 /// and far enough from the trees' splats: the far fade shrinks with
 /// distance and the canopy's share of the tree blend grows, so both ends
 /// of the tile's distances tell.
-fn canopy_whole(camera: &Camera, tile: &TileData, fade: &Fade) -> bool {
+pub fn canopy_whole(camera: &Camera, tile: &TileData, fade: &Fade) -> bool {
     let (near, far) = (tile_near_m(camera, tile), tile_far_m(camera, tile));
     fade.factor(near) >= 1.0 && fade.factor(far) >= 1.0
 }
