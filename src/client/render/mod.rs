@@ -117,9 +117,9 @@ impl Renderer {
     /// samples (set before the first frame). A software rasteriser shades
     /// whole pixel blocks along every triangle's edge, so there fewer,
     /// larger triangles win although rays start farther from the surface:
-    /// the same 26-tile frames on lavapipe took 330 ms with 16-sample quads,
-    /// 235 ms with 64 (and 15.2 against 19.5 fetches per pixel; the linear
-    /// march, starting farther away, misses more).
+    /// the same 27-tile frames on lavapipe took 257 ms with 16-sample quads,
+    /// 187–192 ms with 64 (and 15.1 against 19.6 fetches per pixel; the
+    /// linear march, starting farther away, misses more).
     pub fn with_hull_factor(mut self, factor: usize) -> Renderer {
         self.cache.set_hull_factor(factor);
         self
