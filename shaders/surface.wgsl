@@ -124,7 +124,8 @@ fn height_at(s: vec2<f32>, counter: ptr<private, u32>) -> f32 {
 
 // The first tau in [0, len] where the ray at cell fraction `f`, height `z0`,
 // moving `d` (samples and metres per metre), is at or below the patch `h`;
-// NO_HIT if none. Mirrors reference::patch_hit.
+// NO_HIT if none. The roots of reference::patch_hit, without its separate
+// linear case (one branch less for every lane of a software rasteriser).
 fn patch_hit(h: vec4<f32>, f: vec2<f32>, d: vec3<f32>, z0: f32, len: f32) -> f32 {
     let e = h.x - h.y - h.z + h.w;
     let hx = h.y - h.x;
@@ -136,25 +137,19 @@ fn patch_hit(h: vec4<f32>, f: vec2<f32>, d: vec3<f32>, z0: f32, len: f32) -> f32
     let b = hx * d.x + hy * d.y + e * (f.x * d.y + f.y * d.x) - d.z;
     let a = e * d.x * d.y;
     var root = NO_HIT;
-    // Linear where the quadratic term is negligible over the cell (compared
-    // at the cell's far end, so the test holds at any scale).
-    if abs(a * len) <= 1.0e-6 * max(abs(b), 1.0e-30) {
-        if b > 0.0 {
-            root = -c / b;
-        }
-    } else {
-        let disc = b * b - 4.0 * a * c;
-        if disc >= 0.0 {
-            let q = -0.5 * (b + select(-1.0, 1.0, b >= 0.0) * sqrt(disc));
-            let r1 = q / a;
-            let r2 = select(1.0e30, c / q, q != 0.0);
-            let lo = min(r1, r2);
-            let hi = max(r1, r2);
-            if lo >= 0.0 && lo <= len {
-                root = lo;
-            } else if hi >= 0.0 && hi <= len {
-                root = hi;
-            }
+    // The numerically stable pair of roots; c / q is also the root of the
+    // linear case (a = 0), where q / a is none.
+    let disc = b * b - 4.0 * a * c;
+    if disc >= 0.0 {
+        let q = -0.5 * (b + select(-1.0, 1.0, b >= 0.0) * sqrt(disc));
+        let r1 = select(1.0e30, q / a, a != 0.0);
+        let r2 = select(1.0e30, c / q, q != 0.0);
+        let lo = min(r1, r2);
+        let hi = max(r1, r2);
+        if lo >= 0.0 && lo <= len {
+            root = lo;
+        } else if hi >= 0.0 && hi <= len {
+            root = hi;
         }
     }
     if root >= 0.0 && root <= len {
