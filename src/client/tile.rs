@@ -191,13 +191,13 @@ impl TileData {
             .zip(&self.texels)
             .map(|(f, t)| [0, 1].map(|c| if f[c].is_nan() { t[c] } else { f[c] }))
             .collect();
-        let end = |c: usize, pick: fn(f32, f32) -> f32| {
+        let end = |own: &Raster<f32>, c: usize, pick: fn(f32, f32) -> f32| {
             Raster::from_fn(size, size, |x, y| {
-                let mine = if c == 0 { cem.get(x, y) } else { dem.get(x, y) };
+                let mine = own.get(x, y);
                 if mine.is_nan() { mine } else { pick(mine, from[y * size + x][c]) }
             })
         };
-        let (upper, lower) = (end(0, f32::max), end(1, f32::min));
+        let (upper, lower) = (end(&cem, 0, f32::max), end(&dem, 1, f32::min));
         let n = self.frame.samples as usize;
         let bounded = Bounded::new((&cem, &dem), (&upper, &lower), self.halo, n);
         let sink = cast_window(&dem, self.halo, n)
@@ -209,17 +209,23 @@ impl TileData {
             .fold(0.0, f32::max);
         let (lo, hi) = self.range.heights_m;
         TileData {
+            frame: self.frame,
+            base_m: self.base_m,
             serial: next_serial(),
+            halo: self.halo,
+            size,
             texels: bounded.texels,
+            colour: self.colour.clone(),
+            surface: self.surface.clone(),
             mip: bounded.mip,
             hull: bounded.hull,
+            terrain: self.terrain.clone(),
             range: TileRange {
                 mesh_error_m: self.range.mesh_error_m + sink,
                 heights_m: (lo.min(lowest_m), hi.max(highest_m)),
                 ..bounded.range
             },
             morph_from: Some(from),
-            ..self.clone()
         }
     }
 
