@@ -23,7 +23,8 @@ struct Frame {
     // Trees as splats (splat.wgsl): range (m; 0 without trees), blend band
     // (m), unused, unused.
     trees: vec4<f32>,
-    // traversal (0 exact, 1 linear), linear steps, unused, sun on.
+    // unused (the traversal is the pipeline's LINEAR), linear steps,
+    // unused, sun on.
     mode: vec4<u32>,
     // The maximum mipmap's levels in the atlas: x, y, width, height.
     mip_rects: array<vec4<u32>, 16>,
@@ -75,6 +76,8 @@ const NO_HIT: f32 = -1.0;
 // tiles whose whole canopy is drawn unfaded (no ground or fade is read).
 override MORPHING: bool = false;
 override CANOPY_WHOLE: bool = false;
+// Rays march linearly (frame.mode.y steps) instead of traversing the mipmap.
+override LINEAR: bool = false;
 @group(1) @binding(0) var<uniform> tile: Tile;
 
 // Texture accesses of this invocation: view ray (with the two gathers of the

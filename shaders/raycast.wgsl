@@ -120,10 +120,10 @@ fn fs_ray(in: VertexOut) -> FragmentOut {
     let t1 = span.y;
     var t = NO_HIT;
     if t0 <= t1 {
-        if frame.mode.x == 0u {
-            t = traverse_exact(os, ds, t0, t1);
-        } else {
+        if LINEAR {
             t = traverse_linear(os, ds, t0, t1, frame.mode.y);
+        } else {
+            t = traverse_exact(os, ds, t0, t1);
         }
     }
     if t == NO_HIT {

@@ -1,4 +1,5 @@
-// The two ways a view ray finds the surface, selectable per frame:
+// The two ways a view ray finds the surface, selectable per frame (the
+// ray-casting pipelines are specialised by it, LINEAR):
 //
 // - exact: hierarchical traversal of the maximum mipmap. Integer cell
 //   stepping on each level; a cell the ray passes above (its lowest point
@@ -7,6 +8,10 @@
 //   descended into; on level 0 the cell's corners bound it and its bilinear
 //   patch is intersected exactly.
 //   Bounds are conservative, so no hit is ever skipped, at any angle.
+//   The walk over the upper levels and the leaf tests are two loops (Aila
+//   and Laine's "while-while" traversal): lanes of a SIMD group then run one
+//   kind of step at a time instead of every lane paying for both — on
+//   lavapipe 0.80-0.92x the frame time of one loop with a branch per step.
 // - linear: the dissertation's fixed-step march (6.4) with its 4- and
 //   32-sample safety zones, giving up after a fixed number of steps.
 //
@@ -16,17 +21,20 @@
 const START_LEVEL: i32 = 2;
 const MAX_ITERATIONS: u32 = 8192u;
 
-// A ray's constants for cell stepping: the inverse direction, and which
-// side of a cell it leaves by (1 toward +x/+y, 0 toward -x/-y).
+// A ray's constants for cell stepping: the inverse direction, which side of
+// a cell it leaves by (1 toward +x/+y, 0 toward -x/-y), and the step to the
+// next cell per axis.
 struct Stepper {
     inverse: vec2<f32>,
     far_side: vec2<f32>,
     moving: vec2<bool>,
+    step: vec2<i32>,
 };
 
 fn stepper(d: vec2<f32>) -> Stepper {
     let moving = d != vec2<f32>(0.0);
-    return Stepper(1.0 / select(vec2<f32>(1.0), d, moving), select(vec2<f32>(0.0), vec2<f32>(1.0), d > vec2<f32>(0.0)), moving);
+    let far_side = select(vec2<f32>(0.0), vec2<f32>(1.0), d > vec2<f32>(0.0));
+    return Stepper(1.0 / select(vec2<f32>(1.0), d, moving), far_side, moving, vec2<i32>(sign(d)));
 }
 
 // The ray parameter where the ray leaves cell `cell` of side `size` (cell m
@@ -36,55 +44,78 @@ fn cell_exit(cell: vec2<i32>, size: f32, o: vec2<f32>, s: Stepper) -> vec2<f32> 
     return select(vec2<f32>(1.0e30), (side - o) * s.inverse, s.moving);
 }
 
+// The lowest height of the ray o + t d over t in [a, b].
+fn lowest(o: vec3<f32>, d: vec3<f32>, a: f32, b: f32) -> f32 {
+    return min(o.z + d.z * a, o.z + d.z * b);
+}
+
 fn cell_of(p: vec2<f32>, size: f32, lo: vec2<i32>, hi: vec2<i32>) -> vec2<i32> {
     return clamp(vec2<i32>(floor((p + 1.0) / size)), lo, hi);
 }
 
+// Where a walk stands: its level and cell, and the ray parameter where it
+// entered the cell.
+struct Walk {
+    level: i32,
+    cell: vec2<i32>,
+    t: f32,
+};
+
+// Moves the walk to the next cell along the ray, which it enters at `t_out`,
+// climbing a level when it leaves its parent; false when it leaves the tile.
+fn advance(w: ptr<function, Walk>, exits: vec2<f32>, t_out: f32, s: Stepper) -> bool {
+    (*w).t = t_out;
+    let old = (*w).cell;
+    var cell = old;
+    if exits.x <= exits.y { cell.x += s.step.x; } else { cell.y += s.step.y; }
+    if any(cell < vec2<i32>(0)) || any(cell >= mip_cells((*w).level)) {
+        return false;
+    }
+    if (*w).level < tile.index.w && any((cell >> vec2<u32>(1u)) != (old >> vec2<u32>(1u))) {
+        (*w).level += 1;
+        cell = cell >> vec2<u32>(1u);
+    }
+    (*w).cell = cell;
+    return true;
+}
+
 fn traverse_exact(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> f32 {
-    let top = tile.index.w;
-    var level = min(START_LEVEL, top);
-    var t = t0;
-    let step = vec2<i32>(sign(d.xy));
+    let start = min(START_LEVEL, tile.index.w);
     let stepping = stepper(d.xy);
-    var cell = cell_of(o.xy + d.xy * t, f32(1 << u32(level)), vec2<i32>(0), mip_cells(level) - 1);
-    for (var it = 0u; it < MAX_ITERATIONS; it++) {
-        let size = f32(1 << u32(level));
-        let exits = cell_exit(cell, size, o.xy, stepping);
-        let t_out = min(min(exits.x, exits.y), t1);
-        let z_low = min(o.z + d.z * t, o.z + d.z * t_out);
-        if level > 0 {
+    let first = cell_of(o.xy + d.xy * t0, f32(1 << u32(start)), vec2<i32>(0), mip_cells(start) - 1);
+    var w = Walk(start, first, t0);
+    var it = 0u;
+    while it < MAX_ITERATIONS {
+        // Down the upper levels to the next leaf the ray may enter.
+        while w.level > 0 && it < MAX_ITERATIONS {
+            it++;
+            let size = f32(1 << u32(w.level));
+            let exits = cell_exit(w.cell, size, o.xy, stepping);
+            let t_out = min(min(exits.x, exits.y), t1);
             view_fetches += 1u;
-            if z_low <= mip_bound(level, cell) {
-                level -= 1;
-                let first = cell * 2;
-                cell = cell_of(o.xy + d.xy * t, size / 2.0, first, first + 1);
-                continue;
-            }
-        } else {
-            // A leaf's bound is the highest of its corners: read them at once.
-            let h = cell_heights(cell.x - 1, cell.y - 1, &view_fetches);
-            if has_data(h) && z_low <= max(max(h.x, h.y), max(h.z, h.w)) {
-                let p = o.xy + d.xy * t;
-                let tau = patch_hit(h, p - vec2<f32>(cell - 1), d, o.z + d.z * t, t_out - t);
-                if tau != NO_HIT {
-                    return t + tau;
-                }
+            if lowest(o, d, w.t, t_out) <= mip_bound(w.level, w.cell) {
+                w.level -= 1;
+                let child = w.cell * 2;
+                w.cell = cell_of(o.xy + d.xy * w.t, size / 2.0, child, child + 1);
+            } else if t_out >= t1 || !advance(&w, exits, t_out, stepping) {
+                return NO_HIT;
             }
         }
-        if t_out >= t1 {
-            return NO_HIT;
+        // The leaf.
+        it++;
+        let exits = cell_exit(w.cell, 1.0, o.xy, stepping);
+        let t_out = min(min(exits.x, exits.y), t1);
+        // A leaf's bound is the highest of its corners: read them at once.
+        let h = cell_heights(w.cell.x - 1, w.cell.y - 1, &view_fetches);
+        if has_data(h) && lowest(o, d, w.t, t_out) <= max(max(h.x, h.y), max(h.z, h.w)) {
+            let p = o.xy + d.xy * w.t;
+            let tau = patch_hit(h, p - vec2<f32>(w.cell - 1), d, o.z + d.z * w.t, t_out - w.t);
+            if tau != NO_HIT {
+                return w.t + tau;
+            }
         }
-        t = t_out;
-        let old = cell;
-        if exits.x <= exits.y { cell.x += step.x; } else { cell.y += step.y; }
-        let cells = mip_cells(level);
-        if any(cell < vec2<i32>(0)) || any(cell >= cells) {
+        if t_out >= t1 || !advance(&w, exits, t_out, stepping) {
             return NO_HIT;
-        }
-        // Climb when the walk leaves its parent.
-        if level < top && any((cell >> vec2<u32>(1u)) != (old >> vec2<u32>(1u))) {
-            level += 1;
-            cell = cell >> vec2<u32>(1u);
         }
     }
     return NO_HIT;

@@ -367,6 +367,9 @@ enum Bench {
         /// Where to write the plot of error against time.
         #[arg(long, default_value = "docs/raycast-error-vs-time.png")]
         plot: PathBuf,
+        /// Run only these settings (e.g. `--only "linear 30 + 10" --only "exact + 10"`); all by default.
+        #[arg(long)]
+        only: Vec<String>,
     },
     /// Seeding speed (1 and 2 workers, parents from children or not) and
     /// memory over a ~100,000-tile job.
@@ -570,13 +573,13 @@ fn run(command: Command) -> Result<()> {
             Ok(())
         }
         #[cfg(feature = "client")]
-        Command::Bench { what: Bench::Raycast { rmnp, size, gpu_budget_mib, plot } } => {
+        Command::Bench { what: Bench::Raycast { rmnp, size, gpu_budget_mib, plot, only } } => {
             let size = parse_size(&size)?;
             let gpu = sylva::client::render::gpu::Gpu::open()?;
             let name = gpu.describe();
             let mut renderer = sylva::client::render::Renderer::new(gpu, 513, 32, gpu_budget_mib << 20, false);
             let views = sylva::bench::raycast::default_views(&rmnp);
-            let rows = sylva::bench::raycast::run(&views, size, &mut renderer).map_err(anyhow::Error::msg)?;
+            let rows = sylva::bench::raycast::run(&views, size, &only, &mut renderer).map_err(anyhow::Error::msg)?;
             println!("{}", sylva::bench::raycast::report(&rows, size, &name));
             write_file(&plot, &sylva::bench::raycast::plot(&rows).map_err(anyhow::Error::msg)?)?;
             eprintln!("plot: {}", plot.display());

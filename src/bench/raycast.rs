@@ -65,8 +65,11 @@ pub struct Row {
     pub psnr_db: f64,
 }
 
-/// The settings: name, traversal, shadow steps, sun on, canopy fade on.
-fn settings() -> Vec<(String, Traversal, u32, bool, bool)> {
+/// A setting: name, traversal, shadow steps, sun on, canopy fade on.
+type Setting = (String, Traversal, u32, bool, bool);
+
+/// The settings, in the table's order.
+fn settings() -> Vec<Setting> {
     let mut out = Vec::new();
     for steps in [30, 50, 70, 90] {
         for shadows in [10, 20, 30] {
@@ -79,6 +82,17 @@ fn settings() -> Vec<(String, Traversal, u32, bool, bool)> {
     out.push(("exact + 10, canopy fade".into(), Traversal::Exact, 10, true, true));
     out.push(("exact, no sun".into(), Traversal::Exact, 0, false, false));
     out
+}
+
+/// The settings named in `only`, in the table's order (all when empty); an
+/// unknown name is an error listing the known ones.
+fn chosen(only: &[String]) -> Result<Vec<Setting>, String> {
+    let all = settings();
+    if let Some(unknown) = only.iter().find(|name| !all.iter().any(|s| &s.0 == *name)) {
+        let names: Vec<&str> = all.iter().map(|s| s.0.as_str()).collect();
+        return Err(format!("no setting is named {unknown:?}; the settings: {names:?}"));
+    }
+    Ok(all.into_iter().filter(|s| only.is_empty() || only.contains(&s.0)).collect())
 }
 
 /// The default views: a low flight and a grazing view over each region.
@@ -102,8 +116,9 @@ pub fn default_views(rmnp: &Path) -> Vec<View> {
     ]
 }
 
-/// Runs every setting on every view at `size`.
-pub fn run(views: &[View], size: (u32, u32), renderer: &mut Renderer) -> Result<Vec<Row>, String> {
+/// Runs every setting named in `only` (all when empty) on every view at `size`.
+pub fn run(views: &[View], size: (u32, u32), only: &[String], renderer: &mut Renderer) -> Result<Vec<Row>, String> {
+    let settings = chosen(only)?;
     let mut rows = Vec::new();
     for view in views {
         let region = crate::config::load(view.config.as_deref()).map_err(|e| e.to_string())?;
@@ -117,7 +132,7 @@ pub fn run(views: &[View], size: (u32, u32), renderer: &mut Renderer) -> Result<
         let tiles: Vec<TileData> = tiles.iter().map(|t| t.as_ref().clone()).collect();
         let lighting = Lighting { sun_ecef: path.sun_ecef(), shadow_steps: REFERENCE_SHADOW_STEPS, fade: Fade::NONE };
         let truth = reference::render(&camera, &tiles, &lighting);
-        for (name, traversal, shadows, sun, fade) in settings() {
+        for (name, traversal, shadows, sun, fade) in settings.iter().cloned() {
             let fade = if fade { default_fade(&camera) } else { Fade::NONE };
             let frame =
                 FrameSettings { traversal, shadow_steps: shadows, sun_ecef: path.sun_ecef().filter(|_| sun), fade };
@@ -278,5 +293,22 @@ fn marker<DB: plotters::prelude::DrawingBackend>(
         1 => Cross::new(at, 5, colour.stroke_width(2)).into_dyn(),
         2 => TriangleMarker::new(at, 5, colour.filled()).into_dyn(),
         _ => Rectangle::new([at, at], colour.stroke_width(6)).into_dyn(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_picks_the_named_settings_in_table_order_and_names_an_unknown_one() {
+        let names = |only: &[&str]| {
+            let only: Vec<String> = only.iter().map(|s| s.to_string()).collect();
+            chosen(&only).map(|c| c.into_iter().map(|s| s.0).collect::<Vec<_>>())
+        };
+        assert_eq!(names(&[]).map(|n| n.len()), Ok(settings().len()));
+        assert_eq!(names(&["exact + 10", "linear 30 + 10"]), Ok(vec!["linear 30 + 10".into(), "exact + 10".into()]));
+        let err = names(&["exact + 10", "exact + 11"]).unwrap_err();
+        assert!(err.contains("\"exact + 11\"") && err.contains("linear 90 + 30"), "{err}");
     }
 }

@@ -19,7 +19,7 @@ pub mod timer;
 pub mod uniforms;
 
 use super::camera::Camera;
-use super::raycast::{self, SKY};
+use super::raycast::{self, SKY, Traversal};
 use super::tile::TileData;
 use super::trees::Splat;
 use cache::{CacheFull, TileCache};
@@ -240,7 +240,8 @@ impl Renderer {
             blocks.extend(bytes);
             let start = splats.len() as u32;
             splats.extend_from_slice(tile_splats);
-            let variant = RayVariant { inside: mode == DrawMode::Inside, morphing: morph.is_some(), whole };
+            let linear = matches!(settings.traversal, Traversal::Linear(_));
+            let variant = RayVariant { inside: mode == DrawMode::Inside, morphing: morph.is_some(), whole, linear };
             if mode != DrawMode::Plain {
                 self.pipelines.prepare_ray(device, variant);
             }

@@ -41,6 +41,9 @@ pub struct RayVariant {
     pub morphing: bool,
     /// The whole canopy, unfaded, everywhere on the tile (`CANOPY_WHOLE`).
     pub whole: bool,
+    /// Rays march linearly instead of traversing the maximum mipmap
+    /// (`LINEAR`).
+    pub linear: bool,
 }
 
 /// The pipelines and bind group layouts.
@@ -129,8 +132,12 @@ impl Pipelines {
         };
         // Back faces when the camera is inside the hull.
         let cull = if variant.inside { wgpu::Face::Front } else { wgpu::Face::Back };
-        let constants =
-            [("MORPHING", f64::from(u8::from(variant.morphing))), ("CANOPY_WHOLE", f64::from(u8::from(variant.whole)))];
+        let flag = |on: bool| f64::from(u8::from(on));
+        let constants = [
+            ("MORPHING", flag(variant.morphing)),
+            ("CANOPY_WHOLE", flag(variant.whole)),
+            ("LINEAR", flag(variant.linear)),
+        ];
         let built = pipeline(
             device,
             (&self.layout, &self.module),

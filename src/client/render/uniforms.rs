@@ -30,7 +30,8 @@ pub struct FrameUniform {
     pub canopy_tint: [f32; 4],
     /// Tree range and blend band (m), unused × 2.
     pub trees: [f32; 4],
-    /// Traversal, linear steps, unused, sun on.
+    /// Unused (the traversal is the pipeline's `LINEAR`), linear steps,
+    /// unused, sun on.
     pub mode: [u32; 4],
     /// Mipmap atlas rectangles per level.
     pub mip_rects: [[u32; 4]; MAX_MIP_LEVELS],
@@ -106,9 +107,9 @@ impl FrameUniform {
         for (r, m) in rects.iter_mut().zip(mip_rects) {
             *r = *m;
         }
-        let (traversal, steps) = match settings.traversal {
-            Traversal::Exact => (0, 0),
-            Traversal::Linear(n) => (1, n),
+        let steps = match settings.traversal {
+            Traversal::Exact => 0,
+            Traversal::Linear(n) => n,
         };
         let f = &settings.fade;
         let rgb = |c: [f64; 3], a: f64| [c[0] as f32, c[1] as f32, c[2] as f32, a as f32];
@@ -120,7 +121,7 @@ impl FrameUniform {
             shadow: [raycast::SHADOW_WEIGHT as f32, raycast::SHADOW_SOFT_M as f32, 0.0, 0.0],
             canopy_tint: rgb(raycast::CANOPY_TINT, 1.0),
             trees: [f.trees.range_m as f32, f.trees.band_m as f32, 0.0, 0.0],
-            mode: [traversal, steps, 0, settings.sun_ecef.is_some() as u32],
+            mode: [0, steps, 0, settings.sun_ecef.is_some() as u32],
             mip_rects: rects,
         }
     }
