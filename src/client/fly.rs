@@ -10,7 +10,7 @@
 //! screen size asks for, or under a budget as the selection allots.
 
 use super::lod::ahead::Lookahead;
-use super::lod::budget::{Budget, Choice};
+use super::lod::budget::{Budget, Choice, VIEW_STEPS};
 use super::lod::flight::BudgetFlight;
 use super::lod::{Selected, Selector};
 use super::path::CameraPath;
@@ -220,6 +220,7 @@ pub fn fly(
                 max_tiles: renderer.cache_slots() as usize,
                 shadows: path.sun.is_some(),
                 deadline: None,
+                view_steps: VIEW_STEPS,
             };
             let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
             let look =
@@ -336,7 +337,8 @@ fn frame(
         let drawn: Vec<Choice> =
             draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
         let drawn_trees = (trees.drawn.splats, trees.drawn.groups);
-        lod.observe(&camera, &drawn, drawn_trees, out.stats.gpu_ms.unwrap_or(out.stats.wall_ms));
+        let measured = (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), mean_view_fetches(&out.fetches));
+        lod.observe(&camera, &drawn, drawn_trees, measured);
     }
     if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
         let file = dir.join(format!("frame_{k:05}.png"));
@@ -366,7 +368,7 @@ fn frame(
         tiles_plain: out.stats.tiles_plain,
         error_px,
         ray_pixels: rays.len(),
-        view_fetches: (rays.iter().map(|f| f[0] as f64).sum::<f64>() / n, rays.iter().map(|f| f[0]).max().unwrap_or(0)),
+        view_fetches: (mean_view_fetches(&out.fetches), rays.iter().map(|f| f[0]).max().unwrap_or(0)),
         shadow_fetches_mean: rays.iter().map(|f| f[1] as f64).sum::<f64>() / n,
         bytes_fetched: source.bytes_fetched() - bytes_before,
         gpu_bytes: out.stats.resident_bytes,
@@ -383,6 +385,12 @@ fn frame(
         trees: trees.drawn.trees,
         splats: out.stats.splats as usize,
     })
+}
+
+/// Mean view-ray fetches over the pixels a ray was cast for (0 if none).
+fn mean_view_fetches(fetches: &[[u32; 2]]) -> f64 {
+    let (sum, n) = fetches.iter().filter(|f| f[0] > 0).fold((0.0, 0usize), |(s, n), f| (s + f64::from(f[0]), n + 1));
+    sum / n.max(1) as f64
 }
 
 /// A frame's trees.

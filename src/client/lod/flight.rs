@@ -181,18 +181,23 @@ impl BudgetFlight {
     }
 
     /// Records a drawn frame: its tiles as drawn from `camera`, its
-    /// `(splats, tree groups)` and its measured time. Returns the frame's
-    /// features, priced by the model before this frame's correction. The
-    /// first frame builds the GPU pipelines and is not calibrated.
+    /// `(splats, tree groups)`, its measured time and mean view-ray steps
+    /// per ray-cast pixel (which the next selections price tiles with).
+    /// Returns the frame's features, priced by the model before this
+    /// frame's correction. The first frame builds the GPU pipelines and is
+    /// not calibrated.
     pub fn observe(
         &mut self,
         camera: &Camera,
         drawn: &[Choice],
         trees: (usize, usize),
-        measured_ms: f64,
+        (measured_ms, view_steps): (f64, f64),
     ) -> CostFeatures {
+        if view_steps.is_finite() && view_steps > 0.0 {
+            self.budget.view_steps = view_steps;
+        }
         let splats = budget::tree_features(trees.0 as f64, trees.1 as f64);
-        let features = self.selector.features(camera, drawn).plus(&splats);
+        let features = self.selector.features(camera, drawn, self.budget.view_steps).plus(&splats);
         if self.frames > 0 {
             self.calibrator.observe(&features, measured_ms);
         }
@@ -233,7 +238,7 @@ mod tests {
             fade: (30.0, 0.5, 2.0),
             max_level: 14,
         };
-        let budget = Budget { budget_ms: 8.0, max_tiles: 256, shadows: true, deadline: None };
+        let budget = Budget { budget_ms: 8.0, max_tiles: 256, shadows: true, deadline: None, view_steps: 20.0 };
         let look = Lookahead { tau_s: 1.0, limits: MotionLimits { max_speed_mps: 100.0, max_turn_radps: 0.1 } };
         BudgetFlight::new(selector, budget, look, CostModel::default(), true).unwrap()
     }
@@ -276,14 +281,30 @@ mod tests {
         let mut f = flight();
         let cam = camera(10.05);
         let cut = f.frame(0.0, &cam).cut;
-        let before = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles));
+        let before = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles, 20.0));
         // The first frame builds pipelines and teaches nothing.
-        f.observe(&cam, &cut.tiles, (0, 0), 1000.0);
+        f.observe(&cam, &cut.tiles, (0, 0), (1000.0, 20.0));
         assert_eq!(f.model(), CostModel::default());
         for _ in 0..5 {
-            f.observe(&cam, &cut.tiles, (0, 0), 4.0 * before);
+            f.observe(&cam, &cut.tiles, (0, 0), (4.0 * before, 20.0));
         }
-        let after = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles));
+        let after = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles, 20.0));
         assert!((after / (4.0 * before) - 1.0).abs() < 0.05, "{before} → {after}");
+    }
+
+    #[test]
+    fn selections_price_view_rays_with_the_steps_last_measured() {
+        let mut f = flight();
+        let cam = camera(10.05);
+        let cut = f.frame(0.0, &cam).cut;
+        assert_eq!(f.budget().view_steps, 20.0, "before any frame");
+        let at = |steps: f64| f.selector.features(&cam, &cut.tiles, steps).raycast_mpx_steps;
+        let (twenty, thirty_five) = (at(20.0), at(35.0));
+        let features = f.observe(&cam, &cut.tiles, (0, 0), (50.0, 35.0));
+        assert_eq!(f.budget().view_steps, 35.0);
+        assert!(twenty > 0.0 && features.raycast_mpx_steps == thirty_five, "{twenty} {features:?}");
+        // A frame without ray-cast pixels measures nothing: the estimate stays.
+        f.observe(&cam, &cut.tiles, (0, 0), (50.0, 0.0));
+        assert_eq!(f.budget().view_steps, 35.0);
     }
 }

@@ -85,13 +85,14 @@ impl Selector {
         Selected { cut, candidates: found.tiles.len(), ms: start.elapsed().as_secs_f64() * 1e3 }
     }
 
-    /// What drawing `drawn` from `camera` costs, measured as a selection
-    /// measures its candidates (so calibrated constants fit predictions).
-    pub fn features(&self, camera: &Camera, drawn: &[Choice]) -> CostFeatures {
+    /// What drawing `drawn` from `camera` with `view_steps` view-ray steps
+    /// per ray-cast pixel costs, measured as a selection measures its
+    /// candidates (so calibrated constants fit predictions).
+    pub fn features(&self, camera: &Camera, drawn: &[Choice], view_steps: f64) -> CostFeatures {
         self.with_scope(std::slice::from_ref(camera), None, |scope| {
             drawn
                 .iter()
-                .map(|c| budget::features(&candidates::candidate(scope, c.id), c.shadow_steps))
+                .map(|c| budget::features(&candidates::candidate(scope, c.id), c.shadow_steps, view_steps))
                 .fold(CostFeatures::default(), |a, f| a.plus(&f))
         })
     }
