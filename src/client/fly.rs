@@ -333,11 +333,12 @@ fn frame(
     let selected = chosen.selected.as_ref();
     let predicted_ms = selected.map(|s| s.cut.predicted_ms);
     let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
+    let view_fetches_mean = mean_view_fetches(&out.fetches);
     if let Some(lod) = lod {
         let drawn: Vec<Choice> =
             draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
         let drawn_trees = (trees.drawn.splats, trees.drawn.groups);
-        let measured = (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), mean_view_fetches(&out.fetches));
+        let measured = (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), view_fetches_mean);
         lod.observe(&camera, &drawn, drawn_trees, measured);
     }
     if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
@@ -368,7 +369,7 @@ fn frame(
         tiles_plain: out.stats.tiles_plain,
         error_px,
         ray_pixels: rays.len(),
-        view_fetches: (mean_view_fetches(&out.fetches), rays.iter().map(|f| f[0]).max().unwrap_or(0)),
+        view_fetches: (view_fetches_mean, rays.iter().map(|f| f[0]).max().unwrap_or(0)),
         shadow_fetches_mean: rays.iter().map(|f| f[1] as f64).sum::<f64>() / n,
         bytes_fetched: source.bytes_fetched() - bytes_before,
         gpu_bytes: out.stats.resident_bytes,

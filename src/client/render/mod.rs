@@ -222,11 +222,16 @@ impl Renderer {
         let mut blocks = Vec::with_capacity(order.len());
         let mut draws = Vec::with_capacity(order.len());
         let mut splats: Vec<Splat> = Vec::new();
+        let linear = matches!(settings.traversal, Traversal::Linear(_));
         for (near_m, &Draw { tile, shadow_steps, splats: tile_splats, morph_weight }) in order {
             let slot = self.cache.insert(device, queue, tile, self.frame_no)?;
-            let morph = self.cache.morph_layer(queue, tile, self.frame_no).map(|layer| (layer, morph_weight));
             let whole = uniforms::canopy_whole(camera, tile, &settings.fade);
             let mode = draw_mode(camera, tile, settings, near_m);
+            // A tile drawn plain shows its own ground: no morph layer.
+            let morph = match mode {
+                DrawMode::Plain => None,
+                _ => self.cache.morph_layer(queue, tile, self.frame_no).map(|layer| (layer, morph_weight)),
+            };
             match mode {
                 DrawMode::Hull => stats.tiles_hull += 1,
                 DrawMode::Inside => stats.tiles_inside += 1,
@@ -240,7 +245,6 @@ impl Renderer {
             blocks.extend(bytes);
             let start = splats.len() as u32;
             splats.extend_from_slice(tile_splats);
-            let linear = matches!(settings.traversal, Traversal::Linear(_));
             let variant = RayVariant { inside: mode == DrawMode::Inside, morphing: morph.is_some(), whole, linear };
             if mode != DrawMode::Plain {
                 self.pipelines.prepare_ray(device, variant);
