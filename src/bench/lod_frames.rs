@@ -3,6 +3,12 @@
 //! budget`), the predicted and the measured frame time against the budget.
 //! The measured time is the GPU's (timestamp queries), else the render's
 //! wall clock. The first frame builds the GPU pipelines and is left out.
+//!
+//! A frame whose selection drew everything that adds benefit (`bound`
+//! `full`) or filled the GPU cache's slots cannot meet its budget by
+//! drawing more; the summary counts the frames on budget over all frames
+//! and over those the budget bounded (`budget`, or `limit`: the optimiser
+//! stopped early, which is the selection's shortfall).
 
 use super::lod_plot;
 use std::collections::HashMap;
@@ -19,6 +25,9 @@ pub struct FrameTime {
     pub measured_ms: f64,
     /// The budget.
     pub budget_ms: f64,
+    /// Whether the budget bounded the selection (`None`: a `stats.csv`
+    /// without the `bound` column).
+    pub budget_bound: Option<bool>,
 }
 
 /// The frames of a `stats.csv` (all but the first).
@@ -28,13 +37,15 @@ pub fn parse(csv: &str) -> Result<Vec<FrameTime>, String> {
     let column = |name: &str| header.iter().position(|h| *h == name).ok_or(format!("no {name} column"));
     let (gpu, render, predicted, budget) =
         (column("gpu_ms")?, column("render_ms")?, column("predicted_ms")?, column("budget_ms")?);
+    let bound = column("bound").ok();
     let rows = lines.skip(1).enumerate().map(|(k, line)| {
         let cells: Vec<&str> = line.split(',').collect();
         let number = |i: usize| cells.get(i).and_then(|c| c.parse::<f64>().ok());
         let measured = number(gpu).or(number(render));
+        let budget_bound = bound.and_then(|i| cells.get(i)).map(|b| matches!(*b, "budget" | "limit"));
         match (number(predicted), measured, number(budget)) {
             (Some(predicted_ms), Some(measured_ms), Some(budget_ms)) => {
-                Ok(FrameTime { predicted_ms, measured_ms, budget_ms })
+                Ok(FrameTime { predicted_ms, measured_ms, budget_ms, budget_bound })
             }
             _ => Err(format!("frame {}: not a flight under a budget", k + 1)),
         }
@@ -49,6 +60,9 @@ pub struct Summary {
     pub frames: usize,
     /// Share of frames measured within ±[`TOLERANCE`] of the budget.
     pub on_budget: f64,
+    /// Frames the budget bounded, and the share of them on budget (`None`
+    /// without the `bound` column).
+    pub budget_bound: Option<(usize, f64)>,
     /// Share of frames measured at most `1 + TOLERANCE` times the budget.
     pub not_over: f64,
     /// Median of |predicted − measured| / measured (the error of prediction).
@@ -57,14 +71,19 @@ pub struct Summary {
 
 /// The summary of `frames`.
 pub fn summarize(frames: &[FrameTime]) -> Summary {
-    let n = frames.len().max(1) as f64;
-    let share = |f: &dyn Fn(&FrameTime) -> bool| frames.iter().filter(|t| f(t)).count() as f64 / n;
+    let share = |frames: &[FrameTime], f: &dyn Fn(&FrameTime) -> bool| {
+        frames.iter().filter(|t| f(t)).count() as f64 / frames.len().max(1) as f64
+    };
+    let on_budget = |t: &FrameTime| (t.measured_ms / t.budget_ms - 1.0).abs() <= TOLERANCE;
+    let known = frames.iter().all(|t| t.budget_bound.is_some());
+    let bound = known.then(|| frames.iter().filter(|t| t.budget_bound == Some(true)).copied().collect::<Vec<_>>());
     let mut errors: Vec<f64> = frames.iter().map(|t| (t.predicted_ms - t.measured_ms).abs() / t.measured_ms).collect();
     errors.sort_by(f64::total_cmp);
     Summary {
         frames: frames.len(),
-        on_budget: share(&|t| (t.measured_ms / t.budget_ms - 1.0).abs() <= TOLERANCE),
-        not_over: share(&|t| t.measured_ms <= t.budget_ms * (1.0 + TOLERANCE)),
+        on_budget: share(frames, &on_budget),
+        budget_bound: bound.map(|b| (b.len(), share(&b, &on_budget))),
+        not_over: share(frames, &|t| t.measured_ms <= t.budget_ms * (1.0 + TOLERANCE)),
         prediction_error: errors.get(errors.len() / 2).copied().unwrap_or(f64::NAN),
     }
 }
@@ -83,6 +102,8 @@ pub fn report(flights: &[(String, String)]) -> Result<(String, HashMap<String, V
             s.frames.to_string(),
             format!("{budget:.1}"),
             format!("{:.1}", 100.0 * s.on_budget),
+            s.budget_bound.map_or("–".into(), |(n, _)| n.to_string()),
+            s.budget_bound.map_or("–".into(), |(_, on)| format!("{:.1}", 100.0 * on)),
             format!("{:.1}", 100.0 * s.not_over),
             format!("{:.1}", 100.0 * s.prediction_error),
         ]);
@@ -93,6 +114,8 @@ pub fn report(flights: &[(String, String)]) -> Result<(String, HashMap<String, V
         "frames",
         "budget (ms)",
         "on budget ±10 % (%)",
+        "frames bounded by the budget",
+        "of those on budget ±10 % (%)",
         "≤ 110 % of budget (%)",
         "median error of prediction (%)",
     ];
@@ -120,6 +143,25 @@ mod tests {
         assert!((s.not_over - 2.0 / 3.0).abs() < 1e-12, "{s:?}");
         // Errors 0.1, 0.1, 0.5: the median is 0.1.
         assert!((s.prediction_error - 0.1).abs() < 1e-12, "{s:?}");
+        assert_eq!(s.budget_bound, None, "no bound column");
+    }
+
+    #[test]
+    fn frames_the_budget_did_not_bound_are_counted_apart() {
+        let csv = "frame,gpu_ms,render_ms,predicted_ms,budget_ms,bound\n\
+            0,500,510,1.0,40,budget\n\
+            1,40,45,44,40,budget\n\
+            2,,20,22,40,full\n\
+            3,80,85,40,40,limit\n\
+            4,25,26,25,40,slots\n";
+        let s = summarize(&parse(csv).unwrap());
+        assert!((s.on_budget - 0.25).abs() < 1e-12, "{s:?}");
+        let (n, on) = s.budget_bound.unwrap();
+        assert_eq!(n, 2, "budget and limit frames");
+        assert!((on - 0.5).abs() < 1e-12, "{s:?}");
+        let (table, _) = report(&[("rmnp".into(), csv.into())]).unwrap();
+        let cells: Vec<&str> = table.lines().nth(2).unwrap().split('|').map(str::trim).collect();
+        assert_eq!(cells[5..7], ["2", "50.0"], "{table}");
     }
 
     #[test]

@@ -147,7 +147,8 @@ pub struct FrameRecord {
     pub selection_ms: f64,
     /// The frame budget, ms (budget mode).
     pub budget_ms: Option<f64>,
-    /// The selection's predicted frame time, ms (budget mode).
+    /// The frame time the selection predicted, ms, corrected by the
+    /// flight's aim ([`BudgetFlight::expected_ms`]; budget mode).
     pub predicted_ms: Option<f64>,
     /// Candidate tiles of the selection (budget mode).
     pub candidates: Option<usize>,
@@ -156,6 +157,9 @@ pub struct FrameRecord {
     pub benefit_bound: Option<f64>,
     /// Mean shadow steps over the tiles drawn.
     pub shadow_steps_mean: f64,
+    /// What bounded the selection: [`crate::client::lod::budget::Cut::bound`]
+    /// (budget mode).
+    pub bound: Option<&'static str>,
     /// Tiles drawn morphing from a coarser one (budget mode).
     pub morphing: usize,
     /// Trees drawn as splats.
@@ -331,7 +335,7 @@ fn frame(
         .collect();
     let out = renderer.render_draws(&camera, &draws, &settings, Readback::All)?;
     let selected = chosen.selected.as_ref();
-    let predicted_ms = selected.map(|s| s.cut.predicted_ms);
+    let predicted_ms = lod.as_deref().zip(selected).map(|(l, s)| l.expected_ms(s));
     let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
     let view_fetches_mean = mean_view_fetches(&out.fetches);
     if let Some(lod) = lod {
@@ -380,6 +384,7 @@ fn frame(
         predicted_ms,
         candidates: selected.map(|s| s.candidates),
         benefit_bound: selected.map(|s| s.cut.benefit / s.cut.upper_bound),
+        bound: selected.map(|s| s.cut.bound()),
         morphing: chosen.morphing,
         nodes_touched: chosen.touched,
         shadow_steps_mean: chosen.steps.iter().map(|&s| f64::from(s)).sum::<f64>() / chosen.steps.len().max(1) as f64,
@@ -460,7 +465,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     let mut out = Vec::new();
     let _ = writeln!(
         out,
-        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,morphing,trees,splats,nodes_touched"
+        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,bound,morphing,trees,splats,nodes_touched"
     );
     for r in records {
         let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
@@ -468,7 +473,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
         let gpu = optional(r.gpu_ms);
         let _ = writeln!(
             out,
-            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{},{},{},{}",
+            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{},{},{},{},{}",
             r.frame,
             r.cpu_ms,
             r.render_ms,
@@ -491,6 +496,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             r.shadow_steps_mean,
             r.candidates.map_or(String::new(), |n| n.to_string()),
             optional(r.benefit_bound),
+            r.bound.unwrap_or_default(),
             r.morphing,
             r.trees,
             r.splats,

@@ -341,7 +341,8 @@ pub fn splats(
 }
 
 impl TreeGroup {
-    /// The group as the LOD selection sees it, its trees on `tiles`.
+    /// The group as the LOD selection sees it from one camera, its trees
+    /// on `tiles`.
     pub fn item(&self, tiles: &[&TileData], field: &TreeField) -> TreeItem {
         let middles: Vec<(DVec3, f64)> = self
             .trees
@@ -356,7 +357,7 @@ impl TreeGroup {
             trees: self.trees.len() as u32,
             capacity: (self.trees.len() as u64 * u64::from(field.splats_per_tree)) as f64,
         };
-        TreeItem { block: self.block, group }
+        TreeItem { block: self.block, group, share: 1.0 }
     }
 }
 

@@ -33,6 +33,12 @@ pub struct CalibratorSettings {
     /// entry of `A` (so it does not depend on the features' units): keeps
     /// constants whose features never vary (or vary together) at the prior.
     pub ridge: f64,
+    /// Least ridge of a per-item constant, as a share of the ridge of the
+    /// feature costing most under the prior (`Aⱼⱼ pⱼ²`, in ms²), so a
+    /// feature seen rarely or small (a few tree groups now and then) keeps
+    /// its constant near the prior's proportion instead of taking the
+    /// whole error of the few frames it appears in (0: none).
+    pub ridge_floor: f64,
     /// Frames before outliers are rejected.
     pub warmup_frames: u32,
     /// A measurement beyond this factor of the prediction (either way) is
@@ -42,7 +48,7 @@ pub struct CalibratorSettings {
 
 impl Default for CalibratorSettings {
     fn default() -> CalibratorSettings {
-        CalibratorSettings { forgetting: 0.95, ridge: 1e-3, warmup_frames: 10, outlier_ratio: 4.0 }
+        CalibratorSettings { forgetting: 0.95, ridge: 1e-3, ridge_floor: 0.0, warmup_frames: 10, outlier_ratio: 4.0 }
     }
 }
 
@@ -150,10 +156,9 @@ impl CostCalibrator {
     fn solve_free(&self, free: &[bool; FEATURES]) -> Option<[f64; FEATURES]> {
         let a = self.restricted(free);
         let mut m = a;
-        let mut lambda = [0.0; FEATURES];
-        for (i, l) in lambda.iter_mut().enumerate() {
-            *l = if free[i] { self.settings.ridge.max(0.0) * a[i][i] + 1e-12 } else { 0.0 };
-            m[i][i] += *l;
+        let lambda = self.ridges(&a, free);
+        for i in 0..FEATURES {
+            m[i][i] += lambda[i];
         }
         let keep = |i: usize, x: f64| if free[i] { x } else { 0.0 };
         let (fixed, scaled) = self.prior_parts();
@@ -162,6 +167,21 @@ impl CostCalibrator {
         let s = self.prior_scale(&a, (&c0, &c1), &lambda, free);
         let c: [f64; FEATURES] = std::array::from_fn(|i| c0[i] + s * c1[i]);
         c.iter().all(|x| x.is_finite()).then_some(c)
+    }
+
+    /// The ridge of each free constant: [`CalibratorSettings::ridge`] times
+    /// its diagonal entry of `a`, or for a per-item constant at least its
+    /// [`CalibratorSettings::ridge_floor`] share of the costliest feature's
+    /// in ms² under the prior.
+    fn ridges(&self, a: &[[f64; FEATURES]; FEATURES], free: &[bool; FEATURES]) -> [f64; FEATURES] {
+        let p = &self.prior.constants_ms;
+        let costliest = (1..FEATURES).filter(|&j| free[j]).map(|j| a[j][j] * p[j] * p[j]).fold(0.0, f64::max);
+        let ridge = self.settings.ridge.max(0.0);
+        std::array::from_fn(|i| {
+            let floor =
+                if i > 0 && p[i] > 0.0 { self.settings.ridge_floor.max(0.0) * costliest / (p[i] * p[i]) } else { 0.0 };
+            if free[i] { ridge * a[i][i].max(floor) + 1e-12 } else { 0.0 }
+        })
     }
 
     /// `A` with the rows and columns of fixed constants replaced by those
@@ -298,6 +318,30 @@ mod tests {
         let ratio: Vec<f64> = c.iter().zip(prior.constants_ms).skip(1).map(|(c, p)| c / p).collect();
         assert!(ratio[0] > 1.0 && ratio.iter().all(|r| (r / ratio[0] - 1.0).abs() < 1e-6), "{ratio:?}");
         assert!((cal.model().predict_ms(&frame(0)) - 41.0).abs() < 0.5, "{:?}", cal.model());
+    }
+
+    #[test]
+    fn a_feature_seen_rarely_keeps_its_constant_near_the_prior_proportion() {
+        // Frames without tree groups, and now and then a frame with a few
+        // that runs 5 ms slow (noise): without the floor the group constant
+        // takes that error whole.
+        let calibrated = |ridge_floor: f64| {
+            let settings = CalibratorSettings { ridge: 0.03, ridge_floor, ..CalibratorSettings::default() };
+            let mut cal = CostCalibrator::new(CostModel::default(), settings);
+            for k in 0..60 {
+                let groups_h = if k % 20 == 19 { 0.03 } else { 0.0 };
+                let f = CostFeatures { splats_k: 0.0, groups_h, ..frame(k) };
+                let slow = if groups_h > 0.0 { 5.0 } else { 0.0 };
+                cal.observe(&f, TRUTH.predict_ms(&f) + slow);
+            }
+            let c = cal.model().constants_ms;
+            // The group constant over the raycast one, against the prior's.
+            let prior = CostModel::default().constants_ms;
+            (c[5] / c[2]) / (prior[5] / prior[2])
+        };
+        let (without, with) = (calibrated(0.0), calibrated(0.01));
+        assert!(without > 100.0, "{without}");
+        assert!(with < 10.0, "{with}");
     }
 
     #[test]

@@ -93,13 +93,29 @@ pub struct Choice {
 }
 
 /// A group of trees as the selection sees it: its block on the tree
-/// lattice (the key of its budget) and the group (centre in ECEF).
+/// lattice (the key of its budget), the group (centre in ECEF) and the
+/// share of the selection's cameras near which it grows.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TreeItem {
     /// Block index.
     pub block: (i64, i64),
     /// Bounding sphere, trees and splats at full resolution.
     pub group: Item,
+    /// Share of the cameras the group is drawn from (0–1]: the frames in
+    /// the interval the cut is drawn in that draw it, so it is priced and
+    /// worth that share of its splats (the cameras ahead are tens of metres
+    /// apart in a coarsely sampled flight, the trees' reach not much more;
+    /// priced whole, the union of their groups cost half as much again as
+    /// any frame drew).
+    pub share: f64,
+}
+
+/// A tree group's splat budget in a cut.
+#[derive(Clone, Copy, Debug)]
+struct GroupBudget {
+    block: (i64, i64),
+    splats: f64,
+    share: f64,
 }
 
 /// The chosen cut.
@@ -119,6 +135,23 @@ pub struct Cut {
     pub upper_bound: f64,
     /// Why the optimiser stopped (`None`: no candidates).
     pub stop: Option<Stop>,
+    /// Whether the GPU cache's slots, not the budget, bounded the cut.
+    pub slot_bound: bool,
+}
+
+impl Cut {
+    /// What bounded the cut, as `stats.csv` names it: `budget`, `full`
+    /// (nothing left that adds benefit), `limit` (the optimiser's time or
+    /// iterations), `slots`, or `none` (no candidates).
+    pub fn bound(&self) -> &'static str {
+        match (self.slot_bound, self.stop) {
+            (true, _) => "slots",
+            (false, Some(Stop::Budget)) => "budget",
+            (false, Some(Stop::FullResolution)) => "full",
+            (false, Some(Stop::Limit)) => "limit",
+            (false, None) => "none",
+        }
+    }
 }
 
 /// The features of drawing candidate `c` with `steps` shadow steps.
@@ -162,7 +195,8 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
     };
     let max_tiles = budget.max_tiles.max(1);
     let (mut selection, mut drawn) = run(budget.budget_ms - model.constants_ms[0]);
-    if drawn.len() > max_tiles {
+    let slot_bound = drawn.len() > max_tiles;
+    if slot_bound {
         // The largest budget whose cut fits the slots, by bisection.
         let (mut lo, mut hi) = (0.0, selection.cost_ms);
         (selection, drawn) = run(lo);
@@ -183,35 +217,36 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
             shadow_steps: regions.steps(i, &forest, candidates, &selection.resolutions),
         })
         .collect();
-    let mut groups: Vec<((i64, i64), f64)> = trees
+    let mut groups: Vec<GroupBudget> = trees
         .iter()
         .zip(&selection.resolutions[regions.heads.len().min(selection.resolutions.len())..])
         .filter(|(_, x)| **x >= 1.0)
-        .map(|((t, _), x)| (t.block, x.floor()))
+        .map(|((t, _), x)| GroupBudget { block: t.block, splats: x.floor(), share: t.share })
         .collect();
     let terrain = drawn
         .iter()
         .zip(&tiles)
         .map(|(&i, t)| features(&candidates[i as usize], t.shadow_steps, budget.view_steps))
         .fold(CostFeatures::default(), |a, f| a.plus(&f));
-    let with_trees = |groups: &[((i64, i64), f64)]| {
-        terrain.plus(&tree_features(groups.iter().map(|g| g.1).sum(), groups.len() as f64))
+    let with_trees = |groups: &[GroupBudget]| {
+        let splats = groups.iter().map(|g| g.share * g.splats).sum();
+        terrain.plus(&tree_features(splats, groups.iter().map(|g| g.share).sum()))
     };
     // Fewest splats last: the loop trims that group, or drops it.
-    groups.sort_by(|a, b| b.1.total_cmp(&a.1));
+    groups.sort_by(|a, b| b.splats.total_cmp(&a.splats));
     let splat_ms = model.marginal_ms(&tree_features(1.0, 0.0));
     loop {
         let over_ms = model.predict_ms(&with_trees(&groups)) - budget.budget_ms;
         let Some(last) = groups.last_mut().filter(|_| over_ms > 0.0) else { break };
-        let trim = (over_ms / splat_ms).ceil();
-        if splat_ms > 0.0 && last.1 - trim >= 1.0 {
-            last.1 -= trim;
+        let trim = (over_ms / (splat_ms * last.share)).ceil();
+        if splat_ms > 0.0 && last.splats - trim >= 1.0 {
+            last.splats -= trim;
         } else {
             groups.pop();
         }
     }
     let features = with_trees(&groups);
-    let tree_budgets: TreeBudgets = groups.into_iter().collect();
+    let tree_budgets: TreeBudgets = groups.into_iter().map(|g| (g.block, g.splats)).collect();
     Cut {
         predicted_ms: model.predict_ms(&features),
         features,
@@ -220,18 +255,19 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
         benefit: selection.benefit,
         upper_bound: selection.upper_bound,
         stop: Some(selection.stop),
+        slot_bound,
     }
 }
 
 /// A tree group's variable: its worth and its cost per splat, the group
-/// constant spread over its capacity.
+/// constant spread over its capacity, both times its share of the cameras.
 fn tree_variable(t: &TreeItem, px: f64, model: &CostModel) -> Continuous {
     let capacity = t.group.capacity.max(0.0);
     let group_ms = model.marginal_ms(&tree_features(0.0, 1.0));
     Continuous {
-        weight: group_weight(px, t.group.trees, TREE_WORTH),
+        weight: t.share * group_weight(px, t.group.trees, TREE_WORTH),
         capacity,
-        cost_per_unit_ms: model.marginal_ms(&tree_features(1.0, 0.0)) + group_ms / capacity.max(1.0),
+        cost_per_unit_ms: t.share * (model.marginal_ms(&tree_features(1.0, 0.0)) + group_ms / capacity.max(1.0)),
     }
 }
 
@@ -405,6 +441,24 @@ mod tests {
         assert!(dark.tiles.iter().all(|t| t.shadow_steps == 0) && dark.features.shadow_mpx_steps == 0.0);
         let few = choose(&c, &[], &MODEL, &Budget { max_tiles: 8, ..budget(1e4, true) });
         assert!(few.tiles.len() <= 8 && !few.tiles.is_empty(), "{}", few.tiles.len());
+        assert_eq!((few.bound(), dark.bound()), ("slots", "full"));
+    }
+
+    #[test]
+    fn a_group_near_some_of_the_cameras_is_priced_at_that_share() {
+        let c = demo_candidates();
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01] };
+        let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
+        let cut = |share: f64| {
+            let trees = [(TreeItem { block: (0, 0), group, share }, 20_000.0)];
+            choose(&c, &trees, &model, &budget(1e3, true))
+        };
+        let (all, third) = (cut(1.0), cut(1.0 / 3.0));
+        // Room for every splat either way: the same budget, a third the cost.
+        assert_eq!(all.tree_budgets, third.tree_budgets);
+        assert_eq!(all.tree_budgets[&(0, 0)], 64.0 * 24.0);
+        assert!((third.features.splats_k * 3.0 - all.features.splats_k).abs() < 1e-9, "{:?}", third.features);
+        assert!((third.features.groups_h * 3.0 - all.features.groups_h).abs() < 1e-12);
     }
 
     #[test]
@@ -413,7 +467,7 @@ mod tests {
         // A full group costs 3.1 ms: the groups compete with the terrain.
         let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01] };
         let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
-        let item = |k: i64| TreeItem { block: (k, 0), group };
+        let item = |k: i64| TreeItem { block: (k, 0), group, share: 1.0 };
         let trees = [(item(0), 20_000.0), (item(1), 2_000.0), (item(2), 0.0)];
         let cut = choose(&c, &trees, &model, &budget(8.0, true));
         let got = |k: i64| cut.tree_budgets.get(&(k, 0)).copied().unwrap_or(0.0);
@@ -424,7 +478,7 @@ mod tests {
         // The terrain is whole at 3.8 ms; the splats take the rest.
         let terrain = model.predict_ms(&CostFeatures { splats_k: 0.0, groups_h: 0.0, ..cut.features });
         let bare = choose(&c, &[], &model, &budget(8.0, true));
-        assert_eq!(bare.stop, Some(Stop::FullResolution));
+        assert_eq!((bare.stop, bare.bound()), (Some(Stop::FullResolution), "full"));
         assert!((terrain - bare.predicted_ms).abs() < 1e-9 && cut.predicted_ms > 7.9, "{terrain} {}", cut.predicted_ms);
         // With less, the terrain gives way too.
         let tight = choose(&c, &trees, &model, &budget(4.0, true));
@@ -440,7 +494,7 @@ mod tests {
         let c = demo_candidates();
         let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 1200.0] };
         let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
-        let trees: Vec<_> = (0..50).map(|k| (TreeItem { block: (k, 0), group }, 2_000.0)).collect();
+        let trees: Vec<_> = (0..50).map(|k| (TreeItem { block: (k, 0), group, share: 1.0 }, 2_000.0)).collect();
         let cut = choose(&c, &trees, &model, &budget(8.0, true));
         let bare = choose(&c, &[], &model, &budget(8.0, true));
         assert!(cut.predicted_ms <= 8.0 + 1e-9, "{}", cut.predicted_ms);

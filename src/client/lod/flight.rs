@@ -28,8 +28,11 @@ use std::sync::Arc;
 /// time them with ±50 % noise (lavapipe on a shared machine); constants
 /// separate only as frames keep disagreeing with the prior's proportions.
 pub fn calibration() -> CalibratorSettings {
-    CalibratorSettings { ridge: 0.03, ..CalibratorSettings::default() }
+    CalibratorSettings { ridge: 0.03, ridge_floor: RIDGE_FLOOR, ..CalibratorSettings::default() }
 }
+
+/// The calibrator's ridge floor (see [`CalibratorSettings::ridge_floor`]).
+pub const RIDGE_FLOOR: f64 = 0.01;
 
 /// The selection state of a flight.
 pub struct BudgetFlight {
@@ -52,7 +55,18 @@ pub struct BudgetFlight {
     pairs: Pairs,
     /// The tiles last drawn and how trees grow on them.
     trees: Option<(TreeSettings, Vec<Arc<TileData>>)>,
+    /// What the frames drawn cost over what their selections predicted,
+    /// both priced by the model now (a moving average): selections price
+    /// the cameras ahead and the conservative cone, which see more than
+    /// the camera that draws, so they aim at the budget over this.
+    aim: f64,
 }
+
+/// Weight of a frame in [`BudgetFlight`]'s moving average of drawn over
+/// selected cost.
+const AIM_WEIGHT: f64 = 0.25;
+/// The aim stays within this factor of 1 (either way).
+const AIM_LIMIT: f64 = 2.0;
 
 impl BudgetFlight {
     /// A flight of frames of `budget` looking ahead by `look`, starting
@@ -78,6 +92,7 @@ impl BudgetFlight {
             morphs: geomorph.then(|| Morphs::new(look.tau_s)),
             pairs: Pairs::default(),
             trees: None,
+            aim: 1.0,
         })
     }
 
@@ -107,7 +122,7 @@ impl BudgetFlight {
         if !self.worker.busy() && t_s >= self.requested_s + self.look.tau_s {
             let (cameras, cone) = ahead::ahead(&self.predictor, camera, t_s, &self.look);
             let trees = self.tree_items(&cameras);
-            let request = Request { cameras, cone: Some(cone), trees, model: self.model(), budget: self.budget };
+            let request = Request { cameras, cone: Some(cone), trees, model: self.model(), budget: self.aimed() };
             if self.worker.submit(request) {
                 self.requested_s = t_s;
             }
@@ -130,16 +145,19 @@ impl BudgetFlight {
         self.trees = Some((settings, drawn));
     }
 
-    /// The tree groups near `cameras` on the tiles last drawn, each once.
+    /// The tree groups near `cameras` on the tiles last drawn, each once,
+    /// with the share of the cameras it is near.
     fn tree_items(&self, cameras: &[Camera]) -> Vec<TreeItem> {
         let Some((settings, tiles)) = &self.trees else { return Vec::new() };
         let refs: Vec<&TileData> = tiles.iter().map(|t| t.as_ref()).collect();
         let mut items: Vec<TreeItem> = Vec::new();
+        let per_camera = 1.0 / cameras.len().max(1) as f64;
         for camera in cameras {
             let blend = settings.blend(camera.focal_px());
             for g in trees::groups_near(settings, &refs, camera, &blend) {
-                if !items.iter().any(|i| i.block == g.block) {
-                    items.push(g.item(&refs, &settings.field));
+                match items.iter_mut().find(|i| i.block == g.block) {
+                    Some(item) => item.share += per_camera,
+                    None => items.push(TreeItem { share: per_camera, ..g.item(&refs, &settings.field) }),
                 }
             }
         }
@@ -199,10 +217,36 @@ impl BudgetFlight {
         let splats = budget::tree_features(trees.0 as f64, trees.1 as f64);
         let features = self.selector.features(camera, drawn, self.budget.view_steps).plus(&splats);
         if self.frames > 0 {
+            self.follow_aim(&features);
             self.calibrator.observe(&features, measured_ms);
         }
         self.frames += 1;
         features
+    }
+}
+
+impl BudgetFlight {
+    /// The budget the selections aim at: the frame budget over the aim.
+    fn aimed(&self) -> Budget {
+        Budget { budget_ms: self.budget.budget_ms / self.aim, ..self.budget }
+    }
+
+    /// What a frame drawing `selected` is expected to cost: its
+    /// prediction times the aim.
+    pub fn expected_ms(&self, selected: &Selected) -> f64 {
+        selected.cut.predicted_ms * self.aim
+    }
+
+    /// Moves the aim toward what the frame drawn with `features` costs
+    /// over what its selection predicted, both priced by the model now.
+    fn follow_aim(&mut self, features: &CostFeatures) {
+        let Some(selected) = &self.current else { return };
+        let model = self.model();
+        let ratio = model.predict_ms(features) / model.predict_ms(&selected.cut.features);
+        if ratio.is_finite() && ratio > 0.0 {
+            let aim = (1.0 - AIM_WEIGHT) * self.aim + AIM_WEIGHT * ratio;
+            self.aim = aim.clamp(1.0 / AIM_LIMIT, AIM_LIMIT);
+        }
     }
 }
 
@@ -306,5 +350,34 @@ mod tests {
         // A frame without ray-cast pixels measures nothing: the estimate stays.
         f.observe(&cam, &cut.tiles, (0, 0), (50.0, 0.0));
         assert_eq!(f.budget().view_steps, 35.0);
+    }
+
+    #[test]
+    fn selections_aim_past_the_budget_when_frames_draw_less_than_predicted() {
+        let mut f = flight();
+        let cam = camera(10.05);
+        let cut = f.frame(0.0, &cam).cut;
+        let steps = f.budget().view_steps;
+        // Frames measured as the model prices them, so it stays.
+        let draw = |f: &mut BudgetFlight, tiles: &[Choice]| {
+            let ms = f.model().predict_ms(&f.selector.features(&cam, tiles, steps));
+            f.observe(&cam, tiles, (0, 0), (ms, steps));
+        };
+        // Frames drawing what their selection priced: the aim stays.
+        for _ in 0..3 {
+            draw(&mut f, &cut.tiles);
+        }
+        assert!((f.aimed().budget_ms - 8.0).abs() < 1e-9, "{}", f.aimed().budget_ms);
+        // Frames drawing fewer tiles cost less: later selections aim higher.
+        let fewer = &cut.tiles[..cut.tiles.len() * 7 / 8];
+        for _ in 0..20 {
+            draw(&mut f, fewer);
+        }
+        let model = f.model();
+        let ratio = model.predict_ms(&f.selector.features(&cam, fewer, steps)) / model.predict_ms(&cut.features);
+        assert!(ratio < 0.98 && ratio > 1.0 / AIM_LIMIT && (f.aim / ratio - 1.0).abs() < 0.01, "{ratio} {}", f.aim);
+        assert!((f.aimed().budget_ms - 8.0 / f.aim).abs() < 1e-9);
+        let expected = f.expected_ms(&f.current.clone().unwrap());
+        assert!((expected - cut.predicted_ms * f.aim).abs() < 1e-9);
     }
 }
