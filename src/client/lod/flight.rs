@@ -223,9 +223,7 @@ impl BudgetFlight {
         self.frames += 1;
         features
     }
-}
 
-impl BudgetFlight {
     /// The budget the selections aim at: the frame budget over the aim.
     fn aimed(&self) -> Budget {
         Budget { budget_ms: self.budget.budget_ms / self.aim, ..self.budget }
