@@ -52,6 +52,9 @@ struct Tile {
     texels: vec4<f32>,
     // weight of the tile's own heights against its morph layer's, unused x3.
     morph: vec4<f32>,
+    // the tile's splats in the frame's instance buffer: first, count;
+    // unused x2.
+    splats: vec4<u32>,
 };
 
 const MODE_HULL: u32 = 0u;

@@ -4,8 +4,9 @@
 // opacity fades it out toward the edge of the tree range, where the
 // ray-cast canopy fades in (surface.wgsl): a screen-door keeps depth writes
 // exact without sorting. Lighting follows the canopy's: ambient plus the
-// sun, shadowed by the terrain toward the sun (shade.wgsl's shadow(), once
-// per splat in the vertex stage: a splat is small, its fragments many).
+// sun, shadowed by the terrain toward the sun: shade.wgsl's shadow() at the
+// splat's centre, once per splat in a compute pass before the frame's
+// render pass (cs_splat_light), which the quad's four vertices read.
 
 struct SplatIn {
     // Centre, tile-local metres.
@@ -14,6 +15,9 @@ struct SplatIn {
     @location(1) radius: f32,
     // sRGB colour; alpha: opacity.
     @location(2) colour: vec4<f32>,
+    // Light reaching the centre through the terrain, in [0, 1]
+    // (cs_splat_light, a second instance buffer).
+    @location(3) light: f32,
 };
 
 struct SplatOut {
@@ -32,12 +36,29 @@ fn vs_splat(@builtin(vertex_index) v: u32, s: SplatIn) -> SplatOut {
     let disc = vec2<f32>(f32(v & 1u), f32(v >> 1u)) * 2.0 - 1.0;
     let centre = (tile.model_view * vec4<f32>(s.centre, 1.0)).xyz;
     let corner = centre + vec3<f32>(disc * s.radius, 0.0);
+    return SplatOut(frame.proj * vec4<f32>(corner, 1.0), disc, s.colour, vec4<f32>(centre, s.radius), s.light);
+}
+
+// The frame's splats as 32-bit words, SPLAT_WORDS each (the centre first:
+// trees.rs's Splat), and the light each receives.
+const SPLAT_WORDS: u32 = 5u;
+@group(2) @binding(0) var<storage, read> splat_words: array<f32>;
+@group(2) @binding(1) var<storage, read_write> splat_lights: array<f32>;
+
+// The light of the tile's splats, one invocation per splat.
+@compute @workgroup_size(64)
+fn cs_splat_light(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= tile.splats.y {
+        return;
+    }
+    let k = tile.splats.x + id.x;
+    let w = k * SPLAT_WORDS;
+    let at = to_samples(vec3<f32>(splat_words[w], splat_words[w + 1u], splat_words[w + 2u]));
     var light = 1.0;
     if frame.mode.w == 1u {
-        let at = to_samples(s.centre);
         light = shadow(at.xy, at.z, tile.sun.xyz);
     }
-    return SplatOut(frame.proj * vec4<f32>(corner, 1.0), disc, s.colour, vec4<f32>(centre, s.radius), light);
+    splat_lights[k] = light;
 }
 
 // A hash of the pixel in [0, 1): the screen door's threshold.

@@ -11,19 +11,21 @@
 //! is at least 40 dB (measured: 84 dB to identical).
 
 use crate::common;
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
+use sylva::cem::surface::SurfaceType;
 use sylva::client::camera::Camera;
 use sylva::client::globe::{self, Geodetic};
 use sylva::client::lod::morphs;
-use sylva::client::raycast::{Fade, Traversal, TreeBlend};
+use sylva::client::raycast::{self, Fade, Traversal, TreeBlend};
 use sylva::client::reference::{self, Departure, Image, Lighting};
 use sylva::client::render::gpu::Gpu;
 use sylva::client::render::uniforms::FrameSettings;
 use sylva::client::render::{Draw, Readback, Rendered, Renderer};
 use sylva::client::source::{RegionSource, TileSource};
 use sylva::client::tile::{TileData, TilePayload};
+use sylva::client::trees::{self, Splat, TreeSettings};
 use sylva::grid::{TileGrid, TileId};
 
 /// Largest share of pixels whose hit may differ (silhouette edges).
@@ -57,7 +59,7 @@ fn render_both(tiles: &[TileData], camera: &Camera, settings: &FrameSettings) ->
     let refs: Vec<&TileData> = tiles.iter().collect();
     let gpu =
         with_renderer(samples, halo, |r| r.render(camera, &refs, settings, Readback::All).expect("fits the cache"));
-    let lighting = Lighting { sun_ecef: settings.sun_ecef, shadow_steps: settings.shadow_steps, fade: settings.fade };
+    let lighting = lighting_of(settings);
     let cpu = reference::render(camera, tiles, &lighting);
     let departure = reference::compare(&gpu.colour, &gpu.view_z_m, &cpu);
     Both { gpu, cpu, departure }
@@ -65,6 +67,11 @@ fn render_both(tiles: &[TileData], camera: &Camera, settings: &FrameSettings) ->
 
 fn settings(traversal: Traversal, sun: Option<DVec3>) -> FrameSettings {
     FrameSettings { traversal, shadow_steps: 10, sun_ecef: sun, fade: Fade::NONE }
+}
+
+/// The reference's lighting for a GPU frame's settings.
+fn lighting_of(settings: &FrameSettings) -> Lighting {
+    Lighting { sun_ecef: settings.sun_ecef, shadow_steps: settings.shadow_steps, fade: settings.fade }
 }
 
 fn sun_at(lon: f64, lat: f64, azimuth_deg: f64, elevation_deg: f64) -> DVec3 {
@@ -224,7 +231,7 @@ fn per_tile_shadow_quality_matches_the_reference() {
     let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
     let gpu =
         with_renderer(samples, halo, |r| r.render_draws(&camera, &draws, &settings, Readback::All).expect("fits"));
-    let lighting = Lighting { sun_ecef: settings.sun_ecef, shadow_steps: settings.shadow_steps, fade: settings.fade };
+    let lighting = lighting_of(&settings);
     let per_tile = reference::compare(
         &gpu.colour,
         &gpu.view_z_m,
@@ -250,7 +257,7 @@ fn a_morphing_tile_draws_the_blended_surface_at_every_weight() {
     let parents: Vec<TileData> = tiles.iter().map(parent_of).collect();
     let pairs: Vec<TileData> = tiles.iter().zip(&parents).map(|(t, p)| morphs::pair(&grid, t, p)).collect();
     let settings = settings(Traversal::Exact, sun);
-    let lighting = Lighting { sun_ecef: settings.sun_ecef, shadow_steps: settings.shadow_steps, fade: settings.fade };
+    let lighting = lighting_of(&settings);
     let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
     let own = reference::render(&camera, &tiles, &lighting);
     for weight in [0.0, 0.2, 0.4, 0.6, 0.8, 1.0] {
@@ -606,17 +613,14 @@ fn no_sun_casts_no_shadow_rays_and_far_tiles_cast_no_rays() {
 
 #[test]
 fn trees_stand_in_front_of_the_ground_where_they_replace_the_canopy() {
-    use sylva::client::trees::{self, TreeSettings};
     let grid = small_grid();
     let (lon0, lat0) = (7.3, 45.1);
     let tiles = synthetic_block(&grid, lon0, lat0, 13, 8, &hills(lon0, lat0));
     let s = grid.sector(tiles[0].id());
     let eye = Geodetic::new(s.max_lon, s.max_lat, 1060.0);
     let camera = Camera::looking(eye, 45.0, -25.0, 60.0, (160, 120));
-    let settings_of_trees = TreeSettings::default();
-    let blend = settings_of_trees.blend(camera.focal_px());
-    let fade = Fade { trees: blend, ..Fade::NONE };
-    let settings = FrameSettings { fade, ..settings(Traversal::Exact, Some(sun_at(lon0, lat0, 120.0, 30.0))) };
+    let settings =
+        FrameSettings { fade: tree_fade(&camera), ..settings(Traversal::Exact, Some(sun_at(lon0, lat0, 120.0, 30.0))) };
     // Without splats the GPU's canopy, flattened under the trees, is the
     // reference's.
     let bare = render_both(&tiles, &camera, &settings);
@@ -625,18 +629,9 @@ fn trees_stand_in_front_of_the_ground_where_they_replace_the_canopy() {
     let lowered = bare.gpu.view_z_m.iter().zip(&whole.gpu.view_z_m).filter(|(b, w)| **b > **w * 1.001).count();
     assert!(lowered * 10 > bare.gpu.view_z_m.len(), "the canopy is lowered near the camera ({lowered} pixels)");
 
-    let refs: Vec<&TileData> = tiles.iter().collect();
-    let groups = trees::groups_near(&settings_of_trees, &refs, &camera, &blend);
-    let mut splats = vec![Vec::new(); tiles.len()];
-    let drawn = trees::splats(&settings_of_trees, &groups, None, (&blend, camera.focal_px()), &mut splats).splats;
-    let draws: Vec<Draw> = tiles
-        .iter()
-        .zip(&splats)
-        .map(|(tile, s)| Draw { tile, shadow_steps: 10, splats: s, morph_weight: 1.0 })
-        .collect();
-    let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
-    let wooded =
-        with_renderer(samples, halo, |r| r.render_draws(&camera, &draws, &settings, Readback::All).expect("fits"));
+    let splats = tree_splats(&tiles, &camera);
+    let drawn: usize = splats.iter().map(Vec::len).sum();
+    let wooded = render_trees(&tiles, &splats, &camera, &settings);
     assert_eq!(wooded.stats.splats as usize, drawn);
     assert!(drawn > 1000, "{drawn} splats");
     let (mut nearer, mut hit) = (0, 0);
@@ -649,4 +644,70 @@ fn trees_stand_in_front_of_the_ground_where_they_replace_the_canopy() {
     }
     eprintln!("trees: {drawn} splats in front of {nearer} of {hit} pixels");
     assert!(nearer * 20 > hit, "trees cover more than 5 % of the view ({nearer} of {hit})");
+}
+
+/// The canopy fade of the default trees seen by `camera`.
+fn tree_fade(camera: &Camera) -> Fade {
+    Fade { trees: TreeSettings::default().blend(camera.focal_px()), ..Fade::NONE }
+}
+
+/// The default trees' splats on `tiles` seen by `camera`, a list per tile.
+fn tree_splats(tiles: &[TileData], camera: &Camera) -> Vec<Vec<Splat>> {
+    let settings = TreeSettings::default();
+    let blend = settings.blend(camera.focal_px());
+    let refs: Vec<&TileData> = tiles.iter().collect();
+    let groups = trees::groups_near(&settings, &refs, camera, &blend);
+    let mut splats = vec![Vec::new(); tiles.len()];
+    trees::splats(&settings, &groups, None, (&blend, camera.focal_px()), &mut splats);
+    splats
+}
+
+/// `tiles` with their `splats` on the GPU, 10 shadow steps each.
+fn render_trees(tiles: &[TileData], splats: &[Vec<Splat>], camera: &Camera, settings: &FrameSettings) -> Rendered {
+    let draws: Vec<Draw> = tiles
+        .iter()
+        .zip(splats)
+        .map(|(tile, s)| Draw { tile, shadow_steps: 10, splats: s, morph_weight: 1.0 })
+        .collect();
+    let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
+    with_renderer(samples, halo, |r| r.render_draws(camera, &draws, settings, Readback::All).expect("fits"))
+}
+
+#[test]
+fn each_splat_is_lit_once_by_the_ray_casters_shadow_rule() {
+    let grid = small_grid();
+    let (lon0, lat0) = (7.3, 45.1);
+    // A forest on flat ground west of a 150 m wall, the sun low in the east.
+    let wall = |lon: f64, lat: f64| {
+        let east = metres(lon, lat, lon0, lat0).0 > 0.0;
+        if east { (1150.0, 0.0, 0) } else { (1000.0, 20.0, SurfaceType::Forest as u8) }
+    };
+    let first = grid.tile_containing(lon0, lat0, 13);
+    let tiles: Vec<TileData> =
+        [first, TileId::new(13, first.row, first.col - 1)].iter().map(|&id| synthetic(&grid, id, 8, &wall)).collect();
+    let camera = Camera::looking(Geodetic::new(lon0 - 0.0015, lat0 + 0.0005, 1070.0), 90.0, -30.0, 60.0, (160, 120));
+    let settings =
+        FrameSettings { fade: tree_fade(&camera), ..settings(Traversal::Exact, Some(sun_at(lon0, lat0, 90.0, 10.0))) };
+    let splats = tree_splats(&tiles, &camera);
+    let gpu = render_trees(&tiles, &splats, &camera, &settings).splat_lights;
+    let lighting = lighting_of(&settings);
+    let sun = lighting.sun_ecef.expect("sun");
+    let cpu: Vec<f64> = tiles
+        .iter()
+        .zip(&splats)
+        .flat_map(|(tile, s)| {
+            let view = reference::view_of(&camera, tile, &lighting);
+            let sun = tile.frame.basis.transpose() * sun;
+            s.iter().map(move |p| {
+                let at = tile.frame.sample_of(DVec2::new(f64::from(p.centre[0]), f64::from(p.centre[1])));
+                raycast::shadow(&view, at, f64::from(p.centre[2]), sun)
+            })
+        })
+        .collect();
+    assert_eq!(gpu.len(), cpu.len());
+    let worst = gpu.iter().zip(&cpu).map(|(g, c)| (f64::from(*g) - c).abs()).fold(0.0, f64::max);
+    let shaded = cpu.iter().filter(|&&l| l < 0.99).count();
+    eprintln!("splat lights: {shaded} of {} shaded, worst difference {worst:.2e}", cpu.len());
+    assert!(worst < 1e-3, "a splat's light departs from the reference's by {worst}");
+    assert!(shaded * 20 > cpu.len() && shaded < cpu.len(), "{shaded} of {} splats shaded", cpu.len());
 }

@@ -6,14 +6,16 @@
 //! textures and read back.
 //!
 //! - `gpu`: the adapter and device; `cache`: tile texture slots within a
-//!   memory budget; `pipeline`: the four pipelines; `uniforms`: the
-//!   uniform blocks; `targets`: render targets and readback; `timer`: GPU
-//!   pass time; `shaders`: the WGSL table.
+//!   memory budget; `pipeline`: the pipelines; `splats`: the splat
+//!   instances and their lights; `uniforms`: the uniform blocks; `targets`:
+//!   render targets and readback; `timer`: GPU pass time; `shaders`: the
+//!   WGSL table.
 
 pub mod cache;
 pub mod gpu;
 pub mod pipeline;
 pub mod shaders;
+pub mod splats;
 pub mod targets;
 pub mod timer;
 pub mod uniforms;
@@ -25,6 +27,7 @@ use super::trees::Splat;
 use cache::{CacheFull, TileCache};
 use gpu::Gpu;
 use pipeline::{Pipelines, RayVariant};
+use splats::SplatBuffers;
 use std::time::Instant;
 use targets::Targets;
 use timer::PassTimer;
@@ -69,6 +72,9 @@ pub struct Rendered {
     pub view_z_m: Vec<f32>,
     /// Texture fetches per pixel: view ray, shadow ray and shading.
     pub fetches: Vec<[u32; 2]>,
+    /// Light reaching each splat through the terrain, the draws' splats in
+    /// their order.
+    pub splat_lights: Vec<f32>,
     /// Counts and times.
     pub stats: FrameStats,
 }
@@ -87,10 +93,12 @@ pub struct Draw<'a> {
     pub morph_weight: f32,
 }
 
-/// How one tile of a frame is drawn: its texture slot, its mode and the
-/// range of its splats in the frame's instance buffer.
+/// How one tile of a frame is drawn: its index among the frame's draws,
+/// its texture slot, its mode and the range of its splats in the frame's
+/// instance buffer.
 #[derive(Clone, Debug)]
 struct Prepared {
+    draw: usize,
     slot: u32,
     mode: DrawMode,
     variant: RayVariant,
@@ -106,7 +114,7 @@ pub struct Renderer {
     frame_group: wgpu::BindGroup,
     tile_buffer: wgpu::Buffer,
     tile_group: wgpu::BindGroup,
-    splat_buffer: Option<wgpu::Buffer>,
+    splats: Option<SplatBuffers>,
     targets: Option<Targets>,
     timer: Option<PassTimer>,
     frame_no: u64,
@@ -150,7 +158,7 @@ impl Renderer {
             frame_group,
             tile_buffer,
             tile_group,
-            splat_buffer: None,
+            splats: None,
             targets: None,
             timer,
             frame_no: 0,
@@ -204,7 +212,7 @@ impl Renderer {
         stats.gpu_ms = self.timer.as_ref().and_then(|t| t.read_ms(&self.gpu.device));
         stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         stats.resident_bytes = self.cache.resident_bytes();
-        Ok(self.read(readback, stats))
+        Ok(self.read(readback, stats, &draws))
     }
 
     /// Uploads tiles and splats, decides how each tile is drawn and writes
@@ -217,13 +225,14 @@ impl Renderer {
         stats: &mut FrameStats,
     ) -> Result<Vec<Prepared>, CacheFull> {
         let (device, queue) = (&self.gpu.device, &self.gpu.queue);
-        let mut order: Vec<(f64, &Draw)> = tiles.iter().map(|d| (uniforms::tile_near_m(camera, d.tile), d)).collect();
+        let mut order: Vec<(f64, usize, &Draw)> =
+            tiles.iter().enumerate().map(|(k, d)| (uniforms::tile_near_m(camera, d.tile), k, d)).collect();
         order.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut blocks = Vec::with_capacity(order.len());
         let mut draws = Vec::with_capacity(order.len());
         let mut splats: Vec<Splat> = Vec::new();
         let linear = matches!(settings.traversal, Traversal::Linear(_));
-        for (near_m, &Draw { tile, shadow_steps, splats: tile_splats, morph_weight }) in order {
+        for (near_m, draw, &Draw { tile, shadow_steps, splats: tile_splats, morph_weight }) in order {
             let slot = self.cache.insert(device, queue, tile, self.frame_no)?;
             let whole = uniforms::canopy_whole(camera, tile, &settings.fade);
             let mode = draw_mode(camera, tile, settings, near_m);
@@ -238,45 +247,26 @@ impl Renderer {
                 DrawMode::Plain => stats.tiles_plain += 1,
             }
             let hull_quad_samples = self.cache.hull_quad_samples(slot).unwrap_or_else(|| tile.hull.quad_samples());
-            let at = Placement { slot, mode, hull_quad_samples, morph };
+            let start = splats.len() as u32;
+            splats.extend_from_slice(tile_splats);
+            let tile_splats = start..splats.len() as u32;
+            let at = Placement { slot, mode, hull_quad_samples, morph, splats: tile_splats.clone() };
             let block = TileUniform::new(camera, settings, tile, at, shadow_steps);
             let mut bytes = bytemuck::bytes_of(&block).to_vec();
             bytes.resize(TILE_STRIDE as usize, 0);
             blocks.extend(bytes);
-            let start = splats.len() as u32;
-            splats.extend_from_slice(tile_splats);
             let variant = RayVariant { inside: mode == DrawMode::Inside, morphing: morph.is_some(), whole, linear };
             if mode != DrawMode::Plain {
                 self.pipelines.prepare_ray(device, variant);
             }
-            draws.push(Prepared { slot, mode, variant, splats: start..splats.len() as u32 });
+            draws.push(Prepared { draw, slot, mode, variant, splats: tile_splats });
         }
         let frame = FrameUniform::new(camera, settings, &self.cache.mip_rects);
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
         queue.write_buffer(&self.tile_buffer, 0, &blocks);
         stats.splats = splats.len() as u32;
-        self.upload_splats(&splats);
+        SplatBuffers::upload(&mut self.splats, (device, queue), &self.pipelines, &splats);
         Ok(draws)
-    }
-
-    /// Writes the frame's splats to the instance buffer, growing it to the
-    /// next power of two when they do not fit.
-    fn upload_splats(&mut self, splats: &[Splat]) {
-        if splats.is_empty() {
-            return;
-        }
-        let bytes: &[u8] = bytemuck::cast_slice(splats);
-        if self.splat_buffer.as_ref().is_none_or(|b| b.size() < bytes.len() as u64) {
-            self.splat_buffer = Some(self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("splats"),
-                size: (bytes.len() as u64).next_power_of_two(),
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            }));
-        }
-        if let Some(buffer) = &self.splat_buffer {
-            self.gpu.queue.write_buffer(buffer, 0, bytes);
-        }
     }
 
     fn encode_and_submit(&self, draws: &[Prepared]) {
@@ -284,6 +274,15 @@ impl Renderer {
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
         let (colour, pixel_data, depth) = (view(&targets.colour), view(&targets.pixel_data), view(&targets.depth));
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
+        let splats = self.splats.as_ref().filter(|_| draws.iter().any(|d| !d.splats.is_empty()));
+        if let Some(splats) = splats {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("splat light"),
+                timestamp_writes: self.timer.as_ref().map(|t| t.compute_start()),
+            });
+            let groups = (&self.pipelines, &self.frame_group, &self.tile_group);
+            splats.light(&mut pass, groups, draws.iter().map(|d| &d.splats).enumerate());
+        }
         {
             let sky = wgpu::Color { r: SKY[0], g: SKY[1], b: SKY[2], a: 1.0 };
             let attach = |v, clear| {
@@ -302,7 +301,7 @@ impl Renderer {
                     depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
                     stencil_ops: None,
                 }),
-                timestamp_writes: self.timer.as_ref().map(|t| t.writes()),
+                timestamp_writes: self.timer.as_ref().map(|t| t.render(splats.is_none())),
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
@@ -324,9 +323,9 @@ impl Renderer {
                 let count = if d.mode == DrawMode::Plain { terrain.index_count } else { terrain.grid_count };
                 draw(&mut pass, terrain, count);
             }
-            if let Some(instances) = &self.splat_buffer {
+            if let Some(splats) = splats {
                 pass.set_pipeline(&self.pipelines.splat);
-                pass.set_vertex_buffer(0, instances.slice(..));
+                splats.bind(&mut pass);
                 for (k, d) in draws.iter().enumerate().filter(|(_, d)| !d.splats.is_empty()) {
                     pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
                     pass.draw(0..4, d.splats.clone());
@@ -341,7 +340,7 @@ impl Renderer {
         let _ = self.gpu.device.poll(wgpu::PollType::wait_indefinitely());
     }
 
-    fn read(&self, readback: Readback, stats: FrameStats) -> Rendered {
+    fn read(&self, readback: Readback, stats: FrameStats, draws: &[Prepared]) -> Rendered {
         let mut out = Rendered { stats, ..Default::default() };
         let (Some(targets), true) = (&self.targets, readback != Readback::None) else { return out };
         let (device, queue) = (&self.gpu.device, &self.gpu.queue);
@@ -351,8 +350,25 @@ impl Renderer {
                 bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.pixel_data, 16)).to_vec();
             out.view_z_m = data.iter().map(|d| f32::from_bits(d[2])).collect();
             out.fetches = data.iter().map(|d| [d[0], d[1]]).collect();
+            out.splat_lights = self.splat_lights(draws);
         }
         out
+    }
+
+    /// The light of each splat, the draws' splats in their order.
+    fn splat_lights(&self, draws: &[Prepared]) -> Vec<f32> {
+        let Some(splats) = self.splats.as_ref().filter(|_| draws.iter().any(|d| !d.splats.is_empty())) else {
+            return Vec::new();
+        };
+        let lights = splats.read_lights(&self.gpu.device, &self.gpu.queue);
+        let mut by_draw: Vec<&Prepared> = draws.iter().collect();
+        by_draw.sort_by_key(|d| d.draw);
+        by_draw
+            .iter()
+            .flat_map(|d| lights.get(d.splats.start as usize..d.splats.end as usize))
+            .flatten()
+            .copied()
+            .collect()
     }
 }
 

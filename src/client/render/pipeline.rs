@@ -1,10 +1,11 @@
 //! The render pipelines and their bindings: hull fragments that ray cast
 //! (front faces), the same from a camera inside the hull (back faces), and
 //! plain texture mapping of the terrain mesh (far tiles, and crack filling
-//! under ray-cast ones), and trees' splats as instanced quads. All write
-//! colour, per-pixel fetch counts, the view-axis distance and reversed-Z
-//! depth (greater is nearer). The ray-casting pipelines are specialised per
-//! [`RayVariant`] and built when a frame first needs one.
+//! under ray-cast ones), and trees' splats as instanced quads, lit by a
+//! compute pipeline that casts each splat's shadow ray once. All render
+//! pipelines write colour, per-pixel fetch counts, the view-axis distance
+//! and reversed-Z depth (greater is nearer). The ray-casting pipelines are
+//! specialised per [`RayVariant`] and built when a frame first needs one.
 
 use super::super::hull::HullVertex;
 use super::super::terrain::TerrainVertex;
@@ -52,8 +53,13 @@ pub struct Pipelines {
     rays: HashMap<RayVariant, wgpu::RenderPipeline>,
     /// Texture-mapped terrain mesh.
     pub plain: wgpu::RenderPipeline,
-    /// Trees' splats: a quad of four strip vertices per instance.
+    /// Trees' splats: a quad of four strip vertices per instance, whose
+    /// light is a second instance buffer.
     pub splat: wgpu::RenderPipeline,
+    /// The light of each splat (group 2: the splats, their lights).
+    pub splat_light: wgpu::ComputePipeline,
+    /// Group 2 of [`Self::splat_light`].
+    pub splat_layout: wgpu::BindGroupLayout,
     /// Group 0: frame uniform, tile textures, sampler, morph layers.
     pub frame_layout: wgpu::BindGroupLayout,
     /// Group 1: the tile uniform at a dynamic offset.
@@ -78,7 +84,7 @@ impl Pipelines {
                 texture_entry(3),
                 wgpu::BindGroupLayoutEntry {
                     binding: 4,
-                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    visibility: STAGES,
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::NonFiltering),
                     count: None,
                 },
@@ -101,17 +107,25 @@ impl Pipelines {
             attributes: &terrain_attributes,
         };
         let splat_attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32, 2 => Unorm8x4];
-        let splat_instance = wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<Splat>() as u64,
+        let light_attributes = wgpu::vertex_attr_array![3 => Float32];
+        let instances = |stride: usize, attributes| wgpu::VertexBufferLayout {
+            array_stride: stride as u64,
             step_mode: wgpu::VertexStepMode::Instance,
-            attributes: &splat_attributes,
+            attributes,
         };
+        let splat_instance = [
+            instances(std::mem::size_of::<Splat>(), &splat_attributes[..]),
+            instances(std::mem::size_of::<f32>(), &light_attributes[..]),
+        ];
         let quads = wgpu::PrimitiveState { topology: wgpu::PrimitiveTopology::TriangleStrip, ..Default::default() };
-        let plain = ("vs_plain", terrain_vertex);
-        let splat = ("vs_splat", splat_instance);
+        let plain = ("vs_plain", &[terrain_vertex][..]);
+        let splat = ("vs_splat", &splat_instance[..]);
+        let splat_layout = splat_layout(device);
         Pipelines {
             plain: pipeline(device, (&layout, &module), plain, "fs_plain", (triangles(wgpu::Face::Back), &[])),
             splat: pipeline(device, (&layout, &module), splat, "fs_splat", (quads, &[])),
+            splat_light: splat_light(device, &module, [&frame_layout, &tile_layout, &splat_layout]),
+            splat_layout,
             rays: HashMap::new(),
             frame_layout,
             tile_layout,
@@ -141,7 +155,7 @@ impl Pipelines {
         let built = pipeline(
             device,
             (&self.layout, &self.module),
-            ("vs_hull", vertex),
+            ("vs_hull", &[vertex][..]),
             "fs_ray",
             (triangles(cull), &constants),
         );
@@ -195,10 +209,52 @@ impl Pipelines {
     }
 }
 
+/// The stages that read the frame's and the tiles' bindings.
+const STAGES: wgpu::ShaderStages = wgpu::ShaderStages::VERTEX_FRAGMENT.union(wgpu::ShaderStages::COMPUTE);
+
+/// Group 2 of the splat light pipeline: the splats (read), their lights
+/// (written).
+fn splat_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
+    let storage = |binding, read_only| wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    };
+    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("splats"),
+        entries: &[storage(0, true), storage(1, false)],
+    })
+}
+
+fn splat_light(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    groups: [&wgpu::BindGroupLayout; 3],
+) -> wgpu::ComputePipeline {
+    let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("splat light"),
+        bind_group_layouts: &groups.map(Some),
+        immediate_size: 0,
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("splat light"),
+        layout: Some(&layout),
+        module,
+        entry_point: Some("cs_splat_light"),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}
+
 fn uniform_entry(binding: u32, size: u64, dynamic: bool) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
-        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+        visibility: STAGES,
         ty: wgpu::BindingType::Buffer {
             ty: wgpu::BufferBindingType::Uniform,
             has_dynamic_offset: dynamic,
@@ -211,7 +267,7 @@ fn uniform_entry(binding: u32, size: u64, dynamic: bool) -> wgpu::BindGroupLayou
 fn texture_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
-        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+        visibility: STAGES,
         ty: wgpu::BindingType::Texture {
             sample_type: wgpu::TextureSampleType::Float { filterable: false },
             view_dimension: wgpu::TextureViewDimension::D2Array,
@@ -235,7 +291,7 @@ fn triangles(cull: wgpu::Face) -> wgpu::PrimitiveState {
 fn pipeline(
     device: &wgpu::Device,
     (layout, module): (&wgpu::PipelineLayout, &wgpu::ShaderModule),
-    (vs, vertex): (&str, wgpu::VertexBufferLayout),
+    (vs, buffers): (&str, &[wgpu::VertexBufferLayout]),
     fs: &str,
     (primitive, constants): (wgpu::PrimitiveState, &[(&str, f64)]),
 ) -> wgpu::RenderPipeline {
@@ -247,7 +303,7 @@ fn pipeline(
             module,
             entry_point: Some(vs),
             compilation_options: options(),
-            buffers: &[Some(vertex)],
+            buffers: &buffers.iter().cloned().map(Some).collect::<Vec<_>>(),
         },
         primitive,
         depth_stencil: Some(wgpu::DepthStencilState {

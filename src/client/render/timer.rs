@@ -1,5 +1,6 @@
-//! GPU time of a render pass from timestamp queries, where the adapter has
-//! them (`None` elsewhere; the caller then reports CPU-side time).
+//! GPU time of a frame's passes (the splat light compute pass, if any, and
+//! the render pass) from timestamp queries, where the adapter has them
+//! (`None` elsewhere; the caller then reports CPU-side time).
 
 use super::targets::map_read;
 
@@ -38,11 +39,22 @@ impl PassTimer {
         })
     }
 
-    /// The pass's timestamp writes.
-    pub fn writes(&self) -> wgpu::RenderPassTimestampWrites<'_> {
-        wgpu::RenderPassTimestampWrites {
+    /// The first timestamp at the start of a compute pass that precedes
+    /// the render pass.
+    pub fn compute_start(&self) -> wgpu::ComputePassTimestampWrites<'_> {
+        wgpu::ComputePassTimestampWrites {
             query_set: &self.queries,
             beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: None,
+        }
+    }
+
+    /// The render pass's timestamps: its end, and its start if it is
+    /// `first` (no compute pass before it).
+    pub fn render(&self, first: bool) -> wgpu::RenderPassTimestampWrites<'_> {
+        wgpu::RenderPassTimestampWrites {
+            query_set: &self.queries,
+            beginning_of_pass_write_index: first.then_some(0),
             end_of_pass_write_index: Some(1),
         }
     }

@@ -60,11 +60,14 @@ pub struct TileUniform {
     /// Morph weight of the tile's own heights (against the coarser
     /// surface in its morph layer), unused × 3.
     pub morph: [f32; 4],
-    _pad: [f32; 16],
+    /// First of the tile's splats in the frame's instance buffer, their
+    /// count, unused × 2.
+    pub splats: [u32; 4],
+    _pad: [f32; 12],
 }
 
 /// Where and how a tile is drawn.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct Placement {
     /// Its texture slot.
     pub slot: u32,
@@ -74,6 +77,8 @@ pub struct Placement {
     pub hull_quad_samples: f32,
     /// Its morph layer and the weight of its own heights, if it morphs.
     pub morph: Option<(u32, f32)>,
+    /// Its splats in the frame's instance buffer.
+    pub splats: std::ops::Range<u32>,
 }
 
 /// How a tile is drawn.
@@ -137,7 +142,7 @@ impl TileUniform {
         at: Placement,
         shadow_steps: u32,
     ) -> TileUniform {
-        let Placement { slot, mode, hull_quad_samples, morph } = at;
+        let Placement { slot, mode, hull_quad_samples, morph, splats } = at;
         let frame = &tile.frame;
         let to_local = frame.basis.transpose();
         let cam = frame.to_local(camera.position_ecef);
@@ -168,7 +173,8 @@ impl TileUniform {
             flags: [mode as u32, 0, shadow_steps, morph.map_or(0, |(layer, _)| layer + 1)],
             texels: [tile.range.texels_max_m, 0.0, 0.0, 0.0],
             morph: [morph.map_or(1.0, |(_, weight)| weight), 0.0, 0.0, 0.0],
-            _pad: [0.0; 16],
+            splats: [splats.start, splats.len() as u32, 0, 0],
+            _pad: [0.0; 12],
         }
     }
 }
@@ -264,6 +270,7 @@ mod tests {
             ("flags", offset_of!(TileUniform, flags)),
             ("texels", offset_of!(TileUniform, texels)),
             ("morph", offset_of!(TileUniform, morph)),
+            ("splats", offset_of!(TileUniform, splats)),
         ];
         for (name, rust) in [("Frame", &frame[..]), ("Tile", &tile[..])] {
             let (wgsl, size) = wgsl_offsets(name);
