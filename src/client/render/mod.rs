@@ -274,7 +274,7 @@ impl Renderer {
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
         let (colour, pixel_data, depth) = (view(&targets.colour), view(&targets.pixel_data), view(&targets.depth));
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
-        let splats = self.splats.as_ref().filter(|_| draws.iter().any(|d| !d.splats.is_empty()));
+        let splats = self.drawn_splats(draws);
         if let Some(splats) = splats {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("splat light"),
@@ -355,11 +355,14 @@ impl Renderer {
         out
     }
 
+    /// The splat buffers, if this frame's `draws` have splats.
+    fn drawn_splats(&self, draws: &[Prepared]) -> Option<&SplatBuffers> {
+        self.splats.as_ref().filter(|_| draws.iter().any(|d| !d.splats.is_empty()))
+    }
+
     /// The light of each splat, the draws' splats in their order.
     fn splat_lights(&self, draws: &[Prepared]) -> Vec<f32> {
-        let Some(splats) = self.splats.as_ref().filter(|_| draws.iter().any(|d| !d.splats.is_empty())) else {
-            return Vec::new();
-        };
+        let Some(splats) = self.drawn_splats(draws) else { return Vec::new() };
         let lights = splats.read_lights(&self.gpu.device, &self.gpu.queue);
         let mut by_draw: Vec<&Prepared> = draws.iter().collect();
         by_draw.sort_by_key(|d| d.draw);
