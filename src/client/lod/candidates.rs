@@ -23,7 +23,11 @@
 //!
 //! Its cost is in pixels: the most any camera sees of it, unless the
 //! renderer would draw it plain ([`raycast::plain`], from the terrain
-//! mesh's error once the tile has been loaded).
+//! mesh's error once the tile has been loaded), and at most what its
+//! children in view cover ([`bound_by_children`]): a tile around a camera
+//! in a valley, measured on a plane just under the eye, would otherwise
+//! cost half the screen while its children cost nothing, and refining it
+//! would lower the cost, which greedy increments never follow.
 
 use super::super::camera::Camera;
 use super::super::frame::TileFrame;
@@ -120,7 +124,26 @@ pub fn candidates(scope: &Scope) -> Candidates {
             stack.extend(id.children().map(|c| (c, Some(index))));
         }
     }
+    bound_by_children(&mut out.tiles);
     out
+}
+
+/// Caps each candidate's ray pixels at what its children in view cover
+/// (parents before children in `tiles`): they are measured on tighter
+/// height ranges, and a refinement then never lowers the cut's pixels.
+fn bound_by_children(tiles: &mut [Candidate]) {
+    let mut covered = vec![0.0; tiles.len()];
+    let mut has_children = vec![false; tiles.len()];
+    for k in (0..tiles.len()).rev() {
+        if has_children[k] {
+            tiles[k].ray_px = tiles[k].ray_px.min(covered[k]);
+        }
+        if let Some(p) = tiles[k].parent {
+            let t = &tiles[k];
+            covered[p as usize] += if t.ray_px > 0.0 { t.ray_px } else { t.seen_px };
+            has_children[p as usize] = true;
+        }
+    }
 }
 
 /// Point-registered edges: a tile whose edge lies on the area's edge holds
@@ -348,5 +371,38 @@ mod tests {
         assert!(wide.tiles.len() > narrow.tiles.len());
         // Behind the camera: candidates with no benefit and no pixels.
         assert!(wide.tiles.iter().any(|t| t.seen_px == 0.0 && t.benefit == 0.0));
+    }
+
+    #[test]
+    fn a_tile_costs_no_more_pixels_than_its_children_in_view_cover() {
+        let tile = |level, parent, seen_px: f64, ray_px| Candidate {
+            id: TileId::new(level, 0, 0),
+            parent,
+            benefit: 0.0,
+            seen_px,
+            ray_px,
+        };
+        // A chain around the camera: each tile's plane lies just under the
+        // eye (half the screen), its children in view cover little.
+        let mut tiles = vec![
+            tile(8, None, 190_000.0, 190_000.0),
+            tile(9, Some(0), 180_000.0, 180_000.0),
+            tile(9, Some(0), 3_000.0, 3_000.0),
+            tile(10, Some(1), 500.0, 500.0),
+            tile(10, Some(1), 0.0, 0.0),
+            tile(9, Some(0), 2_000.0, 0.0),
+        ];
+        bound_by_children(&mut tiles);
+        let ray: Vec<f64> = tiles.iter().map(|t| t.ray_px).collect();
+        // A child drawn plain still covers its pixels (a cut through it
+        // casts no rays there, but the parent's rays would).
+        assert_eq!(ray, [5_500.0, 500.0, 3_000.0, 500.0, 0.0, 0.0]);
+        // Refining never lowers a cut's pixels: children sum to at least
+        // their parent.
+        for (k, t) in tiles.iter().enumerate() {
+            let children: f64 =
+                tiles.iter().filter(|c| c.parent == Some(k as u32)).map(|c| c.ray_px.max(c.seen_px)).sum();
+            assert!(children == 0.0 || t.ray_px <= children, "{k}: {} > {children}", t.ray_px);
+        }
     }
 }
