@@ -24,7 +24,7 @@
 //! Its cost is in pixels: the most any camera sees of it, unless the
 //! renderer would draw it plain ([`raycast::plain`], from the terrain
 //! mesh's error once the tile has been loaded), and at most what its
-//! children in view cover ([`bound_by_children`]): a tile around a camera
+//! children in view cover (`bound_by_children`): a tile around a camera
 //! in a valley, measured on a plane just under the eye, would otherwise
 //! cost half the screen while its children cost nothing, and refining it
 //! would lower the cost, which greedy increments never follow.
