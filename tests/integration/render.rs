@@ -631,7 +631,7 @@ fn trees_stand_in_front_of_the_ground_where_they_replace_the_canopy() {
 
     let splats = tree_splats(&tiles, &camera);
     let drawn: usize = splats.iter().map(Vec::len).sum();
-    let wooded = render_trees(&tiles, &splats, &camera, &settings);
+    let (wooded, _) = render_trees(&tiles, &splats, &camera, &settings);
     assert_eq!(wooded.stats.splats as usize, drawn);
     assert!(drawn > 1000, "{drawn} splats");
     let (mut nearer, mut hit) = (0, 0);
@@ -662,15 +662,24 @@ fn tree_splats(tiles: &[TileData], camera: &Camera) -> Vec<Vec<Splat>> {
     splats
 }
 
-/// `tiles` with their `splats` on the GPU, 10 shadow steps each.
-fn render_trees(tiles: &[TileData], splats: &[Vec<Splat>], camera: &Camera, settings: &FrameSettings) -> Rendered {
+/// `tiles` with their `splats` on the GPU, 10 shadow steps each, and the
+/// light each splat received.
+fn render_trees(
+    tiles: &[TileData],
+    splats: &[Vec<Splat>],
+    camera: &Camera,
+    settings: &FrameSettings,
+) -> (Rendered, Vec<f32>) {
     let draws: Vec<Draw> = tiles
         .iter()
         .zip(splats)
         .map(|(tile, s)| Draw { tile, shadow_steps: 10, splats: s, morph_weight: 1.0 })
         .collect();
     let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
-    with_renderer(samples, halo, |r| r.render_draws(camera, &draws, settings, Readback::All).expect("fits"))
+    with_renderer(samples, halo, |r| {
+        let rendered = r.render_draws(camera, &draws, settings, Readback::All).expect("fits");
+        (rendered, r.splat_lights())
+    })
 }
 
 #[test]
@@ -689,7 +698,7 @@ fn each_splat_is_lit_once_by_the_ray_casters_shadow_rule() {
     let settings =
         FrameSettings { fade: tree_fade(&camera), ..settings(Traversal::Exact, Some(sun_at(lon0, lat0, 90.0, 10.0))) };
     let splats = tree_splats(&tiles, &camera);
-    let gpu = render_trees(&tiles, &splats, &camera, &settings).splat_lights;
+    let (_, gpu) = render_trees(&tiles, &splats, &camera, &settings);
     let lighting = lighting_of(&settings);
     let sun = lighting.sun_ecef.expect("sun");
     let cpu: Vec<f64> = tiles

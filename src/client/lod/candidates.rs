@@ -139,11 +139,16 @@ fn bound_by_children(tiles: &mut [Candidate]) {
             tiles[k].ray_px = tiles[k].ray_px.min(covered[k]);
         }
         if let Some(p) = tiles[k].parent {
-            let t = &tiles[k];
-            covered[p as usize] += if t.ray_px > 0.0 { t.ray_px } else { t.seen_px };
+            covered[p as usize] += covers(&tiles[k]);
             has_children[p as usize] = true;
         }
     }
+}
+
+/// The pixels a candidate covers of its parent's: its ray pixels, or what
+/// it shows if it is drawn plain (its parent's rays would fall there).
+fn covers(t: &Candidate) -> f64 {
+    if t.ray_px > 0.0 { t.ray_px } else { t.seen_px }
 }
 
 /// Point-registered edges: a tile whose edge lies on the area's edge holds
@@ -400,8 +405,7 @@ mod tests {
         // Refining never lowers a cut's pixels: children sum to at least
         // their parent.
         for (k, t) in tiles.iter().enumerate() {
-            let children: f64 =
-                tiles.iter().filter(|c| c.parent == Some(k as u32)).map(|c| c.ray_px.max(c.seen_px)).sum();
+            let children: f64 = tiles.iter().filter(|c| c.parent == Some(k as u32)).map(covers).sum();
             assert!(children == 0.0 || t.ray_px <= children, "{k}: {} > {children}", t.ray_px);
         }
     }

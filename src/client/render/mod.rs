@@ -72,9 +72,6 @@ pub struct Rendered {
     pub view_z_m: Vec<f32>,
     /// Texture fetches per pixel: view ray, shadow ray and shading.
     pub fetches: Vec<[u32; 2]>,
-    /// Light reaching each splat through the terrain, the draws' splats in
-    /// their order.
-    pub splat_lights: Vec<f32>,
     /// Counts and times.
     pub stats: FrameStats,
 }
@@ -93,12 +90,10 @@ pub struct Draw<'a> {
     pub morph_weight: f32,
 }
 
-/// How one tile of a frame is drawn: its index among the frame's draws,
-/// its texture slot, its mode and the range of its splats in the frame's
-/// instance buffer.
+/// How one tile of a frame is drawn: its texture slot, its mode and the
+/// range of its splats in the frame's instance buffer.
 #[derive(Clone, Debug)]
 struct Prepared {
-    draw: usize,
     slot: u32,
     mode: DrawMode,
     variant: RayVariant,
@@ -115,6 +110,8 @@ pub struct Renderer {
     tile_buffer: wgpu::Buffer,
     tile_group: wgpu::BindGroup,
     splats: Option<SplatBuffers>,
+    /// The last frame's splat ranges in the instance buffer, by draw.
+    splat_ranges: Vec<std::ops::Range<u32>>,
     targets: Option<Targets>,
     timer: Option<PassTimer>,
     frame_no: u64,
@@ -159,6 +156,7 @@ impl Renderer {
             tile_buffer,
             tile_group,
             splats: None,
+            splat_ranges: Vec::new(),
             targets: None,
             timer,
             frame_no: 0,
@@ -212,7 +210,7 @@ impl Renderer {
         stats.gpu_ms = self.timer.as_ref().and_then(|t| t.read_ms(&self.gpu.device));
         stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         stats.resident_bytes = self.cache.resident_bytes();
-        Ok(self.read(readback, stats, &draws))
+        Ok(self.read(readback, stats))
     }
 
     /// Uploads tiles and splats, decides how each tile is drawn and writes
@@ -232,6 +230,7 @@ impl Renderer {
         let mut draws = Vec::with_capacity(order.len());
         let mut splats: Vec<Splat> = Vec::new();
         let linear = matches!(settings.traversal, Traversal::Linear(_));
+        self.splat_ranges = vec![0..0; tiles.len()];
         for (near_m, draw, &Draw { tile, shadow_steps, splats: tile_splats, morph_weight }) in order {
             let slot = self.cache.insert(device, queue, tile, self.frame_no)?;
             let whole = uniforms::canopy_whole(camera, tile, &settings.fade);
@@ -250,6 +249,7 @@ impl Renderer {
             let start = splats.len() as u32;
             splats.extend_from_slice(tile_splats);
             let tile_splats = start..splats.len() as u32;
+            self.splat_ranges[draw] = tile_splats.clone();
             let at = Placement { slot, mode, hull_quad_samples, morph, splats: tile_splats.clone() };
             let block = TileUniform::new(camera, settings, tile, at, shadow_steps);
             let mut bytes = bytemuck::bytes_of(&block).to_vec();
@@ -259,7 +259,7 @@ impl Renderer {
             if mode != DrawMode::Plain {
                 self.pipelines.prepare_ray(device, variant);
             }
-            draws.push(Prepared { draw, slot, mode, variant, splats: tile_splats });
+            draws.push(Prepared { slot, mode, variant, splats: tile_splats });
         }
         let frame = FrameUniform::new(camera, settings, &self.cache.mip_rects);
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
@@ -274,7 +274,7 @@ impl Renderer {
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
         let (colour, pixel_data, depth) = (view(&targets.colour), view(&targets.pixel_data), view(&targets.depth));
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
-        let splats = self.drawn_splats(draws);
+        let splats = self.splats.as_ref().filter(|_| draws.iter().any(|d| !d.splats.is_empty()));
         if let Some(splats) = splats {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("splat light"),
@@ -340,7 +340,7 @@ impl Renderer {
         let _ = self.gpu.device.poll(wgpu::PollType::wait_indefinitely());
     }
 
-    fn read(&self, readback: Readback, stats: FrameStats, draws: &[Prepared]) -> Rendered {
+    fn read(&self, readback: Readback, stats: FrameStats) -> Rendered {
         let mut out = Rendered { stats, ..Default::default() };
         let (Some(targets), true) = (&self.targets, readback != Readback::None) else { return out };
         let (device, queue) = (&self.gpu.device, &self.gpu.queue);
@@ -350,28 +350,18 @@ impl Renderer {
                 bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.pixel_data, 16)).to_vec();
             out.view_z_m = data.iter().map(|d| f32::from_bits(d[2])).collect();
             out.fetches = data.iter().map(|d| [d[0], d[1]]).collect();
-            out.splat_lights = self.splat_lights(draws);
         }
         out
     }
 
-    /// The splat buffers, if this frame's `draws` have splats.
-    fn drawn_splats(&self, draws: &[Prepared]) -> Option<&SplatBuffers> {
-        self.splats.as_ref().filter(|_| draws.iter().any(|d| !d.splats.is_empty()))
-    }
-
-    /// The light of each splat, the draws' splats in their order.
-    fn splat_lights(&self, draws: &[Prepared]) -> Vec<f32> {
-        let Some(splats) = self.drawn_splats(draws) else { return Vec::new() };
+    /// The light the last frame's splats received through the terrain,
+    /// its draws' splats in their order (read back on demand, for checks
+    /// against the CPU's shadow rule).
+    pub fn splat_lights(&self) -> Vec<f32> {
+        let Some(splats) = &self.splats else { return Vec::new() };
         let lights = splats.read_lights(&self.gpu.device, &self.gpu.queue);
-        let mut by_draw: Vec<&Prepared> = draws.iter().collect();
-        by_draw.sort_by_key(|d| d.draw);
-        by_draw
-            .iter()
-            .flat_map(|d| lights.get(d.splats.start as usize..d.splats.end as usize))
-            .flatten()
-            .copied()
-            .collect()
+        let range = |r: &std::ops::Range<u32>| lights.get(r.start as usize..r.end as usize).unwrap_or_default();
+        self.splat_ranges.iter().flat_map(range).copied().collect()
     }
 }
 
