@@ -44,8 +44,8 @@ struct Tile {
     range: vec4<f32>,
     // halo B, texels per side, texture slot, top mipmap level.
     index: vec4<i32>,
-    // draw mode (0 hull, 1 camera inside the hull, 2 plain), unused,
-    // shadow steps (the tile's ray-casting quality), morph layer + 1 (0: the
+    // draw mode (0 hull, 1 camera inside the hull, 2 plain), the tile's
+    // place among the frame's draws + 1, shadow steps (the tile's ray-casting quality), morph layer + 1 (0: the
     // tile does not morph).
     flags: vec4<u32>,
     // highest CEM over all texels, halo included (local m), unused x3.

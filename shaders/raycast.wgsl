@@ -19,7 +19,8 @@ struct VertexOut {
 };
 
 // Per pixel: view-ray fetches, shadow-ray fetches, the bits of the
-// distance along the view axis (m), unused.
+// distance along the view axis (m), and the draw whose rays it shows
+// (tile.flags.y; 0 where no ray was cast).
 struct FragmentOut {
     @location(0) colour: vec4<f32>,
     @location(1) data: vec4<u32>,
@@ -134,7 +135,7 @@ fn fs_ray(in: VertexOut) -> FragmentOut {
     let colour = shade(hs.xy, hs.z, dir);
     let view = tile.model_view * vec4<f32>(hit, 1.0);
     let distance = max(-view.z, 1.0e-30);
-    let data = vec4<u32>(view_fetches, shadow_fetches, bitcast<u32>(distance), 0u);
+    let data = vec4<u32>(view_fetches, shadow_fetches, bitcast<u32>(distance), tile.flags.y);
     return FragmentOut(vec4<f32>(colour, 1.0), data, frame.viewport.z / distance);
 }
 

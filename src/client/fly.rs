@@ -10,8 +10,9 @@
 //! screen size asks for, or under a budget as the selection allots.
 
 use super::lod::ahead::Lookahead;
-use super::lod::budget::{Budget, Choice, VIEW_STEPS};
+use super::lod::budget::{Budget, Choice};
 use super::lod::flight::BudgetFlight;
+use super::lod::steps::FrameSteps;
 use super::lod::{Selected, Selector};
 use super::path::CameraPath;
 use super::quadtree::{self, LodRule};
@@ -224,7 +225,6 @@ pub fn fly(
                 max_tiles: renderer.cache_slots() as usize,
                 shadows: path.sun.is_some(),
                 deadline: None,
-                view_steps: VIEW_STEPS,
             };
             let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
             let look =
@@ -344,13 +344,13 @@ fn frame(
     let selected = chosen.selected.as_ref();
     let predicted_ms = lod.as_deref().zip(selected).map(|(l, s)| l.expected_ms(s));
     let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
-    let view_fetches_mean = mean_view_fetches(&out.fetches);
+    let drawn: Vec<Choice> = draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
+    let ids: Vec<_> = drawn.iter().map(|c| c.id).collect();
+    let view: Vec<u32> = out.fetches.iter().map(|f| f[0]).collect();
+    let steps = FrameSteps::measure(&view, &out.draws, &ids);
     if let Some(lod) = lod {
-        let drawn: Vec<Choice> =
-            draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
         let drawn_trees = (trees.drawn.splats, trees.drawn.groups);
-        let measured = (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), view_fetches_mean);
-        lod.observe(&camera, &drawn, drawn_trees, measured);
+        lod.observe(&camera, &drawn, drawn_trees, (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), &steps));
     }
     if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
         let file = dir.join(format!("frame_{k:05}.png"));
@@ -380,7 +380,7 @@ fn frame(
         tiles_plain: out.stats.tiles_plain,
         error_px,
         ray_pixels: rays.len(),
-        view_fetches: (view_fetches_mean, rays.iter().map(|f| f[0]).max().unwrap_or(0)),
+        view_fetches: (steps.mean, rays.iter().map(|f| f[0]).max().unwrap_or(0)),
         shadow_fetches_mean: rays.iter().map(|f| f[1] as f64).sum::<f64>() / n,
         bytes_fetched: source.bytes_fetched() - bytes_before,
         gpu_bytes: out.stats.resident_bytes,
@@ -398,12 +398,6 @@ fn frame(
         trees: trees.drawn.trees,
         splats: out.stats.splats as usize,
     })
-}
-
-/// Mean view-ray fetches over the pixels a ray was cast for (0 if none).
-fn mean_view_fetches(fetches: &[[u32; 2]]) -> f64 {
-    let (sum, n) = fetches.iter().filter(|f| f[0] > 0).fold((0.0, 0usize), |(s, n), f| (s + f64::from(f[0]), n + 1));
-    sum / n.max(1) as f64
 }
 
 /// A frame's trees.

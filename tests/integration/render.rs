@@ -527,10 +527,11 @@ fn luminance(c: [u8; 4]) -> f64 {
     0.2126 * c[0] as f64 + 0.7152 * c[1] as f64 + 0.0722 * c[2] as f64
 }
 
-/// Image column of a world point seen by a camera looking down.
-fn column(camera: &Camera, p: Geodetic) -> f64 {
+/// Image column and row of a world point seen by a camera looking down.
+fn pixel_of(camera: &Camera, p: Geodetic) -> DVec2 {
     let v = camera.rotation.transpose() * (p.to_ecef() - camera.position_ecef);
-    camera.width_px as f64 / 2.0 + camera.focal_px() * v.x / -v.z
+    let half = DVec2::new(camera.width_px as f64, camera.height_px as f64) / 2.0;
+    half + camera.focal_px() * DVec2::new(v.x, -v.y) / -v.z
 }
 
 #[test]
@@ -553,6 +554,16 @@ fn four_tiles_show_no_crack_and_shadows_cross_their_borders() {
     let both = render_both(&tiles, &camera, &settings(Traversal::Exact, sun));
     assert_close("four tiles", &both.departure);
     assert!(both.gpu.view_z_m.iter().all(|&z| z > 0.0), "no crack between the four tiles");
+    // Each pixel names the tile whose rays it shows (by its place among the
+    // draws): in each quadrant around the corner, the tile there.
+    let d = 0.2 * (s.max_lon - s.min_lon);
+    for (dlon, dlat) in [(-d, -d), (d, -d), (-d, d), (d, d)] {
+        let p = pixel_of(&camera, Geodetic::new(border + dlon, s.max_lat + dlat, 1000.0)).floor();
+        let k = both.gpu.draws[p.y as usize * 160 + p.x as usize] as usize;
+        let shown = grid.sector(tiles[k.checked_sub(1).expect("a ray-cast pixel")].id());
+        assert!(shown.min_lon < border + dlon && border + dlon < shown.max_lon, "{dlon}: {shown:?}");
+        assert!(shown.min_lat < s.max_lat + dlat && s.max_lat + dlat < shown.max_lat, "{dlat}: {shown:?}");
+    }
 
     // Where the tiles meet, each computes the same light from its own texels
     // (the west tile's ridge is in the east tile's halo).
@@ -571,7 +582,7 @@ fn four_tiles_show_no_crack_and_shadows_cross_their_borders() {
         assert!((a - b).abs() < 0.01, "both tiles light the shared sample alike");
     }
     // And the image has no step at the border beyond its neighbours'.
-    let xb = column(&camera, Geodetic::new(border, s.max_lat, 1000.0)).floor() as usize;
+    let xb = pixel_of(&camera, Geodetic::new(border, s.max_lat, 1000.0)).x.floor() as usize;
     for y in [20, 80, 140] {
         let l: Vec<f64> = (0..160).map(|x| luminance(both.gpu.colour[y * 160 + x])).collect();
         let step = |x: usize| (l[x + 1] - l[x]).abs();

@@ -4,10 +4,10 @@
 //! its continuous variables, and its selection the cut the renderer draws.
 //!
 //! **Costs** are what the renderer spends, as [`CostFeatures`]: one tile
-//! (a draw call, its meshes), view rays on the pixels it covers (the
-//! steps per pixel the renderer measured lately each, [`Budget::view_steps`]:
-//! a view's steps change 2–3× along a flight as rays graze or plunge) and
-//! shadow rays, pixels × shadow steps. The model's constants come from
+//! (a draw call, its meshes), view rays on the pixels it covers (each at
+//! the steps per pixel the renderer measured lately on the tile,
+//! [`super::steps`]: rays graze coarse far tiles and plunge into near ones)
+//! and shadow rays, pixels × shadow steps. The model's constants come from
 //! measured frame times ([`crate::lod::calibrate`]).
 //!
 //! **Shadow quality** is continuous: 0 to [`MAX_SHADOW_STEPS`] samples per
@@ -63,9 +63,6 @@ const SLOT_BISECTIONS: usize = 10;
 /// density (000's `k`): trees are the canopy's near field, worth half the
 /// terrain they stand on (a judgement, not a measurement).
 pub const TREE_WORTH: f64 = 0.5;
-/// View-ray steps per ray-cast pixel before any is measured (the exact
-/// traversal's mean on the demo and rmnp paths is 10–30 fetches).
-pub const VIEW_STEPS: f64 = 20.0;
 
 /// What the budget allows.
 #[derive(Clone, Copy, Debug)]
@@ -78,9 +75,6 @@ pub struct Budget {
     pub shadows: bool,
     /// When the optimiser must stop.
     pub deadline: Option<Instant>,
-    /// View-ray steps per ray-cast pixel to price tiles with: what the
-    /// renderer measured lately ([`VIEW_STEPS`] before a frame).
-    pub view_steps: f64,
 }
 
 /// A tile to draw and its quality.
@@ -155,10 +149,10 @@ impl Cut {
 }
 
 /// The features of drawing candidate `c` with `steps` shadow steps.
-pub fn features(c: &Candidate, steps: u32, view_steps: f64) -> CostFeatures {
+pub fn features(c: &Candidate, steps: u32) -> CostFeatures {
     CostFeatures {
         tiles: 1.0,
-        raycast_mpx_steps: c.ray_px * view_steps / 1e6,
+        raycast_mpx_steps: c.ray_px * c.view_steps / 1e6,
         shadow_mpx_steps: c.ray_px * f64::from(steps) / 1e6,
         ..CostFeatures::default()
     }
@@ -174,11 +168,7 @@ pub fn tree_features(splats: f64, groups: f64) -> CostFeatures {
 pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostModel, budget: &Budget) -> Cut {
     let nodes: Vec<Node> = candidates
         .iter()
-        .map(|c| Node {
-            parent: c.parent,
-            benefit: c.benefit,
-            cost_ms: model.marginal_ms(&features(c, 0, budget.view_steps)),
-        })
+        .map(|c| Node { parent: c.parent, benefit: c.benefit, cost_ms: model.marginal_ms(&features(c, 0)) })
         .collect();
     let Ok(forest) = Forest::new(nodes) else { return Cut::default() };
     if forest.is_empty() {
@@ -226,7 +216,7 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
     let terrain = drawn
         .iter()
         .zip(&tiles)
-        .map(|(&i, t)| features(&candidates[i as usize], t.shadow_steps, budget.view_steps))
+        .map(|(&i, t)| features(&candidates[i as usize], t.shadow_steps))
         .fold(CostFeatures::default(), |a, f| a.plus(&f));
     let with_trees = |groups: &[GroupBudget]| {
         let splats = groups.iter().map(|g| g.share * g.splats).sum();
@@ -371,6 +361,7 @@ mod tests {
     use crate::client::camera::Camera;
     use crate::client::globe::Geodetic;
     use crate::client::lod::candidates::{Scope, candidates};
+    use crate::client::lod::steps::{VIEW_STEPS, ViewSteps};
     use crate::grid::{BBox, TileGrid};
     use glam::DVec3;
 
@@ -386,6 +377,7 @@ mod tests {
             range: &|_| Some((500.0, 3500.0)),
             max_level: 16,
             limit: 100_000,
+            steps: &ViewSteps::new(VIEW_STEPS),
         };
         candidates(&scope).tiles
     }
@@ -393,7 +385,7 @@ mod tests {
     const MODEL: CostModel = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0] };
 
     fn budget(ms: f64, shadows: bool) -> Budget {
-        Budget { budget_ms: ms, max_tiles: 256, shadows, deadline: None, view_steps: VIEW_STEPS }
+        Budget { budget_ms: ms, max_tiles: 256, shadows, deadline: None }
     }
 
     #[test]
@@ -425,7 +417,10 @@ mod tests {
     fn more_steps_per_pixel_buy_fewer_tiles_within_the_budget() {
         let c = demo_candidates();
         // A budget that binds: rays cost what the steps say, tiles the rest.
-        let at = |view_steps: f64| choose(&c, &[], &MODEL, &Budget { view_steps, ..budget(2.5, false) });
+        let at = |view_steps: f64| {
+            let priced: Vec<Candidate> = c.iter().map(|t| Candidate { view_steps, ..*t }).collect();
+            choose(&priced, &[], &MODEL, &budget(2.5, false))
+        };
         let (cheap, dear) = (at(10.0), at(40.0));
         for cut in [&cheap, &dear] {
             assert!(cut.predicted_ms <= 2.5 + 1e-9 && cut.stop == Some(Stop::Budget), "{cut:?}");

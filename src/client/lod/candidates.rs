@@ -36,6 +36,7 @@ use super::super::quadtree::{UNKNOWN_RANGE_M, behind_horizon, local_box, visible
 use super::super::raycast::{self, Fade, TreeBlend};
 use super::super::store::Known;
 use super::coverage;
+use super::steps::ViewSteps;
 use crate::grid::{BBox, Sector, TileGrid, TileId};
 use crate::lod::model::{Smooth, tile_benefit_seen};
 use crate::lod::predict::Cone;
@@ -54,6 +55,8 @@ pub struct Candidate {
     pub seen_px: f64,
     /// Pixels it casts rays on: the most any camera sees, 0 if drawn plain.
     pub ray_px: f64,
+    /// View-ray steps per ray-cast pixel it is priced at ([`ViewSteps::of`]).
+    pub view_steps: f64,
 }
 
 /// Where the candidates are looked for and how they are judged.
@@ -77,6 +80,8 @@ pub struct Scope<'a> {
     pub max_level: u32,
     /// Candidates at most (a guard; the walk stops refining there).
     pub limit: usize,
+    /// The view-ray steps measured per tile.
+    pub steps: &'a ViewSteps,
 }
 
 /// The candidates, parents before children.
@@ -220,7 +225,14 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
     }
     let k = scope.cameras.len().max(1) as f64;
     Judged {
-        candidate: Candidate { id: frame.id, parent: None, benefit: benefit / k, seen_px: seen / k, ray_px: ray },
+        candidate: Candidate {
+            id: frame.id,
+            parent: None,
+            benefit: benefit / k,
+            seen_px: seen / k,
+            ray_px: ray,
+            view_steps: scope.steps.of(frame.id),
+        },
         refinable,
         too_coarse,
     }
@@ -292,6 +304,7 @@ mod tests {
             range,
             max_level,
             limit: 100_000,
+            steps: &ViewSteps::new(20.0),
         };
         candidates(&scope)
     }
@@ -386,6 +399,7 @@ mod tests {
             benefit: 0.0,
             seen_px,
             ray_px,
+            view_steps: 20.0,
         };
         // A chain around the camera: each tile's plane lies just under the
         // eye (half the screen), its children in view cover little.

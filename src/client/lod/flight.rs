@@ -5,7 +5,8 @@
 //! (grown on the tiles last drawn) while the last finished cut is drawn;
 //! after each frame its features and measured time go to the calibrator
 //! (001 §4.2), so the next selection predicts with constants fitted to this
-//! GPU.
+//! GPU, and its view-ray steps per tile to [`super::steps`], so the next
+//! selection prices each tile's rays as they were last measured.
 //! With geomorphing on it also keeps the morphs of the cuts drawn
 //! ([`super::morphs`]).
 
@@ -15,6 +16,7 @@ use super::super::trees::{self, TreeSettings};
 use super::ahead::{self, Lookahead, WINDOW};
 use super::budget::{self, Budget, Choice, TreeItem};
 use super::morphs::{Morphing, Morphs, Pairs};
+use super::steps::{FrameSteps, VIEW_STEPS, ViewSteps};
 use super::worker::{Request, Worker};
 use super::{Selected, Selector};
 use crate::grid::{TileGrid, TileId};
@@ -39,6 +41,9 @@ pub struct BudgetFlight {
     selector: Selector,
     calibrator: CostCalibrator,
     budget: Budget,
+    /// View-ray steps per tile, as last measured (shared with the request
+    /// in flight; copied on write).
+    steps: Arc<ViewSteps>,
     look: Lookahead,
     predictor: PathPredictor,
     worker: Worker,
@@ -70,7 +75,8 @@ const AIM_LIMIT: f64 = 2.0;
 
 impl BudgetFlight {
     /// A flight of frames of `budget` looking ahead by `look`, starting
-    /// from the cost model `prior`, geomorphing or not.
+    /// from the cost model `prior` (and [`VIEW_STEPS`] steps per pixel),
+    /// geomorphing or not.
     pub fn new(
         selector: Selector,
         budget: Budget,
@@ -83,6 +89,7 @@ impl BudgetFlight {
             selector,
             calibrator: CostCalibrator::new(prior, calibration()),
             budget,
+            steps: Arc::new(ViewSteps::new(VIEW_STEPS)),
             look,
             predictor: PathPredictor::new(WINDOW),
             current: None,
@@ -106,6 +113,11 @@ impl BudgetFlight {
         &self.budget
     }
 
+    /// The view-ray steps the next selection prices tiles with.
+    pub fn steps(&self) -> &ViewSteps {
+        &self.steps
+    }
+
     /// The cut to draw at flight time `t_s` from `camera`: the newest
     /// finished selection (waiting only for the first). Starts the next
     /// selection when `τ` has passed since the last and the thread is idle.
@@ -122,7 +134,8 @@ impl BudgetFlight {
         if !self.worker.busy() && t_s >= self.requested_s + self.look.tau_s {
             let (cameras, cone) = ahead::ahead(&self.predictor, camera, t_s, &self.look);
             let trees = self.tree_items(&cameras);
-            let request = Request { cameras, cone: Some(cone), trees, model: self.model(), budget: self.aimed() };
+            let (model, budget, steps) = (self.model(), self.aimed(), self.steps.clone());
+            let request = Request { cameras, cone: Some(cone), trees, model, budget, steps };
             if self.worker.submit(request) {
                 self.requested_s = t_s;
             }
@@ -134,7 +147,7 @@ impl BudgetFlight {
         if self.current.is_none() {
             let cameras = std::slice::from_ref(camera);
             let trees = self.tree_items(cameras);
-            self.current = Some(self.selector.select(cameras, None, &trees, &model, &self.budget));
+            self.current = Some(self.selector.select(cameras, None, &trees, (&model, &self.budget), &self.steps));
         }
         self.current.clone().unwrap_or_default()
     }
@@ -199,8 +212,8 @@ impl BudgetFlight {
     }
 
     /// Records a drawn frame: its tiles as drawn from `camera`, its
-    /// `(splats, tree groups)`, its measured time and mean view-ray steps
-    /// per ray-cast pixel (which the next selections price tiles with).
+    /// `(splats, tree groups)`, its measured time and view-ray steps per
+    /// ray-cast pixel (which the next selections price tiles with).
     /// Returns the frame's features, priced by the model before this
     /// frame's correction. The first frame builds the GPU pipelines and is
     /// not calibrated.
@@ -209,13 +222,11 @@ impl BudgetFlight {
         camera: &Camera,
         drawn: &[Choice],
         trees: (usize, usize),
-        (measured_ms, view_steps): (f64, f64),
+        (measured_ms, steps): (f64, &FrameSteps),
     ) -> CostFeatures {
-        if view_steps.is_finite() && view_steps > 0.0 {
-            self.budget.view_steps = view_steps;
-        }
+        Arc::make_mut(&mut self.steps).record(steps);
         let splats = budget::tree_features(trees.0 as f64, trees.1 as f64);
-        let features = self.selector.features(camera, drawn, self.budget.view_steps).plus(&splats);
+        let features = self.selector.features(camera, drawn, &self.steps).plus(&splats);
         if self.frames > 0 {
             self.follow_aim(&features);
             self.calibrator.observe(&features, measured_ms);
@@ -280,7 +291,7 @@ mod tests {
             fade: (30.0, 0.5, 2.0),
             max_level: 14,
         };
-        let budget = Budget { budget_ms: 8.0, max_tiles: 256, shadows: true, deadline: None, view_steps: 20.0 };
+        let budget = Budget { budget_ms: 8.0, max_tiles: 256, shadows: true, deadline: None };
         let look = Lookahead { tau_s: 1.0, limits: MotionLimits { max_speed_mps: 100.0, max_turn_radps: 0.1 } };
         BudgetFlight::new(selector, budget, look, CostModel::default(), true).unwrap()
     }
@@ -318,36 +329,46 @@ mod tests {
         assert_eq!(f.requested_s, 1.0);
     }
 
+    /// A frame whose every pixel took `steps` view-ray steps.
+    fn even(steps: f64) -> FrameSteps {
+        FrameSteps { mean: steps, tiles: Vec::new() }
+    }
+
     #[test]
     fn measured_frames_calibrate_the_model() {
         let mut f = flight();
         let cam = camera(10.05);
         let cut = f.frame(0.0, &cam).cut;
-        let before = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles, 20.0));
+        let at_20 = ViewSteps::new(20.0);
+        let before = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles, &at_20));
         // The first frame builds pipelines and teaches nothing.
-        f.observe(&cam, &cut.tiles, (0, 0), (1000.0, 20.0));
+        f.observe(&cam, &cut.tiles, (0, 0), (1000.0, &even(20.0)));
         assert_eq!(f.model(), CostModel::default());
         for _ in 0..5 {
-            f.observe(&cam, &cut.tiles, (0, 0), (4.0 * before, 20.0));
+            f.observe(&cam, &cut.tiles, (0, 0), (4.0 * before, &even(20.0)));
         }
-        let after = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles, 20.0));
+        let after = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles, &at_20));
         assert!((after / (4.0 * before) - 1.0).abs() < 0.05, "{before} → {after}");
     }
 
     #[test]
-    fn selections_price_view_rays_with_the_steps_last_measured() {
+    fn selections_price_each_tiles_view_rays_with_the_steps_last_measured_on_it() {
         let mut f = flight();
         let cam = camera(10.05);
-        let cut = f.frame(0.0, &cam).cut;
-        assert_eq!(f.budget().view_steps, 20.0, "before any frame");
-        let at = |steps: f64| f.selector.features(&cam, &cut.tiles, steps).raycast_mpx_steps;
-        let (twenty, thirty_five) = (at(20.0), at(35.0));
-        let features = f.observe(&cam, &cut.tiles, (0, 0), (50.0, 35.0));
-        assert_eq!(f.budget().view_steps, 35.0);
-        assert!(twenty > 0.0 && features.raycast_mpx_steps == thirty_five, "{twenty} {features:?}");
-        // A frame without ray-cast pixels measures nothing: the estimate stays.
-        f.observe(&cam, &cut.tiles, (0, 0), (50.0, 0.0));
-        assert_eq!(f.budget().view_steps, 35.0);
+        let mut tiles = f.frame(0.0, &cam).cut.tiles;
+        assert!(tiles.len() > 1);
+        assert_eq!(f.steps().of(tiles[0].id), VIEW_STEPS, "before any frame");
+        // Ray pixels: priced at 10⁶ steps, a tile costs its pixels in Mpx·steps.
+        let px = |tiles: &[Choice]| f.selector.features(&cam, tiles, &ViewSteps::new(1e6)).raycast_mpx_steps;
+        tiles.sort_by(|a, b| px(&[*b]).total_cmp(&px(&[*a])));
+        let (first, rest) = (px(&tiles[..1]), px(&tiles[1..]));
+        assert!(first > 0.0 && rest > 0.0);
+        // The largest tile's rays took 35 steps a pixel, the frame's 12.
+        let measured = FrameSteps { mean: 12.0, tiles: vec![(tiles[0].id, 35.0)] };
+        let features = f.observe(&cam, &tiles, (0, 0), (50.0, &measured));
+        let expected = (first * 35.0 + rest * 12.0) / 1e6;
+        assert!((features.raycast_mpx_steps / expected - 1.0).abs() < 1e-9, "{features:?} against {expected}");
+        assert_eq!((f.steps().of(tiles[0].id), f.steps().of(tiles[1].id)), (35.0, 12.0));
     }
 
     #[test]
@@ -355,11 +376,11 @@ mod tests {
         let mut f = flight();
         let cam = camera(10.05);
         let cut = f.frame(0.0, &cam).cut;
-        let steps = f.budget().view_steps;
+        let steps = f.steps().clone();
         // Frames measured as the model prices them, so it stays.
         let draw = |f: &mut BudgetFlight, tiles: &[Choice]| {
-            let ms = f.model().predict_ms(&f.selector.features(&cam, tiles, steps));
-            f.observe(&cam, tiles, (0, 0), (ms, steps));
+            let ms = f.model().predict_ms(&f.selector.features(&cam, tiles, &steps));
+            f.observe(&cam, tiles, (0, 0), (ms, &even(steps.mean())));
         };
         // Frames drawing what their selection priced: the aim stays.
         for _ in 0..3 {
@@ -372,7 +393,7 @@ mod tests {
             draw(&mut f, fewer);
         }
         let model = f.model();
-        let ratio = model.predict_ms(&f.selector.features(&cam, fewer, steps)) / model.predict_ms(&cut.features);
+        let ratio = model.predict_ms(&f.selector.features(&cam, fewer, &steps)) / model.predict_ms(&cut.features);
         assert!(ratio < 0.98 && ratio > 1.0 / AIM_LIMIT && (f.aim / ratio - 1.0).abs() < 0.01, "{ratio} {}", f.aim);
         assert!((f.aimed().budget_ms - 8.0 / f.aim).abs() < 1e-9);
         let expected = f.expected_ms(&f.current.clone().unwrap());

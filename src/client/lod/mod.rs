@@ -8,6 +8,8 @@
 //!   in pixels, for one camera or several predicted ones.
 //! - [`budget`]: the optimiser's forest, its shadow-quality and tree-group
 //!   variables, and the cut it selects.
+//! - [`steps`]: the view-ray steps per pixel measured per tile, which
+//!   price the candidates' rays.
 //! - [`ahead`]: the predicted cameras and the conservative cone a
 //!   selection is for.
 //! - [`worker`]: the selection thread.
@@ -25,6 +27,7 @@ pub mod candidates;
 pub mod coverage;
 pub mod flight;
 pub mod morphs;
+pub mod steps;
 pub mod worker;
 
 use super::camera::Camera;
@@ -35,6 +38,7 @@ use crate::lod::predict::Cone;
 use budget::{Budget, Choice, Cut, TreeItem};
 use candidates::Scope;
 use std::time::Instant;
+use steps::ViewSteps;
 
 /// Candidates looked at, at most: far more than a frame draws (the GPU
 /// cache holds at most 256 tiles), few enough to select in milliseconds.
@@ -69,35 +73,41 @@ pub struct Selected {
 impl Selector {
     /// The cut for `cameras` (the cone, if any, widens culling) and the
     /// splat budgets of tree groups `trees` under `budget` with cost
-    /// `model`.
+    /// `model`, tiles' rays priced at `steps`.
     pub fn select(
         &self,
         cameras: &[Camera],
         cone: Option<Cone>,
         trees: &[TreeItem],
-        model: &CostModel,
-        budget: &Budget,
+        (model, budget): (&CostModel, &Budget),
+        steps: &ViewSteps,
     ) -> Selected {
         let start = Instant::now();
-        let found = self.with_scope(cameras, cone, candidates::candidates);
+        let found = self.with_scope(cameras, cone, steps, candidates::candidates);
         let seen: Vec<(TreeItem, f64)> = trees.iter().map(|t| (*t, tree_px(cameras, t))).collect();
         let cut = budget::choose(&found.tiles, &seen, model, budget);
         Selected { cut, candidates: found.tiles.len(), ms: start.elapsed().as_secs_f64() * 1e3 }
     }
 
-    /// What drawing `drawn` from `camera` with `view_steps` view-ray steps
-    /// per ray-cast pixel costs, measured as a selection measures its
-    /// candidates (so calibrated constants fit predictions).
-    pub fn features(&self, camera: &Camera, drawn: &[Choice], view_steps: f64) -> CostFeatures {
-        self.with_scope(std::slice::from_ref(camera), None, |scope| {
+    /// What drawing `drawn` from `camera` costs with tiles' view rays at
+    /// `steps`, measured as a selection measures its candidates (so
+    /// calibrated constants fit predictions).
+    pub fn features(&self, camera: &Camera, drawn: &[Choice], steps: &ViewSteps) -> CostFeatures {
+        self.with_scope(std::slice::from_ref(camera), None, steps, |scope| {
             drawn
                 .iter()
-                .map(|c| budget::features(&candidates::candidate(scope, c.id), c.shadow_steps, view_steps))
+                .map(|c| budget::features(&candidates::candidate(scope, c.id), c.shadow_steps))
                 .fold(CostFeatures::default(), |a, f| a.plus(&f))
         })
     }
 
-    fn with_scope<R>(&self, cameras: &[Camera], cone: Option<Cone>, f: impl FnOnce(&Scope) -> R) -> R {
+    fn with_scope<R>(
+        &self,
+        cameras: &[Camera],
+        cone: Option<Cone>,
+        steps: &ViewSteps,
+        f: impl FnOnce(&Scope) -> R,
+    ) -> R {
         let known = |id| self.knowledge.get(id);
         let range = |id| self.knowledge.range(id);
         f(&Scope {
@@ -110,6 +120,7 @@ impl Selector {
             range: &range,
             max_level: self.max_level,
             limit: MAX_CANDIDATES,
+            steps,
         })
     }
 }

@@ -1,14 +1,16 @@
 //! LOD selection on its own thread (001 §4.1): the flight hands it a
 //! [`Request`] (the predicted cameras, the conservative cone, the cost
-//! model calibrated so far) and keeps drawing the last cut while it works.
+//! model calibrated so far, the view-ray steps measured so far) and keeps drawing the last cut while it works.
 //! At most one request is in flight; the thread ends when the worker is
 //! dropped.
 
 use super::super::camera::Camera;
 use super::budget::{Budget, TreeItem};
+use super::steps::ViewSteps;
 use super::{Selected, Selector};
 use crate::lod::model::CostModel;
 use crate::lod::predict::Cone;
+use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
 use std::thread::JoinHandle;
 
@@ -25,6 +27,8 @@ pub struct Request {
     pub model: CostModel,
     /// The budget.
     pub budget: Budget,
+    /// The view-ray steps per tile.
+    pub steps: Arc<ViewSteps>,
 }
 
 /// The selection thread and its channels.
@@ -42,7 +46,8 @@ impl Worker {
         let (outbox, results) = channel();
         let thread = std::thread::Builder::new().name("lod-select".into()).spawn(move || {
             for r in inbox {
-                if outbox.send(selector.select(&r.cameras, r.cone, &r.trees, &r.model, &r.budget)).is_err() {
+                let selected = selector.select(&r.cameras, r.cone, &r.trees, (&r.model, &r.budget), &r.steps);
+                if outbox.send(selected).is_err() {
                     break;
                 }
             }

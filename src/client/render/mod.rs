@@ -72,6 +72,9 @@ pub struct Rendered {
     pub view_z_m: Vec<f32>,
     /// Texture fetches per pixel: view ray, shadow ray and shading.
     pub fetches: Vec<[u32; 2]>,
+    /// The draw whose rays a pixel shows: `k + 1` for the `k`-th of the
+    /// frame's draws, 0 where no ray was cast.
+    pub draws: Vec<u32>,
     /// Counts and times.
     pub stats: FrameStats,
 }
@@ -250,7 +253,7 @@ impl Renderer {
             splats.extend_from_slice(tile_splats);
             let tile_splats = start..splats.len() as u32;
             self.splat_ranges[draw] = tile_splats.clone();
-            let at = Placement { slot, mode, hull_quad_samples, morph, splats: tile_splats.clone() };
+            let at = Placement { draw: draw as u32, slot, mode, hull_quad_samples, morph, splats: tile_splats.clone() };
             let block = TileUniform::new(camera, settings, tile, at, shadow_steps);
             let mut bytes = bytemuck::bytes_of(&block).to_vec();
             bytes.resize(TILE_STRIDE as usize, 0);
@@ -350,6 +353,7 @@ impl Renderer {
                 bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.pixel_data, 16)).to_vec();
             out.view_z_m = data.iter().map(|d| f32::from_bits(d[2])).collect();
             out.fetches = data.iter().map(|d| [d[0], d[1]]).collect();
+            out.draws = data.iter().map(|d| d[3]).collect();
         }
         out
     }

@@ -17,8 +17,8 @@ use std::collections::HashMap;
 
 /// Colour target format.
 pub const COLOUR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
-/// Per-pixel data target: view and shadow fetches, and the bits of the
-/// view-axis distance (read back instead of the depth buffer, which GL
+/// Per-pixel data target: view and shadow fetches, the bits of the
+/// view-axis distance and the draw whose rays the pixel shows (read back instead of the depth buffer, which GL
 /// cannot copy; an integer target, which GL renders to, unlike R32Float).
 pub const PIXEL_DATA_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Uint;
 /// Depth format.

@@ -11,7 +11,8 @@ pub struct Targets {
     /// Colour.
     pub colour: wgpu::Texture,
     /// Per pixel: view-ray and shadow-ray fetches, the bits of the distance
-    /// along the view axis (metres; 0: nothing).
+    /// along the view axis (metres; 0: nothing), the draw whose rays it
+    /// shows + 1 (0: none).
     pub pixel_data: wgpu::Texture,
     /// Reversed-Z depth.
     pub depth: wgpu::Texture,

@@ -53,7 +53,7 @@ pub struct TileUniform {
     pub range: [f32; 4],
     /// Halo, texels per side, slot, top mipmap level.
     pub index: [i32; 4],
-    /// Draw mode, unused, shadow steps, morph layer + 1 (0: none).
+    /// Draw mode, draw index + 1, shadow steps, morph layer + 1 (0: none).
     pub flags: [u32; 4],
     /// Highest CEM over all texels (the halo too).
     pub texels: [f32; 4],
@@ -69,6 +69,8 @@ pub struct TileUniform {
 /// Where and how a tile is drawn.
 #[derive(Clone, Debug)]
 pub struct Placement {
+    /// Its place among the frame's draws.
+    pub draw: u32,
     /// Its texture slot.
     pub slot: u32,
     /// Its draw mode.
@@ -142,7 +144,7 @@ impl TileUniform {
         at: Placement,
         shadow_steps: u32,
     ) -> TileUniform {
-        let Placement { slot, mode, hull_quad_samples, morph, splats } = at;
+        let Placement { draw, slot, mode, hull_quad_samples, morph, splats } = at;
         let frame = &tile.frame;
         let to_local = frame.basis.transpose();
         let cam = frame.to_local(camera.position_ecef);
@@ -170,7 +172,7 @@ impl TileUniform {
                 if mode == DrawMode::Plain { 0.0 } else { filler_drop_m(tile) },
             ],
             index: [tile.halo as i32, tile.size as i32, slot as i32, tile.mip.levels() as i32 - 1],
-            flags: [mode as u32, 0, shadow_steps, morph.map_or(0, |(layer, _)| layer + 1)],
+            flags: [mode as u32, draw + 1, shadow_steps, morph.map_or(0, |(layer, _)| layer + 1)],
             texels: [tile.range.texels_max_m, 0.0, 0.0, 0.0],
             morph: [morph.map_or(1.0, |(_, weight)| weight), 0.0, 0.0, 0.0],
             splats: [splats.start, splats.len() as u32, 0, 0],
