@@ -167,6 +167,8 @@ pub struct FrameRecord {
     pub trees: usize,
     /// Tree splats drawn.
     pub splats: usize,
+    /// Pixels the splats' quads cover, overlaps counted.
+    pub splat_fill_px: f64,
     /// Quadtree nodes the screen-space error selection touched:
     /// refinement and visibility tests (sse mode).
     pub nodes_touched: Option<usize>,
@@ -349,8 +351,7 @@ fn frame(
     let view: Vec<u32> = out.fetches.iter().map(|f| f[0]).collect();
     let steps = FrameSteps::measure(&view, &out.draws, &ids);
     if let Some(lod) = lod {
-        let drawn_trees = (trees.drawn.splats, trees.drawn.groups);
-        lod.observe(&camera, &drawn, drawn_trees, (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), &steps));
+        lod.observe(&camera, &drawn, &trees.drawn, (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), &steps));
     }
     if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
         let file = dir.join(format!("frame_{k:05}.png"));
@@ -397,6 +398,7 @@ fn frame(
         shadow_steps_mean: chosen.steps.iter().map(|&s| f64::from(s)).sum::<f64>() / chosen.steps.len().max(1) as f64,
         trees: trees.drawn.trees,
         splats: out.stats.splats as usize,
+        splat_fill_px: trees.drawn.fill_px,
     })
 }
 
@@ -466,7 +468,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     let mut out = Vec::new();
     let _ = writeln!(
         out,
-        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,bound,morphing,trees,splats,nodes_touched"
+        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,bound,morphing,trees,splats,splat_fill_mpx,nodes_touched"
     );
     for r in records {
         let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
@@ -474,7 +476,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
         let gpu = optional(r.gpu_ms);
         let _ = writeln!(
             out,
-            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{},{},{},{},{}",
+            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{},{},{},{},{:.4},{}",
             r.frame,
             r.cpu_ms,
             r.render_ms,
@@ -501,6 +503,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             r.morphing,
             r.trees,
             r.splats,
+            r.splat_fill_px / 1e6,
             r.nodes_touched.map_or(String::new(), |n| n.to_string())
         );
     }

@@ -294,7 +294,7 @@ fn greenest(tile: &TileData, s: DVec2, reach: i64, greenness: impl Fn(&[u8; 4]) 
 }
 
 /// What [`splats`] drew.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Drawn {
     /// Splats.
     pub splats: usize,
@@ -302,6 +302,9 @@ pub struct Drawn {
     pub trees: usize,
     /// Groups with a splat.
     pub groups: usize,
+    /// Pixels the splats' quads cover, overlaps counted: the fragments
+    /// the rasteriser shades ([`Crown::fill_px`]).
+    pub fill_px: f64,
 }
 
 /// Splats of each group: `budgets` gives a group's splat budget by block
@@ -332,6 +335,7 @@ pub fn splats(
             }
             let crown = Crown::of(field, t);
             out[t.tile].extend((0..n).map(|k| crown.splat(t, k, n, opacity)));
+            drawn.fill_px += crown.fill_px(n, t.distance_m, focal_px);
             drawn.splats += n as usize;
             drawn.trees += 1;
         }
@@ -341,9 +345,10 @@ pub fn splats(
 }
 
 impl TreeGroup {
-    /// The group as the LOD selection sees it from one camera, its trees
-    /// on `tiles`.
-    pub fn item(&self, tiles: &[&TileData], field: &TreeField) -> TreeItem {
+    /// The group as the LOD selection sees it from one camera (focal
+    /// length `focal_px`; the trees' distances are from it), its trees on
+    /// `tiles`.
+    pub fn item(&self, tiles: &[&TileData], field: &TreeField, focal_px: f64) -> TreeItem {
         let middles: Vec<(DVec3, f64)> = self
             .trees
             .iter()
@@ -357,7 +362,9 @@ impl TreeGroup {
             trees: self.trees.len() as u32,
             capacity: (self.trees.len() as u64 * u64::from(field.splats_per_tree)) as f64,
         };
-        TreeItem { block: self.block, group, share: 1.0 }
+        let full = field.splats_per_tree.max(1);
+        let fill_px = self.trees.iter().map(|t| Crown::of(field, t).fill_px(full, t.distance_m, focal_px)).sum();
+        TreeItem { block: self.block, group, share: 1.0, fill_px }
     }
 }
 
@@ -386,6 +393,23 @@ impl Crown {
         Crown { centre: t.foot + DVec3::Z * (t.height_m - half_height_m), radius_m, half_height_m }
     }
 
+    /// The radius of each of `n` splats: together they cover the crown's
+    /// silhouette twice, none larger than the crown.
+    fn splat_radius_m(&self, n: u32) -> f64 {
+        (2.0 * self.radius_m * self.half_height_m / f64::from(n.max(1)))
+            .sqrt()
+            .min(self.half_height_m.max(self.radius_m))
+    }
+
+    /// Pixels the quads of `n` splats cover at `distance_m` from a camera
+    /// of focal length `focal_px`, overlaps counted: about the same for
+    /// any `n` (twice the crown's silhouette, a little less for one splat,
+    /// which the crown's size caps).
+    fn fill_px(&self, n: u32, distance_m: f64, focal_px: f64) -> f64 {
+        let side_px = 2.0 * self.splat_radius_m(n) * focal_px / distance_m.max(1.0);
+        f64::from(n) * side_px * side_px
+    }
+
     /// Splat `k` of `n`: spread over the crown as far as `n` allows (one
     /// splat sits at the centre), sized so that the splats cover the
     /// crown's silhouette twice, darker low in the crown.
@@ -397,8 +421,7 @@ impl Crown {
         let spread = 0.7 * (1.0 - 1.0 / f64::from(n)).sqrt();
         let offset = DVec3::new(r * phi.cos() * self.radius_m, r * phi.sin() * self.radius_m, z * self.half_height_m);
         let centre = self.centre + offset * spread;
-        let radius =
-            (2.0 * self.radius_m * self.half_height_m / f64::from(n)).sqrt().min(self.half_height_m.max(self.radius_m));
+        let radius = self.splat_radius_m(n);
         let shade = (0.7 + 0.3 * (z * spread + 1.0) / 2.0) * (0.9 + 0.2 * unit(h, 2));
         let byte = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
         let [r, g, b] = t.colour.map(|c| byte(c * shade));
@@ -525,11 +548,19 @@ mod tests {
             let mut out = vec![Vec::new()];
             splats(&settings, std::slice::from_ref(g), budgets.as_ref(), (&WIDE, camera.focal_px()), &mut out)
         };
-        let full = g.trees.len() * 24;
-        let drawn = |splats, trees| Drawn { splats, trees, groups: usize::from(splats > 0) };
-        assert_eq!(count(Some(0.0)), drawn(0, 0));
-        assert_eq!(count(Some(5.0)), drawn(5, 5), "a small budget draws the first trees by rank, one splat each");
-        assert_eq!(count(Some(1e9)), drawn(full, g.trees.len()));
+        let (n, full) = (g.trees.len(), g.trees.len() * 24);
+        let drawn = |d: Drawn| (d.splats, d.trees, d.groups);
+        assert_eq!(drawn(count(Some(0.0))), (0, 0, 0));
+        assert_eq!(drawn(count(Some(5.0))), (5, 5, 1), "a small budget draws the first trees by rank, one splat each");
+        assert_eq!(drawn(count(Some(1e9))), (full, n, 1));
+        // The quads cover about as much at a splat per tree as at 24, a
+        // share of that below; the selection's item foresees the full fill.
+        let fill = |b: f64| count(Some(b)).fill_px;
+        let (one_each, whole) = (fill(n as f64), fill(1e9));
+        assert!(whole > 0.0 && (0.6..=1.0).contains(&(one_each / whole)), "{one_each} {whole}");
+        assert!(fill(0.0) == 0.0 && fill(5.0) < one_each * 10.0 / n as f64, "{} {one_each}", fill(5.0));
+        let item = g.item(&[&t], &settings.field, camera.focal_px());
+        assert!((item.fill_px - whole).abs() <= 1e-9 * whole, "{} {whole}", item.fill_px);
         // By screen size: near trees get more splats than far ones.
         let tree = g.trees[0];
         let far = PlacedTree { distance_m: tree.distance_m * 100.0, ..tree };

@@ -110,17 +110,29 @@ pub struct CostFeatures {
     pub splats_k: f64,
     /// Tree groups drawn (per-group setup, 000 §5.3's `c_tree`), hundreds.
     pub groups_h: f64,
+    /// Pixels the splats' quads cover, overlaps counted, millions: each
+    /// covered pixel is a fragment shaded (splats write their depth), and
+    /// a tree's splats cover its crown twice however many it has.
+    pub splat_fill_mpx: f64,
 }
 
 /// Number of calibrated constants: one per feature plus a fixed per-frame
 /// cost.
-pub const FEATURES: usize = 6;
+pub const FEATURES: usize = 7;
 
 impl CostFeatures {
     /// The features as a vector, with 1 for the fixed per-frame cost first.
     pub fn vector(&self) -> [f64; FEATURES] {
-        [1.0, self.tiles, self.raycast_mpx_steps, self.shadow_mpx_steps, self.splats_k, self.groups_h]
-            .map(finite_non_negative)
+        [
+            1.0,
+            self.tiles,
+            self.raycast_mpx_steps,
+            self.shadow_mpx_steps,
+            self.splats_k,
+            self.groups_h,
+            self.splat_fill_mpx,
+        ]
+        .map(finite_non_negative)
     }
 
     /// Sum of two feature sets (a tile's and a group's, say).
@@ -131,6 +143,7 @@ impl CostFeatures {
             shadow_mpx_steps: self.shadow_mpx_steps + o.shadow_mpx_steps,
             splats_k: self.splats_k + o.splats_k,
             groups_h: self.groups_h + o.groups_h,
+            splat_fill_mpx: self.splat_fill_mpx + o.splat_fill_mpx,
         }
     }
 }
@@ -148,10 +161,11 @@ pub struct CostModel {
 impl Default for CostModel {
     /// Starting guesses before any frame was measured: 0.5 ms per frame,
     /// 0.01 ms per tile, 1 ms per million pixel·steps of view or shadow
-    /// rays, 0.02 ms per thousand splats, 0.01 ms per hundred groups. The
-    /// calibrator replaces them within a few frames.
+    /// rays, 0.02 ms per thousand splats, 0.01 ms per hundred groups, 0.2
+    /// ms per million pixels of splat fill. The calibrator replaces them
+    /// within a few frames.
     fn default() -> CostModel {
-        CostModel { constants_ms: [0.5, 0.01, 1.0, 1.0, 0.02, 0.01] }
+        CostModel { constants_ms: [0.5, 0.01, 1.0, 1.0, 0.02, 0.01, 0.2] }
     }
 }
 
@@ -189,11 +203,11 @@ mod tests {
 
     #[test]
     fn cost_models_round_trip_through_json_and_bad_ones_are_refused() {
-        let model = CostModel { constants_ms: [2.5, 0.3, 40.0, 12.0, 0.0, 1e-3] };
+        let model = CostModel { constants_ms: [2.5, 0.3, 40.0, 12.0, 0.0, 1e-3, 0.5] };
         let text = serde_json::to_string(&model).unwrap();
         assert_eq!(CostModel::from_json(&text), Ok(model));
         assert!(CostModel::from_json("{\"constants_ms\": [1, 2]}").unwrap_err().contains("not a cost model"));
-        let negative = "{\"constants_ms\": [1, 2, 3, -4, 5, 6]}";
+        let negative = "{\"constants_ms\": [1, 2, 3, -4, 5, 6, 7]}";
         assert!(CostModel::from_json(negative).unwrap_err().contains("constant 3 is -4"));
         assert!(CostModel::from_json("ms").is_err());
     }
@@ -266,7 +280,8 @@ mod tests {
             shadow_mpx_steps: f64::NEG_INFINITY,
             splats_k: f64::INFINITY,
             groups_h: 2.0,
+            splat_fill_mpx: 0.5,
         };
-        assert!((model.predict_ms(&junk) - (0.5 + 0.02)).abs() < 1e-12);
+        assert!((model.predict_ms(&junk) - (0.5 + 0.02 + 0.1)).abs() < 1e-12);
     }
 }

@@ -27,10 +27,13 @@
 //! at most 64, each a continuous variable of up to its trees × splats per
 //! tree: worth 000's `k S (N/64) φ(x/capacity)` with `S` its projected
 //! pixels ([`TREE_WORTH`] is `k`), costing per splat the splat constant
-//! plus the group constant spread over the group's capacity (a fixed
-//! charge is not convex; spread, it is). Groups left part-full, which
-//! that under-charges, are then trimmed or dropped, fewest splats first,
-//! until the cut fits. (Setting the group constant of every group in view aside
+//! plus the group constant and the fill of its quads spread over the
+//! group's capacity. The fill is the group's pixels its splats cover
+//! (overlaps counted): a tree's splats cover its crown twice however many
+//! it has, so the fill is whole from a splat per tree on, a rising cost
+//! that is not convex, nor is a fixed charge; spread, they are. Groups
+//! left part-full, which that under-charges, are then trimmed or dropped,
+//! fewest splats first, until the cut fits. (Setting the group constant of every group in view aside
 //! first let one miscalibrated constant starve the terrain: fifty groups
 //! at a fitted 12 ms each left a 640 × 480 flight one tile for good, since
 //! frames without trees never corrected it.)
@@ -102,14 +105,39 @@ pub struct TreeItem {
     /// priced whole, the union of their groups cost half as much again as
     /// any frame drew).
     pub share: f64,
+    /// Pixels its splats' quads cover at full resolution: as much at a
+    /// splat per tree (a tree's splats cover its crown twice however many
+    /// it has), that share below.
+    pub fill_px: f64,
 }
 
 /// A tree group's splat budget in a cut.
 #[derive(Clone, Copy, Debug)]
 struct GroupBudget {
-    block: (i64, i64),
+    item: TreeItem,
     splats: f64,
-    share: f64,
+}
+
+impl GroupBudget {
+    /// What drawing the group costs, times its share: its splats, its
+    /// setup, and the fill of its quads, which grows with its splats only
+    /// until each tree has one.
+    fn features(&self) -> CostFeatures {
+        let share = self.item.share;
+        let fill_px = self.item.fill_px * (self.splats / self.trees()).min(1.0);
+        tree_features(share * self.splats, share, share * fill_px)
+    }
+
+    fn trees(&self) -> f64 {
+        f64::from(self.item.group.trees.max(1))
+    }
+
+    /// What one splat fewer saves, ms: its own cost, and below a splat per
+    /// tree its tree's fill.
+    fn splat_ms(&self, model: &CostModel) -> f64 {
+        let fill_px = if self.splats > self.trees() { 0.0 } else { self.item.fill_px / self.trees() };
+        self.item.share * model.marginal_ms(&tree_features(1.0, 0.0, fill_px))
+    }
 }
 
 /// The chosen cut.
@@ -158,9 +186,15 @@ pub fn features(c: &Candidate, steps: u32) -> CostFeatures {
     }
 }
 
-/// The features of `splats` splats in `groups` groups.
-pub fn tree_features(splats: f64, groups: f64) -> CostFeatures {
-    CostFeatures { splats_k: splats / 1e3, groups_h: groups / 1e2, ..CostFeatures::default() }
+/// The features of `splats` splats in `groups` groups whose quads cover
+/// `fill_px` pixels.
+pub fn tree_features(splats: f64, groups: f64, fill_px: f64) -> CostFeatures {
+    CostFeatures {
+        splats_k: splats / 1e3,
+        groups_h: groups / 1e2,
+        splat_fill_mpx: fill_px / 1e6,
+        ..CostFeatures::default()
+    }
 }
 
 /// Chooses the cut of `candidates` and the budgets of tree groups `trees`
@@ -207,36 +241,19 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
             shadow_steps: regions.steps(i, &forest, candidates, &selection.resolutions),
         })
         .collect();
-    let mut groups: Vec<GroupBudget> = trees
+    let groups: Vec<GroupBudget> = trees
         .iter()
         .zip(&selection.resolutions[regions.heads.len().min(selection.resolutions.len())..])
         .filter(|(_, x)| **x >= 1.0)
-        .map(|((t, _), x)| GroupBudget { block: t.block, splats: x.floor(), share: t.share })
+        .map(|((item, _), x)| GroupBudget { item: *item, splats: x.floor() })
         .collect();
     let terrain = drawn
         .iter()
         .zip(&tiles)
         .map(|(&i, t)| features(&candidates[i as usize], t.shadow_steps))
         .fold(CostFeatures::default(), |a, f| a.plus(&f));
-    let with_trees = |groups: &[GroupBudget]| {
-        let splats = groups.iter().map(|g| g.share * g.splats).sum();
-        terrain.plus(&tree_features(splats, groups.iter().map(|g| g.share).sum()))
-    };
-    // Fewest splats last: the loop trims that group, or drops it.
-    groups.sort_by(|a, b| b.splats.total_cmp(&a.splats));
-    let splat_ms = model.marginal_ms(&tree_features(1.0, 0.0));
-    loop {
-        let over_ms = model.predict_ms(&with_trees(&groups)) - budget.budget_ms;
-        let Some(last) = groups.last_mut().filter(|_| over_ms > 0.0) else { break };
-        let trim = (over_ms / (splat_ms * last.share)).ceil();
-        if splat_ms > 0.0 && last.splats - trim >= 1.0 {
-            last.splats -= trim;
-        } else {
-            groups.pop();
-        }
-    }
-    let features = with_trees(&groups);
-    let tree_budgets: TreeBudgets = groups.into_iter().map(|g| (g.block, g.splats)).collect();
+    let (features, groups) = fit_groups(terrain, groups, model, budget.budget_ms);
+    let tree_budgets: TreeBudgets = groups.into_iter().map(|g| (g.item.block, g.splats)).collect();
     Cut {
         predicted_ms: model.predict_ms(&features),
         features,
@@ -249,15 +266,46 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
     }
 }
 
+/// The features of the cut `terrain` plus `groups`, trimmed or dropped,
+/// fewest splats first, until it fits `budget_ms`; the groups kept.
+fn fit_groups(
+    terrain: CostFeatures,
+    mut groups: Vec<GroupBudget>,
+    model: &CostModel,
+    budget_ms: f64,
+) -> (CostFeatures, Vec<GroupBudget>) {
+    let with_trees = |groups: &[GroupBudget]| groups.iter().fold(terrain, |a, g| a.plus(&g.features()));
+    // Fewest splats last: the loop trims that group, or drops it.
+    groups.sort_by(|a, b| b.splats.total_cmp(&a.splats));
+    loop {
+        let over_ms = model.predict_ms(&with_trees(&groups)) - budget_ms;
+        let Some(last) = groups.last_mut().filter(|_| over_ms > 0.0) else { break };
+        // Down to a splat per tree first: below that each splat saves fill.
+        let above = last.splats - last.trees();
+        let mut trim = (over_ms / last.splat_ms(model)).ceil();
+        if above > 0.0 {
+            trim = trim.min(above);
+        }
+        if last.splats - trim >= 1.0 {
+            last.splats -= trim;
+        } else {
+            groups.pop();
+        }
+    }
+    (with_trees(&groups), groups)
+}
+
 /// A tree group's variable: its worth and its cost per splat, the group
-/// constant spread over its capacity, both times its share of the cameras.
+/// constant and the full fill spread over its capacity (the chord of a
+/// cost that rises steeply to a splat per tree), both times its share of
+/// the cameras.
 fn tree_variable(t: &TreeItem, px: f64, model: &CostModel) -> Continuous {
     let capacity = t.group.capacity.max(0.0);
-    let group_ms = model.marginal_ms(&tree_features(0.0, 1.0));
+    let fixed_ms = model.marginal_ms(&tree_features(0.0, 1.0, t.fill_px));
     Continuous {
         weight: t.share * group_weight(px, t.group.trees, TREE_WORTH),
         capacity,
-        cost_per_unit_ms: t.share * (model.marginal_ms(&tree_features(1.0, 0.0)) + group_ms / capacity.max(1.0)),
+        cost_per_unit_ms: t.share * (model.marginal_ms(&tree_features(1.0, 0.0, 0.0)) + fixed_ms / capacity.max(1.0)),
     }
 }
 
@@ -382,7 +430,7 @@ mod tests {
         candidates(&scope).tiles
     }
 
-    const MODEL: CostModel = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0] };
+    const MODEL: CostModel = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0, 0.0] };
 
     fn budget(ms: f64, shadows: bool) -> Budget {
         Budget { budget_ms: ms, max_tiles: 256, shadows, deadline: None }
@@ -442,10 +490,10 @@ mod tests {
     #[test]
     fn a_group_near_some_of_the_cameras_is_priced_at_that_share() {
         let c = demo_candidates();
-        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01] };
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01, 0.0] };
         let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
         let cut = |share: f64| {
-            let trees = [(TreeItem { block: (0, 0), group, share }, 20_000.0)];
+            let trees = [(TreeItem { block: (0, 0), group, share, fill_px: 0.0 }, 20_000.0)];
             choose(&c, &trees, &model, &budget(1e3, true))
         };
         let (all, third) = (cut(1.0), cut(1.0 / 3.0));
@@ -460,9 +508,9 @@ mod tests {
     fn tree_groups_get_splats_by_their_worth_within_the_budget() {
         let c = demo_candidates();
         // A full group costs 3.1 ms: the groups compete with the terrain.
-        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01] };
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01, 0.0] };
         let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
-        let item = |k: i64| TreeItem { block: (k, 0), group, share: 1.0 };
+        let item = |k: i64| TreeItem { block: (k, 0), group, share: 1.0, fill_px: 0.0 };
         let trees = [(item(0), 20_000.0), (item(1), 2_000.0), (item(2), 0.0)];
         let cut = choose(&c, &trees, &model, &budget(8.0, true));
         let got = |k: i64| cut.tree_budgets.get(&(k, 0)).copied().unwrap_or(0.0);
@@ -483,19 +531,41 @@ mod tests {
     }
 
     #[test]
+    fn a_groups_fill_is_paid_from_its_first_splats_and_trimmed_below_a_splat_per_tree() {
+        let c = demo_candidates();
+        // Splats free, fill 1 ms per 10,000 pixels: the group's 64 trees
+        // cover 100,000 pixels from a splat each to 24 each.
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0, 100.0] };
+        let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
+        let trees = [(TreeItem { block: (0, 0), group, share: 1.0, fill_px: 1e5 }, 20_000.0)];
+        let bare = choose(&c, &[], &model, &budget(1e4, true));
+        let whole = choose(&c, &trees, &model, &budget(bare.predicted_ms + 11.0, true));
+        assert_eq!(whole.tree_budgets[&(0, 0)], 64.0 * 24.0);
+        assert!((whole.features.splat_fill_mpx - 0.1).abs() < 1e-12, "{:?}", whole.features);
+        // 4 ms for trees: fewer than a tree's worth of splats each, on as
+        // many trees, the fill their share.
+        let part = choose(&c, &trees, &model, &budget(bare.predicted_ms + 4.0, true));
+        let splats = part.tree_budgets[&(0, 0)];
+        assert!(splats < 64.0 && part.predicted_ms <= bare.predicted_ms + 4.0 + 1e-9, "{splats} {}", part.predicted_ms);
+        assert!((part.features.splat_fill_mpx - 0.1 * splats / 64.0).abs() < 1e-12, "{:?}", part.features);
+        assert_eq!(part.tiles.len(), bare.tiles.len(), "the terrain stays whole");
+    }
+
+    #[test]
     fn a_costly_group_constant_does_not_starve_the_terrain() {
         // Fifty groups in view at 12 ms each (a fit gone wrong): the
         // terrain still gets what the budget allows, and the cut fits.
         let c = demo_candidates();
-        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 1200.0] };
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 1200.0, 0.0] };
         let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
-        let trees: Vec<_> = (0..50).map(|k| (TreeItem { block: (k, 0), group, share: 1.0 }, 2_000.0)).collect();
+        let trees: Vec<_> =
+            (0..50).map(|k| (TreeItem { block: (k, 0), group, share: 1.0, fill_px: 0.0 }, 2_000.0)).collect();
         let cut = choose(&c, &trees, &model, &budget(8.0, true));
         let bare = choose(&c, &[], &model, &budget(8.0, true));
         assert!(cut.predicted_ms <= 8.0 + 1e-9, "{}", cut.predicted_ms);
         assert_eq!(cut.tiles.len(), bare.tiles.len(), "{:?}", cut.tree_budgets);
         // Affordable, a group gets its splats with the constant paid once.
-        let cheap = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 100.0] };
+        let cheap = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 100.0, 0.0] };
         let rich = choose(&c, &trees, &cheap, &budget(1e4, true));
         assert_eq!(rich.tree_budgets.len(), 50);
         assert!((rich.features.groups_h - 0.5).abs() < 1e-12 && rich.predicted_ms <= 1e4);

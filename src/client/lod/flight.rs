@@ -170,7 +170,9 @@ impl BudgetFlight {
             for g in trees::groups_near(settings, &refs, camera, &blend) {
                 match items.iter_mut().find(|i| i.block == g.block) {
                     Some(item) => item.share += per_camera,
-                    None => items.push(TreeItem { share: per_camera, ..g.item(&refs, &settings.field) }),
+                    None => {
+                        items.push(TreeItem { share: per_camera, ..g.item(&refs, &settings.field, camera.focal_px()) })
+                    }
                 }
             }
         }
@@ -212,7 +214,7 @@ impl BudgetFlight {
     }
 
     /// Records a drawn frame: its tiles as drawn from `camera`, its
-    /// `(splats, tree groups)`, its measured time and view-ray steps per
+    /// trees, its measured time and view-ray steps per
     /// ray-cast pixel (which the next selections price tiles with).
     /// Returns the frame's features, priced by the model before this
     /// frame's correction. The first frame builds the GPU pipelines and is
@@ -221,11 +223,11 @@ impl BudgetFlight {
         &mut self,
         camera: &Camera,
         drawn: &[Choice],
-        trees: (usize, usize),
+        trees: &trees::Drawn,
         (measured_ms, steps): (f64, &FrameSteps),
     ) -> CostFeatures {
         Arc::make_mut(&mut self.steps).record(steps);
-        let splats = budget::tree_features(trees.0 as f64, trees.1 as f64);
+        let splats = budget::tree_features(trees.splats as f64, trees.groups as f64, trees.fill_px);
         let features = self.selector.features(camera, drawn, &self.steps).plus(&splats);
         if self.frames > 0 {
             self.follow_aim(&features);
@@ -342,10 +344,10 @@ mod tests {
         let at_20 = ViewSteps::new(20.0);
         let before = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles, &at_20));
         // The first frame builds pipelines and teaches nothing.
-        f.observe(&cam, &cut.tiles, (0, 0), (1000.0, &even(20.0)));
+        f.observe(&cam, &cut.tiles, &trees::Drawn::default(), (1000.0, &even(20.0)));
         assert_eq!(f.model(), CostModel::default());
         for _ in 0..5 {
-            f.observe(&cam, &cut.tiles, (0, 0), (4.0 * before, &even(20.0)));
+            f.observe(&cam, &cut.tiles, &trees::Drawn::default(), (4.0 * before, &even(20.0)));
         }
         let after = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles, &at_20));
         assert!((after / (4.0 * before) - 1.0).abs() < 0.05, "{before} → {after}");
@@ -365,7 +367,7 @@ mod tests {
         assert!(first > 0.0 && rest > 0.0);
         // The largest tile's rays took 35 steps a pixel, the frame's 12.
         let measured = FrameSteps { mean: 12.0, tiles: vec![(tiles[0].id, 35.0)] };
-        let features = f.observe(&cam, &tiles, (0, 0), (50.0, &measured));
+        let features = f.observe(&cam, &tiles, &trees::Drawn::default(), (50.0, &measured));
         let expected = (first * 35.0 + rest * 12.0) / 1e6;
         assert!((features.raycast_mpx_steps / expected - 1.0).abs() < 1e-9, "{features:?} against {expected}");
         assert_eq!((f.steps().of(tiles[0].id), f.steps().of(tiles[1].id)), (35.0, 12.0));
@@ -380,7 +382,7 @@ mod tests {
         // Frames measured as the model prices them, so it stays.
         let draw = |f: &mut BudgetFlight, tiles: &[Choice]| {
             let ms = f.model().predict_ms(&f.selector.features(&cam, tiles, &steps));
-            f.observe(&cam, tiles, (0, 0), (ms, &even(steps.mean())));
+            f.observe(&cam, tiles, &trees::Drawn::default(), (ms, &even(steps.mean())));
         };
         // Frames drawing what their selection priced: the aim stays.
         for _ in 0..3 {
