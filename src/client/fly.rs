@@ -16,7 +16,7 @@ use super::lod::steps::FrameSteps;
 use super::lod::{Selected, Selector};
 use super::path::CameraPath;
 use super::quadtree::{self, LodRule};
-use super::raycast::{Fade, Traversal, TreeBlend};
+use super::raycast::{Traversal, TreeBlend};
 use super::render::cache::CacheFull;
 use super::render::uniforms::FrameSettings;
 use super::render::{Draw, Readback, Renderer};
@@ -220,6 +220,7 @@ pub fn fly(
                 bounds: source.bounds(),
                 knowledge: store.knowledge(),
                 fade: options.fade,
+                trees: options.trees,
                 max_level: options.lod.max_level,
             };
             let budget = Budget {
@@ -321,16 +322,15 @@ fn frame(
     let chosen = choose(source, (store, lod.as_deref_mut(), sse), (t_s, &camera), (options, renderer.cache_slots()))?;
     let (tiles, error_px) = (&chosen.tiles, chosen.error_px);
     let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
-    let (canopy_ref_m, lo_px, hi_px) = options.fade;
-    let blend = options.trees.map_or(TreeBlend::NONE, |t| t.blend(camera.focal_px()));
+    let fade = trees::canopy_fade(options.fade, options.trees.as_ref(), camera.focal_px());
     let settings = FrameSettings {
         traversal: options.traversal,
         shadow_steps: options.shadow_steps,
         sun_ecef: path.sun_ecef(),
-        fade: Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px, trees: blend },
+        fade,
     };
     let budgets = chosen.selected.as_ref().map(|s| &s.cut.tree_budgets);
-    let trees = tree_splats(options, tiles, &camera, (&blend, budgets));
+    let trees = tree_splats(options, tiles, &camera, (&fade.trees, budgets));
     if let (Some(lod), Some(settings)) = (lod.as_deref_mut(), options.trees) {
         lod.set_trees(settings, tiles.clone());
     }

@@ -92,6 +92,13 @@ impl Fade {
         smoothstep(self.lo_px, self.hi_px, px)
     }
 
+    /// Whether the canopy is whole, unfaded, over distances from `near_m`
+    /// to `far_m`: the far fade shrinks with distance and the canopy's
+    /// share of the tree blend grows, so both ends tell.
+    pub fn whole(&self, near_m: f64, far_m: f64) -> bool {
+        self.factor(near_m) >= 1.0 && self.factor(far_m) >= 1.0
+    }
+
     /// The distance beyond which the canopy is gone.
     pub fn end_m(&self) -> f64 {
         if self.lo_px <= 0.0 { f64::INFINITY } else { self.canopy_ref_m * self.focal_px / self.lo_px }

@@ -27,7 +27,7 @@
 
 use super::camera::Camera;
 use super::lod::budget::TreeItem;
-use super::raycast::{TreeBlend, texel_index};
+use super::raycast::{Fade, TreeBlend, texel_index};
 use super::tile::{NODATA_M, TileData};
 use crate::cem::surface::SurfaceType;
 use crate::geo::METRES_PER_DEGREE;
@@ -74,6 +74,13 @@ impl TreeSettings {
         }
         TreeBlend { range_m, band_m: self.band.clamp(0.0, 1.9) * range_m }
     }
+}
+
+/// The canopy fade for a camera of focal length `focal_px`: the far fade,
+/// `(reference height m, low px, high px)`, and with `trees` their blend.
+pub fn canopy_fade((canopy_ref_m, lo_px, hi_px): (f64, f64, f64), trees: Option<&TreeSettings>, focal_px: f64) -> Fade {
+    let trees = trees.map_or(TreeBlend::NONE, |t| t.blend(focal_px));
+    Fade { focal_px, canopy_ref_m, lo_px, hi_px, trees }
 }
 
 /// Splat budgets of tree groups, by lattice block.

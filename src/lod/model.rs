@@ -114,11 +114,15 @@ pub struct CostFeatures {
     /// covered pixel is a fragment shaded (splats write their depth), and
     /// a tree's splats cover its crown twice however many it has.
     pub splat_fill_mpx: f64,
+    /// The part of the view-ray work cast through a fading canopy,
+    /// millions of pixel·steps: what the fading pipeline costs beyond the
+    /// whole canopy's (near the trees' blend and far away).
+    pub faded_mpx_steps: f64,
 }
 
 /// Number of calibrated constants: one per feature plus a fixed per-frame
 /// cost.
-pub const FEATURES: usize = 7;
+pub const FEATURES: usize = 8;
 
 impl CostFeatures {
     /// The features as a vector, with 1 for the fixed per-frame cost first.
@@ -131,6 +135,7 @@ impl CostFeatures {
             self.splats_k,
             self.groups_h,
             self.splat_fill_mpx,
+            self.faded_mpx_steps,
         ]
         .map(finite_non_negative)
     }
@@ -144,6 +149,7 @@ impl CostFeatures {
             splats_k: self.splats_k + o.splats_k,
             groups_h: self.groups_h + o.groups_h,
             splat_fill_mpx: self.splat_fill_mpx + o.splat_fill_mpx,
+            faded_mpx_steps: self.faded_mpx_steps + o.faded_mpx_steps,
         }
     }
 }
@@ -162,10 +168,11 @@ impl Default for CostModel {
     /// Starting guesses before any frame was measured: 0.5 ms per frame,
     /// 0.01 ms per tile, 1 ms per million pixel·steps of view or shadow
     /// rays, 0.02 ms per thousand splats, 0.01 ms per hundred groups, 0.2
-    /// ms per million pixels of splat fill. The calibrator replaces them
+    /// ms per million pixels of splat fill, 0.5 ms more per million
+    /// pixel·steps through a fading canopy. The calibrator replaces them
     /// within a few frames.
     fn default() -> CostModel {
-        CostModel { constants_ms: [0.5, 0.01, 1.0, 1.0, 0.02, 0.01, 0.2] }
+        CostModel { constants_ms: [0.5, 0.01, 1.0, 1.0, 0.02, 0.01, 0.2, 0.5] }
     }
 }
 
@@ -203,11 +210,11 @@ mod tests {
 
     #[test]
     fn cost_models_round_trip_through_json_and_bad_ones_are_refused() {
-        let model = CostModel { constants_ms: [2.5, 0.3, 40.0, 12.0, 0.0, 1e-3, 0.5] };
+        let model = CostModel { constants_ms: [2.5, 0.3, 40.0, 12.0, 0.0, 1e-3, 0.5, 20.0] };
         let text = serde_json::to_string(&model).unwrap();
         assert_eq!(CostModel::from_json(&text), Ok(model));
         assert!(CostModel::from_json("{\"constants_ms\": [1, 2]}").unwrap_err().contains("not a cost model"));
-        let negative = "{\"constants_ms\": [1, 2, 3, -4, 5, 6, 7]}";
+        let negative = "{\"constants_ms\": [1, 2, 3, -4, 5, 6, 7, 8]}";
         assert!(CostModel::from_json(negative).unwrap_err().contains("constant 3 is -4"));
         assert!(CostModel::from_json("ms").is_err());
     }
@@ -281,6 +288,7 @@ mod tests {
             splats_k: f64::INFINITY,
             groups_h: 2.0,
             splat_fill_mpx: 0.5,
+            faded_mpx_steps: 0.0,
         };
         assert!((model.predict_ms(&junk) - (0.5 + 0.02 + 0.1)).abs() < 1e-12);
     }

@@ -100,7 +100,7 @@ fn bad_flight_input_is_explained() {
     let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--server", "http://127.0.0.1:9"]);
     assert!(String::from_utf8_lossy(&e.stderr).contains("tiles.json"), "{}", String::from_utf8_lossy(&e.stderr));
     let model = dir.join("model.json");
-    std::fs::write(&model, r#"{"constants_ms": [1, 1, 1, -1, 1, 1, 1]}"#).unwrap();
+    std::fs::write(&model, r#"{"constants_ms": [1, 1, 1, -1, 1, 1, 1, 1]}"#).unwrap();
     let e = run(&[
         "--path",
         path.to_str().unwrap(),

@@ -33,8 +33,9 @@ use super::super::camera::Camera;
 use super::super::frame::TileFrame;
 use super::super::globe::Geodetic;
 use super::super::quadtree::{UNKNOWN_RANGE_M, behind_horizon, local_box, visible};
-use super::super::raycast::{self, Fade, TreeBlend};
+use super::super::raycast;
 use super::super::store::Known;
+use super::super::trees::{TreeSettings, canopy_fade};
 use super::coverage;
 use super::steps::ViewSteps;
 use crate::grid::{BBox, Sector, TileGrid, TileId};
@@ -57,6 +58,10 @@ pub struct Candidate {
     pub ray_px: f64,
     /// View-ray steps per ray-cast pixel it is priced at ([`ViewSteps::of`]).
     pub view_steps: f64,
+    /// Whether a camera casts its rays through a fading canopy (the far
+    /// fade or the trees' blend reaches it), which the renderer draws with
+    /// a costlier pipeline than a whole canopy.
+    pub faded: bool,
 }
 
 /// Where the candidates are looked for and how they are judged.
@@ -72,6 +77,9 @@ pub struct Scope<'a> {
     pub cone: Option<Cone>,
     /// The canopy fade (the renderer's), for the plain-tile rule.
     pub fade: (f64, f64, f64),
+    /// Trees drawn as splats, whose blend fades the canopy near the
+    /// cameras.
+    pub trees: Option<TreeSettings>,
     /// What is known of loaded tiles.
     pub known: &'a dyn Fn(TileId) -> Option<Known>,
     /// Height range of a tile, or of its nearest loaded ancestor.
@@ -203,8 +211,8 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
     let samples = share * n * n * (spacing / (spacing + flat)).powi(2);
     let area_m2 = share * n * n * frame.spacing_m.x * frame.spacing_m.y;
     let mesh_error_m = (scope.known)(frame.id).map(|k| k.mesh_error_m);
-    let (canopy_ref_m, lo_px, hi_px) = scope.fade;
     let (mut benefit, mut seen, mut ray, mut refinable, mut too_coarse) = (0.0, 0.0, 0.0f64, false, false);
+    let mut faded = false;
     for camera in scope.cameras {
         let cam = frame.to_local(camera.position_ecef);
         let near_m = (cam.clamp(box_lo, box_hi) - cam).length();
@@ -212,9 +220,10 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
         let full = coverage::full_px(camera, area_m2, near_m).max(visible);
         benefit += tile_benefit_seen(visible, full, samples, Smooth::default());
         seen += visible;
-        let fade = Fade { focal_px: camera.focal_px(), canopy_ref_m, lo_px, hi_px, trees: TreeBlend::NONE };
+        let fade = canopy_fade(scope.fade, scope.trees.as_ref(), camera.focal_px());
         if !mesh_error_m.is_some_and(|e| raycast::plain(&fade, near_m, e)) {
             ray = ray.max(visible);
+            faded |= visible > 0.0 && !fade.whole(near_m, farthest_m(cam, box_lo, box_hi));
         }
         refinable |= visible > 0.0 && full > samples;
         // Measured no nearer than the lowest ground below the eye: a camera
@@ -232,10 +241,16 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
             seen_px: seen / k,
             ray_px: ray,
             view_steps: scope.steps.of(frame.id),
+            faded,
         },
         refinable,
         too_coarse,
     }
+}
+
+/// The distance from `cam` to the farthest corner of the box.
+fn farthest_m(cam: DVec3, lo: DVec3, hi: DVec3) -> f64 {
+    (cam - lo).abs().max((cam - hi).abs()).length()
 }
 
 /// The largest a sample may look, pixels per side at the tile's nearest
@@ -284,12 +299,12 @@ mod tests {
     use super::*;
 
     fn walk(camera: Camera, cone: Option<Cone>, max_level: u32) -> Candidates {
-        walk_over(camera, cone, max_level, &|_| Some((500.0, 3500.0)))
+        walk_over(camera, (cone, None), max_level, &|_| Some((500.0, 3500.0)))
     }
 
     fn walk_over(
         camera: Camera,
-        cone: Option<Cone>,
+        (cone, trees): (Option<Cone>, Option<TreeSettings>),
         max_level: u32,
         range: &dyn Fn(TileId) -> Option<(f64, f64)>,
     ) -> Candidates {
@@ -300,6 +315,7 @@ mod tests {
             cameras: &cameras,
             cone,
             fade: (30.0, 0.5, 2.0),
+            trees,
             known: &|_| None,
             range,
             max_level,
@@ -354,7 +370,7 @@ mod tests {
         // would look ~50 px wide at the nearest point, a level-8 one ~25 px.
         let eye = Geodetic::new(10.05, 46.35, 1400.0);
         let camera = Camera::looking(eye, 90.0, -20.0, 60.0, (320, 240));
-        let c = walk_over(camera, None, 13, &|_| Some((1100.0, 1200.0)));
+        let c = walk_over(camera, (None, None), 13, &|_| Some((1100.0, 1200.0)));
         let grid = TileGrid::new(36.0, 513).unwrap();
         let holds = |t: &&Candidate| {
             let s = grid.sector(t.id);
@@ -374,7 +390,7 @@ mod tests {
         // 1150 m up, below the middle of the unknown range (4250 m): the
         // ground is measured below the eye, so it faces the camera.
         let camera = Camera::looking(Geodetic::new(10.01, 46.352, 1150.0), 90.0, -8.0, 60.0, (160, 120));
-        let c = walk_over(camera, None, 13, &|_| None);
+        let c = walk_over(camera, (None, None), 13, &|_| None);
         let deepest = c.tiles.iter().map(|t| t.id.level).max().unwrap();
         assert!(deepest >= 9, "{deepest}");
         assert!(c.tiles.iter().any(|t| t.seen_px > 100.0));
@@ -392,6 +408,35 @@ mod tests {
     }
 
     #[test]
+    fn rays_through_a_fading_canopy_are_told_apart() {
+        // 300 m above flat ground at 1000 m, looking ahead: the trees' blend
+        // reaches 420 m, the far fade begins 3.1 km out.
+        let camera = Camera::looking(Geodetic::new(10.1, 46.32, 1300.0), 10.0, -10.0, 60.0, (320, 240));
+        let flat = |_| Some((1000.0, 1000.0));
+        let walk = |trees| walk_over(camera, (None, trees), 16, &flat).tiles;
+        let (bare, wooded) = (walk(None), walk(Some(TreeSettings::default())));
+        assert_eq!(bare.iter().map(|t| t.id).collect::<Vec<_>>(), wooded.iter().map(|t| t.id).collect::<Vec<_>>());
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        let near_m = |t: &Candidate| {
+            let frame = TileFrame::new(&grid, t.id);
+            let (lo, hi) = local_box(&frame, 1000.0, 1000.0);
+            let cam = frame.to_local(camera.position_ecef);
+            ((cam.clamp(lo, hi) - cam).length(), farthest_m(cam, lo, hi))
+        };
+        let blend = TreeSettings::default().blend(camera.focal_px());
+        let (reach_m, whole_m) = (blend.range_m + blend.band_m / 2.0, 30.0 * camera.focal_px() / 2.0);
+        assert!((reach_m - 420.0).abs() < 5.0 && (whole_m - 3118.0).abs() < 5.0, "{reach_m} {whole_m}");
+        for (b, w) in bare.iter().zip(&wooded).filter(|(b, _)| b.ray_px > 0.0) {
+            let (near, far) = near_m(b);
+            // Far tiles fade either way; trees fade those within their reach.
+            assert_eq!(b.faded, far > whole_m, "{:?} {near} {far}", b.id);
+            assert_eq!(w.faded, b.faded || near < reach_m, "{:?} {near} {far}", w.id);
+        }
+        assert!(bare.iter().any(|t| t.ray_px > 0.0 && !t.faded), "near small tiles are whole without trees");
+        assert!(wooded.iter().zip(&bare).any(|(w, b)| w.faded && !b.faded), "the trees fade some of them");
+    }
+
+    #[test]
     fn a_tile_costs_no_more_pixels_than_its_children_in_view_cover() {
         let tile = |level, parent, seen_px: f64, ray_px| Candidate {
             id: TileId::new(level, 0, 0),
@@ -400,6 +445,7 @@ mod tests {
             seen_px,
             ray_px,
             view_steps: 20.0,
+            faded: false,
         };
         // A chain around the camera: each tile's plane lies just under the
         // eye (half the screen), its children in view cover little.

@@ -291,6 +291,7 @@ mod tests {
             bounds: BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 },
             knowledge: Knowledge::default(),
             fade: (30.0, 0.5, 2.0),
+            trees: None,
             max_level: 14,
         };
         let budget = Budget { budget_ms: 8.0, max_tiles: 256, shadows: true, deadline: None };

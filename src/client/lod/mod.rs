@@ -32,6 +32,7 @@ pub mod worker;
 
 use super::camera::Camera;
 use super::store::Knowledge;
+use super::trees::TreeSettings;
 use crate::grid::{BBox, TileGrid};
 use crate::lod::model::{CostFeatures, CostModel};
 use crate::lod::predict::Cone;
@@ -55,6 +56,9 @@ pub struct Selector {
     pub knowledge: Knowledge,
     /// The canopy fade: reference height (m), low and high (px).
     pub fade: (f64, f64, f64),
+    /// Trees drawn as splats near the camera, if any (their blend fades
+    /// the canopy there).
+    pub trees: Option<TreeSettings>,
     /// Deepest level.
     pub max_level: u32,
 }
@@ -116,6 +120,7 @@ impl Selector {
             cameras,
             cone,
             fade: self.fade,
+            trees: self.trees,
             known: &known,
             range: &range,
             max_level: self.max_level,

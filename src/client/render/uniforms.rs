@@ -193,12 +193,9 @@ fn filler_drop_m(tile: &TileData) -> f32 {
 }
 
 /// Whether every sample of the tile is close enough for the whole canopy
-/// and far enough from the trees' splats: the far fade shrinks with
-/// distance and the canopy's share of the tree blend grows, so both ends
-/// of the tile's distances tell.
+/// and far enough from the trees' splats ([`Fade::whole`]).
 pub fn canopy_whole(camera: &Camera, tile: &TileData, fade: &Fade) -> bool {
-    let (near, far) = (tile_near_m(camera, tile), tile_far_m(camera, tile));
-    fade.factor(near) >= 1.0 && fade.factor(far) >= 1.0
+    fade.whole(tile_near_m(camera, tile), tile_far_m(camera, tile))
 }
 
 /// The farthest distance from the camera to the tile's box.
