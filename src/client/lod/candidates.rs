@@ -27,7 +27,11 @@
 //! children in view cover (`bound_by_children`): a tile around a camera
 //! in a valley, measured on a plane just under the eye, would otherwise
 //! cost half the screen while its children cost nothing, and refining it
-//! would lower the cost, which greedy increments never follow.
+//! would lower the cost, which greedy increments never follow. Its rays
+//! are *faded* when some camera sees its canopy fade on its box (the far
+//! fade, or the trees' blend near the camera: [`raycast::Fade::whole`],
+//! the renderer's rule), which the renderer draws with a costlier
+//! pipeline.
 
 use super::super::camera::Camera;
 use super::super::frame::TileFrame;
