@@ -331,8 +331,8 @@ fn frame(
     };
     let budgets = chosen.selected.as_ref().map(|s| &s.cut.tree_budgets);
     let trees = tree_splats(options, tiles, &camera, (&fade.trees, budgets));
-    if let (Some(lod), Some(settings)) = (lod.as_deref_mut(), options.trees) {
-        lod.set_trees(settings, tiles.clone());
+    if let Some(lod) = lod.as_deref_mut().filter(|_| options.trees.is_some()) {
+        lod.set_drawn(tiles.clone());
     }
     let draws: Vec<Draw> = (0..tiles.len())
         .map(|k| Draw {

@@ -421,7 +421,7 @@ mod tests {
         let (bare, wooded) = (walk(None), walk(Some(TreeSettings::default())));
         assert_eq!(bare.iter().map(|t| t.id).collect::<Vec<_>>(), wooded.iter().map(|t| t.id).collect::<Vec<_>>());
         let grid = TileGrid::new(36.0, 513).unwrap();
-        let near_m = |t: &Candidate| {
+        let distances_m = |t: &Candidate| {
             let frame = TileFrame::new(&grid, t.id);
             let (lo, hi) = local_box(&frame, 1000.0, 1000.0);
             let cam = frame.to_local(camera.position_ecef);
@@ -431,7 +431,7 @@ mod tests {
         let (reach_m, whole_m) = (blend.range_m + blend.band_m / 2.0, 30.0 * camera.focal_px() / 2.0);
         assert!((reach_m - 420.0).abs() < 5.0 && (whole_m - 3118.0).abs() < 5.0, "{reach_m} {whole_m}");
         for (b, w) in bare.iter().zip(&wooded).filter(|(b, _)| b.ray_px > 0.0) {
-            let (near, far) = near_m(b);
+            let (near, far) = distances_m(b);
             // Far tiles fade either way; trees fade those within their reach.
             assert_eq!(b.faded, far > whole_m, "{:?} {near} {far}", b.id);
             assert_eq!(w.faded, b.faded || near < reach_m, "{:?} {near} {far}", w.id);

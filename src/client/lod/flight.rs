@@ -12,7 +12,7 @@
 
 use super::super::camera::Camera;
 use super::super::tile::TileData;
-use super::super::trees::{self, TreeSettings};
+use super::super::trees;
 use super::ahead::{self, Lookahead, WINDOW};
 use super::budget::{self, Budget, Choice, TreeItem};
 use super::morphs::{Morphing, Morphs, Pairs};
@@ -58,8 +58,8 @@ pub struct BudgetFlight {
     /// The morphs, with geomorphing on, and the tiles they draw.
     morphs: Option<Morphs>,
     pairs: Pairs,
-    /// The tiles last drawn and how trees grow on them.
-    trees: Option<(TreeSettings, Vec<Arc<TileData>>)>,
+    /// The tiles last drawn, on which the selector's trees grow.
+    drawn: Vec<Arc<TileData>>,
     /// What the frames drawn cost over what their selections predicted,
     /// both priced by the model now (a moving average): selections price
     /// the cameras ahead and the conservative cone, which see more than
@@ -98,7 +98,7 @@ impl BudgetFlight {
             frames: 0,
             morphs: geomorph.then(|| Morphs::new(look.tau_s)),
             pairs: Pairs::default(),
-            trees: None,
+            drawn: Vec::new(),
             aim: 1.0,
         })
     }
@@ -152,17 +152,16 @@ impl BudgetFlight {
         self.current.clone().unwrap_or_default()
     }
 
-    /// The tiles drawn and how trees grow on them, for the next
-    /// selections' tree groups.
-    pub fn set_trees(&mut self, settings: TreeSettings, drawn: Vec<Arc<TileData>>) {
-        self.trees = Some((settings, drawn));
+    /// The tiles drawn, on which the next selections' tree groups grow.
+    pub fn set_drawn(&mut self, drawn: Vec<Arc<TileData>>) {
+        self.drawn = drawn;
     }
 
     /// The tree groups near `cameras` on the tiles last drawn, each once,
     /// with the share of the cameras it is near.
     fn tree_items(&self, cameras: &[Camera]) -> Vec<TreeItem> {
-        let Some((settings, tiles)) = &self.trees else { return Vec::new() };
-        let refs: Vec<&TileData> = tiles.iter().map(|t| t.as_ref()).collect();
+        let Some(settings) = &self.selector.trees else { return Vec::new() };
+        let refs: Vec<&TileData> = self.drawn.iter().map(|t| t.as_ref()).collect();
         let mut items: Vec<TreeItem> = Vec::new();
         let per_camera = 1.0 / cameras.len().max(1) as f64;
         for camera in cameras {
