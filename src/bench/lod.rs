@@ -16,6 +16,7 @@ use super::table;
 use crate::lod::deferral::{ThresholdRefiner, full_refinement};
 use crate::lod::model::{CostFeatures, CostModel, Smooth, group_weight, tile_benefit};
 use crate::lod::optimizer::{Continuous, Forest, Node, Settings, optimize};
+use crate::lod::predict::Cone;
 use crate::lod::split::{SplitSettings, Variable, split};
 use glam::DVec3;
 use std::time::Instant;
@@ -41,30 +42,24 @@ const MODEL: CostModel = CostModel { constants_ms: [0.5, 0.004, 0.25, 0.25, 0.03
 
 /// The camera of one frame.
 struct Camera {
-    eye: DVec3,
-    forward: DVec3,
+    /// The cone around the frustum (its half-angle: the diagonal's).
+    cone: Cone,
     focal_px: f64,
-    /// Half-angle of the cone around the frustum (the diagonal).
-    half_rad: f64,
 }
 
 impl Camera {
     fn new(eye: DVec3, forward: DVec3) -> Camera {
         let focal_px = 540.0 / (FOV_Y_RAD / 2.0).tan();
-        Camera { eye, forward, focal_px, half_rad: (1101.4 / focal_px).atan() }
+        Camera { cone: Cone::new(eye, forward, (1101.4 / focal_px).atan()), focal_px }
     }
 
     /// Projected area of a sphere, pixels (capped at the screen), or
     /// `None` if it is outside the view cone.
     fn projected_px(&self, center: DVec3, radius: f64) -> Option<f64> {
-        let v = center - self.eye;
-        let d = v.length();
-        if d > radius {
-            let angle = (v.dot(self.forward) / d).clamp(-1.0, 1.0).acos();
-            if angle - (radius / d).asin() > self.half_rad {
-                return None;
-            }
+        if !self.cone.meets_sphere(center, radius) {
+            return None;
         }
+        let d = center.distance(self.cone.apex_m());
         let r_px = radius * self.focal_px / (d - radius).max(1.0);
         Some((std::f64::consts::PI * r_px * r_px).min(SCREEN_PX))
     }
@@ -85,6 +80,9 @@ pub struct Frame {
     pub ms_unsplit: f64,
     /// Selection ms with splitting, the tile cut kept by the deferral table.
     pub ms_deferred: f64,
+    /// Its parts, ms: tile candidates (the deferred refinement included),
+    /// variable splitting, the optimiser.
+    pub ms_deferred_parts: [f64; 3],
     /// Tiles evaluated by full top-down threshold refinement.
     pub touched_full: usize,
     /// Tiles evaluated by deferred threshold refinement.
@@ -162,6 +160,7 @@ fn select(scene: &Scene, cam: &Camera, refined: &[bool], loss_fraction: f64, mut
 
     f.ms_split = ms_tiles + ms_split_vars + ms_opt_split;
     f.ms_deferred = ms_tiles_deferred + ms_split_vars + ms_opt_deferred;
+    f.ms_deferred_parts = [ms_tiles_deferred, ms_split_vars, ms_opt_deferred];
     f.vars_split = split_vars.len();
     f.vars_unsplit = unsplit_vars.len();
     let bound = unsplit_sel.upper_bound.max(f64::MIN_POSITIVE);
@@ -273,6 +272,9 @@ pub fn report(scene: &Scene, frames: &[Frame]) -> String {
             row("selection, unsplit (ms)", col(|f| f.ms_unsplit)),
             row("selection, split (ms)", col(|f| f.ms_split)),
             row("selection, split + deferral (ms)", col(|f| f.ms_deferred)),
+            row("… tile candidates (ms)", col(|f| f.ms_deferred_parts[0])),
+            row("… splitting (ms)", col(|f| f.ms_deferred_parts[1])),
+            row("… optimiser (ms)", col(|f| f.ms_deferred_parts[2])),
             row("tile refinement, full (ms)", col(|f| f.ms_refine_full)),
             row("tile refinement, deferred (ms)", col(|f| f.ms_refine_deferred)),
             row("tiles evaluated, full", col(|f| f.touched_full as f64)),

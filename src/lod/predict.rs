@@ -120,18 +120,35 @@ pub struct MotionLimits {
     pub max_turn_radps: f64,
 }
 
-/// A view cone: apex, axis and half-angle.
+/// A view cone: apex, axis and half-angle (with its sine and cosine, as the
+/// tests against it run for every node a selection looks at).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Cone {
-    /// Apex, metres.
-    pub apex_m: DVec3,
-    /// Unit axis.
-    pub axis: DVec3,
-    /// Half-angle, radians (π: everything).
-    pub half_angle_rad: f64,
+    apex_m: DVec3,
+    axis: DVec3,
+    half_angle_rad: f64,
+    sin_half: f64,
+    cos_half: f64,
 }
 
 impl Cone {
+    /// The cone at `apex_m` (metres) around the unit `axis`, of
+    /// `half_angle_rad` (π: everything).
+    pub fn new(apex_m: DVec3, axis: DVec3, half_angle_rad: f64) -> Cone {
+        let (sin_half, cos_half) = half_angle_rad.sin_cos();
+        Cone { apex_m, axis, half_angle_rad, sin_half, cos_half }
+    }
+
+    /// Apex, metres.
+    pub fn apex_m(&self) -> DVec3 {
+        self.apex_m
+    }
+
+    /// Half-angle, radians.
+    pub fn half_angle_rad(&self) -> f64 {
+        self.half_angle_rad
+    }
+
     /// Whether `point_m` is inside.
     pub fn contains(&self, point_m: DVec3) -> bool {
         let v = point_m - self.apex_m;
@@ -139,7 +156,24 @@ impl Cone {
         if self.half_angle_rad >= std::f64::consts::PI || len == 0.0 {
             return true;
         }
-        v.dot(self.axis) >= len * self.half_angle_rad.cos() - 1e-9 * len
+        v.dot(self.axis) >= len * self.cos_half - 1e-9 * len
+    }
+
+    /// Whether the sphere at `center_m` of `radius_m` meets the cone: the
+    /// angle off the axis to its centre is at most the half-angle plus the
+    /// angle the sphere subtends, `asin(r/d)`, compared by cosines.
+    pub fn meets_sphere(&self, center_m: DVec3, radius_m: f64) -> bool {
+        let v = center_m - self.apex_m;
+        let d = v.length();
+        if d <= radius_m || self.half_angle_rad >= std::f64::consts::PI {
+            return true;
+        }
+        let s = radius_m.max(0.0) / d;
+        // half + asin(s) reaches π: the cone and the sphere cover every direction.
+        if self.cos_half <= 0.0 && s >= self.sin_half {
+            return true;
+        }
+        v.dot(self.axis) >= d * (self.cos_half * (1.0 - s * s).sqrt() - self.sin_half * s)
     }
 }
 
@@ -155,7 +189,7 @@ pub fn conservative(pose: &Pose, fov_rad: f64, tau_s: f64, stages: u32, limits: 
     let half = if half.is_finite() && half <= FRAC_PI_2 { half } else { PI };
     let pull = if half >= PI { 0.0 } else { reach / half.sin().max(1e-12) };
     let apex = pose.position_m - pose.forward() * if pull.is_finite() { pull } else { 0.0 };
-    Cone { apex_m: apex, axis: pose.forward(), half_angle_rad: half }
+    Cone::new(apex, pose.forward(), half)
 }
 
 /// 001's estimated benefit: the mean over the predicted cameras plus `λ`
@@ -177,6 +211,26 @@ mod tests {
 
     fn pose(p: DVec3, f: DVec3) -> Pose {
         Pose::looking(p, f, DVec3::Z)
+    }
+
+    proptest! {
+        #[test]
+        fn a_sphere_meets_the_cone_as_the_angles_say(
+            (x, y, z) in (-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0),
+            distance in 1.0f64..1000.0,
+            radius in 0.0f64..500.0,
+            half in 0.01f64..3.1,
+        ) {
+            let dir = DVec3::new(x, y, z);
+            prop_assume!(dir.length() > 1e-3);
+            let cone = Cone::new(DVec3::new(5.0, -3.0, 2.0), DVec3::new(0.6, 0.0, 0.8), half);
+            let center = cone.apex_m() + dir.normalize() * distance;
+            let off_axis = dir.normalize().dot(DVec3::new(0.6, 0.0, 0.8)).clamp(-1.0, 1.0).acos();
+            let by_angles = distance <= radius || off_axis - (radius / distance).min(1.0).asin() <= half;
+            let margin = off_axis - (radius / distance).min(1.0).asin() - half;
+            prop_assume!(distance <= radius || margin.abs() > 1e-9);
+            prop_assert_eq!(cone.meets_sphere(center, radius), by_angles);
+        }
     }
 
     #[test]
@@ -250,11 +304,11 @@ mod tests {
         let now = pose(DVec3::ZERO, DVec3::X);
         let fast = MotionLimits { max_speed_mps: 1e9, max_turn_radps: 100.0 };
         let c = conservative(&now, 1.0, 1.0, 3, &fast);
-        assert_eq!(c.half_angle_rad, std::f64::consts::PI);
+        assert_eq!(c.half_angle_rad(), std::f64::consts::PI);
         assert!(c.contains(DVec3::new(-1e6, 0.0, 0.0)));
         let none =
             conservative(&now, f64::NAN, f64::NAN, 3, &MotionLimits { max_speed_mps: f64::NAN, max_turn_radps: 0.0 });
-        assert!(none.apex_m.is_finite() && none.half_angle_rad.is_finite());
+        assert!(none.apex_m().is_finite() && none.half_angle_rad().is_finite());
         assert_eq!(blend(&[1.0, 3.0, f64::NAN], 4.0, 0.5), 4.0 / 3.0 + 2.0);
         assert_eq!(blend(&[], 4.0, 0.25), 1.0);
     }

@@ -227,13 +227,15 @@ impl Pass<'_> {
     fn visit(&mut self, n: u32, w: f64, x: f64) {
         let tree = self.tree;
         let node = &tree.nodes[n as usize];
-        let mut kids: Vec<(u32, f64, f64)> = Vec::with_capacity(4);
-        for &c in &node.children {
+        // Up to four children: on the stack, as this runs for every node seen.
+        let mut storage = [(0u32, 0.0, 0.0); 4];
+        for (k, &c) in storage.iter_mut().zip(&node.children) {
             self.stats.visited += 1;
             let wc = (self.weight)(&tree.nodes[c as usize]).filter(|w| *w > 0.0).unwrap_or(0.0);
-            kids.push((c, wc, tree.nodes[c as usize].capacity.max(f64::MIN_POSITIVE)));
+            *k = (c, wc, tree.nodes[c as usize].capacity.max(f64::MIN_POSITIVE));
         }
-        let loss = self.loss_of_tying(&kids, x);
+        let kids = &storage[..node.children.len().min(4)];
+        let loss = self.loss_of_tying(kids, x);
         if kids.is_empty() || loss < self.settings.loss_fraction * w * self.ratio {
             self.stats.estimated_loss += loss;
             // The children's weights add up closer to the groups' than the
@@ -245,7 +247,7 @@ impl Pass<'_> {
             return;
         }
         let total: f64 = kids.iter().map(|k| k.1 * k.1 / k.2).sum();
-        for (c, wc, cap) in kids {
+        for &(c, wc, cap) in kids {
             if wc > 0.0 {
                 let xc = if total > 0.0 { x * (wc * wc / cap) / total } else { 0.0 };
                 self.visit(c, wc, xc.min(cap));

@@ -84,7 +84,7 @@ mod tests {
             (cameras[1].position_ecef - expected).length()
         );
         // The cone holds the current view and what lies just beside it.
-        assert!(cone.half_angle_rad > 0.5 * 60f64.to_radians());
+        assert!(cone.half_angle_rad() > 0.5 * 60f64.to_radians());
         assert!(cone.contains(camera(10.103).position_ecef + camera(10.103).forward() * 1000.0));
     }
 

@@ -177,13 +177,7 @@ fn overlaps(s: &Sector, area: &Sector) -> bool {
 /// Whether the tile's box, by its bounding sphere, meets the cone and is
 /// not entirely behind the horizon of `camera`.
 fn in_cone(cone: &Cone, camera: &Camera, frame: &TileFrame, lo: DVec3, hi: DVec3) -> bool {
-    let centre = frame.to_ecef((lo + hi) / 2.0);
-    let radius = (hi - lo).length() / 2.0;
-    let v = centre - cone.apex_m;
-    let d = v.length();
-    let meets = d <= radius
-        || cone.half_angle_rad >= std::f64::consts::PI
-        || (v.dot(cone.axis) / d).clamp(-1.0, 1.0).acos() - (radius / d).clamp(0.0, 1.0).asin() <= cone.half_angle_rad;
+    let meets = cone.meets_sphere(frame.to_ecef((lo + hi) / 2.0), (hi - lo).length() / 2.0);
     let corners = (0..8).map(|k| {
         let local = DVec3::new([lo.x, hi.x][k & 1], [lo.y, hi.y][(k >> 1) & 1], [lo.z, hi.z][k >> 2]);
         frame.to_ecef(local) - camera.position_ecef
@@ -404,7 +398,7 @@ mod tests {
     fn the_cone_keeps_tiles_the_frustum_culls() {
         let camera = Camera::looking(Geodetic::new(10.1, 46.32, 2500.0), 10.0, -15.0, 60.0, (320, 240));
         let narrow = walk(camera, None, 12);
-        let cone = Cone { apex_m: camera.position_ecef, axis: camera.forward(), half_angle_rad: std::f64::consts::PI };
+        let cone = Cone::new(camera.position_ecef, camera.forward(), std::f64::consts::PI);
         let wide = walk(camera, Some(cone), 12);
         assert!(wide.tiles.len() > narrow.tiles.len());
         // Behind the camera: candidates with no benefit and no pixels.

@@ -47,6 +47,24 @@ enum Kind {
     Priced { a: f64, start: f64, full: f64 },
 }
 
+impl Kind {
+    /// The start level of a priced variable (0 otherwise).
+    fn start(self) -> f64 {
+        match self {
+            Kind::Priced { start, .. } => start,
+            _ => 0.0,
+        }
+    }
+
+    /// The full-resolution level of a priced variable (0 otherwise).
+    fn full(self) -> f64 {
+        match self {
+            Kind::Priced { full, .. } => full,
+            _ => 0.0,
+        }
+    }
+}
+
 /// A sum kept as an unevaluated pair `hi + lo` (Knuth's two-sum), so that
 /// differences of prefix sums do not lose the small interior terms to the
 /// large saturated ones.
@@ -116,17 +134,20 @@ impl Sums {
 
 /// The continuous variables prepared for level queries: breakpoints sorted
 /// with prefix sums, so cost and benefit at a level take two binary searches.
+/// A variable's start and full-resolution levels are its `a` times constants
+/// of the shape, so one order (by `a`, descending) sorts both, and one
+/// prefix sum serves both.
 #[derive(Clone, Debug)]
 pub struct Levels {
     shape: Smooth,
     kinds: Vec<Kind>,
     vars: Vec<Continuous>,
-    /// Start levels, descending, with prefix sums (`starts_sum[k]`: the first k).
+    /// Start levels, descending (∞ with `s = 0`).
     starts: Vec<f64>,
-    starts_sum: Vec<Sums>,
-    /// Full-resolution levels, descending, with prefix sums.
+    /// Full-resolution levels, descending, in the same order.
     fulls: Vec<f64>,
-    fulls_sum: Vec<Sums>,
+    /// Prefix sums in that order (`sums[k]`: the first k).
+    sums: Vec<Sums>,
     /// Benefit of the free variables.
     free_benefit: f64,
     /// Cost of everything at full resolution.
@@ -139,37 +160,33 @@ impl Levels {
     /// Prepares `vars` (O(m log m)).
     pub fn new(vars: &[Continuous], shape: Smooth) -> Levels {
         let kinds: Vec<Kind> = vars.iter().map(|v| kind(v, shape)).collect();
-        let mut free_benefit = 0.0;
-        let mut starts = Vec::new();
-        let mut fulls = Vec::new();
-        for (v, k) in vars.iter().zip(&kinds) {
-            match *k {
-                Kind::Inert => {}
-                Kind::Free => free_benefit += v.weight,
-                Kind::Priced { a, start, full } => {
-                    let p = v.cost_per_unit_ms * v.capacity;
-                    let s = Sums::of(p, p * a * a, v.weight * a, v.weight);
-                    starts.push((start, s));
-                    fulls.push((full, s));
-                }
-            }
+        let free_benefit =
+            vars.iter().zip(&kinds).filter(|(_, k)| matches!(k, Kind::Free)).map(|(v, _)| v.weight).sum();
+        let mut priced: Vec<(f64, u32)> = kinds
+            .iter()
+            .enumerate()
+            .filter_map(|(i, k)| match *k {
+                Kind::Priced { a, .. } => Some((a, i as u32)),
+                _ => None,
+            })
+            .collect();
+        // `a` is finite and positive: its bits order it as integers do.
+        priced.sort_unstable_by_key(|&(a, _)| std::cmp::Reverse(a.to_bits()));
+        let mut sums = Vec::with_capacity(priced.len() + 1);
+        let mut acc = Sums::default();
+        sums.push(acc);
+        for &(a, i) in &priced {
+            let v = &vars[i as usize];
+            let p = v.cost_per_unit_ms * v.capacity;
+            acc = acc.plus(Sums::of(p, p * a * a, v.weight * a, v.weight));
+            sums.push(acc);
         }
-        let (starts, starts_sum) = prefix(starts);
-        let (fulls, fulls_sum) = prefix(fulls);
-        let total_cost_ms = starts_sum.last().map_or(0.0, |s| s.p.value());
+        // Division by a positive constant keeps the order of `a`.
+        let starts: Vec<f64> = priced.iter().map(|&(_, i)| kinds[i as usize].start()).collect();
+        let fulls: Vec<f64> = priced.iter().map(|&(_, i)| kinds[i as usize].full()).collect();
+        let total_cost_ms = sums.last().map_or(0.0, |s| s.p.value());
         let top_start = starts.first().copied().unwrap_or(0.0);
-        Levels {
-            shape,
-            kinds,
-            vars: vars.to_vec(),
-            starts,
-            starts_sum,
-            fulls,
-            fulls_sum,
-            free_benefit,
-            total_cost_ms,
-            top_start,
-        }
+        Levels { shape, kinds, vars: vars.to_vec(), starts, fulls, sums, free_benefit, total_cost_ms, top_start }
     }
 
     /// Number of variables.
@@ -186,8 +203,8 @@ impl Levels {
     fn sums(&self, mu: f64) -> (Plain, Plain) {
         let started = self.starts.partition_point(|&s| s > mu);
         let full = self.fulls.partition_point(|&f| f >= mu);
-        let sat = self.fulls_sum[full];
-        (self.starts_sum[started].minus(sat), sat.plain())
+        let sat = self.sums[full];
+        (self.sums[started].minus(sat), sat.plain())
     }
 
     /// Predicted cost at level `mu` (ms); `mu = ∞`: nothing drawn.
@@ -209,7 +226,7 @@ impl Levels {
             return self.free_benefit;
         }
         if mu <= 0.0 {
-            return self.free_benefit + self.starts_sum.last().map_or(0.0, |s| s.w.value());
+            return self.free_benefit + self.sums.last().map_or(0.0, |s| s.w.value());
         }
         let (int, sat) = self.sums(mu);
         let interior = (int.wa / mu - self.shape.s.sqrt() * int.w) / self.shape.norm();
@@ -308,19 +325,6 @@ fn kind(v: &Continuous, shape: Smooth) -> Kind {
     }
     let start = if shape.s > 0.0 { a / shape.s.sqrt() } else { f64::INFINITY };
     Kind::Priced { a, start, full: a / (1.0 + shape.s).sqrt() }
-}
-
-/// Sorts `(level, sums)` by level, descending, and forms prefix sums.
-fn prefix(mut items: Vec<(f64, Sums)>) -> (Vec<f64>, Vec<Sums>) {
-    items.sort_by(|x, y| y.0.total_cmp(&x.0));
-    let mut sums = Vec::with_capacity(items.len() + 1);
-    let mut acc = Sums::default();
-    sums.push(acc);
-    for (_, s) in &items {
-        acc = acc.plus(*s);
-        sums.push(acc);
-    }
-    (items.into_iter().map(|(l, _)| l).collect(), sums)
 }
 
 #[cfg(test)]
