@@ -10,6 +10,8 @@ use std::fmt;
 pub enum Code {
     /// Unknown layer.
     LayerNotDefined,
+    /// Unknown style (each layer has only its default one).
+    StyleNotDefined,
     /// CRS not offered (1.3.0).
     InvalidCrs,
     /// SRS not offered (1.1.1).
@@ -31,6 +33,7 @@ impl Code {
     pub fn as_str(self) -> &'static str {
         match self {
             Code::LayerNotDefined => "LayerNotDefined",
+            Code::StyleNotDefined => "StyleNotDefined",
             Code::InvalidCrs => "InvalidCRS",
             Code::InvalidSrs => "InvalidSRS",
             Code::InvalidFormat => "InvalidFormat",

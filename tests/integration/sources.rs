@@ -35,13 +35,7 @@ fn garbage_and_plain_tiffs_are_refused_with_the_reason() {
     assert!(err.contains("garbage.tif") && err.contains("not a readable TIFF"), "{err}");
 
     // A valid TIFF without georeferencing.
-    let plain = dir.join("plain.tif");
-    let mut bytes = std::io::Cursor::new(Vec::new());
-    tiff::encoder::TiffEncoder::new(&mut bytes)
-        .unwrap()
-        .write_image::<tiff::encoder::colortype::Gray8>(4, 4, &[0u8; 16])
-        .unwrap();
-    std::fs::write(&plain, bytes.into_inner()).unwrap();
+    let plain = plain_tiff(&dir);
     let err = open(&plain).expect_err("no georeferencing").to_string();
     assert!(err.contains("plain.tif") && err.contains("EPSG"), "{err}");
 
@@ -57,14 +51,20 @@ fn garbage_and_plain_tiffs_are_refused_with_the_reason() {
 fn a_crs_override_georeferences_a_file_without_geokeys() {
     // The same plain TIFF with a CRS given in the configuration still lacks a transform.
     let dir = TempDir::new("override");
-    let plain = dir.join("plain.tif");
+    let plain = plain_tiff(&dir);
+    let options = OpenOptions { crs: Some(32632), ..OpenOptions::default() };
+    let err = open_file(&plain, &options, &BlockCache::new(1 << 20)).expect_err("no transform").to_string();
+    assert!(err.contains("not georeferenced"), "{err}");
+}
+
+/// A valid 4 × 4 TIFF without georeferencing, `plain.tif` in `dir`.
+fn plain_tiff(dir: &TempDir) -> std::path::PathBuf {
+    let path = dir.join("plain.tif");
     let mut bytes = std::io::Cursor::new(Vec::new());
     tiff::encoder::TiffEncoder::new(&mut bytes)
         .unwrap()
         .write_image::<tiff::encoder::colortype::Gray8>(4, 4, &[0u8; 16])
         .unwrap();
-    std::fs::write(&plain, bytes.into_inner()).unwrap();
-    let options = OpenOptions { crs: Some(32632), ..OpenOptions::default() };
-    let err = open_file(&plain, &options, &BlockCache::new(1 << 20)).expect_err("no transform").to_string();
-    assert!(err.contains("not georeferenced"), "{err}");
+    std::fs::write(&path, bytes.into_inner()).unwrap();
+    path
 }

@@ -184,10 +184,7 @@ pub struct Reply {
 /// Parses a query string.
 pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)> {
     let params = Params::new(query);
-    let version = match params.get("VERSION").or(params.get("WMTVER")) {
-        Some("1.1.1" | "1.1.0" | "1.1" | "1.0.0") => Version::V111,
-        _ => Version::V130,
-    };
+    let version = negotiate(params.get("VERSION").or(params.get("WMTVER")));
     let mut reply = Reply { version, style: ExceptionStyle::Xml, image: None };
     let fail = |e: Exception, reply: Reply| Err((e, reply));
     if let Some(service) = params.get("SERVICE").filter(|s| !s.eq_ignore_ascii_case("WMS")) {
@@ -207,6 +204,21 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)>
             get_map(&params, version, limits).map(Request::GetMap).map_err(|e| (e, reply))
         }
         other => fail(Exception::new(Code::OperationNotSupported, format!("REQUEST={other} is not supported")), reply),
+    }
+}
+
+/// The version answered (WMS 1.3.0 §6.2.4): below 1.3.0 the highest known
+/// version lower than the one asked for, 1.1.1 (also the lowest known, for
+/// anything older); 1.3.0 from there on, and when none or no number is given.
+fn negotiate(asked: Option<&str>) -> Version {
+    // "1.3" is 1.3.0: missing parts are zeros.
+    let number = |text: &str| -> Option<[u32; 3]> {
+        let parts: Vec<u32> = text.trim().split('.').map(|p| p.parse().ok()).collect::<Option<_>>()?;
+        (parts.len() <= 3).then(|| std::array::from_fn(|i| parts.get(i).copied().unwrap_or(0)))
+    };
+    match asked.and_then(number) {
+        Some(v) if v < [1, 3, 0] => Version::V111,
+        _ => Version::V130,
     }
 }
 
@@ -243,6 +255,7 @@ fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, 
         })?,
         _ => return Err(Exception::new(Code::InvalidParameterValue, "one layer per request").locator("LAYERS")),
     };
+    check_styles(params.get("STYLES"))?;
     let crs_key = if version == Version::V130 { "CRS" } else { "SRS" };
     let crs_text = params.get(crs_key).or(params.get(if crs_key == "CRS" { "SRS" } else { "CRS" }));
     let crs_text =
@@ -263,6 +276,18 @@ fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, 
     let bbox = numbers(required("BBOX")?)?;
     let grid = grid(bbox, crs, version, width, height)?;
     Ok(GetMap { version, layer, crs, grid, format })
+}
+
+/// Each layer has only its default style: `STYLES` may be empty (or left
+/// out, as some clients do) or name `default`.
+fn check_styles(styles: Option<&str>) -> Result<(), Exception> {
+    match styles.unwrap_or("").split(',').map(str::trim).find(|s| !s.is_empty() && !s.eq_ignore_ascii_case("default")) {
+        Some(style) => {
+            Err(Exception::new(Code::StyleNotDefined, format!("style {style:?} is not served: leave STYLES empty"))
+                .locator("STYLES"))
+        }
+        None => Ok(()),
+    }
 }
 
 fn size(text: &str, key: &'static str, limits: Limits) -> Result<usize, Exception> {
@@ -383,6 +408,30 @@ mod tests {
         assert_eq!(code("SERVICE=WMS&REQUEST=GetFeatureInfo"), Code::OperationNotSupported);
         assert_eq!(code("SERVICE=WMS"), Code::MissingParameterValue);
         assert_eq!(code(&format!("{base}&LAYERS=relief").replace("image/png", "image/tiff")), Code::InvalidFormat);
+        assert_eq!(code(&format!("{base}&LAYERS=dem&STYLES=fancy")), Code::StyleNotDefined);
+    }
+
+    #[test]
+    fn only_the_default_style_is_served() {
+        let base = "SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=dem&CRS=EPSG:4326&BBOX=40,-106,41,-105&WIDTH=4&HEIGHT=2&FORMAT=image/png";
+        for styles in ["", "&STYLES=", "&STYLES=default", "&STYLES=Default"] {
+            assert_eq!(map(&format!("{base}{styles}")).layer, MapLayer::Data(Layer::Dem), "{styles}");
+        }
+        assert_eq!(code(&format!("{base}&STYLES=,hillshade")), Code::StyleNotDefined);
+    }
+
+    #[test]
+    fn versions_are_negotiated_as_the_specification_says() {
+        let asked = |v: &str| match parse(&format!("SERVICE=WMS&REQUEST=GetCapabilities&VERSION={v}"), LIMITS) {
+            Ok(Request::GetCapabilities(version)) => version,
+            other => panic!("{v}: {other:?}"),
+        };
+        for v in ["1.0.0", "1.0.7", "1.1", "1.1.0", "1.1.1", "1.2.0", "1.2.9"] {
+            assert_eq!(asked(v), Version::V111, "{v}");
+        }
+        for v in ["1.3.0", "1.3", "1.4.0", "2.0.0", "", "x.y"] {
+            assert_eq!(asked(v), Version::V130, "{v}");
+        }
     }
 
     #[test]
