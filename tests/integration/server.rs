@@ -57,6 +57,40 @@ fn the_same_area_in_every_axis_order_gives_identical_bytes() {
 }
 
 #[test]
+fn maps_reaching_past_the_data_keep_their_encoding_and_background() {
+    let dir = TempDir::new("srv-background");
+    let server = Server::start(None, &dir.join("cache"));
+    // The demo region fills the middle of this box; its corners are empty.
+    let relief = "/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=relief&STYLES=&CRS=CRS:84&BBOX=9.9,46.25,10.4,46.5&WIDTH=100&HEIGHT=50&FORMAT=image/png";
+    let picture = |query: &str| {
+        let r = server.get(&format!("{relief}{query}"));
+        assert_eq!(r.status, 200, "{query}: {}", r.text());
+        image::load_from_memory(&r.body).unwrap().into_rgba8()
+    };
+    let (corner, middle) = ((0, 0), (50, 25));
+    let white = picture("");
+    assert_eq!(
+        white.get_pixel(corner.0, corner.1).0,
+        [255, 255, 255, 255],
+        "opaque white by default (TRANSPARENT=FALSE)"
+    );
+    let tinted = picture("&BGCOLOR=0x203040");
+    assert_eq!(tinted.get_pixel(corner.0, corner.1).0, [0x20, 0x30, 0x40, 255]);
+    let clear = picture("&TRANSPARENT=TRUE");
+    assert_eq!(clear.get_pixel(corner.0, corner.1).0[3], 0);
+    assert_eq!(clear.get_pixel(middle.0, middle.1).0, tinted.get_pixel(middle.0, middle.1).0, "the data is the same");
+    let bad = server.get(&format!("{relief}&BGCOLOR=blue"));
+    assert!(bad.status == 400 && bad.text().contains("BGCOLOR"), "{}", bad.text());
+    // A data layer wholly outside the region: nodata heights, still 16-bit grey.
+    let empty = server.get(
+        "/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=dem&STYLES=&CRS=CRS:84&BBOX=0,0,1,1&WIDTH=4&HEIGHT=4&FORMAT=image/png",
+    );
+    let heights = image::load_from_memory(&empty.body).unwrap();
+    assert_eq!(heights.color(), image::ColorType::L16);
+    assert!(heights.into_luma16().pixels().all(|p| p.0[0] == 0), "code 0 is nodata");
+}
+
+#[test]
 fn world_wind_tiles_have_n_squared_samples_and_neighbours_share_edges() {
     let dir = TempDir::new("srv-ww");
     let server = Server::start(None, &dir.join("cache"));

@@ -1,8 +1,9 @@
 //! Exception images for `EXCEPTIONS=INIMAGE` and `BLANK`: an image of the
 //! requested size that a client can draw in place of the map, carrying the
-//! message (PNG) or nothing (transparent PNG, nodata grids).
+//! message (PNG) or nothing (transparent PNG, nodata grids); and the empty
+//! map answered where a request has no data.
 
-use super::request::MapFormat;
+use super::request::{MapFormat, MapLayer};
 use crate::cem::Layer;
 use crate::encode::{self, Format, Quantization, Samples};
 use crate::grid::SampleGrid;
@@ -14,21 +15,34 @@ const FONT: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSansMono.ttf");
 /// Text height, pixels.
 const TEXT_PX: f32 = 14.0;
 
-/// An image of `format` over `grid` with no data in it.
-pub fn blank(grid: &SampleGrid, format: MapFormat, heights_16: Quantization) -> Vec<u8> {
+/// An image of `format` over `grid` with no data in it: a data layer's
+/// nodata samples in its own encoding, or a picture of `background`
+/// (transparent if none).
+pub fn blank(
+    grid: &SampleGrid,
+    layer: MapLayer,
+    format: MapFormat,
+    heights_16: Quantization,
+    background: Option<[u8; 3]>,
+) -> Vec<u8> {
     let (w, h) = (grid.width(), grid.height());
-    match format {
-        MapFormat::Png => rgba_png(&vec![0u8; 4 * w * h], w, h),
-        other => {
-            let empty = Raster::filled(w, h, f32::NAN);
-            let f = match other {
-                MapFormat::Bil16 => Format::Bil16,
-                MapFormat::Bil32 => Format::Bil32,
-                _ => Format::Tiff,
-            };
-            encode::encode(Layer::Dem, Samples::Float(&empty), grid, f, heights_16).map(|e| e.bytes).unwrap_or_default()
+    let MapLayer::Data(layer) = layer else {
+        return rgba_png(&super::background::filled(w * h, background), w, h);
+    };
+    let f = match format {
+        MapFormat::Png => Format::Png16,
+        MapFormat::Bil16 => Format::Bil16,
+        MapFormat::Bil32 => Format::Bil32,
+        MapFormat::Tiff => Format::Tiff,
+    };
+    let encoded = match layer {
+        Layer::Surface => {
+            let none = Raster::filled(w, h, crate::cem::surface::NODATA);
+            encode::encode(layer, Samples::Class(&none), grid, f, heights_16)
         }
-    }
+        _ => encode::encode(layer, Samples::Float(&Raster::filled(w, h, f32::NAN)), grid, f, heights_16),
+    };
+    encoded.map(|e| e.bytes).unwrap_or_default()
 }
 
 /// A transparent RGBA PNG of `w × h` with `message` written on it.
@@ -76,10 +90,20 @@ mod tests {
         let img = image::load_from_memory(&png).unwrap().into_rgba8();
         assert_eq!(img.dimensions(), (200, 60));
         assert!(img.pixels().filter(|p| p.0[3] > 128).count() > 100);
+    }
+
+    #[test]
+    fn blanks_are_nodata_in_the_layers_encoding_or_the_background() {
         let grid = crate::grid::BBox::parse("0,0,1,1").unwrap().area_grid(3, 2).unwrap();
-        assert_eq!(blank(&grid, MapFormat::Bil16, Quantization::PNG16_HEIGHTS).len(), 3 * 2 * 2);
-        let blank_png =
-            image::load_from_memory(&blank(&grid, MapFormat::Png, Quantization::PNG16_HEIGHTS)).unwrap().into_rgba8();
-        assert!(blank_png.pixels().all(|p| p.0[3] == 0));
+        let q = Quantization::PNG16_HEIGHTS;
+        let dem = MapLayer::Data(Layer::Dem);
+        assert_eq!(blank(&grid, dem, MapFormat::Bil16, q, None), [0x00, 0x80].repeat(6), "-32768 everywhere");
+        let heights = image::load_from_memory(&blank(&grid, dem, MapFormat::Png, q, None)).unwrap();
+        assert_eq!(heights.color(), image::ColorType::L16, "a data layer stays 16-bit grey");
+        assert!(heights.into_luma16().pixels().all(|p| p.0[0] == 0), "code 0 is nodata");
+        let see_through = image::load_from_memory(&blank(&grid, MapLayer::Relief, MapFormat::Png, q, None)).unwrap();
+        assert!(see_through.into_rgba8().pixels().all(|p| p.0[3] == 0));
+        let white = blank(&grid, MapLayer::Relief, MapFormat::Png, q, Some([255, 250, 240]));
+        assert!(image::load_from_memory(&white).unwrap().into_rgba8().pixels().all(|p| p.0 == [255, 250, 240, 255]));
     }
 }

@@ -4,6 +4,7 @@
 //! comes from the tile cache; one whose pixel centres lie on a level's lattice
 //! is stitched from cached tiles; any other grid is computed directly.
 
+mod background;
 pub mod capabilities;
 mod inimage;
 pub mod request;
@@ -90,9 +91,16 @@ async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<
     };
     if tile.bytes.is_empty() {
         // No data here: WMS still answers with an image, empty.
-        let body = inimage::blank(&map.grid, map.format, state.region().heights_16);
+        let body = inimage::blank(&map.grid, map.layer, map.format, state.region().heights_16, map.background);
         return Ok(([(header::CONTENT_TYPE, map.format.mime())], body).into_response());
     }
+    let tile = match map.background {
+        Some(colour) if map.layer.is_picture() => {
+            let opaque = background::flatten(&tile.bytes, colour).map_err(ServeError::internal)?;
+            Arc::new(super::service::Tile::new(opaque, tile.timing.clone()))
+        }
+        _ => tile,
+    };
     Ok(respond::tile(&tile, &meta(state, map.layer, encoding), headers))
 }
 
@@ -159,7 +167,13 @@ fn exception(e: &Exception, reply: Reply, state: &AppState) -> Response {
             let grid = crate::grid::BBox { west: 0.0, south: 0.0, east: 1.0, north: 1.0 }.area_grid(w, h);
             match grid {
                 Ok(g) => {
-                    ([(header::CONTENT_TYPE, format.mime())], inimage::blank(&g, format, state.region().heights_16))
+                    // The request did not parse: a transparent picture, or
+                    // nodata in the format asked for.
+                    let layer = if format == MapFormat::Png { MapLayer::Relief } else { MapLayer::Data(Layer::Dem) };
+                    (
+                        [(header::CONTENT_TYPE, format.mime())],
+                        inimage::blank(&g, layer, format, state.region().heights_16, None),
+                    )
                         .into_response()
                 }
                 Err(_) => report(e, reply),

@@ -152,6 +152,9 @@ pub struct GetMap {
     pub grid: SampleGrid,
     /// Output format.
     pub format: MapFormat,
+    /// What pictures (`relief`, `colour`) show where there is no data:
+    /// `BGCOLOR` (white unless given), or nothing with `TRANSPARENT=TRUE`.
+    pub background: Option<[u8; 3]>,
 }
 
 /// A parsed request.
@@ -275,7 +278,33 @@ fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, 
     let (width, height) = (size(required("WIDTH")?, "WIDTH", limits)?, size(required("HEIGHT")?, "HEIGHT", limits)?);
     let bbox = numbers(required("BBOX")?)?;
     let grid = grid(bbox, crs, version, width, height)?;
-    Ok(GetMap { version, layer, crs, grid, format })
+    let background = background(params.get("TRANSPARENT"), params.get("BGCOLOR"))?;
+    Ok(GetMap { version, layer, crs, grid, format, background })
+}
+
+/// `TRANSPARENT` (`FALSE` unless given) and `BGCOLOR` (`0xRRGGBB`, white
+/// unless given): the background colour, or `None` for transparent.
+fn background(transparent: Option<&str>, colour: Option<&str>) -> Result<Option<[u8; 3]>, Exception> {
+    let bad = |key: &'static str, text: &str, want: &str| {
+        Exception::new(Code::InvalidParameterValue, format!("{key}={text}: {want}")).locator(key)
+    };
+    let see_through = match transparent.map(|t| t.trim().to_ascii_uppercase()) {
+        None => false,
+        Some(t) if t == "TRUE" => true,
+        Some(t) if t == "FALSE" || t.is_empty() => false,
+        Some(_) => return Err(bad("TRANSPARENT", transparent.unwrap_or(""), "need TRUE or FALSE")),
+    };
+    let rgb = match colour.map(str::trim).filter(|c| !c.is_empty()) {
+        None => [255, 255, 255],
+        Some(c) => c
+            .strip_prefix("0x")
+            .or_else(|| c.strip_prefix("0X"))
+            .filter(|hex| hex.len() == 6 && hex.bytes().all(|b| b.is_ascii_hexdigit()))
+            .and_then(|hex| u32::from_str_radix(hex, 16).ok())
+            .map(|v| [(v >> 16) as u8, (v >> 8) as u8, v as u8])
+            .ok_or_else(|| bad("BGCOLOR", c, "need 0xRRGGBB"))?,
+    };
+    Ok((!see_through).then_some(rgb))
 }
 
 /// Each layer has only its default style: `STYLES` may be empty (or left
@@ -418,6 +447,18 @@ mod tests {
             assert_eq!(map(&format!("{base}{styles}")).layer, MapLayer::Data(Layer::Dem), "{styles}");
         }
         assert_eq!(code(&format!("{base}&STYLES=,hillshade")), Code::StyleNotDefined);
+    }
+
+    #[test]
+    fn pictures_are_opaque_on_their_background_unless_transparent() {
+        let base = "SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=relief&CRS=EPSG:4326&BBOX=40,-106,41,-105&WIDTH=4&HEIGHT=2&FORMAT=image/png";
+        assert_eq!(map(base).background, Some([255, 255, 255]));
+        assert_eq!(map(&format!("{base}&TRANSPARENT=true")).background, None);
+        assert_eq!(map(&format!("{base}&TRANSPARENT=FALSE&BGCOLOR=0x2040FF")).background, Some([0x20, 0x40, 0xFF]));
+        assert_eq!(map(&format!("{base}&TRANSPARENT=TRUE&BGCOLOR=0x2040FF")).background, None);
+        for bad in ["&TRANSPARENT=maybe", "&BGCOLOR=red", "&BGCOLOR=0x12345", "&BGCOLOR=0xGG0000"] {
+            assert_eq!(code(&format!("{base}{bad}")), Code::InvalidParameterValue, "{bad}");
+        }
     }
 
     #[test]
