@@ -406,9 +406,21 @@ enum Bench {
 fn main() {
     let cli = Cli::parse();
     if let Err(e) = run(cli.command) {
-        eprintln!("sylva: {e:#}");
+        eprintln!("sylva: {}", explain(&e));
         std::process::exit(1);
     }
+}
+
+/// The error and its causes, each cause said once: most errors already
+/// write their cause into their own message.
+fn explain(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain().map(ToString::to_string) {
+        if !text.contains(&cause) {
+            text = if text.is_empty() { cause } else { format!("{text}: {cause}") };
+        }
+    }
+    text
 }
 
 /// mimalloc's setting for a long-running server: freed memory goes back to
@@ -674,7 +686,10 @@ fn parse_format(text: &str) -> Result<Format> {
 /// Writes bytes atomically: a temporary file, then a rename.
 fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
     let tmp = path.with_extension("partial");
-    std::fs::write(&tmp, bytes).with_context(|| format!("{}: cannot write", tmp.display()))?;
+    if let Err(e) = std::fs::write(&tmp, bytes) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e).with_context(|| format!("{}: cannot write", path.display()));
+    }
     std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot rename into place", path.display()))
 }
 

@@ -90,6 +90,10 @@ fn bad_arguments_are_explained() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("four numbers"));
     let out = sylva(&["info"]);
     assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("canopy"));
+    // The file and the cause, the cause said once.
+    let out = sylva(&["info", "--config", "/no/such/sylva.toml"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("/no/such/sylva.toml") && err.matches("No such file").count() == 1, "{err}");
 }
 
 #[test]
