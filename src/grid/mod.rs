@@ -119,6 +119,21 @@ impl Sector {
             && self.min_lon < other.max_lon
             && other.min_lon < self.max_lon
     }
+
+    /// True if the point lies in the sector, edges included.
+    pub fn contains(&self, lon: f64, lat: f64) -> bool {
+        (self.min_lat..=self.max_lat).contains(&lat) && (self.min_lon..=self.max_lon).contains(&lon)
+    }
+
+    /// The sector widened by `d_lat` and `d_lon` degrees on each side.
+    pub fn grown(&self, d_lat: f64, d_lon: f64) -> Sector {
+        Sector {
+            min_lat: self.min_lat - d_lat,
+            max_lat: self.max_lat + d_lat,
+            min_lon: self.min_lon - d_lon,
+            max_lon: self.max_lon + d_lon,
+        }
+    }
 }
 
 /// The tiling: level-0 delta `D0` and samples per side `N`.

@@ -187,8 +187,13 @@ impl GeoRaster {
         // Rows past a pole read the opposite meridian: a mesh cell across the
         // pole would interpolate nonsense, so project every sample there.
         let m = if grid_crosses_pole(grid) { 1 } else { mesh_step(grid) };
+        // Samples beyond the source's reach are not projected (far from a
+        // UTM zone that is most of the cost of a world-wide request).
+        let reach = self.reach(grid, scale);
         let pixel = |(lon, lat): (f64, f64)| -> (f64, f64) {
-            match g.crs.from_lon_lat(self.lon_into_source(lon), lat) {
+            let lon = self.lon_into_source(lon);
+            let projected = if reach.contains(lon, lat) { g.crs.from_lon_lat(lon, lat) } else { None };
+            match projected {
                 Some((x, y)) => (to_level((x - g.x0) / g.dx), to_level((y - g.y0) / g.dy)),
                 None => (f64::NAN, f64::NAN),
             }
@@ -209,6 +214,16 @@ impl GeoRaster {
             }
         });
         PixelCoords::Dense { width: grid.width(), xy }
+    }
+
+    /// The box outside which a sample of `grid` reads nothing from overview
+    /// `scale`: the source's bounds grown by a sample of the grid and two
+    /// pixels of the overview (wider in longitude away from the equator).
+    fn reach(&self, grid: &SampleGrid, scale: f64) -> Sector {
+        let b = &self.bounds;
+        let pad = 2.0 * scale * self.georef.pixel_deg();
+        let widest = b.min_lat.abs().max(b.max_lat.abs()).min(89.0).to_radians().cos();
+        b.grown(grid.lat.step_deg() + pad, grid.lon.step_deg() + pad / widest)
     }
 
     /// Moves a longitude by ±360° when that puts it inside the source.
@@ -291,4 +306,49 @@ fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
     // Projected edges bulge between boundary samples: pad by a pixel.
     let pad = g.pixel_deg();
     Sector { min_lat: s.min_lat - pad, max_lat: s.max_lat + pad, min_lon: s.min_lon - pad, max_lon: s.max_lon + pad }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::BBox;
+    use crate::source::memory::MemorySource;
+
+    /// 200 × 200 pixels of 30 m in UTM 32N, north-west corner near 10.0° E, 46.4° N.
+    fn utm_raster() -> GeoRaster {
+        let cache = BlockCache::new(1 << 20);
+        let r = Raster::filled(200, 200, 1.0f32);
+        let blocks = Blocks::new(Arc::new(MemorySource::new("<utm>", vec![r]).unwrap()), &cache);
+        let crs = Arc::new(Crs::from_epsg(32632).unwrap());
+        let georef = Georef { crs, x0: 577_000.0, y0: 5_140_000.0, dx: 30.0, dy: -30.0, overhang: 0.5 };
+        GeoRaster::new(blocks, georef, &[Reducer::Mean], &cache)
+    }
+
+    fn coords(raster: &GeoRaster, bbox: &str, w: usize, h: usize) -> Vec<(f64, f64)> {
+        let grid = BBox::parse(bbox).unwrap().area_grid(w, h).unwrap();
+        let pc = raster.pixel_coords(&grid, 0);
+        let mut buf = Vec::new();
+        (0..h).flat_map(|r| pc.row(r, &mut buf).to_vec()).collect()
+    }
+
+    #[test]
+    fn samples_beyond_the_sources_reach_are_not_projected_and_the_rest_are() {
+        let raster = utm_raster();
+        // World-wide: only the samples near the raster have coordinates.
+        let world = coords(&raster, "-180,-90,180,90", 720, 360);
+        let near = world.iter().filter(|p| p.0.is_finite()).count();
+        assert!(near > 0 && near <= 16, "{near} of {} samples projected", world.len());
+        // Around the raster's edge: the same coordinates as projecting each sample.
+        let (bbox, (w, h)) = ("9.95,46.3,10.2,46.45", (120usize, 90usize));
+        let grid = BBox::parse(bbox).unwrap().area_grid(w, h).unwrap();
+        let g = &raster.georef;
+        for (i, &(x, y)) in coords(&raster, bbox, w, h).iter().enumerate() {
+            let (lon, lat) = grid.on_globe((i % w) as i64, (i / w) as i64);
+            let (e, n) = g.crs.from_lon_lat(lon, lat).unwrap();
+            let inside = (-2.0..202.0).contains(&((e - g.x0) / g.dx)) && (-2.0..202.0).contains(&((n - g.y0) / g.dy));
+            if inside {
+                assert!((x - (e - g.x0) / g.dx).abs() < 0.01 && (y - (n - g.y0) / g.dy).abs() < 0.01, "sample {i}");
+            }
+        }
+    }
 }
