@@ -29,6 +29,7 @@ pub mod grid;
 pub mod lidar;
 pub mod lod;
 pub mod noise;
+pub mod outputs;
 pub mod produce;
 pub mod raster;
 pub mod region;

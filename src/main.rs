@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use sylva::cem::Layer;
 use sylva::encode::Format;
 use sylva::grid::{BBox, TileId};
+use sylva::outputs;
 use sylva::produce::{self, Product};
 
 #[derive(Parser)]
@@ -445,6 +446,7 @@ fn with_server_allocator() {
 fn run(command: Command) -> Result<()> {
     match command {
         Command::Tile { config, layer, level, row, col, halo, format, output } => {
+            outputs::check(config.as_deref().as_slice(), &[&output])?;
             let region = sylva::config::load(config.as_deref())?;
             let product = produce::tile(
                 &region,
@@ -456,6 +458,7 @@ fn run(command: Command) -> Result<()> {
             write(&output, &product)
         }
         Command::Build { config, layer, bbox, width, height, format, output } => {
+            outputs::check(config.as_deref().as_slice(), &[&output])?;
             let region = sylva::config::load(config.as_deref())?;
             let bbox = match bbox {
                 Some(text) => BBox::parse(&text)?,
@@ -570,17 +573,22 @@ fn run(command: Command) -> Result<()> {
             Ok(())
         }
         Command::Canopy { las, resolution, output, chm, preview, crs, tile_px, colours, variants } => {
-            let mut options = sylva::lidar::Options::new(las, resolution);
+            let inputs: Vec<&Path> = las.iter().map(PathBuf::as_path).collect();
+            let targets: Vec<&Path> =
+                [Some(&output), chm.as_ref(), preview.as_ref()].into_iter().flatten().map(PathBuf::as_path).collect();
+            outputs::check(&inputs, &targets)?;
+            let mut options = sylva::lidar::Options::new(las.clone(), resolution);
             options.crs = crs.as_deref().map(sylva::source::crs::parse_epsg).transpose().map_err(anyhow::Error::msg)?;
             (options.tile_px, options.colours, options.variants) = (tile_px, colours, variants);
             let (model, set) = sylva::lidar::build(&options)?;
-            write_file(&output, &model.proxy_tiff(&set)?)?;
-            if let Some(path) = chm {
-                write_file(&path, &model.chm_tiff()?)?;
+            let mut files = vec![(output.as_path(), model.proxy_tiff(&set)?)];
+            if let Some(path) = &chm {
+                files.push((path, model.chm_tiff()?));
             }
-            if let Some(path) = preview {
-                write_file(&path, &model.preview_png(&set, 3, 0)?)?;
+            if let Some(path) = &preview {
+                files.push((path, model.preview_png(&set, 3, 0)?));
             }
+            outputs::write_all(&files.iter().map(|(p, b)| (*p, b.as_slice())).collect::<Vec<_>>())?;
             println!("{}", model.report(&set));
             Ok(())
         }
@@ -593,7 +601,7 @@ fn run(command: Command) -> Result<()> {
             let views = sylva::bench::raycast::default_views(&rmnp);
             let rows = sylva::bench::raycast::run(&views, size, &only, &mut renderer).map_err(anyhow::Error::msg)?;
             println!("{}", sylva::bench::raycast::report(&rows, size, &name));
-            write_file(&plot, &sylva::bench::raycast::plot(&rows).map_err(anyhow::Error::msg)?)?;
+            outputs::write_all(&[(&plot, &sylva::bench::raycast::plot(&rows).map_err(anyhow::Error::msg)?)])?;
             eprintln!("plot: {}", plot.display());
             Ok(())
         }
@@ -683,19 +691,9 @@ fn parse_format(text: &str) -> Result<Format> {
     }
 }
 
-/// Writes bytes atomically: a temporary file, then a rename.
-fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension("partial");
-    if let Err(e) = std::fs::write(&tmp, bytes) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e).with_context(|| format!("{}: cannot write", path.display()));
-    }
-    std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot rename into place", path.display()))
-}
-
 /// Writes the product atomically and reports it.
 fn write(path: &Path, product: &Product) -> Result<()> {
-    write_file(path, &product.encoded.bytes)?;
+    outputs::write_all(&[(path, &product.encoded.bytes)])?;
     let g = &product.grid;
     eprintln!(
         "{}: {}×{} samples, {} bytes, {:.1} ms",

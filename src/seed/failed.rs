@@ -47,6 +47,8 @@ pub fn read(path: &Path, tiles: &TileGrid) -> Result<Vec<Entry>, ListError> {
 /// The failed-tiles file of a run.
 pub struct Failed {
     path: PathBuf,
+    /// The list this run re-runs, replaced by `path` when the run ends.
+    replaces: Option<PathBuf>,
     file: Mutex<std::fs::File>,
 }
 
@@ -57,12 +59,32 @@ impl Failed {
         if !append {
             file.set_len(0)?;
         }
-        Ok(Failed { path: path.to_path_buf(), file: Mutex::new(file) })
+        Ok(Failed { path: path.to_path_buf(), replaces: None, file: Mutex::new(file) })
     }
 
-    /// The file.
+    /// Records into `LIST.next` while `list`, the tiles this run re-runs,
+    /// stays whole: [`Failed::finish`] puts the new failures in its place,
+    /// so an interrupted run loses no tile of the list.
+    pub fn replacing(list: &Path) -> std::io::Result<Failed> {
+        let mut next = list.as_os_str().to_owned();
+        next.push(".next");
+        let mut failed = Failed::open(Path::new(&next), false)?;
+        failed.replaces = Some(list.to_path_buf());
+        Ok(failed)
+    }
+
+    /// The file failures are written to.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Ends a run that went through all its tiles; returns the failed-tiles
+    /// file.
+    pub fn finish(self) -> std::io::Result<PathBuf> {
+        match self.replaces {
+            Some(list) => std::fs::rename(&self.path, &list).map(|()| list),
+            None => Ok(self.path),
+        }
     }
 
     /// Records a failed tile.
@@ -76,6 +98,19 @@ impl Failed {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_list_re_run_in_place_stays_whole_until_the_run_ends() {
+        let path = std::env::temp_dir().join(format!("sylva-rerun-{}.txt", std::process::id()));
+        std::fs::write(&path, "cem/12/3/4\ndem/5/1/2\n").unwrap();
+        let f = Failed::replacing(&path).unwrap();
+        f.record((Layer::Dem, TileId::new(5, 1, 2)), "still failing").unwrap();
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        assert_eq!(read(&path, &grid).unwrap().len(), 2, "an interrupted run would leave the list whole");
+        assert_eq!(f.finish().unwrap(), path);
+        assert_eq!(read(&path, &grid).unwrap(), vec![(Layer::Dem, TileId::new(5, 1, 2))]);
+        std::fs::remove_file(&path).unwrap();
+    }
 
     #[test]
     fn recorded_failures_read_back_and_bad_lines_are_named() {

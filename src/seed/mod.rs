@@ -104,8 +104,12 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
         true => Progress::resume(progress_path, &job.fingerprint)?,
         false => Progress::start(progress_path, &job.fingerprint),
     };
-    let failed = failed::Failed::open(failed_path, options.resume)
-        .map_err(|source| SeedError::Io { path: failed_path.clone(), source })?;
+    let rerun_in_place = options.tiles_from.as_deref().is_some_and(|l| crate::outputs::same_file(l, failed_path));
+    let failed = match rerun_in_place {
+        true => failed::Failed::replacing(failed_path),
+        false => failed::Failed::open(failed_path, options.resume),
+    }
+    .map_err(|source| SeedError::Io { path: failed_path.clone(), source })?;
     let threads =
         rayon::ThreadPoolBuilder::new().num_threads(options.concurrency).thread_name(|i| format!("sylva-seed-{i}"));
     let pool = threads.build().map_err(|e| SeedError::Usage(format!("--concurrency {}: {e}", options.concurrency)))?;
@@ -134,7 +138,8 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
             list: failed.path().display().to_string(),
         });
     }
-    Ok(Report { text: summary(&job, &*store, counters, started.elapsed(), failed.path()), failed: n })
+    let list = failed.finish().map_err(|source| SeedError::Io { path: failed_path.clone(), source })?;
+    Ok(Report { text: summary(&job, &*store, counters, started.elapsed(), &list), failed: n })
 }
 
 /// Cache entries written up to this long before a job started count as the

@@ -12,7 +12,7 @@ use crate::encode::Format;
 use crate::grid::{BBox, TileGrid};
 use crate::region::Region;
 use std::ops::RangeInclusive;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
 /// `sylva seed` as given on the command line.
@@ -141,6 +141,10 @@ impl Job {
             o.progress_file.clone().unwrap_or_else(|| PathBuf::from(format!("seed-progress{suffix}.json"))),
             o.failed_file.clone().unwrap_or_else(|| PathBuf::from(format!("seed-failed{suffix}.txt"))),
         );
+        // The failed-tiles file may be the list re-run: it is then replaced at the end.
+        let list = o.tiles_from.as_deref().filter(|l| !crate::outputs::same_file(l, &files.1));
+        let inputs: Vec<&Path> = [o.config.as_deref(), o.coverage.as_deref(), list].into_iter().flatten().collect();
+        crate::outputs::check(&inputs, &[&files.0, &files.1]).map_err(|e| SeedError::Usage(e.to_string()))?;
         let what = format!("{} {layers:?} {formats:?} {area} {shard:?}", region.version);
         let fingerprint = format!("{:016x}", crate::cache::digest(what.as_bytes()));
         Ok(Job { config, region, layers, formats, walk, shard, refresh_before, files, fingerprint })

@@ -94,6 +94,14 @@ fn bad_arguments_are_explained() {
     let out = sylva(&["info", "--config", "/no/such/sylva.toml"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/no/such/sylva.toml") && err.matches("No such file").count() == 1, "{err}");
+    // An output may not overwrite an input.
+    let dir = TempDir::new("cli-clobber");
+    let config = dir.join("c.toml");
+    std::fs::write(&config, "[grid]\n").unwrap();
+    let c = config.to_str().unwrap();
+    let out = sylva(&["tile", "--config", c, "--layer", "dem", "--level", "1", "--row", "0", "--col", "0", "-o", c]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("is also an input"), "{out:?}");
+    assert_eq!(std::fs::read_to_string(&config).unwrap(), "[grid]\n");
 }
 
 #[test]
