@@ -1,6 +1,8 @@
 //! Routes and middleware: `/health`, `/metrics`, World Wind tiles (path and
 //! `?T=&L=&X=&Y=` forms), XYZ Terrarium tiles, and `/wms`; per-request
-//! timeout, URI length limit, gzip for BIL bodies, request metrics and logs.
+//! timeout (503, a ServiceExceptionReport on `/wms`), URI length limit, CORS
+//! for browser clients (read-only data: any origin may GET), gzip for BIL
+//! bodies, request metrics and logs.
 
 use super::products::{Encoding, Product};
 use super::respond::{self, TileMeta};
@@ -19,14 +21,13 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Instant;
 use tower_http::compression::CompressionLayer;
-use tower_http::timeout::TimeoutLayer;
+use tower_http::cors::{Any, CorsLayer};
 use tower_http::trace::TraceLayer;
 
 /// Longest request URI, bytes; a WMS request is a few hundred.
 const MAX_URI_BYTES: usize = 8192;
 
 pub fn router(state: Arc<AppState>) -> Router {
-    let timeout = super::seconds(state.settings.request_timeout_s);
     // Elevation grids compress well; PNG and TIFF are compressed already.
     let bil_only = |_: StatusCode, _: axum::http::Version, h: &HeaderMap, _: &axum::http::Extensions| {
         h.get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok()).is_some_and(|t| t.starts_with("application/bil"))
@@ -40,23 +41,53 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/tiles/{layer}/{level}/{row}/{file}", get(tile_path))
         .route("/xyz/{layer}/{z}/{x}/{file}", get(xyz))
         .layer(CompressionLayer::new().gzip(true).compress_when(bil_only))
-        .layer(TimeoutLayer::with_status_code(StatusCode::SERVICE_UNAVAILABLE, timeout))
         .layer(middleware::from_fn_with_state(state.clone(), observe))
+        .layer(cors())
         .layer(TraceLayer::new_for_http())
         .with_state(state)
 }
 
-/// Refuses overlong URIs and records every request's route, status and time.
+/// Any web page may read tiles and maps (and their quantization headers).
+fn cors() -> CorsLayer {
+    let exposed =
+        [header::ETAG, "x-sylva-offset".parse().expect("header name"), "x-sylva-scale".parse().expect("header name")];
+    CorsLayer::new()
+        .allow_origin(Any)
+        .allow_methods([axum::http::Method::GET, axum::http::Method::HEAD])
+        .expose_headers(exposed)
+}
+
+/// Refuses overlong URIs, gives up on requests past the timeout, and
+/// records every request's route, status and time.
 async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
     let start = Instant::now();
     let route = request.extensions().get::<MatchedPath>().map_or("other", |p| route_label(p.as_str()));
+    let timeout = super::seconds(state.settings.request_timeout_s);
+    let query = request.uri().query().unwrap_or("").to_string();
     let response = if request.uri().to_string().len() > MAX_URI_BYTES {
         (StatusCode::URI_TOO_LONG, format!("request URI longer than {MAX_URI_BYTES} bytes")).into_response()
     } else {
-        next.run(request).await
+        match tokio::time::timeout(timeout, next.run(request)).await {
+            Ok(response) => response,
+            Err(_) => timed_out(route, &query, timeout),
+        }
     };
     state.metrics.request(route, response.status().as_u16(), start.elapsed());
     response
+}
+
+/// 503 for a request past the timeout (its tile is still computed and
+/// cached for the retry): a ServiceExceptionReport on `/wms`, text elsewhere.
+fn timed_out(route: &str, query: &str, timeout: std::time::Duration) -> Response {
+    let message = format!("the request took longer than {timeout:?}; retry later");
+    let retry = (header::RETRY_AFTER, "5");
+    if route == "wms" {
+        let version = super::wms::request::version_of(query);
+        let (mime, body) =
+            super::exception::Exception::new(super::exception::Code::NoApplicableCode, message).report(version);
+        return (StatusCode::SERVICE_UNAVAILABLE, [(header::CONTENT_TYPE, mime), retry], body).into_response();
+    }
+    (StatusCode::SERVICE_UNAVAILABLE, [retry], message).into_response()
 }
 
 fn route_label(path: &str) -> &'static str {

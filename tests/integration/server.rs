@@ -57,6 +57,18 @@ fn the_same_area_in_every_axis_order_gives_identical_bytes() {
 }
 
 #[test]
+fn browsers_may_read_tiles_from_any_page() {
+    let dir = TempDir::new("srv-cors");
+    let server = Server::start(None, &dir.join("cache"));
+    let t = demo_tile();
+    let path = format!("/tiles/cem/{}/{}/{}_{}.bil", t.level, t.row, t.row, t.col);
+    let r = server.get_with(&path, &[("Origin", "https://maps.example.org")]);
+    assert_eq!(r.status, 200);
+    assert_eq!(r.header("access-control-allow-origin"), Some("*"));
+    assert!(r.header("access-control-expose-headers").is_some_and(|h| h.contains("x-sylva-scale")));
+}
+
+#[test]
 fn maps_reaching_past_the_data_keep_their_encoding_and_background() {
     let dir = TempDir::new("srv-background");
     let server = Server::start(None, &dir.join("cache"));
@@ -415,6 +427,9 @@ fn a_request_that_times_out_leaves_its_tile_computed_for_the_retry() {
     let t = demo_tile();
     let path = format!("/tiles/cem/{}/{}/{}_{}.bil32?halo=8", t.level, t.row, t.row, t.col);
     assert_eq!(impatient.get(&path).status, 503, "the request gives up");
+    let wms = impatient.get("/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=cem&STYLES=&CRS=CRS:84&BBOX=10.01,46.31,10.24,46.44&WIDTH=300&HEIGHT=200&FORMAT=image/png");
+    assert_eq!(wms.status, 503);
+    assert!(wms.text().contains("<ServiceExceptionReport") && wms.text().contains("retry later"), "{}", wms.text());
     // A patient server on the same cache waits for the abandoned computation.
     let patient = Server::start(None, &dir.join("cache"));
     assert_eq!(patient.get(&path).status, 200);
