@@ -13,7 +13,7 @@ use crate::encode::{self, Format};
 use crate::grid::TileId;
 use axum::Router;
 use axum::extract::{MatchedPath, Path, RawQuery, Request, State};
-use axum::http::{HeaderMap, StatusCode, header};
+use axum::http::{HeaderMap, HeaderName, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
@@ -49,8 +49,7 @@ pub fn router(state: Arc<AppState>) -> Router {
 
 /// Any web page may read tiles and maps (and their quantization headers).
 fn cors() -> CorsLayer {
-    let exposed =
-        [header::ETAG, "x-sylva-offset".parse().expect("header name"), "x-sylva-scale".parse().expect("header name")];
+    let exposed = [header::ETAG, HeaderName::from_static("x-sylva-offset"), HeaderName::from_static("x-sylva-scale")];
     CorsLayer::new()
         .allow_origin(Any)
         .allow_methods([axum::http::Method::GET, axum::http::Method::HEAD])
