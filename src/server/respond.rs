@@ -40,12 +40,18 @@ pub fn tile(t: &Tile, meta: &TileMeta, request: &HeaderMap) -> Response {
     let matches = request
         .get(header::IF_NONE_MATCH)
         .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.split(',').any(|e| e.trim() == t.etag || e.trim() == "*"));
+        .is_some_and(|v| v.split(',').any(|e| e.trim() == "*" || weak_match(e.trim(), &t.etag)));
     if matches {
         return (StatusCode::NOT_MODIFIED, headers).into_response();
     }
     insert(&mut headers, header::CONTENT_TYPE, meta.mime);
     (StatusCode::OK, headers, Body::from(t.bytes.clone())).into_response()
+}
+
+/// The weak comparison of two entity tags (RFC 9110 §8.8.3.2), which
+/// `If-None-Match` uses: equal once any `W/` is set aside.
+fn weak_match(a: &str, b: &str) -> bool {
+    a.trim_start_matches("W/") == b.trim_start_matches("W/")
 }
 
 fn insert(headers: &mut HeaderMap, name: impl axum::http::header::IntoHeaderName, value: &str) {

@@ -37,7 +37,9 @@ pub struct Tile {
 impl Tile {
     /// A tile of `bytes`, described by `timing` in `Server-Timing`.
     pub fn new(bytes: Vec<u8>, timing: String) -> Tile {
-        let etag = format!("\"{:08x}{:08x}\"", crc32fast::hash(&bytes), bytes.len() as u32);
+        // Weak: one tile is served as it is and gzipped, two representations
+        // of the same content (RFC 9110 §8.8.1).
+        let etag = format!("W/\"{:08x}{:08x}\"", crc32fast::hash(&bytes), bytes.len() as u32);
         Tile { bytes: Bytes::from(bytes), etag, timing, stale: false }
     }
 }

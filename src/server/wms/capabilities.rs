@@ -40,7 +40,7 @@ fn v130(s: &Service) -> String {
     format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <WMS_Capabilities version="1.3.0" xmlns="http://www.opengis.net/wms" xmlns:xlink="http://www.w3.org/1999/xlink" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengis.net/wms http://schemas.opengis.net/wms/1.3.0/capabilities_1_3_0.xsd">
-<Service><Name>WMS</Name><Title>{title}</Title><Abstract>Combined elevation maps (terrain + forest canopy) computed on demand by Sylva.</Abstract><OnlineResource xlink:type="simple" xlink:href="{url}"/><MaxWidth>{max}</MaxWidth><MaxHeight>{max}</MaxHeight></Service>
+<Service><Name>WMS</Name><Title>{title}</Title><Abstract>Combined elevation maps (terrain + forest canopy) computed on demand by Sylva.</Abstract><OnlineResource xlink:type="simple" xlink:href="{url}"/><LayerLimit>1</LayerLimit><MaxWidth>{max}</MaxWidth><MaxHeight>{max}</MaxHeight></Service>
 <Capability><Request>
 <GetCapabilities><Format>text/xml</Format>{dcp}</GetCapabilities>
 <GetMap>{formats}{dcp}</GetMap>
@@ -162,21 +162,29 @@ fn title(layer: MapLayer) -> &'static str {
 
 /// How to read the layer's encodings.
 fn abstract_of(layer: MapLayer, s: &Service) -> String {
-    let MapLayer::Data(l) = layer else {
-        return "RGBA PNG for viewing: hillshade of the combined elevation map over the map colours.".into();
+    let picture = "PNG for viewing: RGBA with TRANSPARENT=TRUE, else RGB on BGCOLOR (white).";
+    let l = match layer {
+        MapLayer::Data(l) => l,
+        MapLayer::Colour => return format!("The map colours, unshaded. {picture}"),
+        MapLayer::Relief => return format!("Hillshade of the combined elevation map over the map colours. {picture}"),
     };
     let (bil16, png16) = encode::quantizations(l, s.heights_16);
-    let units = match l {
-        crate::cem::Layer::Cover => "cover fraction",
-        crate::cem::Layer::Surface => "class id (0 plain, 1 forest, 2 water, 3 rock, 4 ice, 5 built, 255 nodata)",
-        _ => "metres",
-    };
-    format!(
-        "Values in {units}. image/png: 16-bit grey, value = {} + {} * code (code 0 is nodata for heights). \
-         application/bil16: little-endian int16, value = {} + {} * code, nodata -32768. \
-         application/bil32 and image/tiff: float32, nodata -32768.",
-        png16.offset, png16.scale, bil16.offset, bil16.scale
-    )
+    match l {
+        crate::cem::Layer::Surface => "Class id (0 plain, 1 forest, 2 water, 3 rock, 4 ice, 5 built, 255 nodata),              the id itself in every format: image/png 16-bit grey, application/bil16 int16, application/bil32              float32, image/tiff 8-bit."
+            .into(),
+        _ => {
+            let (units, png_nodata) = match l {
+                crate::cem::Layer::Cover => ("cover fraction", "no nodata code: read bil or tiff to tell no data from 0"),
+                _ => ("metres", "code 0 is nodata"),
+            };
+            format!(
+                "Values in {units}. image/png: 16-bit grey, value = {} + {} * code ({png_nodata}). \
+                 application/bil16: little-endian int16, value = {} + {} * code, nodata -32768. \
+                 application/bil32 and image/tiff: float32, nodata -32768.",
+                png16.offset, png16.scale, bil16.offset, bil16.scale
+            )
+        }
+    }
 }
 
 #[cfg(test)]

@@ -335,9 +335,11 @@ fn size(text: &str, key: &'static str, limits: Limits) -> Result<usize, Exceptio
 }
 
 fn numbers(text: &str) -> Result<[f64; 4], Exception> {
-    let bad = || Exception::new(Code::InvalidParameterValue, format!("BBOX={text}: need four numbers")).locator("BBOX");
+    let bad = || {
+        Exception::new(Code::InvalidParameterValue, format!("BBOX={text}: need four finite numbers")).locator("BBOX")
+    };
     let v: Vec<f64> = text.split(',').map(|p| p.trim().parse::<f64>()).collect::<Result<_, _>>().map_err(|_| bad())?;
-    <[f64; 4]>::try_from(v).map_err(|_| bad())
+    <[f64; 4]>::try_from(v).ok().filter(|b| b.iter().all(|x| x.is_finite())).ok_or_else(bad)
 }
 
 /// The pixel-centre grid of the request, its box read in the CRS's axis order.
@@ -444,6 +446,13 @@ mod tests {
         assert_eq!(code("SERVICE=WMS"), Code::MissingParameterValue);
         assert_eq!(code(&format!("{base}&LAYERS=relief").replace("image/png", "image/tiff")), Code::InvalidFormat);
         assert_eq!(code(&format!("{base}&LAYERS=dem&STYLES=fancy")), Code::StyleNotDefined);
+        for b in ["NaN,-106,41,-105", "40,-inf,41,-105"] {
+            let q = base.replace("BBOX=40,-106,41,-105", &format!("BBOX={b}")) + "&LAYERS=dem";
+            match parse(&q, LIMITS) {
+                Err((e, _)) => assert!(e.to_string().contains("finite"), "{e}"),
+                other => panic!("{b}: {other:?}"),
+            }
+        }
     }
 
     #[test]
