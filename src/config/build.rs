@@ -264,6 +264,10 @@ fn compile(keys: &[ColorKey]) -> Result<Vec<LabKey>, String> {
     keys.iter().map(ColorKey::compile).collect()
 }
 
+/// Largest close and blur radius on a map, pixels (a map's symbols are a
+/// few pixels wide; the kernels grow with the square of the radius).
+const MAX_MAP_RADIUS_PX: usize = 32;
+
 fn rule(lc: &LandcoverConfig) -> Result<Rule, String> {
     match lc.kind {
         LandcoverKind::Map => {
@@ -273,6 +277,11 @@ fn rule(lc: &LandcoverConfig) -> Result<Rule, String> {
             }
             let ops = MorphOp::parse_sequence(&lc.close)
                 .ok_or_else(|| format!("close {:?} must be a sequence of D and E", lc.close))?;
+            for (key, px) in [("close_radius_px", lc.close_radius_px), ("blur_radius_px", lc.blur_radius_px)] {
+                if px > MAX_MAP_RADIUS_PX {
+                    return Err(format!("{key} = {px}: at most {MAX_MAP_RADIUS_PX} pixels"));
+                }
+            }
             Ok(Rule::Map { keys, ops, radius_px: lc.close_radius_px, blur_px: lc.blur_radius_px })
         }
         LandcoverKind::Classes => class_table(lc).map(Rule::Classes),

@@ -24,7 +24,7 @@ pub enum GridError {
     #[error("level-0 tile delta {0}° must divide 180° (e.g. 36, 20, 10)")]
     BadDelta(f64),
     /// Tiles need at least two samples per side.
-    #[error("tiles need 2 to 65536 samples per side, got {0}")]
+    #[error("tiles need 2 to {MAX_TILE_SAMPLES} samples per side, got {0}")]
     BadSamples(u32),
     /// Level beyond what the indices can hold.
     #[error("level {level} is beyond the deepest level {max}")]
@@ -154,7 +154,7 @@ impl TileGrid {
         if !(1.0..=180.0).contains(&level0_delta_deg) || (rows0 - rows0.round()).abs() > 1e-9 {
             return Err(GridError::BadDelta(level0_delta_deg));
         }
-        if !(2..=65536).contains(&samples) {
+        if !(2..=MAX_TILE_SAMPLES).contains(&samples) {
             return Err(GridError::BadSamples(samples));
         }
         Ok(TileGrid { level0_delta_deg, samples })
@@ -343,6 +343,10 @@ impl BBox {
 /// Largest side of a single request; 4097² float planes are ~67 MB each.
 pub const MAX_REQUEST_SIDE: usize = 8193;
 
+/// Most samples per tile side: a tile with its halo stays a request
+/// ([`MAX_REQUEST_SIDE`]).
+pub const MAX_TILE_SAMPLES: u32 = 4097;
+
 pub(crate) fn check_size(width: usize, height: usize) -> Result<(), GridError> {
     let bad = |reason: &str| GridError::BadSize { width, height, reason: reason.into() };
     if width == 0 || height == 0 {
@@ -472,6 +476,7 @@ mod tests {
     fn bad_parameters_are_refused_with_reasons() {
         assert_eq!(TileGrid::new(7.0, 513), Err(GridError::BadDelta(7.0)));
         assert_eq!(TileGrid::new(36.0, 1), Err(GridError::BadSamples(1)));
+        assert_eq!(TileGrid::new(36.0, 65536), Err(GridError::BadSamples(65536)));
         let g = TileGrid::new(36.0, 513).unwrap();
         assert!(matches!(g.check(TileId::new(0, 5, 0)), Err(GridError::NoSuchTile { .. })));
         assert!(g.check(TileId::new(22, 5 * (1 << 22) - 1, 10 * (1 << 22) - 1)).is_ok());

@@ -109,12 +109,18 @@ pub struct Job {
     pub fingerprint: String,
 }
 
+/// Most worker threads a seed runs (each holds a tile's planes in memory).
+const MAX_CONCURRENCY: usize = 256;
+
 impl Job {
     /// Checks the options, loads the region and reads the coverage.
     pub fn new(o: &SeedOptions) -> Result<Job, SeedError> {
         let layers = list(&o.layers, "--layers", Layer::parse, "dem, cover, canopy, cem, surface, max4, max32")?;
         let formats = list(&o.formats, "--formats", Format::parse, "bil16, bil32, png16, tiff")?;
         let shard = o.shard.as_deref().map(parse_shard).transpose()?.unwrap_or(Shard::ALL);
+        if o.concurrency > MAX_CONCURRENCY {
+            return Err(SeedError::Usage(format!("--concurrency {}: at most {MAX_CONCURRENCY}", o.concurrency)));
+        }
         let refresh_before = match (&o.refresh_before, o.skip_existing) {
             (Some(date), false) => Some(parse_date(date)?),
             (None, true) => Some(SystemTime::UNIX_EPOCH),

@@ -57,6 +57,8 @@ fn bad_configs_name_the_file_and_the_problem() {
         ("typo.toml", "[dem]\npaht = \"x.tif\"\n", "unknown field `paht`"),
         ("delta.toml", "[grid]\nlevel0_delta_deg = 7.0\n", "must divide 180"),
         ("close.toml", "[landcover]\nkind = \"map\"\nclose = \"DXE\"\n", "sequence of D and E"),
+        ("radius.toml", "[landcover]\nkind = \"map\"\nclose_radius_px = 100000\n", "at most 32 pixels"),
+        ("samples.toml", "[grid]\ntile_samples = 65536\n", "2 to 4097 samples"),
         (
             "classes.toml",
             "[dem]\npath = \"x.hgt\"\n[landcover]\nkind = \"classes\"\npath = \"c.tif\"\n",
