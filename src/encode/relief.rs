@@ -110,9 +110,15 @@ pub fn grey(heights: &Raster<f32>, cell_m: f64, max_m: f32) -> Result<Vec<u8>, E
     super::png(&grey, w, h, image::ExtendedColorType::L8)
 }
 
-/// Lambertian shade in [0, 1] at `(x, y)` of `cem` from Horn's 3×3 gradient.
+/// Lambertian shade in [0, 1] at `(x, y)` of `cem` from Horn's 3×3 gradient;
+/// a neighbour without data counts as level with the centre (so the edge
+/// of the data is shaded, not lost), a centre without data gives NaN.
 fn shade(cem: &Raster<f32>, x: usize, y: usize, (dx, dy): (f64, f64)) -> f32 {
-    let z = |i: usize, j: usize| f64::from(cem.get(i, j));
+    let centre = cem.get(x, y);
+    if centre.is_nan() {
+        return f32::NAN;
+    }
+    let z = |i: usize, j: usize| f64::from(Some(cem.get(i, j)).filter(|v| !v.is_nan()).unwrap_or(centre));
     let gx = ((z(x + 1, y - 1) + 2.0 * z(x + 1, y) + z(x + 1, y + 1))
         - (z(x - 1, y - 1) + 2.0 * z(x - 1, y) + z(x - 1, y + 1)))
         / (8.0 * dx);
@@ -141,5 +147,16 @@ mod tests {
         let img = image::load_from_memory(&png).unwrap().into_rgba8();
         assert_eq!(img.get_pixel(1, 1).0[3], 0);
         assert_eq!(img.get_pixel(0, 0).0[3], 255);
+    }
+
+    #[test]
+    fn the_edge_of_the_data_is_shaded_not_lost() {
+        // Data only in the middle sample and its east neighbour (rising east).
+        let mut cem = Raster::filled(5, 5, f32::NAN);
+        cem.set(2, 2, 100.0);
+        cem.set(3, 2, 120.0);
+        let lit = shade(&cem, 2, 2, (10.0, 10.0));
+        assert!(lit.is_finite() && lit > shade(&Raster::filled(3, 3, 100.0), 1, 1, (10.0, 10.0)), "{lit}");
+        assert!(shade(&cem, 1, 1, (10.0, 10.0)).is_nan(), "no data at the centre");
     }
 }
