@@ -45,9 +45,10 @@ pub fn blank(
     encoded.map(|e| e.bytes).unwrap_or_default()
 }
 
-/// A transparent RGBA PNG of `w × h` with `message` written on it.
-pub fn message(message: &str, w: usize, h: usize) -> Vec<u8> {
-    let mut rgba = vec![0u8; 4 * w * h];
+/// An RGBA PNG of `w × h` of `background` (transparent if none) with
+/// `message` written on it.
+pub fn message(message: &str, w: usize, h: usize, background: Option<[u8; 3]>) -> Vec<u8> {
+    let mut rgba = super::background::filled(w * h, background);
     if let Ok(font) = FontRef::try_from_slice(FONT) {
         let scaled = font.as_scaled(PxScale::from(TEXT_PX));
         let advance = scaled.h_advance(font.glyph_id('M')).max(1.0);
@@ -65,8 +66,7 @@ pub fn message(message: &str, w: usize, h: usize) -> Vec<u8> {
                         let (px, py) = (b.min.x as i64 + x as i64, b.min.y as i64 + y as i64);
                         if px >= 0 && py >= 0 && (px as usize) < w && (py as usize) < h {
                             let i = 4 * (py as usize * w + px as usize);
-                            let a = ((coverage * 255.0) as u8).max(rgba[i + 3]);
-                            rgba[i..i + 4].copy_from_slice(&[200, 0, 0, a]);
+                            ink(&mut rgba[i..i + 4], coverage, background.is_some());
                         }
                     });
                 }
@@ -74,6 +74,21 @@ pub fn message(message: &str, w: usize, h: usize) -> Vec<u8> {
         }
     }
     rgba_png(&rgba, w, h)
+}
+
+/// Dark red ink of `coverage` on one RGBA pixel: blended into an opaque
+/// background, as alpha on a transparent one.
+fn ink(pixel: &mut [u8], coverage: f32, opaque: bool) {
+    const RED: [u8; 3] = [200, 0, 0];
+    let c = coverage.clamp(0.0, 1.0);
+    if opaque {
+        for k in 0..3 {
+            pixel[k] = (f32::from(pixel[k]) * (1.0 - c) + f32::from(RED[k]) * c).round() as u8;
+        }
+    } else {
+        let a = ((c * 255.0) as u8).max(pixel[3]);
+        pixel.copy_from_slice(&[RED[0], RED[1], RED[2], a]);
+    }
 }
 
 fn rgba_png(rgba: &[u8], w: usize, h: usize) -> Vec<u8> {
@@ -86,10 +101,14 @@ mod tests {
 
     #[test]
     fn messages_leave_ink_and_blanks_are_empty() {
-        let png = message("LayerNotDefined: layer \"x\" is not served", 200, 60);
+        let png = message("LayerNotDefined: layer \"x\" is not served", 200, 60, None);
         let img = image::load_from_memory(&png).unwrap().into_rgba8();
         assert_eq!(img.dimensions(), (200, 60));
         assert!(img.pixels().filter(|p| p.0[3] > 128).count() > 100);
+        let on_white = message("LayerNotDefined", 200, 60, Some([255, 255, 255]));
+        let img = image::load_from_memory(&on_white).unwrap().into_rgba8();
+        assert!(img.pixels().all(|p| p.0[3] == 255), "opaque on its background");
+        assert!(img.pixels().filter(|p| p.0[1] < 128).count() > 50, "with red ink");
     }
 
     #[test]

@@ -45,7 +45,7 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
             ([(header::CONTENT_TYPE, mime)], body).into_response()
         }
         Ok(Request::GetMap(map)) => {
-            let reply = Reply { version: map.version, style: ExceptionStyle::Xml, image: None };
+            let reply = Reply { version: map.version, style: ExceptionStyle::Xml, image: None, background: None };
             match get_map(&state, &map, &headers).await {
                 Ok(response) => response,
                 Err(ServeError::BadRequest(m)) => {
@@ -161,18 +161,19 @@ fn paste(out: &mut Raster<f32>, bil32: &[u8], n1: i64, (x0, y0): (i64, i64)) {
 fn exception(e: &Exception, reply: Reply, state: &AppState) -> Response {
     match (reply.style, reply.image) {
         (ExceptionStyle::InImage, Some((w, h, MapFormat::Png))) => {
-            ([(header::CONTENT_TYPE, "image/png")], inimage::message(&e.to_string(), w, h)).into_response()
+            ([(header::CONTENT_TYPE, "image/png")], inimage::message(&e.to_string(), w, h, reply.background))
+                .into_response()
         }
         (ExceptionStyle::InImage | ExceptionStyle::Blank, Some((w, h, format))) => {
             let grid = crate::grid::BBox { west: 0.0, south: 0.0, east: 1.0, north: 1.0 }.area_grid(w, h);
             match grid {
                 Ok(g) => {
-                    // The request did not parse: a transparent picture, or
-                    // nodata in the format asked for.
+                    // The request did not parse: a picture of its background,
+                    // or nodata in the format asked for.
                     let layer = if format == MapFormat::Png { MapLayer::Relief } else { MapLayer::Data(Layer::Dem) };
                     (
                         [(header::CONTENT_TYPE, format.mime())],
-                        inimage::blank(&g, layer, format, state.region().heights_16, None),
+                        inimage::blank(&g, layer, format, state.region().heights_16, reply.background),
                     )
                         .into_response()
                 }

@@ -182,13 +182,15 @@ pub struct Reply {
     pub style: ExceptionStyle,
     /// Image size and format for in-image and blank replies.
     pub image: Option<(usize, usize, MapFormat)>,
+    /// Their background (`TRANSPARENT` and `BGCOLOR`, if they parse).
+    pub background: Option<[u8; 3]>,
 }
 
 /// Parses a query string.
 pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)> {
     let params = Params::new(query);
     let version = negotiate(params.get("VERSION").or(params.get("WMTVER")));
-    let mut reply = Reply { version, style: ExceptionStyle::Xml, image: None };
+    let mut reply = Reply { version, style: ExceptionStyle::Xml, image: None, background: None };
     let fail = |e: Exception, reply: Reply| Err((e, reply));
     if let Some(service) = params.get("SERVICE").filter(|s| !s.eq_ignore_ascii_case("WMS")) {
         return fail(
@@ -204,6 +206,7 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)>
         "getmap" | "map" => {
             reply.style = exception_style(params.get("EXCEPTIONS"));
             reply.image = image_of(&params);
+            reply.background = background(params.get("TRANSPARENT"), params.get("BGCOLOR")).unwrap_or(None);
             get_map(&params, version, limits).map(Request::GetMap).map_err(|e| (e, reply))
         }
         other => fail(Exception::new(Code::OperationNotSupported, format!("REQUEST={other} is not supported")), reply),
@@ -497,7 +500,12 @@ mod tests {
         assert_eq!(e.code, Code::LayerNotDefined);
         assert_eq!(
             reply,
-            Reply { version: Version::V111, style: ExceptionStyle::InImage, image: Some((8, 4, MapFormat::Png)) }
+            Reply {
+                version: Version::V111,
+                style: ExceptionStyle::InImage,
+                image: Some((8, 4, MapFormat::Png)),
+                background: Some([255, 255, 255])
+            }
         );
     }
 
