@@ -106,8 +106,8 @@ enum Command {
         /// Camera path (TOML; see config/paths/).
         #[arg(long)]
         path: PathBuf,
-        /// Frames spread evenly over the path.
-        #[arg(long, default_value_t = 60)]
+        /// Frames spread evenly over the path (at least 1).
+        #[arg(long, default_value_t = 60, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
         frames: usize,
         /// Image size, WxH.
         #[arg(long, default_value = "640x480")]

@@ -15,7 +15,7 @@ pub type Entry = (Layer, TileId);
 
 /// A tile list that cannot be read.
 #[derive(Debug, thiserror::Error)]
-#[error("{path}:{line}: {message}")]
+#[error("{}: {message}", where_in(path, *line))]
 pub struct ListError {
     /// The file.
     pub path: PathBuf,
@@ -23,6 +23,14 @@ pub struct ListError {
     pub line: usize,
     /// What is wrong.
     pub message: String,
+}
+
+/// `FILE:LINE`, or the file alone for line 0.
+fn where_in(path: &Path, line: usize) -> String {
+    match line {
+        0 => path.display().to_string(),
+        n => format!("{}:{n}", path.display()),
+    }
 }
 
 /// Reads a tile list; every tile must exist in `tiles`.
