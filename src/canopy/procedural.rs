@@ -49,6 +49,25 @@ pub struct ProxyParams {
     pub seed: u64,
 }
 
+impl ProxyParams {
+    /// Each parameter in its range (what [`ProceduralProxy::new`] would
+    /// otherwise clamp), or the first that is not, named.
+    pub fn check(&self) -> Result<(), String> {
+        let ranges = [
+            ("cell_m", self.cell_m, 0.5, 1000.0),
+            ("height_m", f64::from(self.height_m), 0.0, 150.0),
+            ("height_variation", f64::from(self.height_variation), 0.0, 1.0),
+            ("crown_radius", self.crown_radius, 0.05, 1.0),
+            ("crown_exponent", f64::from(self.crown_exponent), 0.25, 8.0),
+            ("gap_fraction", self.gap_fraction, 0.0, 1.0),
+        ];
+        match ranges.into_iter().find(|&(_, v, lo, hi)| !(lo..=hi).contains(&v)) {
+            Some((key, v, lo, hi)) => Err(format!("{key} = {v}: must be {lo} to {hi}")),
+            None => Ok(()),
+        }
+    }
+}
+
 impl Default for ProxyParams {
     fn default() -> Self {
         ProxyParams {

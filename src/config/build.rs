@@ -78,9 +78,13 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
     let upstream_ttl = ttls.into_iter().flatten().map(|u| std::time::Duration::from_secs(u.ttl_s)).min();
     let cache = BlockCache::expiring(config.cache.memory_mb.max(1) * 1024 * 1024, upstream_ttl);
     let enc = &config.encoding;
-    if !(enc.png16_scale_m > 0.0 && enc.png16_scale_m.is_finite() && enc.png16_offset_m.is_finite()) {
+    if !(enc.png16_scale_m > 0.0 && enc.png16_scale_m.is_finite()) {
         return Err(invalid(format!("[encoding] png16_scale_m must be positive, got {}", enc.png16_scale_m)));
     }
+    if !enc.png16_offset_m.is_finite() {
+        return Err(invalid(format!("[encoding] png16_offset_m must be a finite number, got {}", enc.png16_offset_m)));
+    }
+    config.canopy.check().map_err(|m| invalid(format!("[canopy] {m}")))?;
     // Check every value before opening any file.
     let landcover_rule =
         config.landcover.as_ref().map(rule).transpose().map_err(|m| invalid(format!("[landcover] {m}")))?;

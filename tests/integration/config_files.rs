@@ -59,6 +59,9 @@ fn bad_configs_name_the_file_and_the_problem() {
         ("close.toml", "[landcover]\nkind = \"map\"\nclose = \"DXE\"\n", "sequence of D and E"),
         ("radius.toml", "[landcover]\nkind = \"map\"\nclose_radius_px = 100000\n", "at most 32 pixels"),
         ("samples.toml", "[grid]\ntile_samples = 65536\n", "2 to 4097 samples"),
+        ("gaps.toml", "[canopy]\ngap_fraction = 1.5\n", "[canopy] gap_fraction = 1.5: must be 0 to 1"),
+        ("tall.toml", "[canopy]\nheight_m = inf\n", "[canopy] height_m = inf"),
+        ("offset.toml", "[encoding]\npng16_offset_m = inf\n", "png16_offset_m must be a finite number"),
         (
             "classes.toml",
             "[dem]\npath = \"x.hgt\"\n[landcover]\nkind = \"classes\"\npath = \"c.tif\"\n",
