@@ -143,7 +143,7 @@ enum Command {
         #[arg(long)]
         cost_model: Option<PathBuf>,
         /// Largest projected tile error, pixels.
-        #[arg(long, default_value_t = 2.0)]
+        #[arg(long, default_value_t = 2.0, value_parser = positive_px)]
         max_error_px: f64,
         /// Deepest tile level.
         #[arg(long, default_value_t = 13)]
@@ -675,6 +675,14 @@ fn seed(a: SeedArgs) -> Result<()> {
         std::process::exit(3);
     }
     Ok(())
+}
+
+/// A finite number of pixels above 0.
+fn positive_px(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("{text:?} is not a positive number of pixels")),
+    }
 }
 
 fn parse_layer(text: &str) -> Result<Layer> {

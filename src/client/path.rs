@@ -105,6 +105,11 @@ impl CameraPath {
         if !(1.0..=170.0).contains(&path.fov_deg) {
             return Err(format!("fov_deg {} is not within 1..170", path.fov_deg));
         }
+        if let Some(sun) = &path.sun
+            && !(sun.azimuth_deg.is_finite() && (-90.0..=90.0).contains(&sun.elevation_deg))
+        {
+            return Err(format!("sun {sun:?}: need a finite azimuth_deg and elevation_deg within -90..90"));
+        }
         for (k, key) in path.key.iter().enumerate() {
             let finite =
                 [key.t, key.lon, key.lat, key.height_m, key.heading_deg, key.pitch_deg].iter().all(|v| v.is_finite());
@@ -251,5 +256,7 @@ pitch_deg = -30.0
         assert!(CameraPath::parse(&backwards).unwrap_err().contains("not later"));
         let typo = PATH.replace("pitch_deg = -30.0", "pitch = -30.0");
         assert!(CameraPath::parse(&typo).is_err());
+        let dark = PATH.replace("elevation_deg = 30.0", "elevation_deg = nan");
+        assert!(CameraPath::parse(&dark).unwrap_err().contains("sun"));
     }
 }
