@@ -168,23 +168,23 @@ fn abstract_of(layer: MapLayer, s: &Service) -> String {
         MapLayer::Colour => return format!("The map colours, unshaded. {picture}"),
         MapLayer::Relief => return format!("Hillshade of the combined elevation map over the map colours. {picture}"),
     };
-    let (bil16, png16) = encode::quantizations(l, s.heights_16);
-    match l {
-        crate::cem::Layer::Surface => "Class id (0 plain, 1 forest, 2 water, 3 rock, 4 ice, 5 built, 255 nodata),              the id itself in every format: image/png 16-bit grey, application/bil16 int16, application/bil32              float32, image/tiff 8-bit."
-            .into(),
-        _ => {
-            let (units, png_nodata) = match l {
-                crate::cem::Layer::Cover => ("cover fraction", "no nodata code: read bil or tiff to tell no data from 0"),
-                _ => ("metres", "code 0 is nodata"),
-            };
-            format!(
-                "Values in {units}. image/png: 16-bit grey, value = {} + {} * code ({png_nodata}). \
-                 application/bil16: little-endian int16, value = {} + {} * code, nodata -32768. \
-                 application/bil32 and image/tiff: float32, nodata -32768.",
-                png16.offset, png16.scale, bil16.offset, bil16.scale
-            )
+    let (units, png_nodata) = match l {
+        crate::cem::Layer::Surface => {
+            return "Class id (0 plain, 1 forest, 2 water, 3 rock, 4 ice, 5 built, 255 nodata), the id itself in \
+                    every format: image/png 16-bit grey, application/bil16 int16, application/bil32 float32, \
+                    image/tiff 8-bit."
+                .into();
         }
-    }
+        crate::cem::Layer::Cover => ("cover fraction", "no nodata code: read bil or tiff to tell no data from 0"),
+        _ => ("metres", "code 0 is nodata"),
+    };
+    let (bil16, png16) = encode::quantizations(l, s.heights_16);
+    format!(
+        "Values in {units}. image/png: 16-bit grey, value = {} + {} * code ({png_nodata}). \
+         application/bil16: little-endian int16, value = {} + {} * code, nodata -32768. \
+         application/bil32 and image/tiff: float32, nodata -32768.",
+        png16.offset, png16.scale, bil16.offset, bil16.scale
+    )
 }
 
 #[cfg(test)]
@@ -229,5 +229,8 @@ mod tests {
         assert_eq!((attr(1, "minx"), attr(1, "miny")), (-106.0, 40.0));
         assert!(attr(2, "minx") < -1.1e7 && attr(2, "miny") > 4.8e6);
         assert!(xml.contains("-500.15 + 0.15 * code"));
+        let abstracts = doc.descendants().filter(|n| n.has_tag_name("Abstract")).filter_map(|n| n.text());
+        assert!(abstracts.clone().any(|t| t.contains("the id itself in every format")));
+        assert!(abstracts.into_iter().all(|t| !t.contains("  ")), "abstracts read as single-spaced prose");
     }
 }
