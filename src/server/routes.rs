@@ -62,13 +62,14 @@ async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Nex
     let start = Instant::now();
     let route = request.extensions().get::<MatchedPath>().map_or("other", |p| route_label(p.as_str()));
     let timeout = super::seconds(state.settings.request_timeout_s);
-    let query = request.uri().query().unwrap_or("").to_string();
+    // Kept for a WMS timeout's report, which speaks the request's version.
+    let query = (route == "wms").then(|| request.uri().query().unwrap_or("").to_string());
     let response = if request.uri().to_string().len() > MAX_URI_BYTES {
         (StatusCode::URI_TOO_LONG, format!("request URI longer than {MAX_URI_BYTES} bytes")).into_response()
     } else {
         match tokio::time::timeout(timeout, next.run(request)).await {
             Ok(response) => response,
-            Err(_) => timed_out(route, &query, timeout),
+            Err(_) => timed_out(query.as_deref(), timeout),
         }
     };
     state.metrics.request(route, response.status().as_u16(), start.elapsed());
@@ -76,11 +77,12 @@ async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Nex
 }
 
 /// 503 for a request past the timeout (its tile is still computed and
-/// cached for the retry): a ServiceExceptionReport on `/wms`, text elsewhere.
-fn timed_out(route: &str, query: &str, timeout: std::time::Duration) -> Response {
+/// cached for the retry): a ServiceExceptionReport for a WMS `query`, text
+/// elsewhere.
+fn timed_out(wms_query: Option<&str>, timeout: std::time::Duration) -> Response {
     let message = format!("the request took longer than {timeout:?}; retry later");
     let retry = (header::RETRY_AFTER, "5");
-    if route == "wms" {
+    if let Some(query) = wms_query {
         let version = super::wms::request::version_of(query);
         let (mime, body) =
             super::exception::Exception::new(super::exception::Code::NoApplicableCode, message).report(version);

@@ -189,7 +189,7 @@ pub struct Reply {
 /// Parses a query string.
 pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)> {
     let params = Params::new(query);
-    let version = negotiate(params.get("VERSION").or(params.get("WMTVER")));
+    let version = negotiate(&params);
     let mut reply = Reply { version, style: ExceptionStyle::Xml, image: None, background: None };
     let fail = |e: Exception, reply: Reply| Err((e, reply));
     if let Some(service) = params.get("SERVICE").filter(|s| !s.eq_ignore_ascii_case("WMS")) {
@@ -215,14 +215,14 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)>
 
 /// The version a query string is answered in.
 pub fn version_of(query: &str) -> Version {
-    let params = Params::new(query);
-    negotiate(params.get("VERSION").or(params.get("WMTVER")))
+    negotiate(&Params::new(query))
 }
 
 /// The version answered (WMS 1.3.0 §6.2.4): below 1.3.0 the highest known
 /// version lower than the one asked for, 1.1.1 (also the lowest known, for
 /// anything older); 1.3.0 from there on, and when none or no number is given.
-fn negotiate(asked: Option<&str>) -> Version {
+fn negotiate(params: &Params) -> Version {
+    let asked = params.get("VERSION").or(params.get("WMTVER"));
     // "1.3" is 1.3.0: missing parts are zeros.
     let number = |text: &str| -> Option<[u32; 3]> {
         let parts: Vec<u32> = text.trim().split('.').map(|p| p.parse().ok()).collect::<Option<_>>()?;
