@@ -55,6 +55,9 @@ struct Tile {
     // the tile's splats in the frame's instance buffer: first, count;
     // unused x2.
     splats: vec4<u32>,
+    // The pixels its box covers on screen, x0, y0, x1, y1 (x1, y1
+    // excluded): the compute passes' invocations (compute.wgsl).
+    screen: vec4<u32>,
 };
 
 const MODE_HULL: u32 = 0u;
@@ -81,7 +84,9 @@ override MORPHING: bool = false;
 override CANOPY_WHOLE: bool = false;
 // Rays march linearly (frame.mode.y steps) instead of traversing the mipmap.
 override LINEAR: bool = false;
-@group(1) @binding(0) var<uniform> tile: Tile;
+// `tile`, the tile being drawn, is declared by the entry points' part:
+// a uniform at a dynamic offset for the fragments (tile_uniform.wgsl), one
+// of an array for the compute passes (compute.wgsl).
 
 // Texture accesses of this invocation: view ray (with the two gathers of the
 // hit cell's shading), and shadow ray — the benchmark's "fetches per pixel".

@@ -99,22 +99,23 @@ fn pixel_ray(pixel: vec2<f32>) -> vec3<f32> {
     return normalize(transpose(r) * camera_dir);
 }
 
-@fragment
-fn fs_ray(in: VertexOut) -> FragmentOut {
-    let camera = tile.camera.xyz;
-    let dir = pixel_ray(in.clip.xy);
+// A view ray in the tile frame: where its parameter is measured from, its
+// unit direction, and its hit's parameter (NO_HIT: none in this tile).
+struct Ray {
+    origin: vec3<f32>,
+    dir: vec3<f32>,
+    t: f32,
+};
+
+// The ray along `dir` from the camera cast through the tile, starting
+// `t_base` metres along it (where it meets the hull, backed off a little)
+// and never before the near plane. Its parameter is measured from that
+// start, for precision.
+fn cast_ray(dir: vec3<f32>, t_base: f32) -> Ray {
     let ds = vec3<f32>(dir.xy / tile.grid.xy, dir.z);
-    // Rays start where they cross the hull (backed off by 0.1 % for the
-    // rasteriser's rounding), or at the camera when it is inside the hull;
-    // never before the near plane. Their parameter is measured from there,
-    // for precision.
     let forward = -vec3<f32>(tile.model_view[0].z, tile.model_view[1].z, tile.model_view[2].z);
     let t_near = frame.viewport.z / dot(dir, forward);
-    var t_base = 0.0;
-    if tile.flags.x != MODE_INSIDE {
-        t_base = max(dot(in.local - camera, dir) * 0.999, 0.0);
-    }
-    let origin = camera + dir * t_base;
+    let origin = tile.camera.xyz + dir * t_base;
     let os = to_samples(origin);
     let span = cast_box(os, ds);
     let t0 = max(max(span.x, 0.0), t_near - t_base);
@@ -127,16 +128,44 @@ fn fs_ray(in: VertexOut) -> FragmentOut {
             t = traverse_exact(os, ds, t0, t1);
         }
     }
-    if t == NO_HIT {
-        discard;
-    }
-    let hit = origin + dir * t;
-    let hs = to_samples(hit);
-    let colour = shade(hs.xy, hs.z, dir);
-    let view = tile.model_view * vec4<f32>(hit, 1.0);
-    let distance = max(-view.z, 1.0e-30);
+    return Ray(origin, dir, t);
+}
+
+// The distance along the view axis of the ray's hit, metres.
+fn hit_distance(ray: Ray) -> f32 {
+    let view = tile.model_view * vec4<f32>(ray.origin + ray.dir * ray.t, 1.0);
+    return max(-view.z, 1.0e-30);
+}
+
+// The colour, per-pixel data and depth of the ray's hit.
+fn shade_hit(ray: Ray) -> FragmentOut {
+    let hs = to_samples(ray.origin + ray.dir * ray.t);
+    let colour = shade(hs.xy, hs.z, ray.dir);
+    let distance = hit_distance(ray);
     let data = vec4<u32>(view_fetches, shadow_fetches, bitcast<u32>(distance), tile.flags.y);
     return FragmentOut(vec4<f32>(colour, 1.0), data, frame.viewport.z / distance);
+}
+
+// The ray cast of one hull fragment: its hit's colour, data and depth, or
+// discarded where the ray leaves the tile without a hit. Rays start where
+// they cross the hull (backed off by 0.1 % for the rasteriser's rounding),
+// or at the camera when it is inside the hull.
+fn ray_fragment(in: VertexOut) -> FragmentOut {
+    let dir = pixel_ray(in.clip.xy);
+    var t_base = 0.0;
+    if tile.flags.x != MODE_INSIDE {
+        t_base = max(dot(in.local - tile.camera.xyz, dir) * 0.999, 0.0);
+    }
+    let ray = cast_ray(dir, t_base);
+    if ray.t == NO_HIT {
+        discard;
+    }
+    return shade_hit(ray);
+}
+
+@fragment
+fn fs_ray(in: VertexOut) -> FragmentOut {
+    return ray_fragment(in);
 }
 
 @fragment

@@ -68,11 +68,12 @@ fn fetch_cell_heights(ci: i32, cj: i32, counter: ptr<private, u32>) -> vec4<f32>
 
 // The cell's corners at `uv` of the CEM (ground_corners: of the ground), in
 // the order h00, h10, h01, h11, blended with the coarser surface's when the
-// tile morphs (its nodata is the tile's own, so nodata stays nodata). Two
+// tile morphs (its nodata is the tile's own, so nodata stays nodata; a tile
+// without a morph layer drawn by a morphing pipeline reads its own). Two
 // functions: a gather's channel must be a constant.
 fn cem_corners(uv: vec2<f32>, counter: ptr<private, u32>) -> vec4<f32> {
     let own = textureGather(0, texels, gather_sampler, uv, tile.index.z);
-    if !MORPHING {
+    if !MORPHING || tile.flags.w == 0u {
         *counter += 1u;
         return corner_order(own);
     }
@@ -82,7 +83,7 @@ fn cem_corners(uv: vec2<f32>, counter: ptr<private, u32>) -> vec4<f32> {
 
 fn ground_corners(uv: vec2<f32>, counter: ptr<private, u32>) -> vec4<f32> {
     let own = textureGather(1, texels, gather_sampler, uv, tile.index.z);
-    if !MORPHING {
+    if !MORPHING || tile.flags.w == 0u {
         *counter += 1u;
         return corner_order(own);
     }

@@ -12,6 +12,8 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use clap::{Parser, Subcommand};
 use std::path::{Path, PathBuf};
 use sylva::cem::Layer;
+#[cfg(feature = "client")]
+use sylva::client::render::RayPass;
 use sylva::encode::Format;
 use sylva::grid::{BBox, TileId};
 use sylva::outputs;
@@ -164,6 +166,11 @@ enum Command {
         /// fetches, and the linear march misses more).
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=32))]
         hull_factor: u32,
+        /// Where rays are cast: `fragment` (from each tile's hull) or
+        /// `compute` (compute passes; for GPUs that shade fragments on a
+        /// small part of the chip, such as data-centre GPUs).
+        #[arg(long, default_value = "fragment")]
+        ray_pass: RayPass,
     },
     /// Pregenerate tiles into the tile cache (resumable, parallel, sharded).
     #[cfg(feature = "server")]
@@ -371,6 +378,13 @@ enum Bench {
         /// Run only these settings (e.g. `--only "linear 30 + 10" --only "exact + 10"`); all by default.
         #[arg(long)]
         only: Vec<String>,
+        /// Hull fragments without their depth promise (`@early_depth_test`),
+        /// for comparison: every hidden fragment casts its ray.
+        #[arg(long)]
+        no_early_depth: bool,
+        /// Where rays are cast: `fragment` or `compute`.
+        #[arg(long, default_value = "fragment")]
+        ray_pass: RayPass,
     },
     /// Seeding speed (1 and 2 workers, parents from children or not) and
     /// memory over a ~100,000-tile job.
@@ -533,6 +547,7 @@ fn run(command: Command) -> Result<()> {
             no_frames,
             no_trees,
             hull_factor,
+            ray_pass,
         } => {
             let prior = match cost_model {
                 Some(file) => {
@@ -564,6 +579,7 @@ fn run(command: Command) -> Result<()> {
                 geomorph,
                 trees: if no_trees { None } else { Some(Default::default()) },
                 hull_factor: hull_factor as usize,
+                ray_pass,
                 ..Default::default()
             };
             let path = sylva::client::path::CameraPath::load(&path)?;
@@ -593,11 +609,16 @@ fn run(command: Command) -> Result<()> {
             Ok(())
         }
         #[cfg(feature = "client")]
-        Command::Bench { what: Bench::Raycast { rmnp, size, gpu_budget_mib, plot, only } } => {
+        Command::Bench {
+            what: Bench::Raycast { rmnp, size, gpu_budget_mib, plot, only, no_early_depth, ray_pass },
+        } => {
             let size = parse_size(&size)?;
-            let gpu = sylva::client::render::gpu::Gpu::open()?;
-            let name = gpu.describe();
-            let mut renderer = sylva::client::render::Renderer::new(gpu, 513, 32, gpu_budget_mib << 20, false);
+            let mut gpu = sylva::client::render::gpu::Gpu::open()?;
+            gpu.early_depth &= !no_early_depth;
+            let early = if gpu.early_depth { "on" } else { "off" };
+            let name = format!("{}, rays in {ray_pass:?} passes, early depth {early}", gpu.describe());
+            let mut renderer =
+                sylva::client::render::Renderer::new(gpu, 513, 32, gpu_budget_mib << 20, false).with_ray_pass(ray_pass);
             let views = sylva::bench::raycast::default_views(&rmnp);
             let rows = sylva::bench::raycast::run(&views, size, &only, &mut renderer).map_err(anyhow::Error::msg)?;
             println!("{}", sylva::bench::raycast::report(&rows, size, &name));

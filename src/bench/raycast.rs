@@ -27,9 +27,18 @@ use std::sync::Arc;
 
 /// Shadow steps of the reference image.
 const REFERENCE_SHADOW_STEPS: u32 = 30;
-/// Frames timed per setting (the median is reported), after one that
-/// uploads the tiles and warms the pipeline.
+/// Frames timed per setting at least (the median is reported).
 const TIMED_FRAMES: usize = 3;
+/// Frames are rendered untimed for this long first (at least one): the
+/// first uploads the tiles and builds pipelines, and a GPU left idle while
+/// the CPU reference was drawn needs a moment to raise its clocks (an H200's
+/// first setting per view took 2.5–2.7× the next one's time without this).
+const WARM_MS: f64 = 200.0;
+/// Frames are timed until their wall time reaches this too, so that a fast
+/// GPU's median is taken over many frames.
+const TIMED_WALL_MS: f64 = 250.0;
+/// Frames timed per setting at most.
+const MAX_TIMED_FRAMES: usize = 1000;
 
 /// One fixed view: a region, a camera path and the time on it.
 #[derive(Clone, Debug)]
@@ -53,6 +62,9 @@ pub struct Row {
     pub setting: String,
     /// Median GPU (or, without timestamps, wall) time per frame, ms.
     pub ms: f64,
+    /// Median wall time of a frame rendered and waited for, ms: encoding,
+    /// submission and the GPU's work, one frame at a time.
+    pub wall_ms: f64,
     /// Mean and 99th-percentile view-ray fetches per ray-cast pixel.
     pub fetches: (f64, u32),
     /// Mean shadow and shading fetches per ray-cast pixel.
@@ -137,19 +149,39 @@ pub fn run(views: &[View], size: (u32, u32), only: &[String], renderer: &mut Ren
             let frame =
                 FrameSettings { traversal, shadow_steps: shadows, sun_ecef: path.sun_ecef().filter(|_| sun), fade };
             let refs: Vec<&TileData> = tiles.iter().collect();
-            let mut times = Vec::with_capacity(TIMED_FRAMES);
-            for k in 0..=TIMED_FRAMES {
-                let out = renderer.render(&camera, &refs, &frame, Readback::None).map_err(|e| e.to_string())?;
-                if k > 0 {
-                    times.push(out.stats.gpu_ms.unwrap_or(out.stats.wall_ms));
-                }
-            }
-            times.sort_by(f64::total_cmp);
+            let (ms, wall_ms) = time_frames(renderer, &camera, &refs, &frame)?;
             let out = renderer.render(&camera, &refs, &frame, Readback::All).map_err(|e| e.to_string())?;
-            rows.push(Row { ms: times[times.len() / 2], ..row(&view.name, &name, &out, &truth) });
+            rows.push(Row { ms, wall_ms, ..row(&view.name, &name, &out, &truth) });
         }
     }
     Ok(rows)
+}
+
+/// Median GPU (or wall) and wall time per frame of one view and setting,
+/// after [`WARM_MS`] of warm-up: at least [`TIMED_FRAMES`] frames, more until
+/// they have taken [`TIMED_WALL_MS`].
+fn time_frames(
+    renderer: &mut Renderer,
+    camera: &Camera,
+    tiles: &[&TileData],
+    frame: &FrameSettings,
+) -> Result<(f64, f64), String> {
+    let warm = std::time::Instant::now();
+    while warm.elapsed().as_secs_f64() * 1e3 < WARM_MS {
+        renderer.render(camera, tiles, frame, Readback::None).map_err(|e| e.to_string())?;
+    }
+    let (mut gpu, mut wall) = (Vec::new(), Vec::new());
+    while gpu.len() < MAX_TIMED_FRAMES && (gpu.len() < TIMED_FRAMES || wall.iter().sum::<f64>() < TIMED_WALL_MS) {
+        let out = renderer.render(camera, tiles, frame, Readback::None).map_err(|e| e.to_string())?;
+        gpu.push(out.stats.gpu_ms.unwrap_or(out.stats.wall_ms));
+        wall.push(out.stats.wall_ms);
+    }
+    Ok((median(gpu), median(wall)))
+}
+
+fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[values.len() / 2]
 }
 
 fn camera_at(path: &CameraPath, t_s: f64, size: (u32, u32)) -> Camera {
@@ -183,6 +215,7 @@ fn row(view: &str, setting: &str, out: &Rendered, truth: &Image) -> Row {
         view: view.into(),
         setting: setting.into(),
         ms: f64::NAN,
+        wall_ms: f64::NAN,
         fetches: (rays.iter().map(|f| f[0] as f64).sum::<f64>() / n, p99),
         shadow_fetches: rays.iter().map(|f| f[1] as f64).sum::<f64>() / n,
         missed_pct: 100.0 * d.misses as f64 / hits as f64,
@@ -196,7 +229,8 @@ pub fn report(rows: &[Row], size: (u32, u32), gpu: &str) -> String {
     let header = [
         "view",
         "setting",
-        "ms/frame",
+        "GPU ms/frame",
+        "wall ms/frame",
         "fetches mean",
         "fetches p99",
         "shadow fetches",
@@ -210,7 +244,8 @@ pub fn report(rows: &[Row], size: (u32, u32), gpu: &str) -> String {
             vec![
                 r.view.clone(),
                 r.setting.clone(),
-                format!("{:.1}", r.ms),
+                format!("{:.3}", r.ms),
+                format!("{:.3}", r.wall_ms),
                 format!("{:.1}", r.fetches.0),
                 r.fetches.1.to_string(),
                 format!("{:.1}", r.shadow_fetches),

@@ -17,6 +17,7 @@ use super::lod::{Selected, Selector};
 use super::path::CameraPath;
 use super::quadtree::{self, LodRule};
 use super::raycast::{Traversal, TreeBlend};
+use super::render::RayPass;
 use super::render::cache::CacheFull;
 use super::render::uniforms::FrameSettings;
 use super::render::{Draw, Readback, Renderer};
@@ -87,6 +88,8 @@ pub struct FlyOptions {
     /// Hull quads this many times the tiles' 16 samples
     /// ([`Renderer::with_hull_factor`]; 4 suits software rasterisers).
     pub hull_factor: usize,
+    /// Where rays are cast ([`Renderer::with_ray_pass`]).
+    pub ray_pass: RayPass,
 }
 
 impl Default for FlyOptions {
@@ -106,6 +109,7 @@ impl Default for FlyOptions {
             in_flight: 8,
             trees: Some(TreeSettings::default()),
             hull_factor: 1,
+            ray_pass: RayPass::Fragment,
         }
     }
 }
@@ -558,7 +562,8 @@ pub fn run(
     let gpu = super::render::gpu::Gpu::open()?;
     let grid = source.grid();
     let mut renderer = Renderer::new(gpu, grid.samples(), options.halo as u32, gpu_budget_bytes, options.geomorph)
-        .with_hull_factor(options.hull_factor);
+        .with_hull_factor(options.hull_factor)
+        .with_ray_pass(options.ray_pass);
     Ok(fly(source, path, &mut renderer, options)?)
 }
 

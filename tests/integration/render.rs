@@ -2,7 +2,8 @@
 //! small images): real tiles of the demo and rmnp (also with a shadow
 //! quality per tile), stiff synthetic scenes,
 //! deep zoom, poles and the antimeridian, tile seams and shadows across
-//! them, and work left out.
+//! them, and work left out; rays cast from hull fragments and in compute
+//! passes alike.
 //!
 //! Stated tolerances (measured values are printed with `--nocapture`):
 //! hit masks differ on at most 0.1 % of pixels; over pixels both hit, the
@@ -22,7 +23,7 @@ use sylva::client::raycast::{self, Fade, Traversal, TreeBlend};
 use sylva::client::reference::{self, Departure, Image, Lighting};
 use sylva::client::render::gpu::Gpu;
 use sylva::client::render::uniforms::FrameSettings;
-use sylva::client::render::{Draw, Readback, Rendered, Renderer};
+use sylva::client::render::{Draw, RayPass, Readback, Rendered, Renderer};
 use sylva::client::source::{RegionSource, TileSource};
 use sylva::client::tile::{TileData, TilePayload};
 use sylva::client::trees::{self, Splat, TreeSettings};
@@ -36,16 +37,23 @@ const MAX_DEPTH_REL: f64 = 1e-4;
 /// Smallest colour PSNR over pixels both hit, dB.
 const MIN_PSNR_DB: f64 = 40.0;
 
-/// One renderer per tile shape, shared by the tests (lavapipe compiles the
-/// pipelines once; frames render one at a time).
-fn with_renderer<R>(samples: u32, halo: u32, f: impl FnOnce(&mut Renderer) -> R) -> R {
-    static RENDERERS: OnceLock<Mutex<HashMap<(u32, u32), Renderer>>> = OnceLock::new();
+/// Where rays are cast: the tests that compare with the reference run both.
+const PASSES: [RayPass; 2] = [RayPass::Fragment, RayPass::Compute];
+
+/// One renderer per tile shape and ray pass, shared by the tests (lavapipe
+/// compiles the pipelines once; frames render one at a time).
+fn with_renderer_in<R>(pass: RayPass, samples: u32, halo: u32, f: impl FnOnce(&mut Renderer) -> R) -> R {
+    static RENDERERS: OnceLock<Mutex<HashMap<(u32, u32, RayPass), Renderer>>> = OnceLock::new();
     let mut map = RENDERERS.get_or_init(|| Mutex::new(HashMap::new())).lock().unwrap_or_else(|e| e.into_inner());
-    let renderer = map.entry((samples, halo)).or_insert_with(|| {
+    let renderer = map.entry((samples, halo, pass)).or_insert_with(|| {
         let gpu = Gpu::open().expect("a GPU adapter (lavapipe: apt-get install mesa-vulkan-drivers)");
-        Renderer::new(gpu, samples, halo, 256 << 20, true)
+        Renderer::new(gpu, samples, halo, 256 << 20, true).with_ray_pass(pass)
     });
     f(renderer)
+}
+
+fn with_renderer<R>(samples: u32, halo: u32, f: impl FnOnce(&mut Renderer) -> R) -> R {
+    with_renderer_in(RayPass::Fragment, samples, halo, f)
 }
 
 struct Both {
@@ -55,10 +63,15 @@ struct Both {
 }
 
 fn render_both(tiles: &[TileData], camera: &Camera, settings: &FrameSettings) -> Both {
+    render_both_in(RayPass::Fragment, tiles, camera, settings)
+}
+
+fn render_both_in(pass: RayPass, tiles: &[TileData], camera: &Camera, settings: &FrameSettings) -> Both {
     let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
     let refs: Vec<&TileData> = tiles.iter().collect();
-    let gpu =
-        with_renderer(samples, halo, |r| r.render(camera, &refs, settings, Readback::All).expect("fits the cache"));
+    let gpu = with_renderer_in(pass, samples, halo, |r| {
+        r.render(camera, &refs, settings, Readback::All).expect("fits the cache")
+    });
     let lighting = lighting_of(settings);
     let cpu = reference::render(camera, tiles, &lighting);
     let departure = reference::compare(&gpu.colour, &gpu.view_z_m, &cpu);
@@ -184,19 +197,20 @@ fn demo_scene() -> (TileGrid, Vec<TileData>, Camera, Option<DVec3>) {
 
 #[test]
 fn gpu_matches_the_reference_on_real_tiles() {
-    let (grid, tiles, camera, sun) = demo_scene();
-    let both = render_both(&tiles, &camera, &settings(Traversal::Exact, sun));
-    assert!(both.cpu.view_z_m.iter().filter(|&&z| z > 0.0).count() > 5000, "the view shows the tiles");
-    assert_close("demo", &both.departure);
-
+    let (grid, demo_tiles, demo_camera, sun) = demo_scene();
     let rmnp = RegionSource::new(Arc::new(common::region("examples/rmnp.toml")));
     let first = grid.tile_containing(-105.62, 40.36, 10);
-    let tiles = block(&rmnp, first, 2, 32);
+    let rmnp_tiles = block(&rmnp, first, 2, 32);
     let s = grid.sector(first);
     let eye = Geodetic::new(s.min_lon + 0.01, s.min_lat - 0.01, 3600.0);
-    let camera = Camera::looking(eye, 40.0, -15.0, 60.0, (160, 120));
-    let both = render_both(&tiles, &camera, &settings(Traversal::Exact, sun));
-    assert_close("rmnp", &both.departure);
+    let rmnp_camera = Camera::looking(eye, 40.0, -15.0, 60.0, (160, 120));
+    for pass in PASSES {
+        let both = render_both_in(pass, &demo_tiles, &demo_camera, &settings(Traversal::Exact, sun));
+        assert!(both.cpu.view_z_m.iter().filter(|&&z| z > 0.0).count() > 5000, "the view shows the tiles");
+        assert_close(&format!("demo, {pass:?}"), &both.departure);
+        let both = render_both_in(pass, &rmnp_tiles, &rmnp_camera, &settings(Traversal::Exact, sun));
+        assert_close(&format!("rmnp, {pass:?}"), &both.departure);
+    }
 }
 
 #[test]
@@ -260,17 +274,17 @@ fn a_morphing_tile_draws_the_blended_surface_at_every_weight() {
     let lighting = lighting_of(&settings);
     let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
     let own = reference::render(&camera, &tiles, &lighting);
-    for weight in [0.0, 0.2, 0.4, 0.6, 0.8, 1.0] {
+    for (weight, pass) in [0.0, 0.2, 0.4, 0.6, 0.8, 1.0].into_iter().flat_map(|w| PASSES.map(|p| (w, p))) {
         let draws: Vec<Draw> = pairs
             .iter()
             .map(|tile| Draw { tile, shadow_steps: 10, splats: &[], morph_weight: weight as f32 })
             .collect();
-        let gpu = with_renderer(samples, halo, |r| r.render_draws(&camera, &draws, &settings, Readback::All))
+        let gpu = with_renderer_in(pass, samples, halo, |r| r.render_draws(&camera, &draws, &settings, Readback::All))
             .expect("fits the cache");
         let blended: Vec<TileData> =
             tiles.iter().zip(&parents).map(|(t, p)| morphs::blend(&grid, t, p, weight).expect("blend")).collect();
         let cpu = reference::render(&camera, &blended, &lighting);
-        assert_close_but_skims(&format!("morph weight {weight}"), &gpu, cpu);
+        assert_close_but_skims(&format!("morph weight {weight}, {pass:?}"), &gpu, cpu);
         let from_own = reference::compare(&gpu.colour, &gpu.view_z_m, &own);
         if weight < 1.0 {
             assert!(from_own.depth_rms_rel > 10.0 * MAX_DEPTH_RMS_REL, "the parent's surface shows: {from_own:?}");
@@ -356,12 +370,12 @@ fn the_exact_traversal_never_misses_in_stiff_cases() {
             Camera::looking(Geodetic::new(valley_lon, south + tile_deg * 0.2, 1060.0), 0.0, 2.0, 60.0, (160, 100)),
         ),
     ];
-    for (name, tiles, camera) in cases {
-        let both = render_both(tiles, &camera, &exact);
+    for ((name, tiles, camera), pass) in cases.iter().flat_map(|case| PASSES.map(|pass| (case, pass))) {
+        let both = render_both_in(pass, tiles, camera, &exact);
         let hits = both.cpu.view_z_m.iter().filter(|&&z| z > 0.0).count();
         assert!(hits > 1000, "{name}: the view shows the scene ({hits} pixels)");
-        assert_eq!(both.departure.misses, 0, "{name}: exact traversal missed: {:?}", both.departure);
-        assert_close(name, &both.departure);
+        assert_eq!(both.departure.misses, 0, "{name}, {pass:?}: exact traversal missed: {:?}", both.departure);
+        assert_close(&format!("{name}, {pass:?}"), &both.departure);
     }
 }
 
@@ -482,8 +496,15 @@ fn selected(grid: &TileGrid, bounds: sylva::grid::BBox, camera: &Camera) -> Vec<
 /// pixels are counted, not compared, and beside them depths may differ by
 /// up to 1 % (RMS 1e-3).
 fn assert_whole_view(name: &str, tiles: &[TileData], camera: &Camera) -> usize {
+    let cracks = PASSES.map(|pass| assert_whole_view_in(pass, &format!("{name}, {pass:?}"), tiles, camera));
+    assert_eq!(cracks[0], cracks[1], "{name}: the same cracks filled in both passes");
+    cracks[0]
+}
+
+fn assert_whole_view_in(pass: RayPass, name: &str, tiles: &[TileData], camera: &Camera) -> usize {
     let levels: std::collections::BTreeSet<u32> = tiles.iter().map(|t| t.id().level).collect();
-    let both = render_both(tiles, camera, &settings(Traversal::Exact, Some(sun_at(0.0, 60.0, 200.0, 30.0))));
+    let sun = Some(sun_at(0.0, 60.0, 200.0, 30.0));
+    let both = render_both_in(pass, tiles, camera, &settings(Traversal::Exact, sun));
     let holes = both.gpu.view_z_m.iter().filter(|&&z| z <= 0.0).count();
     let d = both.departure;
     eprintln!(
@@ -551,18 +572,12 @@ fn four_tiles_show_no_crack_and_shadows_cross_their_borders() {
     let eye = Geodetic::new(border, s.max_lat, 1700.0);
     let camera = Camera::looking(eye, 0.0, -90.0, 45.0, (160, 160));
     let sun = Some(sun_at(border, s.max_lat, 270.0, 15.0));
-    let both = render_both(&tiles, &camera, &settings(Traversal::Exact, sun));
-    assert_close("four tiles", &both.departure);
-    assert!(both.gpu.view_z_m.iter().all(|&z| z > 0.0), "no crack between the four tiles");
-    // Each pixel names the tile whose rays it shows (by its place among the
-    // draws): in each quadrant around the corner, the tile there.
-    let d = 0.2 * (s.max_lon - s.min_lon);
-    for (dlon, dlat) in [(-d, -d), (d, -d), (-d, d), (d, d)] {
-        let p = pixel_of(&camera, Geodetic::new(border + dlon, s.max_lat + dlat, 1000.0)).floor();
-        let k = both.gpu.draws[p.y as usize * 160 + p.x as usize] as usize;
-        let shown = grid.sector(tiles[k.checked_sub(1).expect("a ray-cast pixel")].id());
-        assert!(shown.min_lon < border + dlon && border + dlon < shown.max_lon, "{dlon}: {shown:?}");
-        assert!(shown.min_lat < s.max_lat + dlat && s.max_lat + dlat < shown.max_lat, "{dlat}: {shown:?}");
+    for pass in PASSES {
+        let both = render_both_in(pass, &tiles, &camera, &settings(Traversal::Exact, sun));
+        assert_close(&format!("four tiles, {pass:?}"), &both.departure);
+        assert!(both.gpu.view_z_m.iter().all(|&z| z > 0.0), "{pass:?}: no crack between the four tiles");
+        assert_tiles_around(&grid, &tiles, &camera, &both.gpu.draws);
+        assert_no_step_at(&camera, &both.gpu.colour, Geodetic::new(border, s.max_lat, 1000.0));
     }
 
     // Where the tiles meet, each computes the same light from its own texels
@@ -581,10 +596,29 @@ fn four_tiles_show_no_crack_and_shadows_cross_their_borders() {
         assert!(a < 0.95, "the ridge shadows the border");
         assert!((a - b).abs() < 0.01, "both tiles light the shared sample alike");
     }
-    // And the image has no step at the border beyond its neighbours'.
-    let xb = pixel_of(&camera, Geodetic::new(border, s.max_lat, 1000.0)).x.floor() as usize;
+}
+
+/// Each pixel names the tile whose rays it shows (by its place among the
+/// draws): in each quadrant around the corner of the four tiles seen from
+/// above it, the tile there.
+fn assert_tiles_around(grid: &TileGrid, tiles: &[TileData], camera: &Camera, draws: &[u32]) {
+    let s = grid.sector(tiles[0].id());
+    let (border, d) = (s.max_lon, 0.2 * (s.max_lon - s.min_lon));
+    for (dlon, dlat) in [(-d, -d), (d, -d), (-d, d), (d, d)] {
+        let p = pixel_of(camera, Geodetic::new(border + dlon, s.max_lat + dlat, 1000.0)).floor();
+        let k = draws[p.y as usize * camera.width_px as usize + p.x as usize] as usize;
+        let shown = grid.sector(tiles[k.checked_sub(1).expect("a ray-cast pixel")].id());
+        assert!(shown.min_lon < border + dlon && border + dlon < shown.max_lon, "{dlon}: {shown:?}");
+        assert!(shown.min_lat < s.max_lat + dlat && s.max_lat + dlat < shown.max_lat, "{dlat}: {shown:?}");
+    }
+}
+
+/// The image has no step in luminance at the column of `border` beyond
+/// its neighbours' (rows 20, 80, 140 of a 160-pixel-wide image).
+fn assert_no_step_at(camera: &Camera, colour: &[[u8; 4]], border: Geodetic) {
+    let xb = pixel_of(camera, border).x.floor() as usize;
     for y in [20, 80, 140] {
-        let l: Vec<f64> = (0..160).map(|x| luminance(both.gpu.colour[y * 160 + x])).collect();
+        let l: Vec<f64> = (0..160).map(|x| luminance(colour[y * 160 + x])).collect();
         let step = |x: usize| (l[x + 1] - l[x]).abs();
         let at = step(xb - 1).max(step(xb));
         let around = [xb - 4, xb - 3, xb - 2, xb + 1, xb + 2, xb + 3].map(step).into_iter().fold(0.0, f64::max);
@@ -632,29 +666,34 @@ fn trees_stand_in_front_of_the_ground_where_they_replace_the_canopy() {
     let camera = Camera::looking(eye, 45.0, -25.0, 60.0, (160, 120));
     let settings =
         FrameSettings { fade: tree_fade(&camera), ..settings(Traversal::Exact, Some(sun_at(lon0, lat0, 120.0, 30.0))) };
-    // Without splats the GPU's canopy, flattened under the trees, is the
-    // reference's.
-    let bare = render_both(&tiles, &camera, &settings);
-    assert_close("canopy blended out near the camera", &bare.departure);
-    let whole = render_both(&tiles, &camera, &FrameSettings { fade: Fade::NONE, ..settings });
-    let lowered = bare.gpu.view_z_m.iter().zip(&whole.gpu.view_z_m).filter(|(b, w)| **b > **w * 1.001).count();
-    assert!(lowered * 10 > bare.gpu.view_z_m.len(), "the canopy is lowered near the camera ({lowered} pixels)");
-
     let splats = tree_splats(&tiles, &camera);
     let drawn: usize = splats.iter().map(Vec::len).sum();
-    let (wooded, _) = render_trees(&tiles, &splats, &camera, &settings);
-    assert_eq!(wooded.stats.splats as usize, drawn);
     assert!(drawn > 1000, "{drawn} splats");
-    let (mut nearer, mut hit) = (0, 0);
-    for (with, without) in wooded.view_z_m.iter().zip(&bare.gpu.view_z_m) {
-        if *without > 0.0 {
-            hit += 1;
-            assert!(*with > 0.0 && *with <= without * (1.0 + 1e-5), "a tree behind the ground: {with} vs {without}");
-            nearer += usize::from(*with < without * 0.999);
+    for pass in PASSES {
+        // Without splats the GPU's canopy, flattened under the trees, is the
+        // reference's.
+        let bare = render_both_in(pass, &tiles, &camera, &settings);
+        assert_close(&format!("canopy blended out near the camera, {pass:?}"), &bare.departure);
+        let whole = render_both_in(pass, &tiles, &camera, &FrameSettings { fade: Fade::NONE, ..settings });
+        let lowered = bare.gpu.view_z_m.iter().zip(&whole.gpu.view_z_m).filter(|(b, w)| **b > **w * 1.001).count();
+        assert!(lowered * 10 > bare.gpu.view_z_m.len(), "the canopy is lowered near the camera ({lowered} pixels)");
+
+        let (wooded, _) = render_trees(pass, &tiles, &splats, &camera, &settings);
+        assert_eq!(wooded.stats.splats as usize, drawn);
+        let (mut nearer, mut hit) = (0, 0);
+        for (with, without) in wooded.view_z_m.iter().zip(&bare.gpu.view_z_m) {
+            if *without > 0.0 {
+                hit += 1;
+                assert!(
+                    *with > 0.0 && *with <= without * (1.0 + 1e-5),
+                    "a tree behind the ground: {with} vs {without}"
+                );
+                nearer += usize::from(*with < without * 0.999);
+            }
         }
+        eprintln!("trees, {pass:?}: {drawn} splats in front of {nearer} of {hit} pixels");
+        assert!(nearer * 20 > hit, "trees cover more than 5 % of the view ({nearer} of {hit})");
     }
-    eprintln!("trees: {drawn} splats in front of {nearer} of {hit} pixels");
-    assert!(nearer * 20 > hit, "trees cover more than 5 % of the view ({nearer} of {hit})");
 }
 
 /// The canopy fade of the default trees seen by `camera`.
@@ -673,9 +712,10 @@ fn tree_splats(tiles: &[TileData], camera: &Camera) -> Vec<Vec<Splat>> {
     splats
 }
 
-/// `tiles` with their `splats` on the GPU, 10 shadow steps each, and the
-/// light each splat received.
+/// `tiles` with their `splats` on the GPU, rays cast in `pass`, 10 shadow
+/// steps each, and the light each splat received.
 fn render_trees(
+    pass: RayPass,
     tiles: &[TileData],
     splats: &[Vec<Splat>],
     camera: &Camera,
@@ -687,7 +727,7 @@ fn render_trees(
         .map(|(tile, s)| Draw { tile, shadow_steps: 10, splats: s, morph_weight: 1.0 })
         .collect();
     let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
-    with_renderer(samples, halo, |r| {
+    with_renderer_in(pass, samples, halo, |r| {
         let rendered = r.render_draws(camera, &draws, settings, Readback::All).expect("fits");
         (rendered, r.splat_lights())
     })
@@ -709,7 +749,7 @@ fn each_splat_is_lit_once_by_the_ray_casters_shadow_rule() {
     let settings =
         FrameSettings { fade: tree_fade(&camera), ..settings(Traversal::Exact, Some(sun_at(lon0, lat0, 90.0, 10.0))) };
     let splats = tree_splats(&tiles, &camera);
-    let (_, gpu) = render_trees(&tiles, &splats, &camera, &settings);
+    let (_, gpu) = render_trees(RayPass::Fragment, &tiles, &splats, &camera, &settings);
     let lighting = lighting_of(&settings);
     let sun = lighting.sun_ecef.expect("sun");
     let cpu: Vec<f64> = tiles

@@ -26,6 +26,10 @@ pub struct Gpu {
     pub info: wgpu::AdapterInfo,
     /// Whether render passes can write timestamps.
     pub timestamps: bool,
+    /// Whether fragment shaders may promise how they change depth
+    /// (`@early_depth_test`), so hidden fragments can be rejected before
+    /// they run.
+    pub early_depth: bool,
 }
 
 impl Gpu {
@@ -38,11 +42,10 @@ impl Gpu {
         };
         let adapter =
             pollster::block_on(instance.request_adapter(&options)).map_err(|e| GpuError::NoAdapter(e.to_string()))?;
-        let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let mut required_features = wgpu::Features::empty();
-        if timestamps {
-            required_features |= wgpu::Features::TIMESTAMP_QUERY;
-        }
+        let wanted = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::SHADER_EARLY_DEPTH_TEST;
+        let required_features = adapter.features() & wanted;
+        let timestamps = required_features.contains(wgpu::Features::TIMESTAMP_QUERY);
+        let early_depth = required_features.contains(wgpu::Features::SHADER_EARLY_DEPTH_TEST);
         let desc = wgpu::DeviceDescriptor {
             label: Some("sylva"),
             required_features,
@@ -51,7 +54,7 @@ impl Gpu {
         };
         let (device, queue) =
             pollster::block_on(adapter.request_device(&desc)).map_err(|e| GpuError::Device(e.to_string()))?;
-        Ok(Gpu { device, queue, info: adapter.get_info(), timestamps })
+        Ok(Gpu { device, queue, info: adapter.get_info(), timestamps, early_depth })
     }
 
     /// A one-line description: name, backend, driver.

@@ -6,12 +6,14 @@
 //! textures and read back.
 //!
 //! - `gpu`: the adapter and device; `cache`: tile texture slots within a
-//!   memory budget; `pipeline`: the pipelines; `splats`: the splat
+//!   memory budget; `pipeline`: the pipelines; `compute`: ray casting in
+//!   compute passes instead of hull fragments ([`RayPass`]); `splats`: the splat
 //!   instances and their lights; `uniforms`: the uniform blocks; `targets`:
 //!   render targets and readback; `timer`: GPU pass time; `shaders`: the
 //!   WGSL table.
 
 pub mod cache;
+pub mod compute;
 pub mod gpu;
 pub mod pipeline;
 pub mod shaders;
@@ -25,6 +27,8 @@ use super::raycast::{self, SKY, Traversal};
 use super::tile::TileData;
 use super::trees::Splat;
 use cache::{CacheFull, TileCache};
+use compute::ComputeFrame;
+pub use compute::RayPass;
 use gpu::Gpu;
 use pipeline::{Pipelines, RayVariant};
 use splats::SplatBuffers;
@@ -101,6 +105,8 @@ struct Prepared {
     mode: DrawMode,
     variant: RayVariant,
     splats: std::ops::Range<u32>,
+    /// Pixels its box covers (the compute ray passes' invocations).
+    screen: [u32; 4],
 }
 
 /// The renderer and its GPU resources.
@@ -116,6 +122,11 @@ pub struct Renderer {
     /// The last frame's splat ranges in the instance buffer, by draw.
     splat_ranges: Vec<std::ops::Range<u32>>,
     targets: Option<Targets>,
+    /// Where rays are cast; for a compute pass, the tiles' buffer as an
+    /// array and the last frame's bindings.
+    ray_pass: RayPass,
+    tiles_group: wgpu::BindGroup,
+    compute_frame: Option<ComputeFrame>,
     timer: Option<PassTimer>,
     frame_no: u64,
 }
@@ -133,12 +144,18 @@ impl Renderer {
         self
     }
 
+    /// Rays cast in `pass` (set before the first frame).
+    pub fn with_ray_pass(mut self, pass: RayPass) -> Renderer {
+        self.ray_pass = pass;
+        self
+    }
+
     /// A renderer for tiles of `samples` per side with `halo`, keeping at
     /// most `budget_bytes` of tiles on the GPU, and, if `geomorph`, room for
     /// morphing tiles' coarser surfaces within that budget.
     pub fn new(gpu: Gpu, samples: u32, halo: u32, budget_bytes: usize, geomorph: bool) -> Renderer {
         let device = &gpu.device;
-        let pipelines = Pipelines::new(device);
+        let pipelines = Pipelines::new(device, gpu.early_depth);
         let cache = TileCache::new(device, samples, halo, budget_bytes, geomorph);
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),
@@ -149,6 +166,7 @@ impl Renderer {
         let frame_group = pipelines.frame_group(device, &frame_buffer, &cache);
         let tile_buffer = tile_buffer(device, cache.capacity());
         let tile_group = pipelines.tile_group(device, &tile_buffer);
+        let tiles_group = pipelines.compute().tiles_group(device, &tile_buffer);
         let timer = PassTimer::new(device, &gpu.queue, gpu.timestamps);
         Renderer {
             gpu,
@@ -161,6 +179,9 @@ impl Renderer {
             splats: None,
             splat_ranges: Vec::new(),
             targets: None,
+            ray_pass: RayPass::default(),
+            tiles_group,
+            compute_frame: None,
             timer,
             frame_no: 0,
         }
@@ -209,6 +230,9 @@ impl Renderer {
         let camera = &depth_camera(camera, draws);
         let mut stats = FrameStats::default();
         let draws = self.prepare(camera, draws, settings, &mut stats)?;
+        if self.ray_pass == RayPass::Compute {
+            self.prepare_compute(camera, &draws);
+        }
         self.encode_and_submit(&draws);
         stats.gpu_ms = self.timer.as_ref().and_then(|t| t.read_ms(&self.gpu.device));
         stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -259,10 +283,10 @@ impl Renderer {
             bytes.resize(TILE_STRIDE as usize, 0);
             blocks.extend(bytes);
             let variant = RayVariant { inside: mode == DrawMode::Inside, morphing: morph.is_some(), whole, linear };
-            if mode != DrawMode::Plain {
+            if mode != DrawMode::Plain && self.ray_pass == RayPass::Fragment {
                 self.pipelines.prepare_ray(device, variant);
             }
-            draws.push(Prepared { slot, mode, variant, splats: tile_splats });
+            draws.push(Prepared { slot, mode, variant, splats: tile_splats, screen: block.screen });
         }
         let frame = FrameUniform::new(camera, settings, &self.cache.mip_rects);
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
@@ -270,6 +294,26 @@ impl Renderer {
         stats.splats = splats.len() as u32;
         SplatBuffers::upload(&mut self.splats, (device, queue), &self.pipelines, &splats);
         Ok(draws)
+    }
+
+    /// The compute pass's pipeline for the frame's tiles (one pipeline for
+    /// all: morphing if any tile morphs, the whole canopy if every tile
+    /// has it) and the bins of its ray-cast tiles, nearest first.
+    fn prepare_compute(&mut self, camera: &Camera, draws: &[Prepared]) {
+        let rays: Vec<&Prepared> = draws.iter().filter(|d| d.mode != DrawMode::Plain).collect();
+        let Some(targets) = &self.targets else { return };
+        let variant = frame_variant(&rays);
+        self.pipelines.compute_mut().prepare(&self.gpu.device, variant);
+        let order: Vec<(u32, [u32; 4])> = draws
+            .iter()
+            .enumerate()
+            .filter(|(_, d)| d.mode != DrawMode::Plain)
+            .map(|(k, d)| (k as u32, d.screen))
+            .collect();
+        let bins = compute::bins((camera.width_px, camera.height_px), &order);
+        let old = self.compute_frame.take();
+        let gpu = (&self.gpu.device, &self.gpu.queue);
+        self.compute_frame = Some(self.pipelines.compute().upload(gpu, targets, old, &bins));
     }
 
     fn encode_and_submit(&self, draws: &[Prepared]) {
@@ -286,32 +330,43 @@ impl Renderer {
             let groups = (&self.pipelines, &self.frame_group, &self.tile_group);
             splats.light(&mut pass, groups, draws.iter().map(|d| &d.splats).enumerate());
         }
+        let sky = wgpu::Color { r: SKY[0], g: SKY[1], b: SKY[2], a: 1.0 };
+        let computed = self.compute_frame.as_ref().filter(|_| self.ray_pass == RayPass::Compute);
+        if let Some(frame) = computed {
+            let rays: Vec<&Prepared> = draws.iter().filter(|d| d.mode != DrawMode::Plain).collect();
+            let timer = self.timer.as_ref().filter(|_| splats.is_none());
+            let groups = (&self.frame_group, &self.tiles_group);
+            self.pipelines.compute().encode(&mut encoder, (targets, frame), groups, frame_variant(&rays), timer);
+        }
         {
-            let sky = wgpu::Color { r: SKY[0], g: SKY[1], b: SKY[2], a: 1.0 };
+            // After the compute ray pass the targets hold its rays.
+            let load = |clear| if computed.is_some() { wgpu::LoadOp::Load } else { wgpu::LoadOp::Clear(clear) };
             let attach = |v, clear| {
                 Some(wgpu::RenderPassColorAttachment {
                     view: v,
                     depth_slice: None,
                     resolve_target: None,
-                    ops: wgpu::Operations { load: wgpu::LoadOp::Clear(clear), store: wgpu::StoreOp::Store },
+                    ops: wgpu::Operations { load: load(clear), store: wgpu::StoreOp::Store },
                 })
             };
+            let depth_load = if computed.is_some() { wgpu::LoadOp::Load } else { wgpu::LoadOp::Clear(0.0) };
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("tiles"),
                 color_attachments: &[attach(&colour, sky), attach(&pixel_data, wgpu::Color::TRANSPARENT)],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &depth,
-                    depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
+                    depth_ops: Some(wgpu::Operations { load: depth_load, store: wgpu::StoreOp::Store }),
                     stencil_ops: None,
                 }),
-                timestamp_writes: self.timer.as_ref().map(|t| t.render(splats.is_none())),
+                timestamp_writes: self.timer.as_ref().map(|t| t.render(splats.is_none() && computed.is_none())),
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
             pass.set_bind_group(0, &self.frame_group, &[]);
             // Ray-cast tiles first, then the terrain meshes: far tiles, and
             // under ray-cast tiles the lowered crack fillers.
-            for (k, d) in draws.iter().enumerate().filter(|(_, d)| d.mode != DrawMode::Plain) {
+            let hulls = draws.iter().enumerate().filter(|(_, d)| d.mode != DrawMode::Plain && computed.is_none());
+            for (k, d) in hulls {
                 let (Some((hull, _)), Some(rays)) = (self.cache.meshes(d.slot), self.pipelines.ray(d.variant)) else {
                     continue;
                 };
@@ -380,6 +435,16 @@ fn depth_camera(camera: &Camera, draws: &[Draw]) -> Camera {
     Camera { near_m, ..*camera }
 }
 
+/// The one variant a compute pass casts all of `rays` with.
+fn frame_variant(rays: &[&Prepared]) -> RayVariant {
+    RayVariant {
+        inside: false,
+        morphing: rays.iter().any(|d| d.variant.morphing),
+        whole: rays.iter().all(|d| d.variant.whole),
+        linear: rays.first().is_some_and(|d| d.variant.linear),
+    }
+}
+
 fn draw(pass: &mut wgpu::RenderPass<'_>, mesh: &cache::Mesh, indices: u32) {
     pass.set_vertex_buffer(0, mesh.vertices.slice(..));
     pass.set_index_buffer(mesh.indices.slice(..), wgpu::IndexFormat::Uint32);
@@ -402,7 +467,7 @@ fn tile_buffer(device: &wgpu::Device, slots: u32) -> wgpu::Buffer {
     device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("tiles"),
         size: TILE_STRIDE * slots.max(1) as u64,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     })
 }

@@ -5,12 +5,14 @@
 //! compute pipeline that casts each splat's shadow ray once. All render
 //! pipelines write colour, per-pixel fetch counts, the view-axis distance
 //! and reversed-Z depth (greater is nearer). The ray-casting pipelines are
-//! specialised per [`RayVariant`] and built when a frame first needs one.
+//! specialised per [`RayVariant`] and built when a frame first needs one;
+//! `compute` holds those that cast rays in a compute pass instead.
 
 use super::super::hull::HullVertex;
 use super::super::terrain::TerrainVertex;
 use super::super::trees::Splat;
 use super::cache::TileCache;
+use super::compute::ComputeRays;
 use super::shaders;
 use super::uniforms::{FrameUniform, TILE_STRIDE, TileUniform};
 use std::collections::HashMap;
@@ -47,6 +49,14 @@ pub struct RayVariant {
     pub linear: bool,
 }
 
+impl RayVariant {
+    /// The shaders' override constants of this variant.
+    pub fn constants(&self) -> [(&'static str, f64); 3] {
+        let flag = |on: bool| f64::from(u8::from(on));
+        [("MORPHING", flag(self.morphing)), ("CANOPY_WHOLE", flag(self.whole)), ("LINEAR", flag(self.linear))]
+    }
+}
+
 /// The pipelines and bind group layouts.
 pub struct Pipelines {
     /// Ray casting from the hull, per variant (built when first needed).
@@ -64,16 +74,23 @@ pub struct Pipelines {
     pub frame_layout: wgpu::BindGroupLayout,
     /// Group 1: the tile uniform at a dynamic offset.
     pub tile_layout: wgpu::BindGroupLayout,
+    /// Ray casting in a compute pass instead.
+    compute: ComputeRays,
     module: wgpu::ShaderModule,
     layout: wgpu::PipelineLayout,
+    /// Hull fragments promise their depth (`fs_ray_hull`), so hidden ones
+    /// can be rejected before their rays are cast.
+    early_depth: bool,
 }
 
 impl Pipelines {
-    /// Compiles the shaders and builds the pipelines.
-    pub fn new(device: &wgpu::Device) -> Pipelines {
+    /// Compiles the shaders and builds the pipelines; hull fragments
+    /// promise their depth if `early_depth` (the device must have
+    /// `SHADER_EARLY_DEPTH_TEST`).
+    pub fn new(device: &wgpu::Device, early_depth: bool) -> Pipelines {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("raycast"),
-            source: wgpu::ShaderSource::Wgsl(shaders::raycast_source().into()),
+            source: wgpu::ShaderSource::Wgsl(shaders::raycast_source(early_depth).into()),
         });
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame"),
@@ -121,20 +138,24 @@ impl Pipelines {
         let plain = ("vs_plain", &[terrain_vertex][..]);
         let splat = ("vs_splat", &splat_instance[..]);
         let splat_layout = splat_layout(device);
+        let compute = ComputeRays::new(device, &frame_layout);
         Pipelines {
             plain: pipeline(device, (&layout, &module), plain, "fs_plain", (triangles(wgpu::Face::Back), &[])),
             splat: pipeline(device, (&layout, &module), splat, "fs_splat", (quads, &[])),
             splat_light: splat_light(device, &module, [&frame_layout, &tile_layout, &splat_layout]),
             splat_layout,
             rays: HashMap::new(),
+            compute,
             frame_layout,
             tile_layout,
             module,
             layout,
+            early_depth,
         }
     }
 
-    /// Builds the ray-casting pipeline of `variant` if it is not built yet.
+    /// Builds the hull fragments' ray-casting pipeline of `variant` if it is
+    /// not built yet.
     pub fn prepare_ray(&mut self, device: &wgpu::Device, variant: RayVariant) {
         if self.rays.contains_key(&variant) {
             return;
@@ -146,20 +167,28 @@ impl Pipelines {
         };
         // Back faces when the camera is inside the hull.
         let cull = if variant.inside { wgpu::Face::Front } else { wgpu::Face::Back };
-        let flag = |on: bool| f64::from(u8::from(on));
-        let constants = [
-            ("MORPHING", flag(variant.morphing)),
-            ("CANOPY_WHOLE", flag(variant.whole)),
-            ("LINEAR", flag(variant.linear)),
-        ];
+        let constants = variant.constants();
+        // From inside the hull, its back faces lie beyond the surface: no
+        // depth promise there.
+        let fragment = if self.early_depth && !variant.inside { "fs_ray_hull" } else { "fs_ray" };
         let built = pipeline(
             device,
             (&self.layout, &self.module),
             ("vs_hull", &[vertex][..]),
-            "fs_ray",
+            fragment,
             (triangles(cull), &constants),
         );
         self.rays.insert(variant, built);
+    }
+
+    /// Ray casting in a compute pass.
+    pub fn compute(&self) -> &ComputeRays {
+        &self.compute
+    }
+
+    /// Ray casting in a compute pass, to prepare a variant.
+    pub fn compute_mut(&mut self) -> &mut ComputeRays {
+        &mut self.compute
     }
 
     /// The ray-casting pipeline of `variant`, once prepared.

@@ -1,38 +1,75 @@
-//! The table of WGSL sources under `shaders/`. WGSL has no includes, so the
-//! ray-casting module is their concatenation in this order: shared
-//! declarations first, entry points last.
+//! The table of WGSL sources under `shaders/`. WGSL has no includes, so a
+//! module is a concatenation of them: the shared declarations and the ray
+//! casting's functions, then the parts of one way of drawing. The fragment
+//! module (hull fragments, plain meshes, splats) reads its tile from a
+//! uniform at a dynamic offset, and holds the entry point that needs
+//! `SHADER_EARLY_DEPTH_TEST` only where the device has it; the compute
+//! module casts rays in a compute pass and reads its tiles from an array.
 
-/// `(file name, source)` in module order.
-pub const RAYCAST_PARTS: [(&str, &str); 6] = [
+/// `(file name, source)` of the parts both modules share, in order.
+pub const SHARED_PARTS: [(&str, &str); 5] = [
     ("common.wgsl", include_str!("../../../shaders/common.wgsl")),
     ("surface.wgsl", include_str!("../../../shaders/surface.wgsl")),
     ("traverse.wgsl", include_str!("../../../shaders/traverse.wgsl")),
     ("shade.wgsl", include_str!("../../../shaders/shade.wgsl")),
     ("raycast.wgsl", include_str!("../../../shaders/raycast.wgsl")),
+];
+
+/// The fragment module's own parts.
+pub const FRAGMENT_PARTS: [(&str, &str); 2] = [
+    ("tile_uniform.wgsl", include_str!("../../../shaders/tile_uniform.wgsl")),
     ("splat.wgsl", include_str!("../../../shaders/splat.wgsl")),
 ];
 
-/// The ray-casting module's source.
-pub fn raycast_source() -> String {
-    RAYCAST_PARTS.iter().map(|(_, s)| *s).collect::<Vec<_>>().join("\n")
+/// The hull's ray casting with a conservative depth promise.
+pub const EARLY_DEPTH_PART: (&str, &str) = ("early_depth.wgsl", include_str!("../../../shaders/early_depth.wgsl"));
+
+/// The compute module's own part.
+pub const COMPUTE_PART: (&str, &str) = ("compute.wgsl", include_str!("../../../shaders/compute.wgsl"));
+
+/// The fragment module's source, with [`EARLY_DEPTH_PART`] if
+/// `early_depth`.
+pub fn raycast_source(early_depth: bool) -> String {
+    let extra = early_depth.then_some(&EARLY_DEPTH_PART);
+    join(SHARED_PARTS.iter().chain(&FRAGMENT_PARTS).chain(extra))
+}
+
+/// The compute module's source.
+pub fn compute_source() -> String {
+    join(SHARED_PARTS.iter().chain([&COMPUTE_PART]))
+}
+
+fn join<'a>(parts: impl Iterator<Item = &'a (&'a str, &'a str)>) -> String {
+    parts.map(|(_, s)| *s).collect::<Vec<_>>().join("\n")
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// Every shader parses and validates with naga, no GPU needed.
-    #[test]
-    fn shaders_validate() {
-        let source = raycast_source();
-        let module = match naga::front::wgsl::parse_str(&source) {
+    fn validated(source: &str) -> naga::Module {
+        let module = match naga::front::wgsl::parse_str(source) {
             Ok(m) => m,
-            Err(e) => panic!("{}", e.emit_to_string(&source)),
+            Err(e) => panic!("{}", e.emit_to_string(source)),
         };
         let mut validator =
             naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all());
         if let Err(e) = validator.validate(&module) {
-            panic!("{}", e.emit_to_string(&source));
+            panic!("{}", e.emit_to_string(source));
         }
+        module
+    }
+
+    /// Every module parses and validates with naga, no GPU needed: the
+    /// fragment module with and without the early-depth entry point, and
+    /// the compute module.
+    #[test]
+    fn shaders_validate() {
+        for early_depth in [false, true] {
+            let module = validated(&raycast_source(early_depth));
+            assert_eq!(module.entry_points.iter().any(|e| e.name == "fs_ray_hull"), early_depth);
+        }
+        let module = validated(&compute_source());
+        assert!(module.entry_points.iter().any(|e| e.name == "cs_rays"));
     }
 }

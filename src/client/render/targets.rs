@@ -21,7 +21,10 @@ pub struct Targets {
 impl Targets {
     /// Targets of `size`.
     pub fn new(device: &wgpu::Device, size: (u32, u32)) -> Targets {
-        let make = |label, format| {
+        // Colour and data are also written by the compute ray passes, and
+        // the data read by their depth fill.
+        let written = wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING;
+        let make = |label, format, extra| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
                 size: wgpu::Extent3d { width: size.0, height: size.1, depth_or_array_layers: 1 },
@@ -29,15 +32,15 @@ impl Targets {
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
                 format,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC | extra,
                 view_formats: &[],
             })
         };
         Targets {
             size,
-            colour: make("colour", COLOUR_FORMAT),
-            pixel_data: make("pixel data", PIXEL_DATA_FORMAT),
-            depth: make("depth", DEPTH_FORMAT),
+            colour: make("colour", COLOUR_FORMAT, written),
+            pixel_data: make("pixel data", PIXEL_DATA_FORMAT, written),
+            depth: make("depth", DEPTH_FORMAT, wgpu::TextureUsages::empty()),
         }
     }
 }

@@ -40,7 +40,7 @@ impl PassTimer {
     }
 
     /// The first timestamp at the start of a compute pass that precedes
-    /// the render pass.
+    /// the render pass (the splats' light, or the rays').
     pub fn compute_start(&self) -> wgpu::ComputePassTimestampWrites<'_> {
         wgpu::ComputePassTimestampWrites {
             query_set: &self.queries,

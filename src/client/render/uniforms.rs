@@ -63,7 +63,9 @@ pub struct TileUniform {
     /// First of the tile's splats in the frame's instance buffer, their
     /// count, unused × 2.
     pub splats: [u32; 4],
-    _pad: [f32; 12],
+    /// Pixels its box covers on screen: x0, y0, x1, y1 (x1, y1 excluded).
+    pub screen: [u32; 4],
+    _pad: [f32; 8],
 }
 
 /// Where and how a tile is drawn.
@@ -176,7 +178,8 @@ impl TileUniform {
             texels: [tile.range.texels_max_m, 0.0, 0.0, 0.0],
             morph: [morph.map_or(1.0, |(_, weight)| weight), 0.0, 0.0, 0.0],
             splats: [splats.start, splats.len() as u32, 0, 0],
-            _pad: [0.0; 12],
+            screen: screen_rect(camera, tile),
+            _pad: [0.0; 8],
         }
     }
 }
@@ -190,6 +193,26 @@ fn filler_drop_m(tile: &TileData) -> f32 {
     (tile.range.mesh_error_m as f64
         + 3.0 * tile.frame.flat_error_m(heights)
         + 0.01 * tile.frame.spacing_m.min_element()) as f32
+}
+
+/// The pixels the tile's box covers on screen, `[x0, y0, x1, y1]` with
+/// `x1, y1` excluded: the bounding rectangle of its corners' projections,
+/// or the whole screen when a corner is not in front of the near plane.
+pub fn screen_rect(camera: &Camera, tile: &TileData) -> [u32; 4] {
+    let (w, h) = (camera.width_px, camera.height_px);
+    let to_camera = camera.rotation.transpose();
+    let f = camera.focal_px();
+    let (mut lo, mut hi) = (glam::DVec2::splat(f64::INFINITY), glam::DVec2::splat(f64::NEG_INFINITY));
+    for corner in corners(tile) {
+        let v = to_camera * (tile.frame.to_ecef(corner) - camera.position_ecef);
+        if -v.z <= camera.near_m {
+            return [0, 0, w, h];
+        }
+        let px = glam::DVec2::new(0.5 * w as f64 + f * v.x / -v.z, 0.5 * h as f64 - f * v.y / -v.z);
+        (lo, hi) = (lo.min(px), hi.max(px));
+    }
+    let clamp = |x: f64, max: u32| x.clamp(0.0, max as f64) as u32;
+    [clamp(lo.x.floor(), w), clamp(lo.y.floor(), h), clamp(hi.x.ceil() + 1.0, w), clamp(hi.y.ceil() + 1.0, h)]
 }
 
 /// Whether every sample of the tile is close enough for the whole canopy
@@ -238,7 +261,11 @@ mod tests {
 
     /// Member offsets of a WGSL struct, by name, from naga's layout.
     fn wgsl_offsets(name: &str) -> (Vec<(String, u32)>, u32) {
-        let module = naga::front::wgsl::parse_str(&super::super::shaders::raycast_source()).expect("WGSL parses");
+        wgsl_offsets_in(&super::super::shaders::raycast_source(false), name)
+    }
+
+    fn wgsl_offsets_in(source: &str, name: &str) -> (Vec<(String, u32)>, u32) {
+        let module = naga::front::wgsl::parse_str(source).expect("WGSL parses");
         let mut layouter = naga::proc::Layouter::default();
         layouter.update(module.to_ctx()).expect("layout");
         let (handle, ty) = module.types.iter().find(|(_, t)| t.name.as_deref() == Some(name)).expect("struct");
@@ -270,6 +297,7 @@ mod tests {
             ("texels", offset_of!(TileUniform, texels)),
             ("morph", offset_of!(TileUniform, morph)),
             ("splats", offset_of!(TileUniform, splats)),
+            ("screen", offset_of!(TileUniform, screen)),
         ];
         for (name, rust) in [("Frame", &frame[..]), ("Tile", &tile[..])] {
             let (wgsl, size) = wgsl_offsets(name);
@@ -279,5 +307,8 @@ mod tests {
             assert_eq!(size as usize, rust_size, "{name}: size");
         }
         assert_eq!(size_of::<TileUniform>() as u64, TILE_STRIDE);
+        // The compute pass reads the same buffer as an array of blocks.
+        let (_, slot) = wgsl_offsets_in(&super::super::shaders::compute_source(), "TileSlot");
+        assert_eq!(u64::from(slot), TILE_STRIDE);
     }
 }
