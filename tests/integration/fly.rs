@@ -178,3 +178,25 @@ fn a_calibrated_cost_model_starts_the_next_flight() {
     let (before, after) = (error(&first), error(&second));
     assert!(after < before.max(2f64.ln()), "prediction error of frame 1: {before:.2} → {after:.2} (|ln ratio|)");
 }
+
+#[test]
+fn a_flight_with_rays_in_a_compute_pass_keeps_its_tiles_within_the_gpu_budget() {
+    let dir = TempDir::new("fly-compute");
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    // 69 MiB: ten slots of a demo tile's textures (7,194,168 bytes), nine
+    // with its meshes (106,792 bytes more): meshes count.
+    let budget_mib = 69.0;
+    let args = ["--path", path.to_str().unwrap(), "--frames", "8", "--size", "96x64", "--ray-pass", "compute"];
+    // The budget's selection keeps to the slots.
+    let more = ["--gpu-budget-mib", "69", "--no-frames", "--lod", "budget", "--budget-ms", "1000"];
+    let summary = fly(&[&args[..], &more[..]].concat(), &dir.join("out"));
+    assert!(summary.contains("8 frames"), "{summary}");
+    let rows = stats(&dir.join("out"));
+    let full = rows.iter().filter(|r| r["gpu_bytes"].parse::<f64>().is_ok_and(|b| b > 8.0 * 7_194_168.0)).count();
+    assert!(full > 0, "the cache fills");
+    for row in rows {
+        let number = |c: &str| row[c].parse::<f64>().unwrap_or_else(|_| panic!("{c} = {:?}", row[c]));
+        assert!(number("ray_pixels") > 100.0, "{row:?}");
+        assert!(number("gpu_bytes") > 0.0 && number("gpu_bytes") <= budget_mib * 1024.0 * 1024.0, "{row:?}");
+    }
+}

@@ -43,7 +43,8 @@ const PASSES: [RayPass; 2] = [RayPass::Fragment, RayPass::Compute];
 /// One renderer per tile shape and ray pass, shared by the tests (lavapipe
 /// compiles the pipelines once; frames render one at a time).
 fn with_renderer_in<R>(pass: RayPass, samples: u32, halo: u32, f: impl FnOnce(&mut Renderer) -> R) -> R {
-    static RENDERERS: OnceLock<Mutex<HashMap<(u32, u32, RayPass), Renderer>>> = OnceLock::new();
+    type Shared = Mutex<HashMap<(u32, u32, RayPass), Renderer>>;
+    static RENDERERS: OnceLock<Shared> = OnceLock::new();
     let mut map = RENDERERS.get_or_init(|| Mutex::new(HashMap::new())).lock().unwrap_or_else(|e| e.into_inner());
     let renderer = map.entry((samples, halo, pass)).or_insert_with(|| {
         let gpu = Gpu::open().expect("a GPU adapter (lavapipe: apt-get install mesa-vulkan-drivers)");

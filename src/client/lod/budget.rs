@@ -41,7 +41,8 @@
 //! Invariant: the cut is feasible as [`optimize`] answers it (steps are
 //! rounded down, part-full groups trimmed until it fits), and draws at
 //! most `max_tiles` tiles (the GPU cache's slots): a larger cut is chosen
-//! again under a smaller budget.
+//! again under a smaller budget, and where even the coarsest cut is larger,
+//! its most beneficial tiles are drawn.
 
 use super::candidates::Candidate;
 use crate::client::trees::TreeBudgets;
@@ -235,6 +236,10 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
                 hi = mid;
             }
         }
+        // Even the coarsest cut may need more slots (a wide view of many
+        // root tiles): its most beneficial tiles are drawn.
+        drawn.sort_by(|a, b| candidates[*b as usize].benefit.total_cmp(&candidates[*a as usize].benefit));
+        drawn.truncate(max_tiles);
     }
     let tiles: Vec<Choice> = drawn
         .iter()
@@ -506,6 +511,13 @@ mod tests {
         let few = choose(&c, &[], &MODEL, &Budget { max_tiles: 8, ..budget(1e4, true) });
         assert!(few.tiles.len() <= 8 && !few.tiles.is_empty(), "{}", few.tiles.len());
         assert_eq!((few.bound(), dark.bound()), ("slots", "full"));
+        // Fewer slots than the coarsest cut's tiles: the best of them.
+        let coarsest = choose(&c, &[], &MODEL, &budget(0.0, true)).tiles.len();
+        assert!(coarsest > 1, "{coarsest} tiles in the coarsest cut");
+        let one = choose(&c, &[], &MODEL, &Budget { max_tiles: 1, ..budget(1e4, true) });
+        let best = c.iter().filter(|t| t.parent.is_none()).map(|t| t.benefit).fold(f64::MIN, f64::max);
+        assert_eq!(one.tiles.len(), 1);
+        assert_eq!(c.iter().find(|t| t.id == one.tiles[0].id).map(|t| t.benefit), Some(best));
     }
 
     #[test]

@@ -9,7 +9,7 @@
 //! Invariant: bytes resident ≤ the budget (slots and layers are allocated
 //! up front).
 
-use super::super::hull::HullVertex;
+use super::super::hull::{self, HullVertex, QUAD_SAMPLES};
 use super::super::terrain::TerrainVertex;
 use super::super::tile::TileData;
 use wgpu::util::DeviceExt;
@@ -57,6 +57,24 @@ impl Mesh {
     }
 }
 
+/// Bytes of a tile's two meshes with `samples` per side at most: the hull
+/// over the cast range's `samples + 1` cells (quads of [`QUAD_SAMPLES`]; a
+/// coarser hull is smaller) and the terrain over its `samples - 1`, each a
+/// top grid with a ring of skirt vertices. Slots are counted with them, so
+/// that what is resident stays within the budget.
+fn mesh_bytes(samples: u32) -> usize {
+    let mesh = |cells: usize, vertex_bytes: usize, closed: bool| {
+        let k = cells.div_ceil(QUAD_SAMPLES).max(1);
+        let ring = hull::ring(k);
+        let top = (k + 1) * (k + 1);
+        let indices = hull::indices(k, &ring, top as u32, closed).len();
+        ((top + ring.len()) * vertex_bytes).next_multiple_of(4) + indices * 4
+    };
+    let n = samples as usize;
+    mesh(n + 1, std::mem::size_of::<HullVertex>(), true)
+        + mesh(n.saturating_sub(1), std::mem::size_of::<TerrainVertex>(), false)
+}
+
 /// The cache is smaller than one frame's tiles.
 #[derive(Debug, thiserror::Error)]
 #[error("the GPU tile cache has {slots} slots and this frame needs more")]
@@ -96,7 +114,7 @@ impl TileCache {
         let atlas_h = mip_rects.iter().map(|r| r[1] + r[3]).max().unwrap_or(1);
         let slot_bytes = (size * size * (16 + 4) + atlas_w * atlas_h * 4) as usize;
         let share = if geomorph { morph_bytes(size) / 2 } else { 0 };
-        let count = ((budget_bytes / (slot_bytes + share)) as u32)
+        let count = ((budget_bytes / (slot_bytes + mesh_bytes(samples) + share)) as u32)
             .clamp(1, MAX_SLOTS.min(device.limits().max_texture_array_layers));
         let layers = if geomorph { (count / 2).max(1) } else { 0 };
         let array = |label, (w, h, count), format| {
