@@ -60,6 +60,8 @@ pub struct ComputeRays {
 /// kept while the target size lasts and the bins fit.
 pub struct ComputeFrame {
     size: (u32, u32),
+    /// The pipeline variant of the frame's tiles.
+    variant: RayVariant,
     bins: wgpu::Buffer,
     rays: wgpu::BindGroup,
     fill: wgpu::BindGroup,
@@ -131,24 +133,26 @@ impl ComputeRays {
     }
 
     /// Uploads a frame's `bins` ([`bins`]) and binds them with `targets`,
-    /// reusing `old` where its size and room allow.
+    /// reusing `old` where its size and room allow; the frame is cast with
+    /// the pipeline of `variant` (prepared).
     pub fn upload(
         &self,
         (device, queue): (&wgpu::Device, &wgpu::Queue),
         targets: &Targets,
         old: Option<ComputeFrame>,
-        bins: &[u32],
+        (bins, variant): (&[u32], RayVariant),
     ) -> ComputeFrame {
         let bytes = std::mem::size_of_val(bins) as u64;
-        let frame = match old.filter(|o| o.size == targets.size && o.bins.size() >= bytes) {
+        let mut frame = match old.filter(|o| o.size == targets.size && o.bins.size() >= bytes) {
             Some(old) => old,
-            None => self.bind(device, targets, bytes.next_power_of_two()),
+            None => self.bind(device, targets, bytes.next_power_of_two(), variant),
         };
         queue.write_buffer(&frame.bins, 0, bytemuck::cast_slice(bins));
+        frame.variant = variant;
         frame
     }
 
-    fn bind(&self, device: &wgpu::Device, targets: &Targets, bytes: u64) -> ComputeFrame {
+    fn bind(&self, device: &wgpu::Device, targets: &Targets, bytes: u64, variant: RayVariant) -> ComputeFrame {
         let bins = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("ray bins"),
             size: bytes,
@@ -172,21 +176,20 @@ impl ComputeRays {
             layout: &self.fill_layout,
             entries: &[entry(3, wgpu::BindingResource::TextureView(&data))],
         });
-        ComputeFrame { size: targets.size, bins, rays, fill }
+        ComputeFrame { size: targets.size, variant, bins, rays, fill }
     }
 
-    /// Encodes the frame's rays with the pipeline of `variant` (prepared),
-    /// every pixel of the colour and data targets written, then the depth
-    /// fill. The rays' pass starts the timer if there is one.
+    /// Encodes the frame's rays, every pixel of the colour and data targets
+    /// written, then the depth fill. The rays' pass starts the timer if
+    /// there is one.
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         (targets, frame): (&Targets, &ComputeFrame),
         (frame_group, tiles_group): (&wgpu::BindGroup, &wgpu::BindGroup),
-        variant: RayVariant,
         timer: Option<&PassTimer>,
     ) {
-        if let Some(pipeline) = self.variants.get(&RayVariant { inside: false, ..variant }) {
+        if let Some(pipeline) = self.variants.get(&frame.variant) {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("rays"),
                 timestamp_writes: timer.map(PassTimer::compute_start),

@@ -7,7 +7,7 @@
 //!
 //! - `gpu`: the adapter and device; `cache`: tile texture slots within a
 //!   memory budget; `pipeline`: the pipelines; `compute`: ray casting in
-//!   compute passes instead of hull fragments ([`RayPass`]); `splats`: the splat
+//!   a compute pass instead of hull fragments ([`RayPass`]); `splats`: the splat
 //!   instances and their lights; `uniforms`: the uniform blocks; `targets`:
 //!   render targets and readback; `timer`: GPU pass time; `shaders`: the
 //!   WGSL table.
@@ -300,20 +300,21 @@ impl Renderer {
     /// all: morphing if any tile morphs, the whole canopy if every tile
     /// has it) and the bins of its ray-cast tiles, nearest first.
     fn prepare_compute(&mut self, camera: &Camera, draws: &[Prepared]) {
-        let rays: Vec<&Prepared> = draws.iter().filter(|d| d.mode != DrawMode::Plain).collect();
         let Some(targets) = &self.targets else { return };
-        let variant = frame_variant(&rays);
+        let rays: Vec<(usize, &Prepared)> =
+            draws.iter().enumerate().filter(|(_, d)| d.mode != DrawMode::Plain).collect();
+        let variant = RayVariant {
+            inside: false,
+            morphing: rays.iter().any(|(_, d)| d.variant.morphing),
+            whole: rays.iter().all(|(_, d)| d.variant.whole),
+            linear: rays.first().is_some_and(|(_, d)| d.variant.linear),
+        };
         self.pipelines.compute_mut().prepare(&self.gpu.device, variant);
-        let order: Vec<(u32, [u32; 4])> = draws
-            .iter()
-            .enumerate()
-            .filter(|(_, d)| d.mode != DrawMode::Plain)
-            .map(|(k, d)| (k as u32, d.screen))
-            .collect();
+        let order: Vec<(u32, [u32; 4])> = rays.iter().map(|(k, d)| (*k as u32, d.screen)).collect();
         let bins = compute::bins((camera.width_px, camera.height_px), &order);
         let old = self.compute_frame.take();
         let gpu = (&self.gpu.device, &self.gpu.queue);
-        self.compute_frame = Some(self.pipelines.compute().upload(gpu, targets, old, &bins));
+        self.compute_frame = Some(self.pipelines.compute().upload(gpu, targets, old, (&bins, variant)));
     }
 
     fn encode_and_submit(&self, draws: &[Prepared]) {
@@ -333,10 +334,9 @@ impl Renderer {
         let sky = wgpu::Color { r: SKY[0], g: SKY[1], b: SKY[2], a: 1.0 };
         let computed = self.compute_frame.as_ref().filter(|_| self.ray_pass == RayPass::Compute);
         if let Some(frame) = computed {
-            let rays: Vec<&Prepared> = draws.iter().filter(|d| d.mode != DrawMode::Plain).collect();
             let timer = self.timer.as_ref().filter(|_| splats.is_none());
             let groups = (&self.frame_group, &self.tiles_group);
-            self.pipelines.compute().encode(&mut encoder, (targets, frame), groups, frame_variant(&rays), timer);
+            self.pipelines.compute().encode(&mut encoder, (targets, frame), groups, timer);
         }
         {
             // After the compute ray pass the targets hold its rays.
@@ -433,16 +433,6 @@ fn depth_camera(camera: &Camera, draws: &[Draw]) -> Camera {
     let nearest = draws.iter().map(|d| uniforms::tile_near_m(camera, d.tile)).fold(f64::INFINITY, f64::min);
     let near_m = if nearest.is_finite() { (0.5 * nearest).max(camera.near_m) } else { camera.near_m };
     Camera { near_m, ..*camera }
-}
-
-/// The one variant a compute pass casts all of `rays` with.
-fn frame_variant(rays: &[&Prepared]) -> RayVariant {
-    RayVariant {
-        inside: false,
-        morphing: rays.iter().any(|d| d.variant.morphing),
-        whole: rays.iter().all(|d| d.variant.whole),
-        linear: rays.first().is_some_and(|d| d.variant.linear),
-    }
 }
 
 fn draw(pass: &mut wgpu::RenderPass<'_>, mesh: &cache::Mesh, indices: u32) {
