@@ -37,6 +37,13 @@ const FAR: f32 = 3.0e38;
 // face) is computed two ways that round apart.
 const BOX_SLACK: f32 = 1.0e-4;
 
+// Casts through tile `draw` from now on; the memo of corner heights
+// (common.wgsl) belongs to the last tile.
+fn use_tile(draw: u32) {
+    tile = tiles[draw].block;
+    memo_cell = vec2<i32>(-2147483647);
+}
+
 // Where the ray along `dir` enters the tile's box (metres from the camera;
 // 0 when it starts inside), or -1 if it misses the box.
 fn box_entry(dir: vec3<f32>) -> f32 {
@@ -66,7 +73,7 @@ fn cs_rays(@builtin(global_invocation_id) id: vec3<u32>) {
     var best_t = NO_HIT;
     for (var i = bins[1u + bin]; i < bins[2u + bin]; i++) {
         let draw = bins[i];
-        tile = tiles[draw].block;
+        use_tile(draw);
         if any(p < tile.screen.xy) || any(p >= tile.screen.zw) {
             continue;
         }
@@ -91,7 +98,7 @@ fn cs_rays(@builtin(global_invocation_id) id: vec3<u32>) {
         textureStore(data_out, p, vec4<u32>(0u));
         return;
     }
-    tile = tiles[best_draw - 1u].block;
+    use_tile(best_draw - 1u);
     let dir = pixel_ray(pixel);
     let out = shade_hit(Ray(tile.camera.xyz + dir * best_base, dir, best_t));
     textureStore(colour_out, p, out.colour);

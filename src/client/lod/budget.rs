@@ -42,7 +42,8 @@
 //! rounded down, part-full groups trimmed until it fits), and draws at
 //! most `max_tiles` tiles (the GPU cache's slots): a larger cut is chosen
 //! again under a smaller budget, and where even the coarsest cut is larger,
-//! its most beneficial tiles are drawn.
+//! its most beneficial tiles are drawn (the rest of the view is left
+//! undrawn, and the cut's benefit and tree budgets are the coarsest cut's).
 
 use super::candidates::Candidate;
 use crate::client::trees::TreeBudgets;
@@ -238,8 +239,10 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
         }
         // Even the coarsest cut may need more slots (a wide view of many
         // root tiles): its most beneficial tiles are drawn.
-        drawn.sort_by(|a, b| candidates[*b as usize].benefit.total_cmp(&candidates[*a as usize].benefit));
-        drawn.truncate(max_tiles);
+        if drawn.len() > max_tiles {
+            drawn.sort_by(|a, b| candidates[*b as usize].benefit.total_cmp(&candidates[*a as usize].benefit));
+            drawn.truncate(max_tiles);
+        }
     }
     let tiles: Vec<Choice> = drawn
         .iter()

@@ -57,6 +57,13 @@ impl Mesh {
     }
 }
 
+/// `n` layers, or one fewer where `n` is a multiple of six: wgpu's GL
+/// backend takes a square texture with such a layer count for a cube-map
+/// array, and the tiles read from it then show the wrong texels.
+fn array_layers(n: u32) -> u32 {
+    if n.is_multiple_of(6) { n - 1 } else { n }
+}
+
 /// Bytes of a tile's two meshes with `samples` per side at most: the hull
 /// over the cast range's `samples + 1` cells (quads of [`QUAD_SAMPLES`]; a
 /// coarser hull is smaller) and the terrain over its `samples - 1`, each a
@@ -114,9 +121,11 @@ impl TileCache {
         let atlas_h = mip_rects.iter().map(|r| r[1] + r[3]).max().unwrap_or(1);
         let slot_bytes = (size * size * (16 + 4) + atlas_w * atlas_h * 4) as usize;
         let share = if geomorph { morph_bytes(size) / 2 } else { 0 };
-        let count = ((budget_bytes / (slot_bytes + mesh_bytes(samples) + share)) as u32)
-            .clamp(1, MAX_SLOTS.min(device.limits().max_texture_array_layers));
-        let layers = if geomorph { (count / 2).max(1) } else { 0 };
+        let count = array_layers(
+            ((budget_bytes / (slot_bytes + mesh_bytes(samples) + share)) as u32)
+                .clamp(1, MAX_SLOTS.min(device.limits().max_texture_array_layers)),
+        );
+        let layers = if geomorph { array_layers((count / 2).max(1)) } else { 0 };
         let array = |label, (w, h, count), format| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
@@ -326,6 +335,12 @@ pub fn atlas(cells: u32) -> Vec<[u32; 4]> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn no_array_is_taken_for_cube_maps() {
+        assert_eq!((1..=40).map(array_layers).filter(|n| n % 6 == 0).count(), 0);
+        assert_eq!([1, 5, 6, 7, 36, 37].map(array_layers), [1, 5, 5, 7, 35, 37]);
+    }
 
     #[test]
     fn the_atlas_holds_every_level_without_overlap() {

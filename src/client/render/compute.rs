@@ -17,7 +17,7 @@ use std::collections::HashMap;
 /// Side of a workgroup's square of pixels (`@workgroup_size(8, 8)`).
 const WORKGROUP_SIDE: u32 = 8;
 /// Side of a bin of the screen, pixels (`BIN_PX`).
-pub const BIN_PX: u32 = 32;
+const BIN_PX: u32 = 32;
 
 /// Where a frame's rays are cast.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]

@@ -45,7 +45,10 @@ impl Gpu {
         let wanted = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::SHADER_EARLY_DEPTH_TEST;
         let required_features = adapter.features() & wanted;
         let timestamps = required_features.contains(wgpu::Features::TIMESTAMP_QUERY);
-        let early_depth = required_features.contains(wgpu::Features::SHADER_EARLY_DEPTH_TEST);
+        // Not on GL: the promise clamps a ray's depth to the rasterised
+        // one, which GL's −1..1 depth range leaves too coarse far away.
+        let early_depth = required_features.contains(wgpu::Features::SHADER_EARLY_DEPTH_TEST)
+            && adapter.get_info().backend != wgpu::Backend::Gl;
         let desc = wgpu::DeviceDescriptor {
             label: Some("sylva"),
             required_features,

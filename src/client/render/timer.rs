@@ -1,5 +1,5 @@
-//! GPU time of a frame's passes (the splat light compute pass, if any, and
-//! the render pass) from timestamp queries, where the adapter has them
+//! GPU time of a frame's passes (from the first — the splats' light or the
+//! compute rays, if any — to the end of the render pass) from timestamp queries, where the adapter has them
 //! (`None` elsewhere; the caller then reports CPU-side time).
 
 use super::targets::map_read;
