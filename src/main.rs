@@ -2,7 +2,9 @@
 //! files, and maps errors to messages and exit codes (1: bad input or data,
 //! 2: bad usage, from clap; 3: a seed finished with failed tiles).
 
-use anyhow::{Context, Result, bail};
+#[cfg(feature = "client")]
+use anyhow::Context;
+use anyhow::{Result, bail};
 
 /// Tiles allocate and free megabyte rasters at a high rate; glibc returns
 /// them to the kernel each time and pays a page fault per 4 KiB on reuse
@@ -699,6 +701,7 @@ fn seed(a: SeedArgs) -> Result<()> {
 }
 
 /// A finite number of pixels above 0.
+#[cfg(feature = "client")]
 fn positive_px(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
