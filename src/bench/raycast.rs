@@ -31,8 +31,9 @@ const REFERENCE_SHADOW_STEPS: u32 = 30;
 const TIMED_FRAMES: usize = 3;
 /// Frames are rendered untimed for this long first (at least one): the
 /// first uploads the tiles and builds pipelines, and a GPU left idle while
-/// the CPU reference was drawn needs a moment to raise its clocks (an H200's
-/// first setting per view took 2.5–2.7× the next one's time without this).
+/// the CPU reference was drawn may need a moment to raise its clocks. (On
+/// an H200 the first setting timed per view still read up to 2.8× its
+/// neighbours in some views with this warm-up; not explained.)
 const WARM_MS: f64 = 200.0;
 /// Frames are timed until their wall time reaches this too, so that a fast
 /// GPU's median is taken over many frames.

@@ -41,12 +41,13 @@ impl std::str::FromStr for RayPass {
     }
 }
 
-/// The compute module, its layouts and pipelines.
+/// The compute module, its layouts and pipelines, the tiles' buffer bound as
+/// an array, and the last frame's bindings.
 pub struct ComputeRays {
     module: wgpu::ShaderModule,
     layout: wgpu::PipelineLayout,
     /// Group 1: the tiles' blocks as one array.
-    tiles_layout: wgpu::BindGroupLayout,
+    tiles: wgpu::BindGroup,
     /// Group 2 of the rays: bins, colour, pixel data.
     rays_layout: wgpu::BindGroupLayout,
     /// Group 2 of the depth fill: the pixel data, read.
@@ -54,6 +55,7 @@ pub struct ComputeRays {
     fill: wgpu::RenderPipeline,
     /// The rays' pipeline per variant (built when first needed).
     variants: HashMap<RayVariant, wgpu::ComputePipeline>,
+    frame: Option<ComputeFrame>,
 }
 
 /// The bindings of one frame: its bins and targets as the passes see them,
@@ -69,8 +71,9 @@ pub struct ComputeFrame {
 
 impl ComputeRays {
     /// The compute module and layouts, and the depth fill's pipeline; group
-    /// 0 is `frame`.
-    pub fn new(device: &wgpu::Device, frame: &wgpu::BindGroupLayout) -> ComputeRays {
+    /// 0 is `frame`, group 1 the `tiles` buffer (with `STORAGE` usage) as
+    /// an array.
+    pub fn new(device: &wgpu::Device, frame: &wgpu::BindGroupLayout, tiles: &wgpu::Buffer) -> ComputeRays {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("compute rays"),
             source: wgpu::ShaderSource::Wgsl(shaders::compute_source().into()),
@@ -101,13 +104,38 @@ impl ComputeRays {
             immediate_size: 0,
         });
         let fill = fill_pipeline(device, &module, &[Some(frame), None, Some(&fill_layout)]);
-        ComputeRays { module, layout, tiles_layout, rays_layout, fill_layout, fill, variants: HashMap::new() }
+        let tiles = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("tiles"),
+            layout: &tiles_layout,
+            entries: &[wgpu::BindGroupEntry { binding: 0, resource: tiles.as_entire_binding() }],
+        });
+        ComputeRays { module, layout, tiles, rays_layout, fill_layout, fill, variants: HashMap::new(), frame: None }
     }
 
-    /// Builds the rays' pipeline of `variant` if it is not built yet (rays
-    /// start at the camera inside a box either way: `inside` is ignored).
-    pub fn prepare(&mut self, device: &wgpu::Device, variant: RayVariant) {
+    /// Readies a frame: the rays' pipeline of `variant` (built if it is
+    /// not yet; `inside` is ignored, rays start at the camera inside a box
+    /// either way), and the frame's `bins` ([`bins`]) uploaded and bound
+    /// with `targets` (the last frame's bindings reused where its size and
+    /// room allow).
+    pub fn prepare(
+        &mut self,
+        (device, queue): (&wgpu::Device, &wgpu::Queue),
+        targets: &Targets,
+        (bins, variant): (&[u32], RayVariant),
+    ) {
         let variant = RayVariant { inside: false, ..variant };
+        self.build(device, variant);
+        let bytes = std::mem::size_of_val(bins) as u64;
+        let mut frame = match self.frame.take().filter(|o| o.size == targets.size && o.bins.size() >= bytes) {
+            Some(old) => old,
+            None => self.bind(device, targets, bytes.next_power_of_two(), variant),
+        };
+        queue.write_buffer(&frame.bins, 0, bytemuck::cast_slice(bins));
+        frame.variant = variant;
+        self.frame = Some(frame);
+    }
+
+    fn build(&mut self, device: &wgpu::Device, variant: RayVariant) {
         if self.variants.contains_key(&variant) {
             return;
         }
@@ -121,35 +149,6 @@ impl ComputeRays {
             cache: None,
         });
         self.variants.insert(variant, built);
-    }
-
-    /// Group 1 over the tiles' buffer (which has `STORAGE` usage).
-    pub fn tiles_group(&self, device: &wgpu::Device, tiles: &wgpu::Buffer) -> wgpu::BindGroup {
-        device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("tiles"),
-            layout: &self.tiles_layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: tiles.as_entire_binding() }],
-        })
-    }
-
-    /// Uploads a frame's `bins` ([`bins`]) and binds them with `targets`,
-    /// reusing `old` where its size and room allow; the frame is cast with
-    /// the pipeline of `variant` (prepared).
-    pub fn upload(
-        &self,
-        (device, queue): (&wgpu::Device, &wgpu::Queue),
-        targets: &Targets,
-        old: Option<ComputeFrame>,
-        (bins, variant): (&[u32], RayVariant),
-    ) -> ComputeFrame {
-        let bytes = std::mem::size_of_val(bins) as u64;
-        let mut frame = match old.filter(|o| o.size == targets.size && o.bins.size() >= bytes) {
-            Some(old) => old,
-            None => self.bind(device, targets, bytes.next_power_of_two(), variant),
-        };
-        queue.write_buffer(&frame.bins, 0, bytemuck::cast_slice(bins));
-        frame.variant = variant;
-        frame
     }
 
     fn bind(&self, device: &wgpu::Device, targets: &Targets, bytes: u64, variant: RayVariant) -> ComputeFrame {
@@ -179,16 +178,16 @@ impl ComputeRays {
         ComputeFrame { size: targets.size, variant, bins, rays, fill }
     }
 
-    /// Encodes the frame's rays, every pixel of the colour and data targets
-    /// written, then the depth fill. The rays' pass starts the timer if
-    /// there is one.
+    /// Encodes the prepared frame's rays, every pixel of the colour and
+    /// data targets written, then the depth fill. The rays' pass starts the
+    /// timer if there is one.
     pub fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
-        (targets, frame): (&Targets, &ComputeFrame),
-        (frame_group, tiles_group): (&wgpu::BindGroup, &wgpu::BindGroup),
+        (targets, frame_group): (&Targets, &wgpu::BindGroup),
         timer: Option<&PassTimer>,
     ) {
+        let Some(frame) = &self.frame else { return };
         if let Some(pipeline) = self.variants.get(&frame.variant) {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("rays"),
@@ -196,7 +195,7 @@ impl ComputeRays {
             });
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, frame_group, &[]);
-            pass.set_bind_group(1, tiles_group, &[]);
+            pass.set_bind_group(1, &self.tiles, &[]);
             pass.set_bind_group(2, &frame.rays, &[]);
             let (w, h) = targets.size;
             pass.dispatch_workgroups(w.div_ceil(WORKGROUP_SIDE), h.div_ceil(WORKGROUP_SIDE), 1);

@@ -27,7 +27,7 @@ use super::raycast::{self, SKY, Traversal};
 use super::tile::TileData;
 use super::trees::Splat;
 use cache::{CacheFull, TileCache};
-use compute::ComputeFrame;
+use compute::ComputeRays;
 pub use compute::RayPass;
 use gpu::Gpu;
 use pipeline::{Pipelines, RayVariant};
@@ -124,11 +124,8 @@ pub struct Renderer {
     /// The last frame's splat ranges in the instance buffer, by draw.
     splat_ranges: Vec<std::ops::Range<u32>>,
     targets: Option<Targets>,
-    /// Where rays are cast; for a compute pass, the tiles' buffer as an
-    /// array and the last frame's bindings.
-    ray_pass: RayPass,
-    tiles_group: wgpu::BindGroup,
-    compute_frame: Option<ComputeFrame>,
+    /// Rays cast in a compute pass (none: from the hulls' fragments).
+    compute: Option<ComputeRays>,
     timer: Option<PassTimer>,
     frame_no: u64,
 }
@@ -148,7 +145,8 @@ impl Renderer {
 
     /// Rays cast in `pass` (set before the first frame).
     pub fn with_ray_pass(mut self, pass: RayPass) -> Renderer {
-        self.ray_pass = pass;
+        self.compute = (pass == RayPass::Compute)
+            .then(|| ComputeRays::new(&self.gpu.device, &self.pipelines.frame_layout, &self.tile_buffer));
         self
     }
 
@@ -168,7 +166,6 @@ impl Renderer {
         let frame_group = pipelines.frame_group(device, &frame_buffer, &cache);
         let tile_buffer = tile_buffer(device, cache.capacity());
         let tile_group = pipelines.tile_group(device, &tile_buffer);
-        let tiles_group = pipelines.compute().tiles_group(device, &tile_buffer);
         let timer = PassTimer::new(device, &gpu.queue, gpu.timestamps);
         Renderer {
             gpu,
@@ -181,9 +178,7 @@ impl Renderer {
             splats: None,
             splat_ranges: Vec::new(),
             targets: None,
-            ray_pass: RayPass::default(),
-            tiles_group,
-            compute_frame: None,
+            compute: None,
             timer,
             frame_no: 0,
         }
@@ -232,9 +227,7 @@ impl Renderer {
         let camera = &depth_camera(camera, draws);
         let mut stats = FrameStats::default();
         let draws = self.prepare(camera, draws, settings, &mut stats)?;
-        if self.ray_pass == RayPass::Compute {
-            self.prepare_compute(camera, &draws);
-        }
+        self.prepare_compute(camera, &draws);
         self.encode_and_submit(&draws);
         stats.gpu_ms = self.timer.as_ref().and_then(|t| t.read_ms(&self.gpu.device));
         stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -285,7 +278,7 @@ impl Renderer {
             bytes.resize(TILE_STRIDE as usize, 0);
             blocks.extend(bytes);
             let variant = RayVariant { inside: mode == DrawMode::Inside, morphing: morph.is_some(), whole, linear };
-            if mode != DrawMode::Plain && self.ray_pass == RayPass::Fragment {
+            if mode != DrawMode::Plain && self.compute.is_none() {
                 self.pipelines.prepare_ray(device, variant);
             }
             draws.push(Prepared { slot, mode, variant, splats: tile_splats, screen: block.screen });
@@ -298,11 +291,11 @@ impl Renderer {
         Ok(draws)
     }
 
-    /// The compute pass's pipeline for the frame's tiles (one pipeline for
-    /// all: morphing if any tile morphs, the whole canopy if every tile
+    /// With rays in a compute pass, its pipeline for the frame's tiles (one
+    /// for all: morphing if any tile morphs, the whole canopy if every tile
     /// has it) and the bins of its ray-cast tiles, nearest first.
     fn prepare_compute(&mut self, camera: &Camera, draws: &[Prepared]) {
-        let Some(targets) = &self.targets else { return };
+        let (Some(compute), Some(targets)) = (&mut self.compute, &self.targets) else { return };
         let rays: Vec<(usize, &Prepared)> =
             draws.iter().enumerate().filter(|(_, d)| d.mode != DrawMode::Plain).collect();
         let variant = RayVariant {
@@ -311,12 +304,9 @@ impl Renderer {
             whole: rays.iter().all(|(_, d)| d.variant.whole),
             linear: rays.first().is_some_and(|(_, d)| d.variant.linear),
         };
-        self.pipelines.compute_mut().prepare(&self.gpu.device, variant);
         let order: Vec<(u32, [u32; 4])> = rays.iter().map(|(k, d)| (*k as u32, d.screen)).collect();
         let bins = compute::bins((camera.width_px, camera.height_px), &order);
-        let old = self.compute_frame.take();
-        let gpu = (&self.gpu.device, &self.gpu.queue);
-        self.compute_frame = Some(self.pipelines.compute().upload(gpu, targets, old, (&bins, variant)));
+        compute.prepare((&self.gpu.device, &self.gpu.queue), targets, (&bins, variant));
     }
 
     fn encode_and_submit(&self, draws: &[Prepared]) {
@@ -334,11 +324,10 @@ impl Renderer {
             splats.light(&mut pass, groups, draws.iter().map(|d| &d.splats).enumerate());
         }
         let sky = wgpu::Color { r: SKY[0], g: SKY[1], b: SKY[2], a: 1.0 };
-        let computed = self.compute_frame.as_ref().filter(|_| self.ray_pass == RayPass::Compute);
-        if let Some(frame) = computed {
+        let computed = self.compute.as_ref();
+        if let Some(compute) = computed {
             let timer = self.timer.as_ref().filter(|_| splats.is_none());
-            let groups = (&self.frame_group, &self.tiles_group);
-            self.pipelines.compute().encode(&mut encoder, (targets, frame), groups, timer);
+            compute.encode(&mut encoder, (targets, &self.frame_group), timer);
         }
         {
             // After the compute ray pass the targets hold its rays.

@@ -5,14 +5,13 @@
 //! compute pipeline that casts each splat's shadow ray once. All render
 //! pipelines write colour, per-pixel fetch counts, the view-axis distance
 //! and reversed-Z depth (greater is nearer). The ray-casting pipelines are
-//! specialised per [`RayVariant`] and built when a frame first needs one;
-//! `compute` holds those that cast rays in a compute pass instead.
+//! specialised per [`RayVariant`] and built when a frame first needs one
+//! (`compute` builds those that cast rays in a compute pass instead).
 
 use super::super::hull::HullVertex;
 use super::super::terrain::TerrainVertex;
 use super::super::trees::Splat;
 use super::cache::TileCache;
-use super::compute::ComputeRays;
 use super::shaders;
 use super::uniforms::{FrameUniform, TILE_STRIDE, TileUniform};
 use std::collections::HashMap;
@@ -74,8 +73,6 @@ pub struct Pipelines {
     pub frame_layout: wgpu::BindGroupLayout,
     /// Group 1: the tile uniform at a dynamic offset.
     pub tile_layout: wgpu::BindGroupLayout,
-    /// Ray casting in a compute pass instead.
-    compute: ComputeRays,
     module: wgpu::ShaderModule,
     layout: wgpu::PipelineLayout,
     /// Hull fragments promise their depth (`fs_ray_hull`), so hidden ones
@@ -138,14 +135,12 @@ impl Pipelines {
         let plain = ("vs_plain", &[terrain_vertex][..]);
         let splat = ("vs_splat", &splat_instance[..]);
         let splat_layout = splat_layout(device);
-        let compute = ComputeRays::new(device, &frame_layout);
         Pipelines {
             plain: pipeline(device, (&layout, &module), plain, "fs_plain", (triangles(wgpu::Face::Back), &[])),
             splat: pipeline(device, (&layout, &module), splat, "fs_splat", (quads, &[])),
             splat_light: splat_light(device, &module, [&frame_layout, &tile_layout, &splat_layout]),
             splat_layout,
             rays: HashMap::new(),
-            compute,
             frame_layout,
             tile_layout,
             module,
@@ -179,16 +174,6 @@ impl Pipelines {
             (triangles(cull), &constants),
         );
         self.rays.insert(variant, built);
-    }
-
-    /// Ray casting in a compute pass.
-    pub fn compute(&self) -> &ComputeRays {
-        &self.compute
-    }
-
-    /// Ray casting in a compute pass, to prepare a variant.
-    pub fn compute_mut(&mut self) -> &mut ComputeRays {
-        &mut self.compute
     }
 
     /// The ray-casting pipeline of `variant`, once prepared.
