@@ -58,6 +58,9 @@ struct Tile {
     // The pixels its box covers on screen, x0, y0, x1, y1 (x1, y1
     // excluded): the compute passes' invocations (compute.wgsl).
     screen: vec4<u32>,
+    // The nearest distance from the camera to its box (m; the order of
+    // the frame's draws), unused x3.
+    near: vec4<f32>,
 };
 
 const MODE_HULL: u32 = 0u;

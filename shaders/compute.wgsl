@@ -7,18 +7,19 @@
 // each bin lists the ray-cast tiles whose box covers any of its pixels,
 // nearest first (built on the CPU each frame). A pixel casts its ray
 // through each listed tile whose box it sees, from where the ray enters the
-// box, skipping tiles whose box starts beyond the nearest hit so far, and
+// box, skipping tiles whose box starts beyond the nearest hit so far (and
+// stopping at the first whose box lies wholly beyond it), and
 // shades the nearest hit once: what the depth test picks among hull
 // fragments, without their overdraw. A full-screen triangle (fs_fill) then
-// writes the hits' depth, so that the plain tiles and splats drawn after
-// are hidden behind them.
+// writes the hits' depth, so that the terrain meshes and splats drawn after
+// (if any) are hidden behind them.
 
 // The tiles' blocks, TILE_STRIDE (256 bytes) apart, and the one this
 // invocation casts through (common.wgsl reads `tile`). The padding is
 // spelled out: GL's backend does not honour a member's @size.
 struct TileSlot {
     block: Tile,
-    pad: array<vec4<f32>, 2>,
+    pad: vec4<f32>,
 };
 @group(1) @binding(0) var<storage, read> tiles: array<TileSlot>;
 var<private> tile: Tile;
@@ -66,6 +67,10 @@ fn cs_rays(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let pixel = vec2<f32>(p) + 0.5;
+    // The cosine of the ray to the view axis: a point d metres along it
+    // lies d * axis_cos along the axis.
+    let f = frame.viewport.w;
+    let axis_cos = 1.0 / length(vec3<f32>((pixel.x - 0.5 * frame.viewport.x) / f, (0.5 * frame.viewport.y - pixel.y) / f, 1.0));
     let bin = (p.y / BIN_PX) * bins[0] + p.x / BIN_PX;
     var best = FAR;
     var best_draw = 0u;
@@ -73,10 +78,16 @@ fn cs_rays(@builtin(global_invocation_id) id: vec3<u32>) {
     var best_t = NO_HIT;
     for (var i = bins[1u + bin]; i < bins[2u + bin]; i++) {
         let draw = bins[i];
-        use_tile(draw);
-        if any(p < tile.screen.xy) || any(p >= tile.screen.zw) {
+        // The list is nearest box first: once a box is wholly beyond the
+        // nearest hit, so are the rest.
+        if tiles[draw].block.near.x * axis_cos > best * (1.0 + BOX_SLACK) {
+            break;
+        }
+        let screen = tiles[draw].block.screen;
+        if any(p < screen.xy) || any(p >= screen.zw) {
             continue;
         }
+        use_tile(draw);
         let dir = pixel_ray(pixel);
         let entry = box_entry(dir);
         if entry < 0.0 || axis_distance(dir, entry) > best * (1.0 + BOX_SLACK) {

@@ -170,6 +170,12 @@ fn fs_ray(in: VertexOut) -> FragmentOut {
 
 @fragment
 fn fs_plain(in: PlainVertexOut) -> PlainOut {
+    return plain_fragment(in);
+}
+
+// The terrain mesh's fragment: map colour, lit by the sun, or discarded on
+// a cell without data.
+fn plain_fragment(in: PlainVertexOut) -> PlainOut {
     let s = in.sample;
     let c = clamp(vec2<i32>(floor(s)), vec2<i32>(0), vec2<i32>(i32(tile.grid.w) - 2));
     let f = clamp(s - vec2<f32>(c), vec2<f32>(0.0), vec2<f32>(1.0));

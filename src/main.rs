@@ -173,6 +173,12 @@ enum Command {
         /// small part of the chip, such as data-centre GPUs).
         #[arg(long, default_value = "fragment")]
         ray_pass: RayPass,
+        /// Render each frame again for this long and report its median
+        /// GPU time: what a loop rendering continuously sees, where a GPU
+        /// lowers its clocks between a CPU-bound flight's frames (an H200
+        /// runs 5.7× slower then).
+        #[arg(long, default_value_t = 0.0)]
+        hold_ms: f64,
     },
     /// Pregenerate tiles into the tile cache (resumable, parallel, sharded).
     #[cfg(feature = "server")]
@@ -550,6 +556,7 @@ fn run(command: Command) -> Result<()> {
             no_trees,
             hull_factor,
             ray_pass,
+            hold_ms,
         } => {
             let prior = match cost_model {
                 Some(file) => {
@@ -582,6 +589,7 @@ fn run(command: Command) -> Result<()> {
                 trees: if no_trees { None } else { Some(Default::default()) },
                 hull_factor: hull_factor as usize,
                 ray_pass,
+                hold_ms,
                 ..Default::default()
             };
             let path = sylva::client::path::CameraPath::load(&path)?;

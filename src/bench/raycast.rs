@@ -18,23 +18,33 @@ use crate::client::path::CameraPath;
 use crate::client::raycast::{Fade, Traversal, TreeBlend};
 use crate::client::reference::{self, Image, Lighting};
 use crate::client::render::uniforms::FrameSettings;
-use crate::client::render::{Readback, Rendered, Renderer};
+use crate::client::render::{FrameStats, Readback, Rendered, Renderer};
 use crate::client::source::RegionSource;
 use crate::client::store::TileStore;
 use crate::client::tile::TileData;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use std::time::Instant;
 
 /// Shadow steps of the reference image.
 const REFERENCE_SHADOW_STEPS: u32 = 30;
 /// Frames timed per setting at least (the median is reported).
 const TIMED_FRAMES: usize = 3;
-/// Frames are rendered untimed for this long first (at least one): the
-/// first uploads the tiles and builds pipelines, and a GPU left idle while
-/// the CPU reference was drawn may need a moment to raise its clocks. (On
-/// an H200 the first setting timed per view still read up to 2.8× its
-/// neighbours in some views with this warm-up; not explained.)
-const WARM_MS: f64 = 200.0;
+/// Warm-up: frames are rendered untimed for at least [`WARM_MIN_MS`], then
+/// in windows of [`WARM_WINDOW_MS`] (at least one frame each) until a
+/// window's median time is within [`SETTLED`] of the one before, or for
+/// [`WARM_MAX_MS`]: the first frames upload the tiles and build pipelines,
+/// and a GPU left idle while the CPU reference was drawn lowers its clocks
+/// (an H200: from 1,980 to 345 MHz within a second of idling) and raises
+/// them only after some busy time (about half a second there), steadily
+/// slow meanwhile.
+const WARM_MIN_MS: f64 = 1000.0;
+/// A warm-up window.
+const WARM_WINDOW_MS: f64 = 100.0;
+/// Relative change between warm-up windows taken as settled.
+const SETTLED: f64 = 0.03;
+/// Longest warm-up.
+const WARM_MAX_MS: f64 = 3000.0;
 /// Frames are timed until their wall time reaches this too, so that a fast
 /// GPU's median is taken over many frames.
 const TIMED_WALL_MS: f64 = 250.0;
@@ -66,6 +76,12 @@ pub struct Row {
     /// Median wall time of a frame rendered and waited for, ms: encoding,
     /// submission and the GPU's work, one frame at a time.
     pub wall_ms: f64,
+    /// Frames per second with frames in flight, as an interactive loop
+    /// renders them (wall time).
+    pub fps: f64,
+    /// Of the GPU time, with rays in a compute pass: median ms of the rays'
+    /// pass and of the depth fill after it.
+    pub rays_ms: Option<(f64, f64)>,
     /// Mean and 99th-percentile view-ray fetches per ray-cast pixel.
     pub fetches: (f64, u32),
     /// Mean shadow and shading fetches per ray-cast pixel.
@@ -150,34 +166,104 @@ pub fn run(views: &[View], size: (u32, u32), only: &[String], renderer: &mut Ren
             let frame =
                 FrameSettings { traversal, shadow_steps: shadows, sun_ecef: path.sun_ecef().filter(|_| sun), fade };
             let refs: Vec<&TileData> = tiles.iter().collect();
-            let (ms, wall_ms) = time_frames(renderer, &camera, &refs, &frame)?;
+            let Timed { ms, wall_ms, fps, rays_ms } = time_frames(renderer, &camera, &refs, &frame)?;
             let out = renderer.render(&camera, &refs, &frame, Readback::All).map_err(|e| e.to_string())?;
-            rows.push(Row { ms, wall_ms, ..row(&view.name, &name, &out, &truth) });
+            rows.push(Row { ms, wall_ms, fps, rays_ms, ..row(&view.name, &name, &out, &truth) });
         }
     }
     Ok(rows)
 }
 
-/// Median GPU (or wall) and wall time per frame of one view and setting,
-/// after [`WARM_MS`] of warm-up: at least [`TIMED_FRAMES`] frames, more until
-/// they have taken [`TIMED_WALL_MS`].
+/// Median times per frame of one view and setting after the warm-up: GPU
+/// (or wall), wall, and the compute rays' pass and depth fill where
+/// measured; at least [`TIMED_FRAMES`] frames, more until they have taken
+/// [`TIMED_WALL_MS`].
 fn time_frames(
     renderer: &mut Renderer,
     camera: &Camera,
     tiles: &[&TileData],
     frame: &FrameSettings,
-) -> Result<(f64, f64), String> {
-    let warm = std::time::Instant::now();
-    while warm.elapsed().as_secs_f64() * 1e3 < WARM_MS {
-        renderer.render(camera, tiles, frame, Readback::None).map_err(|e| e.to_string())?;
+) -> Result<Timed, String> {
+    let mut render =
+        || renderer.render(camera, tiles, frame, Readback::None).map(|out| out.stats).map_err(|e| e.to_string());
+    warm_up(&mut render)?;
+    let mut stats = Vec::new();
+    while stats.len() < MAX_TIMED_FRAMES
+        && (stats.len() < TIMED_FRAMES || stats.iter().map(|s: &FrameStats| s.wall_ms).sum::<f64>() < TIMED_WALL_MS)
+    {
+        stats.push(render()?);
     }
-    let (mut gpu, mut wall) = (Vec::new(), Vec::new());
-    while gpu.len() < MAX_TIMED_FRAMES && (gpu.len() < TIMED_FRAMES || wall.iter().sum::<f64>() < TIMED_WALL_MS) {
-        let out = renderer.render(camera, tiles, frame, Readback::None).map_err(|e| e.to_string())?;
-        gpu.push(out.stats.gpu_ms.unwrap_or(out.stats.wall_ms));
-        wall.push(out.stats.wall_ms);
+    let column = |f: &dyn Fn(&FrameStats) -> Option<f64>| {
+        let values: Vec<f64> = stats.iter().filter_map(f).collect();
+        (!values.is_empty()).then(|| median(values))
+    };
+    Ok(Timed {
+        fps: throughput(renderer, camera, tiles, frame)?,
+        ms: median(stats.iter().map(frame_ms).collect()),
+        wall_ms: median(stats.iter().map(|s| s.wall_ms).collect()),
+        rays_ms: column(&|s| s.gpu_rays_ms.map(|t| t.0)).zip(column(&|s| s.gpu_rays_ms.map(|t| t.1))),
+    })
+}
+
+/// Frames per second rendered with frames in flight (submitted without
+/// waiting for each) over at least [`TIMED_WALL_MS`], the last one waited
+/// for.
+fn throughput(
+    renderer: &mut Renderer,
+    camera: &Camera,
+    tiles: &[&TileData],
+    frame: &FrameSettings,
+) -> Result<f64, String> {
+    renderer.pipelined(true);
+    let start = Instant::now();
+    let mut frames = 0;
+    let rendered = loop {
+        if let Err(e) = renderer.render(camera, tiles, frame, Readback::None) {
+            break Err(e.to_string());
+        }
+        frames += 1;
+        if frames >= TIMED_FRAMES && start.elapsed().as_secs_f64() * 1e3 >= TIMED_WALL_MS {
+            break Ok(());
+        }
+    };
+    renderer.wait();
+    renderer.pipelined(false);
+    rendered.map(|()| frames as f64 / start.elapsed().as_secs_f64())
+}
+
+/// Median times of a setting (see [`Row`]).
+struct Timed {
+    ms: f64,
+    wall_ms: f64,
+    fps: f64,
+    rays_ms: Option<(f64, f64)>,
+}
+
+/// Renders untimed until the frame time settles (see [`WARM_WINDOW_MS`]).
+fn warm_up(render: &mut dyn FnMut() -> Result<FrameStats, String>) -> Result<(), String> {
+    let start = Instant::now();
+    while start.elapsed().as_secs_f64() * 1e3 < WARM_MIN_MS {
+        render()?;
     }
-    Ok((median(gpu), median(wall)))
+    let mut last: Option<f64> = None;
+    loop {
+        let window = Instant::now();
+        let mut times = vec![frame_ms(&render()?)];
+        while window.elapsed().as_secs_f64() * 1e3 < WARM_WINDOW_MS {
+            times.push(frame_ms(&render()?));
+        }
+        let now = median(times);
+        let settled = last.is_some_and(|last| (now / last - 1.0).abs() <= SETTLED);
+        if settled || start.elapsed().as_secs_f64() * 1e3 >= WARM_MAX_MS {
+            return Ok(());
+        }
+        last = Some(now);
+    }
+}
+
+/// A frame's GPU time, or its wall time without timestamps.
+fn frame_ms(stats: &FrameStats) -> f64 {
+    stats.gpu_ms.unwrap_or(stats.wall_ms)
 }
 
 fn median(mut values: Vec<f64>) -> f64 {
@@ -217,6 +303,8 @@ fn row(view: &str, setting: &str, out: &Rendered, truth: &Image) -> Row {
         setting: setting.into(),
         ms: f64::NAN,
         wall_ms: f64::NAN,
+        fps: f64::NAN,
+        rays_ms: None,
         fetches: (rays.iter().map(|f| f[0] as f64).sum::<f64>() / n, p99),
         shadow_fetches: rays.iter().map(|f| f[1] as f64).sum::<f64>() / n,
         missed_pct: 100.0 * d.misses as f64 / hits as f64,
@@ -232,6 +320,8 @@ pub fn report(rows: &[Row], size: (u32, u32), gpu: &str) -> String {
         "setting",
         "GPU ms/frame",
         "wall ms/frame",
+        "frames/s in flight",
+        "rays + fill ms",
         "fetches mean",
         "fetches p99",
         "shadow fetches",
@@ -247,6 +337,8 @@ pub fn report(rows: &[Row], size: (u32, u32), gpu: &str) -> String {
                 r.setting.clone(),
                 format!("{:.3}", r.ms),
                 format!("{:.3}", r.wall_ms),
+                format!("{:.0}", r.fps),
+                r.rays_ms.map_or("–".into(), |(rays, fill)| format!("{rays:.3} + {fill:.3}")),
                 format!("{:.1}", r.fetches.0),
                 r.fetches.1.to_string(),
                 format!("{:.1}", r.shadow_fetches),

@@ -20,7 +20,7 @@ use super::raycast::{Traversal, TreeBlend};
 use super::render::RayPass;
 use super::render::cache::CacheFull;
 use super::render::uniforms::FrameSettings;
-use super::render::{Draw, Readback, Renderer};
+use super::render::{Draw, FrameStats, Readback, Renderer};
 use super::source::TileSource;
 use super::sse::SseSelector;
 use super::store::{LoadError, TileStore};
@@ -90,6 +90,9 @@ pub struct FlyOptions {
     pub hull_factor: usize,
     /// Where rays are cast ([`Renderer::with_ray_pass`]).
     pub ray_pass: RayPass,
+    /// Each frame is rendered again for this long and its median time
+    /// reported and fed to the cost model (0: once): see [`held`].
+    pub hold_ms: f64,
 }
 
 impl Default for FlyOptions {
@@ -110,6 +113,7 @@ impl Default for FlyOptions {
             trees: Some(TreeSettings::default()),
             hull_factor: 1,
             ray_pass: RayPass::Fragment,
+            hold_ms: 0.0,
         }
     }
 }
@@ -123,6 +127,9 @@ pub struct FrameRecord {
     pub cpu_ms: f64,
     /// GPU pass time, if measured, ms.
     pub gpu_ms: Option<f64>,
+    /// Of that, with rays in a compute pass: the rays' pass and the depth
+    /// fill, ms.
+    pub gpu_rays_ms: Option<(f64, f64)>,
     /// Encode, submit and wait for the GPU, ms.
     pub render_ms: f64,
     /// Tiles drawn per level.
@@ -346,7 +353,11 @@ fn frame(
             morph_weight: chosen.weights[k],
         })
         .collect();
-    let out = renderer.render_draws(&camera, &draws, &settings, Readback::All)?;
+    let mut out = renderer.render_draws(&camera, &draws, &settings, Readback::All)?;
+    if options.hold_ms > 0.0 {
+        let held = held(renderer, (&camera, &draws, &settings), options.hold_ms)?;
+        (out.stats.gpu_ms, out.stats.gpu_rays_ms) = (held.gpu_ms, held.gpu_rays_ms);
+    }
     let selected = chosen.selected.as_ref();
     let predicted_ms = lod.as_deref().zip(selected).map(|(l, s)| l.expected_ms(s));
     let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
@@ -379,6 +390,7 @@ fn frame(
         frame: k,
         cpu_ms,
         gpu_ms: out.stats.gpu_ms,
+        gpu_rays_ms: out.stats.gpu_rays_ms,
         render_ms: out.stats.wall_ms,
         levels,
         tiles_ray: out.stats.tiles_hull + out.stats.tiles_inside,
@@ -467,20 +479,40 @@ fn io(path: &std::path::Path, source: std::io::Error) -> FlyError {
     FlyError::Io { path: path.display().to_string(), source }
 }
 
+/// The times of a frame's draws rendered again and again for `hold_ms`,
+/// of the render with the median GPU (or wall) time: what a loop rendering
+/// continuously sees, on a GPU that lowers its clocks while it waits for a
+/// CPU-bound flight's next frame.
+fn held(
+    renderer: &mut Renderer,
+    (camera, draws, settings): (&super::camera::Camera, &[Draw], &FrameSettings),
+    hold_ms: f64,
+) -> Result<FrameStats, FlyError> {
+    let start = Instant::now();
+    let mut renders = Vec::new();
+    while renders.is_empty() || start.elapsed().as_secs_f64() * 1e3 < hold_ms {
+        renders.push(renderer.render_draws(camera, draws, settings, Readback::None)?.stats);
+    }
+    let ms = |s: &FrameStats| s.gpu_ms.unwrap_or(s.wall_ms);
+    renders.sort_by(|a, b| ms(a).total_cmp(&ms(b)));
+    Ok(renders[renders.len() / 2])
+}
+
 /// The statistics as CSV, one row per frame.
 pub fn to_csv(records: &[FrameRecord]) -> String {
     let mut out = Vec::new();
     let _ = writeln!(
         out,
-        "frame,cpu_ms,gpu_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,bound,morphing,trees,splats,splat_fill_mpx,nodes_touched"
+        "frame,cpu_ms,gpu_ms,gpu_rays_ms,gpu_fill_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,bound,morphing,trees,splats,splat_fill_mpx,nodes_touched"
     );
     for r in records {
         let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
         let optional = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.3}"));
         let gpu = optional(r.gpu_ms);
+        let (rays, fill) = (optional(r.gpu_rays_ms.map(|t| t.0)), optional(r.gpu_rays_ms.map(|t| t.1)));
         let _ = writeln!(
             out,
-            "{},{:.3},{gpu},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{},{},{},{},{:.4},{}",
+            "{},{:.3},{gpu},{rays},{fill},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{},{},{},{},{:.4},{}",
             r.frame,
             r.cpu_ms,
             r.render_ms,

@@ -7,11 +7,11 @@
 //!
 //! It is drawn texture-mapped where no ray is cast, and, lowered below the
 //! surface by the flat-frame error and without its skirts (which would
-//! stand beside the tile), under every ray-cast tile: where two
-//! flat frames leave a crack between them (their rectangles misplace the
-//! true trapezoidal tile by up to the flat error, which exceeds the one-cell
-//! overlap on coarse tiles at high latitudes and always at the poles), the
-//! crack shows this mesh instead of the sky.
+//! stand beside the tile), under ray-cast tiles whose flat frame may leave
+//! a crack (`render::uniforms::needs_filler`: their rectangle misplaces the
+//! true trapezoidal tile by half the one-cell overlap or more — coarse tiles
+//! at high latitudes, and always at the poles): there the crack shows this
+//! mesh instead of the sky.
 
 use super::frame::TileFrame;
 use super::hull::{self, QUAD_SAMPLES};

@@ -22,7 +22,7 @@ use sylva::client::lod::morphs;
 use sylva::client::raycast::{self, Fade, Traversal, TreeBlend};
 use sylva::client::reference::{self, Departure, Image, Lighting};
 use sylva::client::render::gpu::Gpu;
-use sylva::client::render::uniforms::FrameSettings;
+use sylva::client::render::uniforms::{FrameSettings, needs_filler};
 use sylva::client::render::{Draw, RayPass, Readback, Rendered, Renderer};
 use sylva::client::source::{RegionSource, TileSource};
 use sylva::client::tile::{TileData, TilePayload};
@@ -540,6 +540,8 @@ fn the_antimeridian_and_the_poles_have_no_seams() {
             tiles.iter().any(|t| t.frame.sector.max_lat == 90.0 || t.frame.sector.min_lat == -90.0),
             "{name}: tiles meet at the pole"
         );
+        // Without them this view shows the sky through cracks (the test fails).
+        assert!(tiles.iter().any(needs_filler), "{name}: crack fillers under the tiles at the pole");
         assert_whole_view(name, &tiles, &camera);
     }
 }
@@ -570,6 +572,7 @@ fn four_tiles_show_no_crack_and_shadows_cross_their_borders() {
         (1000.0 + 100.0 * (-((x + 30.0) / 10.0).powi(2)).exp(), 0.0, 0)
     };
     let tiles = synthetic_block(&grid, lon0, lat0, 13, 32, &ridge);
+    assert!(!tiles.iter().any(needs_filler), "fine tiles hold their footprint: no crack fillers");
     let eye = Geodetic::new(border, s.max_lat, 1700.0);
     let camera = Camera::looking(eye, 0.0, -90.0, 45.0, (160, 160));
     let sun = Some(sun_at(border, s.max_lat, 270.0, 15.0));

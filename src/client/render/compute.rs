@@ -4,7 +4,8 @@
 //! of its multiprocessors and compute shaders on all of them. One
 //! invocation per pixel casts through the ray-cast tiles listed for its bin
 //! of the screen and shades the nearest hit; a full-screen pass then writes
-//! the hits' depth for the plain tiles and splats drawn after. The traversal
+//! the hits' depth for the terrain meshes and splats drawn after, if any
+//! (without them the frame is this pass alone). The traversal
 //! and shading are the fragments' functions, so both agree with the CPU
 //! reference alike.
 
@@ -178,28 +179,37 @@ impl ComputeRays {
         ComputeFrame { size: targets.size, variant, bins, rays, fill }
     }
 
-    /// Encodes the prepared frame's rays, every pixel of the colour and
-    /// data targets written, then the depth fill. The rays' pass starts the
-    /// timer if there is one.
-    pub fn encode(
+    /// Encodes the prepared frame's rays: every pixel of the colour and
+    /// data targets written.
+    pub fn encode_rays(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        frame_group: &wgpu::BindGroup,
+        timer: Option<&PassTimer>,
+    ) {
+        let Some(frame) = &self.frame else { return };
+        let Some(pipeline) = self.variants.get(&frame.variant) else { return };
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("rays"),
+            timestamp_writes: timer.map(PassTimer::rays),
+        });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, frame_group, &[]);
+        pass.set_bind_group(1, &self.tiles, &[]);
+        pass.set_bind_group(2, &frame.rays, &[]);
+        let (w, h) = frame.size;
+        pass.dispatch_workgroups(w.div_ceil(WORKGROUP_SIDE), h.div_ceil(WORKGROUP_SIDE), 1);
+    }
+
+    /// Encodes the depth fill: the depth target cleared, then the depth of
+    /// the prepared frame's hits written.
+    pub fn encode_fill(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         (targets, frame_group): (&Targets, &wgpu::BindGroup),
         timer: Option<&PassTimer>,
     ) {
         let Some(frame) = &self.frame else { return };
-        if let Some(pipeline) = self.variants.get(&frame.variant) {
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("rays"),
-                timestamp_writes: timer.map(PassTimer::compute_start),
-            });
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, frame_group, &[]);
-            pass.set_bind_group(1, &self.tiles, &[]);
-            pass.set_bind_group(2, &frame.rays, &[]);
-            let (w, h) = targets.size;
-            pass.dispatch_workgroups(w.div_ceil(WORKGROUP_SIDE), h.div_ceil(WORKGROUP_SIDE), 1);
-        }
         let depth = targets.depth.create_view(&Default::default());
         let mut fill = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("depth fill"),
@@ -209,7 +219,7 @@ impl ComputeRays {
                 depth_ops: Some(wgpu::Operations { load: wgpu::LoadOp::Clear(0.0), store: wgpu::StoreOp::Store }),
                 stencil_ops: None,
             }),
-            timestamp_writes: None,
+            timestamp_writes: timer.map(PassTimer::fill),
             occlusion_query_set: None,
             multiview_mask: None,
         });

@@ -51,8 +51,11 @@ pub enum Readback {
 /// Counts and times of one frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameStats {
-    /// GPU time of the pass, if the adapter has timestamps.
+    /// GPU time of the frame's passes, if the adapter has timestamps.
     pub gpu_ms: Option<f64>,
+    /// Of that, with rays in a compute pass: the rays' pass, and the depth
+    /// fill after it.
+    pub gpu_rays_ms: Option<(f64, f64)>,
     /// CPU time from encoding to the GPU being done, ms.
     pub wall_ms: f64,
     /// Tiles ray cast from their hull.
@@ -109,6 +112,9 @@ struct Prepared {
     splats: std::ops::Range<u32>,
     /// Pixels its box covers (the compute ray passes' invocations).
     screen: [u32; 4],
+    /// Its terrain mesh is drawn: the tile is drawn plain, or ray cast
+    /// over a crack filler ([`uniforms::needs_filler`]).
+    mesh: bool,
 }
 
 /// The renderer and its GPU resources.
@@ -127,6 +133,8 @@ pub struct Renderer {
     /// Rays cast in a compute pass (none: from the hulls' fragments).
     compute: Option<ComputeRays>,
     timer: Option<PassTimer>,
+    /// Frames are submitted without waiting for the GPU ([`Self::pipelined`]).
+    pipelined: bool,
     frame_no: u64,
 }
 
@@ -180,8 +188,22 @@ impl Renderer {
             targets: None,
             compute: None,
             timer,
+            pipelined: false,
             frame_no: 0,
         }
+    }
+
+    /// Whether frames are submitted without waiting for the GPU, several
+    /// in flight as in an interactive loop: their wall time then measures
+    /// throughput, and they have no GPU times (no timestamps are written)
+    /// and nothing to read back. [`Self::wait`] waits for them.
+    pub fn pipelined(&mut self, on: bool) {
+        self.pipelined = on;
+    }
+
+    /// Waits until the GPU has done every frame submitted.
+    pub fn wait(&self) {
+        let _ = self.gpu.device.poll(wgpu::PollType::wait_indefinitely());
     }
 
     /// The GPU.
@@ -228,8 +250,12 @@ impl Renderer {
         let mut stats = FrameStats::default();
         let draws = self.prepare(camera, draws, settings, &mut stats)?;
         self.prepare_compute(camera, &draws);
-        self.encode_and_submit(&draws);
-        stats.gpu_ms = self.timer.as_ref().and_then(|t| t.read_ms(&self.gpu.device));
+        let raster = self.compute.is_none() || draws.iter().any(|d| d.mesh || !d.splats.is_empty());
+        self.encode_and_submit(&draws, raster);
+        let timer = self.timer.as_ref().filter(|_| !self.pipelined);
+        let times = timer.and_then(|t| t.read(&self.gpu.device, self.compute.is_some(), raster));
+        stats.gpu_ms = times.map(|t| t.total_ms);
+        stats.gpu_rays_ms = times.and_then(|t| t.rays_ms);
         stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         stats.resident_bytes = self.cache.resident_bytes();
         Ok(self.read(readback, stats))
@@ -272,7 +298,15 @@ impl Renderer {
             splats.extend_from_slice(tile_splats);
             let tile_splats = start..splats.len() as u32;
             self.splat_ranges[draw] = tile_splats.clone();
-            let at = Placement { draw: draw as u32, slot, mode, hull_quad_samples, morph, splats: tile_splats.clone() };
+            let at = Placement {
+                draw: draw as u32,
+                slot,
+                mode,
+                hull_quad_samples,
+                morph,
+                splats: tile_splats.clone(),
+                near_m,
+            };
             let block = TileUniform::new(camera, settings, tile, at, shadow_steps);
             let mut bytes = bytemuck::bytes_of(&block).to_vec();
             bytes.resize(TILE_STRIDE as usize, 0);
@@ -281,7 +315,8 @@ impl Renderer {
             if mode != DrawMode::Plain && self.compute.is_none() {
                 self.pipelines.prepare_ray(device, variant);
             }
-            draws.push(Prepared { slot, mode, variant, splats: tile_splats, screen: block.screen });
+            let mesh = mode == DrawMode::Plain || uniforms::needs_filler(tile);
+            draws.push(Prepared { slot, mode, variant, splats: tile_splats, screen: block.screen, mesh });
         }
         let frame = FrameUniform::new(camera, settings, &self.cache.mip_rects);
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
@@ -309,89 +344,110 @@ impl Renderer {
         compute.prepare((&self.gpu.device, &self.gpu.queue), targets, (&bins, variant));
     }
 
-    fn encode_and_submit(&self, draws: &[Prepared]) {
+    /// Encodes and submits the frame: the compute rays if any, then, if
+    /// `raster` (anything is rasterised: rays from hulls, terrain meshes or
+    /// splats), the compute rays' depth fill, the splats' light and the
+    /// render pass.
+    fn encode_and_submit(&self, draws: &[Prepared], raster: bool) {
         let Some(targets) = &self.targets else { return };
-        let view = |t: &wgpu::Texture| t.create_view(&Default::default());
-        let (colour, pixel_data, depth) = (view(&targets.colour), view(&targets.pixel_data), view(&targets.depth));
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
+        let computed = self.compute.as_ref();
+        let timer = self.timer.as_ref().filter(|_| !self.pipelined);
+        if let Some(compute) = computed {
+            compute.encode_rays(&mut encoder, &self.frame_group, timer);
+            if raster {
+                compute.encode_fill(&mut encoder, (targets, &self.frame_group), timer);
+            }
+        }
         let splats = self.splats.as_ref().filter(|_| draws.iter().any(|d| !d.splats.is_empty()));
         if let Some(splats) = splats {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("splat light"),
-                timestamp_writes: self.timer.as_ref().map(|t| t.compute_start()),
+                timestamp_writes: timer.and_then(|t| t.light(computed.is_none())),
             });
             let groups = (&self.pipelines, &self.frame_group, &self.tile_group);
             splats.light(&mut pass, groups, draws.iter().map(|d| &d.splats).enumerate());
         }
-        let sky = wgpu::Color { r: SKY[0], g: SKY[1], b: SKY[2], a: 1.0 };
-        let computed = self.compute.as_ref();
-        if let Some(compute) = computed {
-            let timer = self.timer.as_ref().filter(|_| splats.is_none());
-            compute.encode(&mut encoder, (targets, &self.frame_group), timer);
+        if raster {
+            self.encode_render_pass(&mut encoder, draws, (targets, splats, timer));
         }
-        {
-            // After the compute ray pass the targets hold its rays.
-            let load = |clear| if computed.is_some() { wgpu::LoadOp::Load } else { wgpu::LoadOp::Clear(clear) };
-            let attach = |v, clear| {
-                Some(wgpu::RenderPassColorAttachment {
-                    view: v,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations { load: load(clear), store: wgpu::StoreOp::Store },
-                })
-            };
-            let depth_load = if computed.is_some() { wgpu::LoadOp::Load } else { wgpu::LoadOp::Clear(0.0) };
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("tiles"),
-                color_attachments: &[attach(&colour, sky), attach(&pixel_data, wgpu::Color::TRANSPARENT)],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &depth,
-                    depth_ops: Some(wgpu::Operations { load: depth_load, store: wgpu::StoreOp::Store }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: self.timer.as_ref().map(|t| t.render(splats.is_none() && computed.is_none())),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_bind_group(0, &self.frame_group, &[]);
-            // Ray-cast tiles first, then the terrain meshes: far tiles, and
-            // under ray-cast tiles the lowered crack fillers.
-            let hulls = draws.iter().enumerate().filter(|(_, d)| d.mode != DrawMode::Plain && computed.is_none());
-            for (k, d) in hulls {
-                let (Some((hull, _)), Some(rays)) = (self.cache.meshes(d.slot), self.pipelines.ray(d.variant)) else {
-                    continue;
-                };
-                pass.set_pipeline(rays);
-                pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
-                draw(&mut pass, hull, hull.index_count);
-            }
-            pass.set_pipeline(&self.pipelines.plain);
-            for (k, d) in draws.iter().enumerate() {
-                let Some((_, terrain)) = self.cache.meshes(d.slot) else { continue };
-                pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
-                let count = if d.mode == DrawMode::Plain { terrain.index_count } else { terrain.grid_count };
-                draw(&mut pass, terrain, count);
-            }
-            if let Some(splats) = splats {
-                pass.set_pipeline(&self.pipelines.splat);
-                splats.bind(&mut pass);
-                for (k, d) in draws.iter().enumerate().filter(|(_, d)| !d.splats.is_empty()) {
-                    pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
-                    pass.draw(0..4, d.splats.clone());
-                }
-            }
-        }
-        if let Some(t) = &self.timer {
+        if let Some(t) = timer {
             t.resolve(&mut encoder);
         }
         self.gpu.queue.submit([encoder.finish()]);
         // Waiting here makes the frame time the GPU's, not the queue's.
-        let _ = self.gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        if !self.pipelined {
+            self.wait();
+        }
+    }
+
+    /// The render pass: hulls casting rays (without a compute rays pass),
+    /// terrain meshes, splats.
+    fn encode_render_pass(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        draws: &[Prepared],
+        (targets, splats, timer): (&Targets, Option<&SplatBuffers>, Option<&PassTimer>),
+    ) {
+        let computed = self.compute.as_ref();
+        let view = |t: &wgpu::Texture| t.create_view(&Default::default());
+        let (colour, pixel_data, depth) = (view(&targets.colour), view(&targets.pixel_data), view(&targets.depth));
+        let sky = wgpu::Color { r: SKY[0], g: SKY[1], b: SKY[2], a: 1.0 };
+        // After the compute ray pass the targets hold its rays.
+        let load = |clear| if computed.is_some() { wgpu::LoadOp::Load } else { wgpu::LoadOp::Clear(clear) };
+        let attach = |v, clear| {
+            Some(wgpu::RenderPassColorAttachment {
+                view: v,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations { load: load(clear), store: wgpu::StoreOp::Store },
+            })
+        };
+        let depth_load = if computed.is_some() { wgpu::LoadOp::Load } else { wgpu::LoadOp::Clear(0.0) };
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("tiles"),
+            color_attachments: &[attach(&colour, sky), attach(&pixel_data, wgpu::Color::TRANSPARENT)],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &depth,
+                depth_ops: Some(wgpu::Operations { load: depth_load, store: wgpu::StoreOp::Store }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: timer.map(|t| t.render(splats.is_none() && computed.is_none())),
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_bind_group(0, &self.frame_group, &[]);
+        // Ray-cast tiles first, then the terrain meshes: far tiles, and
+        // under ray-cast tiles the lowered crack fillers.
+        let hulls = draws.iter().enumerate().filter(|(_, d)| d.mode != DrawMode::Plain && computed.is_none());
+        for (k, d) in hulls {
+            let (Some((hull, _)), Some(rays)) = (self.cache.meshes(d.slot), self.pipelines.ray(d.variant)) else {
+                continue;
+            };
+            pass.set_pipeline(rays);
+            pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
+            draw(&mut pass, hull, hull.index_count);
+        }
+        pass.set_pipeline(&self.pipelines.plain);
+        for (k, d) in draws.iter().enumerate().filter(|(_, d)| d.mesh) {
+            let Some((_, terrain)) = self.cache.meshes(d.slot) else { continue };
+            pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
+            let count = if d.mode == DrawMode::Plain { terrain.index_count } else { terrain.grid_count };
+            draw(&mut pass, terrain, count);
+        }
+        if let Some(splats) = splats {
+            pass.set_pipeline(&self.pipelines.splat);
+            splats.bind(&mut pass);
+            for (k, d) in draws.iter().enumerate().filter(|(_, d)| !d.splats.is_empty()) {
+                pass.set_bind_group(1, &self.tile_group, &[(k as u64 * TILE_STRIDE) as u32]);
+                pass.draw(0..4, d.splats.clone());
+            }
+        }
     }
 
     fn read(&self, readback: Readback, stats: FrameStats) -> Rendered {
         let mut out = Rendered { stats, ..Default::default() };
-        let (Some(targets), true) = (&self.targets, readback != Readback::None) else { return out };
+        let (Some(targets), true) = (&self.targets, readback != Readback::None && !self.pipelined) else { return out };
         let (device, queue) = (&self.gpu.device, &self.gpu.queue);
         out.colour = bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.colour, 4)).to_vec();
         if readback == Readback::All {

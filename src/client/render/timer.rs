@@ -1,15 +1,36 @@
-//! GPU time of a frame's passes (from the first — the splats' light or the
-//! compute rays, if any — to the end of the render pass) from timestamp queries, where the adapter has them
-//! (`None` elsewhere; the caller then reports CPU-side time).
+//! GPU time of a frame's passes from timestamp queries, where the adapter
+//! has them (`None` elsewhere; the caller then reports CPU-side time): the
+//! whole frame, from the start of its first pass to the end of its render
+//! pass (or of its rays where nothing is rasterised), and with rays in a
+//! compute pass (which then comes first) the rays' pass and the depth fill
+//! after it.
 
 use super::targets::map_read;
 
-/// Two timestamps around a pass.
+/// Query indices: the first pass's start, the render pass's end, the rays'
+/// end, the depth fill's end.
+const FRAME_START: u32 = 0;
+const FRAME_END: u32 = 1;
+const RAYS_END: u32 = 2;
+const FILL_END: u32 = 3;
+const QUERIES: u32 = 4;
+
+/// The timestamps of a frame's passes.
 pub struct PassTimer {
     queries: wgpu::QuerySet,
     resolve: wgpu::Buffer,
     read: wgpu::Buffer,
     period_ns: f32,
+}
+
+/// GPU milliseconds of one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GpuTimes {
+    /// The whole frame.
+    pub total_ms: f64,
+    /// The compute rays' pass, and the depth fill after it (with rays in
+    /// a compute pass).
+    pub rays_ms: Option<(f64, f64)>,
 }
 
 impl PassTimer {
@@ -21,12 +42,12 @@ impl PassTimer {
         let queries = device.create_query_set(&wgpu::QuerySetDescriptor {
             label: Some("pass time"),
             ty: wgpu::QueryType::Timestamp,
-            count: 2,
+            count: QUERIES,
         });
         let buffer = |usage| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("timestamps"),
-                size: 16,
+                size: 8 * QUERIES as u64,
                 usage,
                 mapped_at_creation: false,
             })
@@ -39,37 +60,63 @@ impl PassTimer {
         })
     }
 
-    /// The first timestamp at the start of a compute pass that precedes
-    /// the render pass (the splats' light, or the rays').
-    pub fn compute_start(&self) -> wgpu::ComputePassTimestampWrites<'_> {
+    /// The splats' light pass: the frame's start if it is `first`.
+    pub fn light(&self, first: bool) -> Option<wgpu::ComputePassTimestampWrites<'_>> {
+        first.then_some(wgpu::ComputePassTimestampWrites {
+            query_set: &self.queries,
+            beginning_of_pass_write_index: Some(FRAME_START),
+            end_of_pass_write_index: None,
+        })
+    }
+
+    /// The compute rays' pass, the frame's first.
+    pub fn rays(&self) -> wgpu::ComputePassTimestampWrites<'_> {
         wgpu::ComputePassTimestampWrites {
             query_set: &self.queries,
-            beginning_of_pass_write_index: Some(0),
-            end_of_pass_write_index: None,
+            beginning_of_pass_write_index: Some(FRAME_START),
+            end_of_pass_write_index: Some(RAYS_END),
         }
     }
 
-    /// The render pass's timestamps: its end, and its start if it is
-    /// `first` (no compute pass before it).
+    /// The depth fill after the compute rays.
+    pub fn fill(&self) -> wgpu::RenderPassTimestampWrites<'_> {
+        wgpu::RenderPassTimestampWrites {
+            query_set: &self.queries,
+            beginning_of_pass_write_index: None,
+            end_of_pass_write_index: Some(FILL_END),
+        }
+    }
+
+    /// The render pass: the frame's end, and its start if it is `first`.
     pub fn render(&self, first: bool) -> wgpu::RenderPassTimestampWrites<'_> {
         wgpu::RenderPassTimestampWrites {
             query_set: &self.queries,
-            beginning_of_pass_write_index: first.then_some(0),
-            end_of_pass_write_index: Some(1),
+            beginning_of_pass_write_index: first.then_some(FRAME_START),
+            end_of_pass_write_index: Some(FRAME_END),
         }
     }
 
-    /// Resolves the queries after the pass, in the same encoder.
+    /// Resolves the queries after the passes, in the same encoder.
     pub fn resolve(&self, encoder: &mut wgpu::CommandEncoder) {
-        encoder.resolve_query_set(&self.queries, 0..2, &self.resolve, 0);
-        encoder.copy_buffer_to_buffer(&self.resolve, 0, &self.read, 0, 16);
+        encoder.resolve_query_set(&self.queries, 0..QUERIES, &self.resolve, 0);
+        encoder.copy_buffer_to_buffer(&self.resolve, 0, &self.read, 0, 8 * QUERIES as u64);
     }
 
-    /// The pass's duration in milliseconds, once submitted.
-    pub fn read_ms(&self, device: &wgpu::Device) -> Option<f64> {
+    /// The frame's times once submitted: with a compute rays' pass (`rays`)
+    /// its time, and the depth fill's if there was a render pass after it
+    /// (`raster`; without one the frame ends with the rays).
+    pub fn read(&self, device: &wgpu::Device, rays: bool, raster: bool) -> Option<GpuTimes> {
         let bytes = map_read(device, &self.read);
         let stamps: &[u64] = bytemuck::try_cast_slice(&bytes).ok()?;
-        let [start, end] = stamps.get(..2)?.try_into().ok()?;
-        (end > start).then(|| (end - start) as f64 * self.period_ns as f64 / 1e6)
+        let stamp = |k: u32| stamps.get(k as usize).copied();
+        let ms = |from: u32, to: u32| {
+            let (a, b) = (stamp(from)?, stamp(to)?);
+            (b >= a).then(|| (b - a) as f64 * self.period_ns as f64 / 1e6)
+        };
+        let end = if raster { FRAME_END } else { RAYS_END };
+        let total_ms = ms(FRAME_START, end).filter(|&t| t > 0.0)?;
+        let fill_ms = if raster { ms(RAYS_END, FILL_END) } else { Some(0.0) };
+        let rays_ms = if rays { ms(FRAME_START, RAYS_END).zip(fill_ms) } else { None };
+        Some(GpuTimes { total_ms, rays_ms })
     }
 }

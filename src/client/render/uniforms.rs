@@ -65,7 +65,9 @@ pub struct TileUniform {
     pub splats: [u32; 4],
     /// Pixels its box covers on screen: x0, y0, x1, y1 (x1, y1 excluded).
     pub screen: [u32; 4],
-    _pad: [f32; 8],
+    /// Nearest distance from the camera to its box (m), unused × 3.
+    pub near: [f32; 4],
+    _pad: [f32; 4],
 }
 
 /// Where and how a tile is drawn.
@@ -83,6 +85,8 @@ pub struct Placement {
     pub morph: Option<(u32, f32)>,
     /// Its splats in the frame's instance buffer.
     pub splats: std::ops::Range<u32>,
+    /// The nearest distance from the camera to its box ([`tile_near_m`]).
+    pub near_m: f64,
 }
 
 /// How a tile is drawn.
@@ -146,7 +150,7 @@ impl TileUniform {
         at: Placement,
         shadow_steps: u32,
     ) -> TileUniform {
-        let Placement { draw, slot, mode, hull_quad_samples, morph, splats } = at;
+        let Placement { draw, slot, mode, hull_quad_samples, morph, splats, near_m } = at;
         let frame = &tile.frame;
         let to_local = frame.basis.transpose();
         let cam = frame.to_local(camera.position_ecef);
@@ -179,7 +183,8 @@ impl TileUniform {
             morph: [morph.map_or(1.0, |(_, weight)| weight), 0.0, 0.0, 0.0],
             splats: [splats.start, splats.len() as u32, 0, 0],
             screen: screen_rect(camera, tile),
-            _pad: [0.0; 8],
+            near: [near_m as f32, 0.0, 0.0, 0.0],
+            _pad: [0.0; 4],
         }
     }
 }
@@ -189,10 +194,27 @@ impl TileUniform {
 /// flat frame's misplacement, which on slopes up to 3:1 moves heights by
 /// three times as much.
 fn filler_drop_m(tile: &TileData) -> f32 {
-    let heights = (tile.base_m.abs() + tile.range.max_m.abs().max(tile.range.min_m.abs()) as f64).max(1.0);
     (tile.range.mesh_error_m as f64
-        + 3.0 * tile.frame.flat_error_m(heights)
+        + 3.0 * tile.frame.flat_error_m(largest_height_m(tile))
         + 0.01 * tile.frame.spacing_m.min_element()) as f32
+}
+
+/// Whether a ray-cast tile needs its terrain mesh beneath it to fill cracks
+/// (`terrain.rs`). Its box reaches a cell beyond its edge samples, so it
+/// holds the tile's true footprint wherever the flat frame misplaces the
+/// tile by less than a cell; with every tile's footprint inside its own box,
+/// a ray cannot pass between tiles without meeting a surface. Half a cell
+/// is taken, for safety: coarse tiles (levels 7 and 8 over rmnp and the
+/// demo), high latitudes and the poles need the mesh, fine tiles do not
+/// (a quarter of a cell at levels 9 to 13 there).
+pub fn needs_filler(tile: &TileData) -> bool {
+    tile.frame.flat_error_m(largest_height_m(tile)) >= 0.5 * tile.frame.spacing_m.min_element()
+}
+
+/// The largest height (absolute, metres) in the tile's frame: its base
+/// and its range.
+fn largest_height_m(tile: &TileData) -> f64 {
+    (tile.base_m.abs() + tile.range.max_m.abs().max(tile.range.min_m.abs()) as f64).max(1.0)
 }
 
 /// The pixels the tile's box covers on screen, `[x0, y0, x1, y1]` with
@@ -298,6 +320,7 @@ mod tests {
             ("morph", offset_of!(TileUniform, morph)),
             ("splats", offset_of!(TileUniform, splats)),
             ("screen", offset_of!(TileUniform, screen)),
+            ("near", offset_of!(TileUniform, near)),
         ];
         for (name, rust) in [("Frame", &frame[..]), ("Tile", &tile[..])] {
             let (wgsl, size) = wgsl_offsets(name);
