@@ -26,3 +26,13 @@ fn fs_plain_early(in: PlainVertexOut) -> PlainOut {
     out.depth = min(out.depth, in.clip.z);
     return out;
 }
+
+// Trees' splats: the quad lies in the plane of the sphere's nearest point
+// (splat.wgsl), so a splat hidden behind the canopy or a nearer splat need
+// not run.
+@fragment @early_depth_test(less_equal)
+fn fs_splat_early(in: SplatOut) -> FragmentOut {
+    var out = splat_fragment(in);
+    out.depth = min(out.depth, in.clip.z);
+    return out;
+}

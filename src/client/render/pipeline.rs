@@ -76,14 +76,14 @@ pub struct Pipelines {
     module: wgpu::ShaderModule,
     layout: wgpu::PipelineLayout,
     /// Hull fragments promise their depth (`fs_ray_hull`), so hidden ones
-    /// can be rejected before their rays are cast; terrain meshes' too
-    /// (`fs_plain_early`).
+    /// can be rejected before their rays are cast; terrain meshes' and
+    /// splats' too (`fs_plain_early`, `fs_splat_early`).
     early_depth: bool,
 }
 
 impl Pipelines {
-    /// Compiles the shaders and builds the pipelines; hull and terrain mesh
-    /// fragments promise their depth if `early_depth` (the device must have
+    /// Compiles the shaders and builds the pipelines; hull, terrain mesh and
+    /// splat fragments promise their depth if `early_depth` (the device must have
     /// `SHADER_EARLY_DEPTH_TEST`).
     pub fn new(device: &wgpu::Device, early_depth: bool) -> Pipelines {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -136,10 +136,11 @@ impl Pipelines {
         let plain = ("vs_plain", &[terrain_vertex][..]);
         let splat = ("vs_splat", &splat_instance[..]);
         let splat_layout = splat_layout(device);
-        let plain_fragment = if early_depth { "fs_plain_early" } else { "fs_plain" };
+        let (plain_fragment, splat_fragment) =
+            if early_depth { ("fs_plain_early", "fs_splat_early") } else { ("fs_plain", "fs_splat") };
         Pipelines {
             plain: pipeline(device, (&layout, &module), plain, plain_fragment, (triangles(wgpu::Face::Back), &[])),
-            splat: pipeline(device, (&layout, &module), splat, "fs_splat", (quads, &[])),
+            splat: pipeline(device, (&layout, &module), splat, splat_fragment, (quads, &[])),
             splat_light: splat_light(device, &module, [&frame_layout, &tile_layout, &splat_layout]),
             splat_layout,
             rays: HashMap::new(),

@@ -21,7 +21,8 @@ pub const FRAGMENT_PARTS: [(&str, &str); 2] = [
     ("splat.wgsl", include_str!("../../../shaders/splat.wgsl")),
 ];
 
-/// Hull ray casting and terrain meshes with a conservative depth promise.
+/// Hull ray casting, terrain meshes and splats with a conservative depth
+/// promise.
 pub const EARLY_DEPTH_PART: (&str, &str) = ("early_depth.wgsl", include_str!("../../../shaders/early_depth.wgsl"));
 
 /// The compute module's own part.
@@ -67,7 +68,7 @@ mod tests {
     fn shaders_validate() {
         for early_depth in [false, true] {
             let module = validated(&raycast_source(early_depth));
-            for name in ["fs_ray_hull", "fs_plain_early"] {
+            for name in ["fs_ray_hull", "fs_plain_early", "fs_splat_early"] {
                 assert_eq!(module.entry_points.iter().any(|e| e.name == name), early_depth, "{name}");
             }
         }
