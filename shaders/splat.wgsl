@@ -32,17 +32,16 @@ struct SplatOut {
 };
 
 // The quad covers the disc's pixels in the plane of the sphere's nearest
-// point, a radius nearer than its centre (but no more than a quarter of
-// the way to the camera, which keeps it beyond the near plane): the depth
-// a fragment writes (the sphere's, fs_splat) then lies at or behind the
-// quad's, as fs_splat_early promises (and clamps to where the quad stops
-// short).
+// point, a radius nearer than its centre (but not before the near plane):
+// the depth a fragment writes (the sphere's, fs_splat) then lies at or
+// behind the quad's, as fs_splat_early promises (and clamps to where the
+// quad stops short).
 @vertex
 fn vs_splat(@builtin(vertex_index) v: u32, s: SplatIn) -> SplatOut {
     let disc = vec2<f32>(f32(v & 1u), f32(v >> 1u)) * 2.0 - 1.0;
     let centre = (tile.model_view * vec4<f32>(s.centre, 1.0)).xyz;
     let z = max(-centre.z, 1.0e-30);
-    let front = max(z - s.radius, 0.75 * z);
+    let front = max(z - s.radius, min(z, 1.001 * frame.viewport.z));
     let corner = vec3<f32>((centre.xy + disc * s.radius) * (front / z), -front);
     return SplatOut(frame.proj * vec4<f32>(corner, 1.0), disc, s.colour, vec4<f32>(centre, s.radius), s.light);
 }

@@ -206,8 +206,8 @@ fn time_frames(
 }
 
 /// Frames per second rendered with frames in flight (submitted without
-/// waiting for each) over at least [`TIMED_WALL_MS`], the last one waited
-/// for.
+/// waiting for each, up to [`crate::client::render::FRAMES_IN_FLIGHT`] at
+/// once) over at least [`TIMED_WALL_MS`], the last one waited for.
 fn throughput(
     renderer: &mut Renderer,
     camera: &Camera,

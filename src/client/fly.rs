@@ -356,7 +356,7 @@ fn frame(
     let mut out = renderer.render_draws(&camera, &draws, &settings, Readback::All)?;
     if options.hold_ms > 0.0 {
         let held = held(renderer, (&camera, &draws, &settings), options.hold_ms)?;
-        (out.stats.gpu_ms, out.stats.gpu_rays_ms) = (held.gpu_ms, held.gpu_rays_ms);
+        (out.stats.gpu_ms, out.stats.gpu_rays_ms, out.stats.wall_ms) = (held.gpu_ms, held.gpu_rays_ms, held.wall_ms);
     }
     let selected = chosen.selected.as_ref();
     let predicted_ms = lod.as_deref().zip(selected).map(|(l, s)| l.expected_ms(s));

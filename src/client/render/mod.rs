@@ -37,6 +37,10 @@ use targets::Targets;
 use timer::PassTimer;
 use uniforms::{DrawMode, FrameSettings, FrameUniform, Placement, TILE_STRIDE, TileUniform};
 
+/// Frames submitted and not yet done, at most, when they are pipelined
+/// ([`Renderer::pipelined`]): what a swapchain holds an interactive loop to.
+pub const FRAMES_IN_FLIGHT: usize = 3;
+
 /// What to read back after a frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Readback {
@@ -135,6 +139,8 @@ pub struct Renderer {
     timer: Option<PassTimer>,
     /// Frames are submitted without waiting for the GPU ([`Self::pipelined`]).
     pipelined: bool,
+    /// Their submissions not yet waited for, oldest first.
+    in_flight: std::collections::VecDeque<wgpu::SubmissionIndex>,
     frame_no: u64,
 }
 
@@ -189,21 +195,24 @@ impl Renderer {
             compute: None,
             timer,
             pipelined: false,
+            in_flight: Default::default(),
             frame_no: 0,
         }
     }
 
-    /// Whether frames are submitted without waiting for the GPU, several
-    /// in flight as in an interactive loop: their wall time then measures
-    /// throughput, and they have no GPU times (no timestamps are written)
-    /// and nothing to read back. [`Self::wait`] waits for them.
+    /// Whether frames are submitted without waiting for the GPU, up to
+    /// [`FRAMES_IN_FLIGHT`] at once as in an interactive loop: their wall
+    /// time then measures throughput, and they have no GPU times (no
+    /// timestamps are written) and nothing to read back. [`Self::wait`]
+    /// waits for them.
     pub fn pipelined(&mut self, on: bool) {
         self.pipelined = on;
     }
 
     /// Waits until the GPU has done every frame submitted.
-    pub fn wait(&self) {
+    pub fn wait(&mut self) {
         let _ = self.gpu.device.poll(wgpu::PollType::wait_indefinitely());
+        self.in_flight.clear();
     }
 
     /// The GPU.
@@ -251,7 +260,8 @@ impl Renderer {
         let draws = self.prepare(camera, draws, settings, &mut stats)?;
         self.prepare_compute(camera, &draws);
         let raster = self.compute.is_none() || draws.iter().any(|d| d.mesh || !d.splats.is_empty());
-        self.encode_and_submit(&draws, raster);
+        let submitted = self.encode_and_submit(&draws, raster);
+        self.throttle(submitted);
         let timer = self.timer.as_ref().filter(|_| !self.pipelined);
         let times = timer.and_then(|t| t.read(&self.gpu.device, self.compute.is_some(), raster));
         stats.gpu_ms = times.map(|t| t.total_ms);
@@ -344,12 +354,27 @@ impl Renderer {
         compute.prepare((&self.gpu.device, &self.gpu.queue), targets, (&bins, variant));
     }
 
+    /// Waits for the frame just `submitted`, or, with frames pipelined, for
+    /// the oldest one once more than [`FRAMES_IN_FLIGHT`] are.
+    fn throttle(&mut self, submitted: Option<wgpu::SubmissionIndex>) {
+        // Waiting here makes the frame time the GPU's, not the queue's.
+        if !self.pipelined {
+            self.wait();
+            return;
+        }
+        self.in_flight.extend(submitted);
+        if self.in_flight.len() > FRAMES_IN_FLIGHT {
+            let oldest = self.in_flight.pop_front();
+            let _ = self.gpu.device.poll(wgpu::PollType::Wait { submission_index: oldest, timeout: None });
+        }
+    }
+
     /// Encodes and submits the frame: the compute rays if any, then, if
     /// `raster` (anything is rasterised: rays from hulls, terrain meshes or
     /// splats), the compute rays' depth fill, the splats' light and the
     /// render pass.
-    fn encode_and_submit(&self, draws: &[Prepared], raster: bool) {
-        let Some(targets) = &self.targets else { return };
+    fn encode_and_submit(&self, draws: &[Prepared], raster: bool) -> Option<wgpu::SubmissionIndex> {
+        let targets = self.targets.as_ref()?;
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
         let computed = self.compute.as_ref();
         let timer = self.timer.as_ref().filter(|_| !self.pipelined);
@@ -374,11 +399,7 @@ impl Renderer {
         if let Some(t) = timer {
             t.resolve(&mut encoder);
         }
-        self.gpu.queue.submit([encoder.finish()]);
-        // Waiting here makes the frame time the GPU's, not the queue's.
-        if !self.pipelined {
-            self.wait();
-        }
+        Some(self.gpu.queue.submit([encoder.finish()]))
     }
 
     /// The render pass: hulls casting rays (without a compute rays pass),
