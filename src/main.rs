@@ -298,9 +298,10 @@ enum Bench {
     /// Per-stage tile times, a whole-area build, and error against run time
     /// for resampling, 16-bit encodings and the close.
     Pipeline {
-        /// A real-data region with a map-based land cover.
-        #[arg(long, default_value = "config/examples/rmnp.toml")]
-        rmnp: PathBuf,
+        /// A real-data region with a map-based land cover (default:
+        /// config/examples/rmnp.toml, left out when its data is absent).
+        #[arg(long)]
+        rmnp: Option<PathBuf>,
         /// Forest labels for scoring the close.
         #[arg(long, default_value = "tests/fixtures/rmnp_forest_labels.csv")]
         labels: PathBuf,
@@ -312,9 +313,10 @@ enum Bench {
     /// time with and without variable splitting and the deferral table,
     /// benefit against the optimiser's upper bound.
     Lod {
-        /// A real-data region.
-        #[arg(long, default_value = "config/examples/rmnp.toml")]
-        rmnp: PathBuf,
+        /// A real-data region (default: config/examples/rmnp.toml, left out
+        /// when its data is absent).
+        #[arg(long)]
+        rmnp: Option<PathBuf>,
         /// Frames per flyover.
         #[arg(long, default_value_t = 300)]
         frames: usize,
@@ -330,9 +332,10 @@ enum Bench {
     /// flyovers: nodes touched with the deferral table against full
     /// re-evaluation every frame (equal selections checked).
     Sse {
-        /// A real-data region.
-        #[arg(long, default_value = "config/examples/rmnp.toml")]
-        rmnp: PathBuf,
+        /// A real-data region (default: config/examples/rmnp.toml, left out
+        /// when its data is absent).
+        #[arg(long)]
+        rmnp: Option<PathBuf>,
         /// Directory of the camera paths (`demo_*.toml`, `rmnp_*.toml`).
         #[arg(long, default_value = "config/paths")]
         paths: PathBuf,
@@ -371,9 +374,9 @@ enum Bench {
     /// reference.
     #[cfg(feature = "client")]
     Raycast {
-        /// The real-data region.
-        #[arg(long, default_value = "config/examples/rmnp.toml")]
-        rmnp: PathBuf,
+        /// The real-data region (default: config/examples/rmnp.toml).
+        #[arg(long)]
+        rmnp: Option<PathBuf>,
         /// Image size, WxH.
         #[arg(long, default_value = "1280x1024")]
         size: String,
@@ -465,6 +468,19 @@ fn with_server_allocator() {
     eprintln!("sylva: running with the allocator's defaults ({VAR} not applied: {error})");
 }
 
+/// The benchmarks' real-data region when none is named; they leave it out
+/// when its data (`../shared/data`) is absent.
+const DEFAULT_REAL_REGION: &str = "config/examples/rmnp.toml";
+
+/// The benchmarks' real-data region: a named one must load (the error names
+/// the file), where the default may be left out.
+fn real_region(named: Option<PathBuf>) -> Result<PathBuf> {
+    if let Some(path) = &named {
+        sylva::config::load(Some(path))?;
+    }
+    Ok(named.unwrap_or_else(|| PathBuf::from(DEFAULT_REAL_REGION)))
+}
+
 fn run(command: Command) -> Result<()> {
     match command {
         Command::Tile { config, layer, level, row, col, halo, format, output } => {
@@ -497,14 +513,17 @@ fn run(command: Command) -> Result<()> {
         #[cfg(feature = "server")]
         Command::Seed(args) => seed(*args),
         Command::Bench { what: Bench::Pipeline { rmnp, labels, build_side } } => {
+            let rmnp = real_region(rmnp)?;
             println!("{}", sylva::bench::pipeline_report(&rmnp, &labels, build_side)?);
             Ok(())
         }
         Command::Bench { what: Bench::Lod { rmnp, frames, plots, flights } } => {
+            let rmnp = real_region(rmnp)?;
             println!("{}", sylva::bench::lod_report(&rmnp, frames, plots.as_deref(), &flights)?);
             Ok(())
         }
         Command::Bench { what: Bench::Sse { rmnp, paths, fps, frames } } => {
+            let rmnp = real_region(rmnp)?;
             use sylva::bench::lod_sse::Pace;
             if !(fps.is_finite() && fps > 0.0) {
                 anyhow::bail!("--fps {fps}: a positive number of frames a second");
@@ -567,6 +586,9 @@ fn run(command: Command) -> Result<()> {
                 None => Default::default(),
             };
             let mode = match lod.as_str() {
+                "sse" if geomorph || select_every != 1 => {
+                    anyhow::bail!("--geomorph and --select-every apply to --lod budget only, not to --lod sse")
+                }
                 "sse" => sylva::client::fly::LodMode::Sse,
                 "budget" if budget_ms.is_finite() && budget_ms > 0.0 => {
                     sylva::client::fly::LodMode::Budget { budget_ms, select_every, prior }
@@ -623,6 +645,8 @@ fn run(command: Command) -> Result<()> {
             what: Bench::Raycast { rmnp, size, gpu_budget_mib, plot, only, no_early_depth, ray_pass },
         } => {
             let size = parse_size(&size)?;
+            let rmnp = real_region(rmnp)?;
+            outputs::check(&[], &[&plot])?;
             let mut gpu = sylva::client::render::gpu::Gpu::open()?;
             gpu.early_depth &= !no_early_depth;
             let early = if gpu.early_depth { "on" } else { "off" };

@@ -17,6 +17,9 @@ pub enum OutputError {
     /// An output names an existing directory.
     #[error("{0}: is a directory")]
     Directory(PathBuf),
+    /// An output's directory does not exist.
+    #[error("{0}: no such directory to write into")]
+    NoDirectory(PathBuf),
     /// Writing or renaming failed.
     #[error("{path}: cannot write: {source}")]
     Write {
@@ -27,13 +30,18 @@ pub enum OutputError {
     },
 }
 
-/// Checks that no output is an input, a directory or another output.
+/// Checks that no output is an input, a directory, another output or in a
+/// directory that does not exist: before the work, not after it.
 pub fn check(inputs: &[&Path], outputs: &[&Path]) -> Result<(), OutputError> {
     let inputs: Vec<PathBuf> = inputs.iter().filter_map(|p| std::fs::canonicalize(p).ok()).collect();
     let mut seen = Vec::new();
     for &out in outputs {
         if out.is_dir() {
             return Err(OutputError::Directory(out.to_path_buf()));
+        }
+        let dir = out.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        if !dir.is_dir() {
+            return Err(OutputError::NoDirectory(dir.to_path_buf()));
         }
         let resolved = resolve(out);
         if inputs.contains(&resolved) {
@@ -109,6 +117,8 @@ mod tests {
         assert!(matches!(check(&[&input], &[&a, &via_dots]), Err(OutputError::IsInput(_))));
         assert!(matches!(check(&[], &[&a, &dir.join("./a.tif")]), Err(OutputError::Twice(_))));
         assert!(matches!(check(&[], &[&dir]), Err(OutputError::Directory(_))));
+        let err = check(&[], &[&dir.join("no/such/c.png")]).unwrap_err().to_string();
+        assert!(err.contains("no/such") && err.contains("no such directory"), "{err}");
         assert!(same_file(&input, &via_dots) && !same_file(&a, &b));
         std::fs::remove_dir_all(&dir).unwrap();
     }

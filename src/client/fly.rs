@@ -197,6 +197,9 @@ pub enum FlyError {
     /// The LOD selection thread could not start.
     #[error("starting the LOD selection thread: {0}")]
     Thread(std::io::Error),
+    /// An output file cannot be written (found before the flight starts).
+    #[error(transparent)]
+    Output(#[from] crate::outputs::OutputError),
     /// Writing frames or statistics failed.
     #[error("{path}: {source}")]
     Io {
@@ -206,6 +209,11 @@ pub enum FlyError {
         source: std::io::Error,
     },
 }
+
+/// The flight's statistics in its output directory.
+const STATS_FILE: &str = "stats.csv";
+/// The calibrated cost model of a budget flight, in its output directory.
+const MODEL_FILE: &str = "cost_model.json";
 
 /// Flies `path` over `source`, rendering with `renderer`.
 pub fn fly(
@@ -218,6 +226,7 @@ pub fn fly(
     let mut store = TileStore::new(options.halo, budget, options.in_flight)?;
     if let Some(dir) = &options.out_dir {
         std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
+        crate::outputs::check(&[], &[&dir.join(STATS_FILE), &dir.join(MODEL_FILE)])?;
     }
     let mut sse = match options.mode {
         LodMode::Sse => SseSelector::for_source(source, options.lod.max_level).map_err(LoadError::from)?,
@@ -252,11 +261,11 @@ pub fn fly(
         records.push(record);
     }
     if let Some(dir) = &options.out_dir {
-        let csv = dir.join("stats.csv");
+        let csv = dir.join(STATS_FILE);
         std::fs::write(&csv, to_csv(&records)).map_err(|e| io(&csv, e))?;
         if let Some(lod) = &lod {
             // The calibrated model, for `--cost-model` on the next flight.
-            let file = dir.join("cost_model.json");
+            let file = dir.join(MODEL_FILE);
             let json = serde_json::to_string_pretty(&lod.model()).map_err(|e| io(&file, e.into()))?;
             std::fs::write(&file, json).map_err(|e| io(&file, e))?;
         }

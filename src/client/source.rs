@@ -15,7 +15,7 @@ use std::sync::Arc;
 #[derive(Debug, thiserror::Error)]
 pub enum FetchError {
     /// The pipeline failed on a source.
-    #[error("tile {id:?}: {source}")]
+    #[error("tile {id}: {source}")]
     Produce {
         /// The tile.
         id: TileId,
@@ -23,7 +23,7 @@ pub enum FetchError {
         source: ProduceError,
     },
     /// The server failed or answered something unusable.
-    #[error("tile {id:?} from {url}: {reason}")]
+    #[error("tile {id} from {url}: {reason}")]
     Http {
         /// The tile.
         id: TileId,

@@ -105,7 +105,7 @@ pub struct TileData {
 #[derive(Debug, thiserror::Error)]
 pub enum TileError {
     /// The layers do not have `(N + 2B)²` samples.
-    #[error("tile {id:?}: expected {expected} samples per layer, got {got}")]
+    #[error("tile {id}: expected {expected} samples per layer, got {got}")]
     Size {
         /// The tile.
         id: TileId,
@@ -115,7 +115,7 @@ pub enum TileError {
         got: usize,
     },
     /// The halo must reach the overlap cell.
-    #[error("tile {0:?}: a halo of at least one sample is needed")]
+    #[error("tile {0}: a halo of at least one sample is needed")]
     NoHalo(TileId),
 }
 

@@ -94,9 +94,11 @@ pub struct Report {
 pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedError> {
     let job = Job::new(options)?;
     if options.dry_run {
-        return Ok(dry_run(&job));
+        let resumed = options.resume.then(|| Progress::resume(&job.files.0, &job.fingerprint)).transpose()?;
+        return Ok(dry_run(&job, resumed.as_ref()));
     }
     let store = crate::cache::open(&job.config.tile_cache.backend(options.cache_dir.as_deref()))?;
+    probe(&*store)?;
     let (progress_path, failed_path) = &job.files;
     // A list is read before the failed-tiles file (perhaps the same) is emptied.
     let list = options.tiles_from.as_deref().map(|p| failed::read(p, &job.region.tiles)).transpose()?;
@@ -125,6 +127,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
         stop: AtomicBool::new(false),
         refresh_before,
         warned: Mutex::new(false),
+        wait_notice: std::sync::Once::new(),
     };
     match list {
         Some(entries) => pool.install(|| run.list(&entries)),
@@ -170,6 +173,8 @@ struct Run<'a> {
     stop: AtomicBool,
     refresh_before: std::time::SystemTime,
     warned: Mutex<bool>,
+    /// Whether a long wait for a lock was explained.
+    wait_notice: std::sync::Once,
 }
 
 impl Run<'_> {
@@ -189,6 +194,7 @@ impl Run<'_> {
             retries: self.options.retries,
             from_children,
             counters: self.counters,
+            wait_notice: &self.wait_notice,
         }
     }
 
@@ -294,12 +300,26 @@ fn exact_levels(region: &crate::region::Region, layers: &[crate::cem::Layer], la
         .collect()
 }
 
-/// The dry run: tiles per level for this shard.
-fn dry_run(job: &Job) -> Report {
+/// Takes and releases a lock in the cache: one that cannot be written fails
+/// the job at once, not every tile of it.
+fn probe(store: &dyn crate::cache::TileStore) -> Result<(), crate::cache::CacheError> {
+    match store.try_lock(".sylva-seed-probe", Duration::from_secs(1))? {
+        Some(lock) => store.unlock(&lock),
+        None => Ok(()),
+    }
+}
+
+/// The dry run: tiles per level for this shard, or with `resumed` (the
+/// job's progress file) those it has left.
+fn dry_run(job: &Job, resumed: Option<&Progress>) -> Report {
     let Some(walk) = &job.walk else {
         return Report { text: "a tile list has no levels to count".into(), failed: 0 };
     };
-    let counts = walk.count_per_level();
+    let counts = match resumed {
+        Some(p) if p.complete => vec![0; walk.levels().count()],
+        Some(p) => walk.count_left(&p.finished()),
+        None => walk.count_per_level(),
+    };
     let files = (job.layers.len() * job.formats.len()) as u64;
     let rows: Vec<Vec<String>> = walk
         .levels()
@@ -311,8 +331,11 @@ fn dry_run(job: &Job) -> Report {
             (counts.iter().sum::<u64>() * files).to_string(),
         ]))
         .collect();
+    let resuming = resumed.map_or(String::new(), |p| {
+        format!(", left after {} tile files made earlier ({})", p.earlier, job.files.0.display())
+    });
     let head = format!(
-        "{} — shard {}/{}, {} layer(s) × {} format(s)",
+        "{} — shard {}/{}, {} layer(s) × {} format(s){resuming}",
         job.region.name,
         job.shard.index,
         job.shard.count,

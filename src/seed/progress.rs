@@ -131,6 +131,11 @@ impl Progress {
         std::fs::rename(&tmp, &self.path)
     }
 
+    /// The finished subtrees' roots.
+    pub fn finished(&self) -> Vec<TileId> {
+        self.done.lock().map(|d| d.iter().copied().collect()).unwrap_or_default()
+    }
+
     /// Finished subtrees held (the set's size stays near the walk's frontier).
     pub fn held(&self) -> usize {
         self.done.lock().map_or(0, |d| d.len())

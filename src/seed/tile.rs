@@ -68,7 +68,14 @@ pub struct Seeder<'a> {
     pub from_children: Vec<Vec<bool>>,
     /// Counts.
     pub counters: &'a Counters,
+    /// Said once, the first time a tile waits long for another's lock.
+    pub wait_notice: &'a std::sync::Once,
 }
+
+/// Busy answers (~2 s of pauses) after which a wait for another's lock is
+/// explained: a tile takes 5–50 ms, so a lock held this long is most likely
+/// left by a seeder that was interrupted, and expires only after the TTL.
+const LONG_WAIT_PAUSES: u32 = 8;
 
 impl Seeder<'_> {
     /// Seeds every layer of `tile`; `kids` are its children's halves (when
@@ -163,6 +170,9 @@ impl Seeder<'_> {
             match flight::claim(self.store, key, &usable, self.lock_ttl).map_err(|e| e.to_string())? {
                 Claim::Ready(_) => return Ok(Made::Existing),
                 Claim::Busy => {
+                    if busy == LONG_WAIT_PAUSES {
+                        self.explain_wait(key);
+                    }
                     std::thread::sleep(flight::pause(busy));
                     busy += 1;
                 }
@@ -173,6 +183,15 @@ impl Seeder<'_> {
                 }
             }
         }
+    }
+
+    fn explain_wait(&self, key: &str) {
+        let ttl = self.lock_ttl.as_secs_f64();
+        self.wait_notice.call_once(|| {
+            eprintln!(
+                "sylva seed: waiting for {key}, locked by another seeder or server; an interrupted seed leaves its locks, which expire {ttl:.0} s after they were taken ([tile_cache] lock_ttl_s)"
+            );
+        });
     }
 
     /// Up to `1 + retries` attempts, 100 ms apart, doubling.

@@ -100,6 +100,16 @@ impl Walk {
         counts
     }
 
+    /// Tiles per level left to seed when the subtrees `finished` (disjoint,
+    /// as a resumed job's progress file holds them) are skipped.
+    pub fn count_left(&self, finished: &[TileId]) -> Vec<u64> {
+        let mut done = vec![0; self.levels.clone().count()];
+        for node in finished.iter().filter(|t| t.level <= *self.levels.end()).filter_map(|&t| self.node(t)) {
+            self.tally(node, &mut done, true);
+        }
+        self.count_per_level().iter().zip(done).map(|(all, done)| all.saturating_sub(done)).collect()
+    }
+
     fn node(&self, tile: TileId) -> Option<Node> {
         let relation = self.coverage.relation(&self.tiles.sector(tile));
         (relation != Relation::Outside).then_some((tile, relation))
@@ -228,6 +238,28 @@ mod tests {
                 assert!(position.get(&c).is_none_or(|&j| j < i), "{c} after its parent {t}");
             }
         }
+    }
+
+    #[test]
+    fn tiles_left_are_those_outside_the_finished_subtrees() {
+        let w = walk(3..=11, Shard::ALL);
+        let tiles = seeded(&w);
+        let inside = |t: TileId, root: TileId| std::iter::successors(Some(t), |t| t.parent()).any(|a| a == root);
+        // Two finished subtrees: one deep inside, one at the walk's top
+        // elsewhere (and one below the walk's levels, which changes nothing).
+        let deep = tiles.iter().find(|t| t.level == 8).copied().unwrap();
+        let top = tiles.iter().copied().filter(|&t| !inside(deep, t)).min_by_key(|t| t.level).unwrap();
+        assert!(top.level < 8, "{top}");
+        let left: Vec<_> = tiles.iter().filter(|&&t| !inside(t, top) && !inside(t, deep)).collect();
+        let counts = w.count_left(&[top, deep, TileId::new(12, 0, 0)]);
+        for level in 3..=11 {
+            assert_eq!(
+                counts[(level - 3) as usize],
+                left.iter().filter(|t| t.level == level).count() as u64,
+                "level {level}"
+            );
+        }
+        assert!(counts.iter().sum::<u64>() < w.count_per_level().iter().sum::<u64>());
     }
 
     #[test]

@@ -105,6 +105,18 @@ fn bad_arguments_are_explained() {
 }
 
 #[test]
+fn benchmarks_refuse_a_named_region_or_an_output_they_cannot_use_before_running() {
+    for bench in ["pipeline", "lod", "sse"] {
+        let out = sylva(&["bench", bench, "--rmnp", "/no/such/rmnp.toml"]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains("/no/such/rmnp.toml"), "bench {bench}: {err}");
+    }
+    let out = sylva(&["bench", "raycast", "--size", "8x8", "--plot", "/no/such/dir/plot.png"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("/no/such/dir: no such directory"), "{err}");
+}
+
+#[test]
 fn geotiff_output_has_the_geotransform_gdal_reads() {
     let dir = TempDir::new("cli-gdal");
     let path = dir.join("t.tif");

@@ -97,6 +97,13 @@ fn bad_flight_input_is_explained() {
     assert!(String::from_utf8_lossy(&e.stderr).contains("sse or budget"));
     let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--lod", "budget", "--budget-ms", "0"]);
     assert!(String::from_utf8_lossy(&e.stderr).contains("--budget-ms 0 is not a positive"));
+    let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--geomorph"]);
+    assert!(String::from_utf8_lossy(&e.stderr).contains("--lod budget only"));
+    // An output that cannot be written stops the flight before its first frame.
+    std::fs::create_dir_all(out_dir.join("stats.csv")).unwrap();
+    let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--frames", "2", "--size", "32x24"]);
+    assert!(String::from_utf8_lossy(&e.stderr).contains("stats.csv: is a directory"));
+    assert!(!out_dir.join("frame_00000.png").exists(), "no frame was rendered");
     let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--server", "http://127.0.0.1:9"]);
     assert!(String::from_utf8_lossy(&e.stderr).contains("tiles.json"), "{}", String::from_utf8_lossy(&e.stderr));
     let model = dir.join("model.json");

@@ -1,8 +1,9 @@
 //! `sylva seed` as an operator runs it: seeded tiles are the server's cache
 //! hits, byte for byte; dry runs count what a seed writes and polygons prune
-//! it; a seeder killed with SIGKILL resumes to the same cache; a source that
-//! fails for some tiles gets them retried, listed and re-run from the list;
-//! uniform tiles are stored once; bad input is named.
+//! it; a seeder killed with SIGKILL resumes to the same cache (and its dry
+//! run counts what is left), and a wait for a lock it left is explained; a
+//! source that fails for some tiles gets them retried, listed and re-run
+//! from the list; uniform tiles are stored once; bad input is named.
 
 use crate::common::{self, TempDir};
 use crate::http::Server;
@@ -200,7 +201,11 @@ fn bad_input_is_named_with_the_problem() {
     std::fs::write(&redis, "[tile_cache]\nbackend = \"redis\"\nredis_url = \"redis://127.0.0.1:1/0\"\n").unwrap();
     let list = dir.join("list.txt");
     std::fs::write(&list, "dem/3/1/1\ncem/nine/1/1\n").unwrap();
-    let cases: [(&[&str], &str); 6] = [
+    // A cache directory that cannot be made (a file is in the way).
+    let file = dir.join("a-file");
+    std::fs::write(&file, "").unwrap();
+    let cache = file.join("cache");
+    let cases: [(&[&str], &str); 7] = [
         (&["--levels", "12-3"], "--levels \"12-3\": FROM is above TO"),
         (
             &["--levels", "0-5", "--coverage", geojson.to_str().unwrap()],
@@ -210,6 +215,10 @@ fn bad_input_is_named_with_the_problem() {
         (&["--levels", "0-5", "--shard", "4/4"], "--shard \"4/4\""),
         (&["--tiles-from", list.to_str().unwrap()], "list.txt:2"),
         (&["--levels", "0-5", "--layers", "trees"], "unknown \"trees\""),
+        (
+            &["--levels", "0-5", "--cache-dir", cache.to_str().unwrap()],
+            "a-file/cache/.sylva-seed-probe.lock: Not a directory",
+        ),
     ];
     for (args, needle) in cases {
         let out = seed(&dir.0, args);
@@ -252,12 +261,38 @@ fn a_seeder_killed_mid_run_resumes_to_the_same_cache() {
     let partial = walk(&cache).len();
     assert!(partial < expected.len(), "killed after the end: {partial} files");
 
+    // A dry run of the resumed job counts what it has left.
+    let dry = |job: &[&str]| dry_total(&ok(&seed(&dir.0, &[job, &["--resume", "--dry-run"]].concat())));
+    let (_, left) = dry(&job);
+    let (_, all) = dry_total(&ok(&seed(&dir.0, &[&job[..], &["--dry-run"]].concat())));
+    assert!(0 < left && left < all, "{left} of {all} files left");
+
     let summary = ok(&seed(&dir.0, &[&job[..], &["--cache-dir", cache.to_str().unwrap(), "--resume"]].concat()));
+    assert!(count(&summary, "tile files made") <= left, "{summary}");
+    assert_eq!(dry(&job).1, 0, "nothing is left once the job is complete");
     let resumed = tiles(&cache);
     assert_eq!(resumed.keys().collect::<Vec<_>>(), expected.keys().collect::<Vec<_>>());
     assert!(resumed == expected, "the resumed cache differs from an uninterrupted run");
     let made = count(&summary, "tile files made");
     assert!(made < expected.len() as u64, "the resumed run remade everything: {summary}");
+}
+
+#[test]
+fn a_wait_for_a_lock_left_by_an_interrupted_seed_is_explained() {
+    let dir = TempDir::new("seed-stale-lock");
+    let config = rmnp_config(&dir, "rmnp.toml", "[tile_cache]\nlock_ttl_s = 6");
+    let cache = dir.join("cache");
+    let job = job_args(&config, &cache, "dem", "6-8", &[]);
+    ok(&seed(&dir.0, &strs(&job)));
+    // A tile gone, and the lock a killed seeder held on it left behind.
+    let key = tiles(&cache).into_keys().next().unwrap();
+    std::fs::remove_file(cache.join(&key)).unwrap();
+    std::fs::write(cache.join(format!("{key}.lock")), "killed-seeder").unwrap();
+    let out = seed(&dir.0, &strs(&job));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&format!("waiting for {key}")) && err.contains("lock_ttl_s"), "{err}");
+    assert_eq!(err.matches("waiting for").count(), 1, "said once: {err}");
+    assert_eq!(count(&ok(&out), "tile files made"), 1, "the tile is made once the lock expires");
 }
 
 /// A Terrarium upstream on loopback: sea (0 m) west of `SEA_EAST`, hills
