@@ -230,15 +230,15 @@ impl CostCalibrator {
 
 /// Solves a small dense system by Gaussian elimination with partial
 /// pivoting; `None` if it is singular.
-fn gauss(mut m: [[f64; FEATURES]; FEATURES], mut rhs: [f64; FEATURES]) -> Option<[f64; FEATURES]> {
-    for col in 0..FEATURES {
-        let pivot = (col..FEATURES).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
+pub(crate) fn gauss<const N: usize>(mut m: [[f64; N]; N], mut rhs: [f64; N]) -> Option<[f64; N]> {
+    for col in 0..N {
+        let pivot = (col..N).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
         if m[pivot][col].abs().partial_cmp(&1e-300) != Some(std::cmp::Ordering::Greater) {
             return None;
         }
         m.swap(col, pivot);
         rhs.swap(col, pivot);
-        for row in col + 1..FEATURES {
+        for row in col + 1..N {
             let k = m[row][col] / m[col][col];
             let pivot_row = m[col];
             for (x, p) in m[row][col..].iter_mut().zip(&pivot_row[col..]) {
@@ -247,9 +247,9 @@ fn gauss(mut m: [[f64; FEATURES]; FEATURES], mut rhs: [f64; FEATURES]) -> Option
             rhs[row] -= k * rhs[col];
         }
     }
-    let mut x = [0.0; FEATURES];
-    for row in (0..FEATURES).rev() {
-        let tail: f64 = (row + 1..FEATURES).map(|j| m[row][j] * x[j]).sum();
+    let mut x = [0.0; N];
+    for row in (0..N).rev() {
+        let tail: f64 = (row + 1..N).map(|j| m[row][j] * x[j]).sum();
         x[row] = (rhs[row] - tail) / m[row][row];
     }
     Some(x)
