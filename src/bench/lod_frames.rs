@@ -10,7 +10,10 @@
 //! and over those the budget bounded (`budget`, or `limit`: the optimiser
 //! stopped early, which is the selection's shortfall).
 //!
-//! How well *any* linear cost model could have done is shown beside: the
+//! Beside the selection's prediction, the model's own for what each frame
+//! drew (`model_ms`, before the frame corrected it): the gap between the
+//! two is what predicting the camera a frame ahead costs. How well *any*
+//! linear cost model could have done is shown too: the
 //! least-squares fit, in hindsight over the whole flight, of the measured
 //! times to the work each frame measurably did ([`hindsight_fit`]). Where
 //! that fit misses ±10 % on many frames, the frame time depends on
@@ -41,6 +44,9 @@ pub struct FrameTime {
     /// Whether the budget bounded the selection (`None`: a `stats.csv`
     /// without the `bound` column).
     pub budget_bound: Option<bool>,
+    /// The cost model's prediction for what the frame drew (`None`
+    /// without the `model_ms` column).
+    pub model_ms: Option<f64>,
     /// The work the frame measurably did ([`WORK`]; `None` without those
     /// columns).
     pub work: Option<[f64; WORK]>,
@@ -54,6 +60,7 @@ pub fn parse(csv: &str) -> Result<Vec<FrameTime>, String> {
     let (gpu, render, predicted, budget) =
         (column("gpu_ms")?, column("render_ms")?, column("predicted_ms")?, column("budget_ms")?);
     let bound = column("bound").ok();
+    let model = column("model_ms").ok();
     let work = ["tiles", "ray_pixels", "view_fetches_mean", "shadow_fetches_mean", "splats"].map(|c| column(c).ok());
     let rows = lines.skip(1).enumerate().map(|(k, line)| {
         let cells: Vec<&str> = line.split(',').collect();
@@ -66,9 +73,14 @@ pub fn parse(csv: &str) -> Result<Vec<FrameTime>, String> {
             Some([1.0, tiles?, pixels / 1e3, view? * pixels / 1e6, shadow? * pixels / 1e6, splats? / 1e3])
         })();
         match (number(predicted), measured, number(budget)) {
-            (Some(predicted_ms), Some(measured_ms), Some(budget_ms)) => {
-                Ok(FrameTime { predicted_ms, measured_ms, budget_ms, budget_bound, work })
-            }
+            (Some(predicted_ms), Some(measured_ms), Some(budget_ms)) => Ok(FrameTime {
+                predicted_ms,
+                measured_ms,
+                budget_ms,
+                budget_bound,
+                model_ms: model.and_then(number),
+                work,
+            }),
             _ => Err(format!("frame {}: not a flight under a budget", k + 1)),
         }
     });
@@ -89,6 +101,9 @@ pub struct Summary {
     pub not_over: f64,
     /// Median of |predicted − measured| / measured (the error of prediction).
     pub prediction_error: f64,
+    /// Share of frames the model predicted within ±[`TOLERANCE`] once
+    /// drawn (`None` without `model_ms`).
+    pub model_fit: Option<f64>,
     /// Share of frames the hindsight fit of their work puts within
     /// ±[`TOLERANCE`] of their measured time ([`hindsight_fit`]).
     pub hindsight: Option<f64>,
@@ -110,6 +125,12 @@ pub fn summarize(frames: &[FrameTime]) -> Summary {
         budget_bound: bound.map(|b| (b.len(), share(&b, &on_budget))),
         not_over: share(frames, &|t| t.measured_ms <= t.budget_ms * (1.0 + TOLERANCE)),
         prediction_error: errors.get(errors.len() / 2).copied().unwrap_or(f64::NAN),
+        model_fit: frames
+            .iter()
+            .map(|t| t.model_ms.map(|m| (m / t.measured_ms - 1.0).abs() <= TOLERANCE))
+            .collect::<Option<Vec<bool>>>()
+            .filter(|fits| !fits.is_empty())
+            .map(|fits| fits.iter().filter(|f| **f).count() as f64 / fits.len() as f64),
         hindsight: hindsight_fit(frames),
     }
 }
@@ -161,6 +182,7 @@ pub fn report(flights: &[(String, String)]) -> Result<(String, HashMap<String, V
             s.budget_bound.map_or("–".into(), |(_, on)| format!("{:.1}", 100.0 * on)),
             format!("{:.1}", 100.0 * s.not_over),
             format!("{:.1}", 100.0 * s.prediction_error),
+            s.model_fit.map_or("–".into(), |h| format!("{:.1}", 100.0 * h)),
             s.hindsight.map_or("–".into(), |h| format!("{:.1}", 100.0 * h)),
         ]);
         plots.insert(name.clone(), lod_plot::frame_times_png(name, &frames)?);
@@ -174,6 +196,7 @@ pub fn report(flights: &[(String, String)]) -> Result<(String, HashMap<String, V
         "of those on budget ±10 % (%)",
         "≤ 110 % of budget (%)",
         "median error of prediction (%)",
+        "model on the drawn frame within ±10 % (%)",
         "work fitted in hindsight within ±10 % (%)",
     ];
     Ok((super::table(&header, &rows), plots))
@@ -240,6 +263,17 @@ mod tests {
             .collect();
         assert!(hindsight_fit(&noisy).unwrap() <= 0.6, "{:?}", hindsight_fit(&noisy));
         assert_eq!(hindsight_fit(&parse(CSV).unwrap()), None, "no work columns");
+        assert_eq!(summarize(&frames).model_fit, None, "no model_ms column");
+    }
+
+    #[test]
+    fn the_model_on_the_drawn_frame_is_scored_apart_from_the_selection() {
+        let csv = "frame,gpu_ms,render_ms,predicted_ms,model_ms,budget_ms\n\
+            0,500,510,1.0,1.0,40\n\
+            1,40,45,60,41,40\n\
+            2,40,45,60,30,40\n";
+        let s = summarize(&parse(csv).unwrap());
+        assert_eq!((s.model_fit, s.prediction_error), (Some(0.5), 0.5), "{s:?}");
     }
 
     #[test]

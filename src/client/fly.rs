@@ -162,6 +162,11 @@ pub struct FrameRecord {
     /// The frame time the selection predicted, ms, corrected by the
     /// flight's aim ([`BudgetFlight::expected_ms`]; budget mode).
     pub predicted_ms: Option<f64>,
+    /// The cost model's prediction for what the frame drew, made before the
+    /// frame corrected the model, ms (budget mode): beside `predicted_ms`,
+    /// it tells the model's error from what the selection's camera
+    /// prediction and aim add.
+    pub model_ms: Option<f64>,
     /// Candidate tiles of the selection (budget mode).
     pub candidates: Option<usize>,
     /// The selection's benefit over the optimiser's upper bound (budget
@@ -374,9 +379,9 @@ fn frame(
     let ids: Vec<_> = drawn.iter().map(|c| c.id).collect();
     let view: Vec<u32> = out.fetches.iter().map(|f| f[0]).collect();
     let steps = FrameSteps::measure(&view, &out.draws, &ids);
-    if let Some(lod) = lod {
-        lod.observe(&camera, &drawn, &trees.drawn, (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), &steps));
-    }
+    let model_ms = lod.map(|lod| {
+        lod.observe(&camera, &drawn, &trees.drawn, (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), &steps)).model_ms
+    });
     if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
         let file = dir.join(format!("frame_{k:05}.png"));
         let bytes: Vec<u8> = out.colour.iter().flatten().copied().collect();
@@ -415,6 +420,7 @@ fn frame(
         selection_ms: chosen.selected.as_ref().map_or(cpu_ms, |s| s.ms),
         budget_ms,
         predicted_ms,
+        model_ms,
         candidates: selected.map(|s| s.candidates),
         benefit_bound: selected.map(|s| s.cut.benefit / s.cut.upper_bound),
         bound: selected.map(|s| s.cut.bound()),
@@ -512,7 +518,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     let mut out = Vec::new();
     let _ = writeln!(
         out,
-        "frame,cpu_ms,gpu_ms,gpu_rays_ms,gpu_fill_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,shadow_steps_mean,candidates,benefit_bound,bound,morphing,trees,splats,splat_fill_mpx,nodes_touched"
+        "frame,cpu_ms,gpu_ms,gpu_rays_ms,gpu_fill_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,model_ms,shadow_steps_mean,candidates,benefit_bound,bound,morphing,trees,splats,splat_fill_mpx,nodes_touched"
     );
     for r in records {
         let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
@@ -521,7 +527,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
         let (rays, fill) = (optional(r.gpu_rays_ms.map(|t| t.0)), optional(r.gpu_rays_ms.map(|t| t.1)));
         let _ = writeln!(
             out,
-            "{},{:.3},{gpu},{rays},{fill},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{:.2},{},{},{},{},{},{},{:.4},{}",
+            "{},{:.3},{gpu},{rays},{fill},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{},{:.2},{},{},{},{},{},{},{:.4},{}",
             r.frame,
             r.cpu_ms,
             r.render_ms,
@@ -541,6 +547,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             r.selection_ms,
             optional(r.budget_ms),
             optional(r.predicted_ms),
+            optional(r.model_ms),
             r.shadow_steps_mean,
             r.candidates.map_or(String::new(), |n| n.to_string()),
             optional(r.benefit_bound),
