@@ -39,7 +39,7 @@ pub fn check(inputs: &[&Path], outputs: &[&Path]) -> Result<(), OutputError> {
         if out.is_dir() {
             return Err(OutputError::Directory(out.to_path_buf()));
         }
-        let dir = out.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let dir = directory_of(out);
         if !dir.is_dir() {
             return Err(OutputError::NoDirectory(dir.to_path_buf()));
         }
@@ -60,14 +60,18 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
     resolve(a) == resolve(b)
 }
 
+/// The directory a file is or would be in (`.` for a bare name).
+fn directory_of(path: &Path) -> &Path {
+    path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."))
+}
+
 /// The absolute path a file has or would have: links and `..` resolved
 /// through its directory when the file does not exist yet.
 fn resolve(path: &Path) -> PathBuf {
     if let Ok(p) = std::fs::canonicalize(path) {
         return p;
     }
-    let dir = path.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    match (std::fs::canonicalize(dir), path.file_name()) {
+    match (std::fs::canonicalize(directory_of(path)), path.file_name()) {
         (Ok(d), Some(name)) => d.join(name),
         _ => path.to_path_buf(),
     }

@@ -143,6 +143,9 @@ pub fn summarize(frames: &[FrameTime]) -> Summary {
 /// columns or frames.
 pub fn hindsight_fit(frames: &[FrameTime]) -> Option<f64> {
     let rows: Vec<([f64; WORK], f64)> = frames.iter().map(|f| Some((f.work?, f.measured_ms))).collect::<Option<_>>()?;
+    if rows.is_empty() {
+        return None;
+    }
     let (mut a, mut b) = ([[0.0; WORK]; WORK], [0.0; WORK]);
     for (w, ms) in &rows {
         let weight = 1.0 / (ms * ms).max(1e-12);
@@ -161,7 +164,7 @@ pub fn hindsight_fit(frames: &[FrameTime]) -> Option<f64> {
         let fit: f64 = w.iter().zip(&c).map(|(x, k)| x * k).sum();
         (fit / ms - 1.0).abs() <= TOLERANCE
     };
-    (!rows.is_empty()).then(|| rows.iter().filter(fits).count() as f64 / rows.len() as f64)
+    Some(rows.iter().filter(fits).count() as f64 / rows.len() as f64)
 }
 
 /// The report's rows and plots for `flights` (name → stats.csv text):
