@@ -3,7 +3,8 @@
 # certificates for cargo, GDAL's command-line tools and OWSLib (the tests read
 # our GeoTIFFs and our WMS with them), Mesa's software Vulkan and OpenGL for
 # the renderer, redis-server (the tests start one for the shared Redis tile
-# cache), and Rust through rustup when cargo is missing.
+# cache), Xvfb (the viewer's tests open a window on it), and Rust through
+# rustup when cargo is missing.
 # Safe to run again: it installs only what is absent.
 set -euo pipefail
 sudo=""
@@ -20,6 +21,8 @@ command -v gdalinfo >/dev/null || need+=(gdal-bin)
 ls /usr/lib/*/libEGL.so.1 >/dev/null 2>&1 || need+=(libegl1)
 ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || need+=(libgl1-mesa-dri)
 command -v redis-server >/dev/null || need+=(redis-server)
+# `sylva view`'s tests open its window on a virtual X display.
+command -v Xvfb >/dev/null || need+=(xvfb)
 if [ ${#need[@]} -gt 0 ]; then
   $sudo apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}"

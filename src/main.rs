@@ -101,84 +101,49 @@ enum Command {
     /// Fly a camera path headless: PNG frames and per-frame statistics.
     #[cfg(feature = "client")]
     Fly {
-        /// Region configuration (default: the embedded demo region).
-        #[arg(long, conflicts_with = "server")]
-        config: Option<PathBuf>,
-        /// A `sylva serve` to fetch tiles from, e.g. http://127.0.0.1:8080.
-        #[arg(long)]
-        server: Option<String>,
+        #[command(flatten)]
+        tiles: TileArgs,
         /// Camera path (TOML; see config/paths/).
         #[arg(long)]
         path: PathBuf,
         /// Frames spread evenly over the path (at least 1).
         #[arg(long, default_value_t = 60, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
         frames: usize,
-        /// Image size, WxH.
-        #[arg(long, default_value = "640x480")]
-        size: String,
         /// Output directory for frame_NNNNN.png and stats.csv.
         #[arg(long)]
         out: PathBuf,
-        /// `exact` or `linear:STEPS`.
-        #[arg(long, default_value = "exact")]
-        traversal: String,
-        /// Shadow samples per hit (0: none).
-        #[arg(long, default_value_t = 10)]
-        shadow_steps: u32,
-        /// Tile selection: `sse` (refine to --max-error-px) or `budget`
-        /// (the most benefit whose predicted frame time fits --budget-ms).
-        #[arg(long, default_value = "sse")]
-        lod: String,
-        /// Frame budget of `--lod budget`, ms.
-        #[arg(long, default_value_t = 33.0)]
-        budget_ms: f64,
-        /// Frames between selections of `--lod budget` (the selection
-        /// thread's period).
-        #[arg(long, default_value_t = 1)]
-        select_every: u32,
-        /// Geomorph between tile levels over the selection period (`--lod
-        /// budget`; a morphing tile is prepared and uploaded once, with the
-        /// coarser surface the GPU blends it with).
-        #[arg(long)]
-        geomorph: bool,
-        /// The cost model `--lod budget` starts from: the `cost_model.json`
-        /// an earlier flight on this machine calibrated (default: constants
-        /// for a current GPU).
-        #[arg(long)]
-        cost_model: Option<PathBuf>,
-        /// Largest projected tile error, pixels.
-        #[arg(long, default_value_t = 2.0, value_parser = positive_px)]
-        max_error_px: f64,
-        /// Deepest tile level.
-        #[arg(long, default_value_t = 13)]
-        max_level: u32,
-        /// GPU tile cache budget, MiB.
-        #[arg(long, default_value_t = 512)]
-        gpu_budget_mib: usize,
         /// Statistics only, no PNG frames.
         #[arg(long)]
         no_frames: bool,
-        /// Draw the canopy by ray casting alone, without trees as point
-        /// splats near the camera.
-        #[arg(long)]
-        no_trees: bool,
-        /// Hull quads this many times the tiles' 16 samples: fewer
-        /// triangles, for software rasterisers (lavapipe: 4 gives ~30 %
-        /// faster frames; rays start farther from the surface, so more
-        /// fetches, and the linear march misses more).
-        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=32))]
-        hull_factor: u32,
-        /// Where rays are cast: `fragment` (from each tile's hull) or
-        /// `compute` (compute passes; for GPUs that shade fragments on a
-        /// small part of the chip, such as data-centre GPUs).
-        #[arg(long, default_value = "fragment")]
-        ray_pass: RayPass,
         /// Render each frame again for this long and report its median
         /// GPU time: what a loop rendering continuously sees, where a GPU
         /// lowers its clocks between a CPU-bound flight's frames (an H200
         /// runs 5.7× slower then).
         #[arg(long, default_value_t = 0.0)]
         hold_ms: f64,
+        #[command(flatten)]
+        render: RenderArgs,
+    },
+    /// Fly over the tiles in a window, with keyboard and mouse (W/S/A/D
+    /// move, Q/E down and up, arrows and a left drag look, Shift and the
+    /// wheel set the speed, L sun, T traversal, P saves the frame, Esc quits).
+    #[cfg(feature = "window")]
+    View {
+        #[command(flatten)]
+        tiles: TileArgs,
+        /// Start at this camera path's first keyframe, with its sun and
+        /// field of view (default: above the middle of the region).
+        #[arg(long)]
+        path: Option<PathBuf>,
+        /// Close after this many frames.
+        #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+        frames: Option<usize>,
+        /// Directory for stats.csv on closing (with the last frame when
+        /// --frames is given) and for frames saved with P (default: here).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        #[command(flatten)]
+        render: RenderArgs,
     },
     /// Pregenerate tiles into the tile cache (resumable, parallel, sharded).
     #[cfg(feature = "server")]
@@ -228,6 +193,126 @@ enum Command {
 
 /// `sylva seed`.
 #[cfg(feature = "server")]
+/// Where a flight's tiles come from.
+#[cfg(feature = "client")]
+#[derive(clap::Args)]
+struct TileArgs {
+    /// Region configuration (default: the embedded demo region).
+    #[arg(long, conflicts_with = "server")]
+    config: Option<PathBuf>,
+    /// A `sylva serve` to fetch tiles from, e.g. http://127.0.0.1:8080.
+    #[arg(long)]
+    server: Option<String>,
+}
+
+#[cfg(feature = "client")]
+impl TileArgs {
+    fn open(&self) -> Result<Box<dyn sylva::client::source::TileSource>> {
+        Ok(sylva::client::source::open(self.config.as_deref(), self.server.as_deref())?)
+    }
+}
+
+/// How a flight's frames are rendered and their tiles chosen.
+#[cfg(feature = "client")]
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// Image size, WxH.
+    #[arg(long, default_value = "640x480")]
+    size: String,
+    /// `exact` or `linear:STEPS`.
+    #[arg(long, default_value = "exact")]
+    traversal: String,
+    /// Shadow samples per hit (0: none).
+    #[arg(long, default_value_t = 10)]
+    shadow_steps: u32,
+    /// Tile selection: `sse` (refine to --max-error-px) or `budget`
+    /// (the most benefit whose predicted frame time fits --budget-ms).
+    #[arg(long, default_value = "sse")]
+    lod: String,
+    /// Frame budget of `--lod budget`, ms.
+    #[arg(long, default_value_t = 33.0)]
+    budget_ms: f64,
+    /// Frames between selections of `--lod budget` (the selection
+    /// thread's period).
+    #[arg(long, default_value_t = 1)]
+    select_every: u32,
+    /// Geomorph between tile levels over the selection period (`--lod
+    /// budget`; a morphing tile is prepared and uploaded once, with the
+    /// coarser surface the GPU blends it with).
+    #[arg(long)]
+    geomorph: bool,
+    /// The cost model `--lod budget` starts from: the `cost_model.json`
+    /// an earlier flight on this machine calibrated (default: constants
+    /// for a current GPU).
+    #[arg(long)]
+    cost_model: Option<PathBuf>,
+    /// Largest projected tile error, pixels.
+    #[arg(long, default_value_t = 2.0, value_parser = positive_px)]
+    max_error_px: f64,
+    /// Deepest tile level.
+    #[arg(long, default_value_t = 13)]
+    max_level: u32,
+    /// GPU tile cache budget, MiB.
+    #[arg(long, default_value_t = 512)]
+    gpu_budget_mib: usize,
+    /// Draw the canopy by ray casting alone, without trees as point
+    /// splats near the camera.
+    #[arg(long)]
+    no_trees: bool,
+    /// Hull quads this many times the tiles' 16 samples: fewer
+    /// triangles, for software rasterisers (lavapipe: 4 gives ~30 %
+    /// faster frames; rays start farther from the surface, so more
+    /// fetches, and the linear march misses more).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=32))]
+    hull_factor: u32,
+    /// Where rays are cast: `fragment` (from each tile's hull) or
+    /// `compute` (compute passes; for GPUs that shade fragments on a
+    /// small part of the chip, such as data-centre GPUs).
+    #[arg(long, default_value = "fragment")]
+    ray_pass: RayPass,
+}
+
+#[cfg(feature = "client")]
+impl RenderArgs {
+    /// The flight options these arguments set (the rest default).
+    fn options(&self) -> Result<sylva::client::fly::FlyOptions> {
+        let mode = match self.lod.as_str() {
+            "sse" if self.geomorph || self.select_every != 1 => {
+                bail!("--geomorph and --select-every apply to --lod budget only, not to --lod sse")
+            }
+            "sse" => sylva::client::fly::LodMode::Sse,
+            "budget" if self.budget_ms.is_finite() && self.budget_ms > 0.0 => sylva::client::fly::LodMode::Budget {
+                budget_ms: self.budget_ms,
+                select_every: self.select_every,
+                prior: self.prior()?,
+            },
+            "budget" => bail!("--budget-ms {} is not a positive number of milliseconds", self.budget_ms),
+            other => bail!("unknown --lod {other:?}; expected sse or budget"),
+        };
+        let traversal = sylva::client::fly::parse_traversal(&self.traversal)
+            .ok_or_else(|| anyhow::anyhow!("unknown traversal {:?}; expected exact or linear:STEPS", self.traversal))?;
+        Ok(sylva::client::fly::FlyOptions {
+            size: parse_size(&self.size)?,
+            traversal,
+            shadow_steps: self.shadow_steps,
+            lod: sylva::client::quadtree::LodRule { max_error_px: self.max_error_px, max_level: self.max_level },
+            mode,
+            geomorph: self.geomorph,
+            trees: if self.no_trees { None } else { Some(Default::default()) },
+            hull_factor: self.hull_factor as usize,
+            ray_pass: self.ray_pass,
+            ..Default::default()
+        })
+    }
+
+    /// The cost model a budget flight starts from.
+    fn prior(&self) -> Result<sylva::lod::model::CostModel> {
+        let Some(file) = &self.cost_model else { return Ok(Default::default()) };
+        let text = std::fs::read_to_string(file).with_context(|| format!("{}", file.display()))?;
+        sylva::lod::model::CostModel::from_json(&text).map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))
+    }
+}
+
 #[derive(clap::Args)]
 struct SeedArgs {
     /// Region and tile cache configuration (default: the embedded demo region).
@@ -554,69 +639,46 @@ fn run(command: Command) -> Result<()> {
             Ok(())
         }
         #[cfg(feature = "client")]
-        Command::Fly {
-            config,
-            server,
-            path,
-            frames,
-            size,
-            out,
-            traversal,
-            shadow_steps,
-            lod,
-            budget_ms,
-            select_every,
-            geomorph,
-            cost_model,
-            max_error_px,
-            max_level,
-            gpu_budget_mib,
-            no_frames,
-            no_trees,
-            hull_factor,
-            ray_pass,
-            hold_ms,
-        } => {
-            let prior = match cost_model {
-                Some(file) => {
-                    let text = std::fs::read_to_string(&file).with_context(|| format!("{}", file.display()))?;
-                    sylva::lod::model::CostModel::from_json(&text)
-                        .map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))?
-                }
-                None => Default::default(),
-            };
-            let mode = match lod.as_str() {
-                "sse" if geomorph || select_every != 1 => {
-                    anyhow::bail!("--geomorph and --select-every apply to --lod budget only, not to --lod sse")
-                }
-                "sse" => sylva::client::fly::LodMode::Sse,
-                "budget" if budget_ms.is_finite() && budget_ms > 0.0 => {
-                    sylva::client::fly::LodMode::Budget { budget_ms, select_every, prior }
-                }
-                "budget" => anyhow::bail!("--budget-ms {budget_ms} is not a positive number of milliseconds"),
-                other => anyhow::bail!("unknown --lod {other:?}; expected sse or budget"),
-            };
+        Command::Fly { tiles, path, frames, out, no_frames, hold_ms, render } => {
             let options = sylva::client::fly::FlyOptions {
                 frames,
-                size: parse_size(&size)?,
                 out_dir: Some(out),
                 write_frames: !no_frames,
-                traversal: sylva::client::fly::parse_traversal(&traversal).ok_or_else(|| {
-                    anyhow::anyhow!("unknown traversal {traversal:?}; expected exact or linear:STEPS")
-                })?,
-                shadow_steps,
-                lod: sylva::client::quadtree::LodRule { max_error_px, max_level },
-                mode,
-                geomorph,
-                trees: if no_trees { None } else { Some(Default::default()) },
-                hull_factor: hull_factor as usize,
-                ray_pass,
                 hold_ms,
-                ..Default::default()
+                ..render.options()?
             };
             let path = sylva::client::path::CameraPath::load(&path)?;
-            let source = sylva::client::source::open(config.as_deref(), server.as_deref())?;
-            let records = sylva::client::fly::run(source.as_ref(), &path, &options, gpu_budget_mib << 20)?;
+            let source = tiles.open()?;
+            let budget = render.gpu_budget_mib << 20;
+            let records = sylva::client::fly::run(source.as_ref(), &path, &options, budget)?;
+            println!("{}", sylva::client::fly::summary(&records));
+            Ok(())
+        }
+        #[cfg(feature = "window")]
+        Command::View { tiles, path, frames, out, render } => {
+            if let Some(dir) = &out {
+                std::fs::create_dir_all(dir).with_context(|| format!("{}", dir.display()))?;
+                outputs::check(&[], &[&dir.join("stats.csv")])?;
+            }
+            let source = tiles.open()?;
+            let path = path.as_deref().map(sylva::client::path::CameraPath::load).transpose()?;
+            let start = match &path {
+                Some(path) => sylva::client::view::path_start(path),
+                None => sylva::client::view::default_start(source.as_ref())?,
+            };
+            let options = sylva::client::view::ViewOptions {
+                render: render.options()?,
+                start,
+                fov_deg: path.as_ref().map_or(sylva::client::view::FOV_DEG, |p| p.fov_deg),
+                sun_ecef: match &path {
+                    Some(path) => path.sun_ecef(),
+                    None => Some(sylva::client::view::SUN.ecef(start.eye.lon_deg, start.eye.lat_deg)),
+                },
+                gpu_budget_bytes: render.gpu_budget_mib << 20,
+                exit_after: frames,
+                out_dir: out,
+            };
+            let records = sylva::client::view::run(source.as_ref(), options)?;
             println!("{}", sylva::client::fly::summary(&records));
             Ok(())
         }

@@ -9,6 +9,7 @@
 //! camera are drawn as splats ([`super::trees`]): at the resolution their
 //! screen size asks for, or under a budget as the selection allots.
 
+use super::camera::Camera;
 use super::lod::ahead::Lookahead;
 use super::lod::budget::{Budget, Choice};
 use super::lod::flight::BudgetFlight;
@@ -20,13 +21,14 @@ use super::raycast::{Traversal, TreeBlend};
 use super::render::RayPass;
 use super::render::cache::CacheFull;
 use super::render::uniforms::FrameSettings;
-use super::render::{Draw, FrameStats, Readback, Renderer};
+use super::render::{Draw, FrameStats, Readback, Rendered, Renderer};
 use super::source::TileSource;
 use super::sse::SseSelector;
 use super::store::{LoadError, TileStore};
 use super::tile::TileData;
 use super::trees::{self, TreeSettings};
 use crate::lod::model::CostModel;
+use glam::DVec3;
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::PathBuf;
@@ -227,55 +229,158 @@ pub fn fly(
     renderer: &mut Renderer,
     options: &FlyOptions,
 ) -> Result<Vec<FrameRecord>, FlyError> {
-    let budget = 2 * renderer.cache_slots() as usize * slot_estimate(source, options.halo);
-    let mut store = TileStore::new(options.halo, budget, options.in_flight)?;
     if let Some(dir) = &options.out_dir {
         std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
         crate::outputs::check(&[], &[&dir.join(STATS_FILE), &dir.join(MODEL_FILE)])?;
     }
-    let mut sse = match options.mode {
-        LodMode::Sse => SseSelector::for_source(source, options.lod.max_level).map_err(LoadError::from)?,
-        LodMode::Budget { .. } => None,
-    };
-    let mut lod = match options.mode {
-        LodMode::Sse => None,
-        LodMode::Budget { budget_ms, select_every, prior } => {
-            let selector = Selector {
-                grid: source.grid(),
-                bounds: source.bounds(),
-                knowledge: store.knowledge(),
-                fade: options.fade,
-                trees: options.trees,
-                max_level: options.lod.max_level,
-            };
-            let budget = Budget {
-                budget_ms,
-                max_tiles: renderer.cache_slots() as usize,
-                shadows: path.sun.is_some(),
-                deadline: None,
-            };
-            let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
-            let look =
-                Lookahead { tau_s: frame_s * f64::from(select_every.max(1)), limits: path.motion_limits(MOTION_STEPS) };
-            Some(BudgetFlight::new(selector, budget, look, prior, options.geomorph).map_err(FlyError::Thread)?)
-        }
-    };
+    let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
+    let motion = Motion { frame_s, limits: path.motion_limits(MOTION_STEPS), shadows: path.sun.is_some() };
+    let mut flight = Flight::new(source, renderer, options, motion)?;
     let mut records = Vec::with_capacity(options.frames);
     for k in 0..options.frames {
-        let record = frame(source, path, renderer, (&mut store, lod.as_mut(), sse.as_mut()), options, k)?;
-        records.push(record);
+        let shot = Shot {
+            index: k,
+            t_s: path.time(k, options.frames),
+            camera: path.camera(k, options.frames, options.size),
+            sun_ecef: path.sun_ecef(),
+        };
+        let framed = flight.frame(source, renderer, options, &shot, Readback::All)?;
+        if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
+            write_png(&dir.join(format!("frame_{k:05}.png")), &framed.rendered, options.size)?;
+        }
+        records.push(framed.record);
     }
     if let Some(dir) = &options.out_dir {
         let csv = dir.join(STATS_FILE);
         std::fs::write(&csv, to_csv(&records)).map_err(|e| io(&csv, e))?;
-        if let Some(lod) = &lod {
+        if let Some(model) = flight.model() {
             // The calibrated model, for `--cost-model` on the next flight.
             let file = dir.join(MODEL_FILE);
-            let json = serde_json::to_string_pretty(&lod.model()).map_err(|e| io(&file, e.into()))?;
+            let json = serde_json::to_string_pretty(&model).map_err(|e| io(&file, e.into()))?;
             std::fs::write(&file, json).map_err(|e| io(&file, e))?;
         }
     }
     Ok(records)
+}
+
+/// Writes a frame's colour as PNG.
+pub fn write_png(file: &std::path::Path, rendered: &Rendered, size: (u32, u32)) -> Result<(), FlyError> {
+    let bytes: Vec<u8> = rendered.colour.iter().flatten().copied().collect();
+    let png = crate::encode::png(&bytes, size.0 as usize, size.1 as usize, image::ExtendedColorType::Rgba8)
+        .map_err(|e| io(file, std::io::Error::other(e.0)))?;
+    std::fs::write(file, png).map_err(|e| io(file, e))
+}
+
+/// How the camera of a flight moves: what a budget flight's selections
+/// look ahead by.
+#[derive(Clone, Copy, Debug)]
+pub struct Motion {
+    /// Seconds between frames.
+    pub frame_s: f64,
+    /// The fastest the camera moves and turns.
+    pub limits: crate::lod::predict::MotionLimits,
+    /// Whether the sun is on (shadow rays are priced).
+    pub shadows: bool,
+}
+
+/// One frame to render: its camera, its time and its sun.
+#[derive(Clone, Copy, Debug)]
+pub struct Shot {
+    /// Frame index, for its record.
+    pub index: usize,
+    /// Time, seconds of the flight.
+    pub t_s: f64,
+    /// The camera.
+    pub camera: Camera,
+    /// Unit direction to the sun (ECEF), if it is on.
+    pub sun_ecef: Option<DVec3>,
+}
+
+/// A rendered frame: its statistics, its images and the tiles it drew.
+pub struct Framed {
+    /// The statistics.
+    pub record: FrameRecord,
+    /// The images read back.
+    pub rendered: Rendered,
+    /// The tiles drawn.
+    pub tiles: Vec<Arc<TileData>>,
+}
+
+/// What a flight keeps from frame to frame: the tiles loaded on the CPU and
+/// the selection's state (the deferral table, or the budget flight with its
+/// selection thread and calibrated cost model).
+pub struct Flight {
+    store: TileStore,
+    lod: Option<BudgetFlight>,
+    sse: Option<SseSelector>,
+}
+
+impl Flight {
+    /// A flight over `source` rendered by `renderer` whose camera moves as
+    /// `motion` says.
+    pub fn new(
+        source: &dyn TileSource,
+        renderer: &Renderer,
+        options: &FlyOptions,
+        motion: Motion,
+    ) -> Result<Flight, FlyError> {
+        let budget = 2 * renderer.cache_slots() as usize * slot_estimate(source, options.halo);
+        let store = TileStore::new(options.halo, budget, options.in_flight)?;
+        let sse = match options.mode {
+            LodMode::Sse => SseSelector::for_source(source, options.lod.max_level).map_err(LoadError::from)?,
+            LodMode::Budget { .. } => None,
+        };
+        let lod = match options.mode {
+            LodMode::Sse => None,
+            LodMode::Budget { budget_ms, select_every, prior } => {
+                let selector = Selector {
+                    grid: source.grid(),
+                    bounds: source.bounds(),
+                    knowledge: store.knowledge(),
+                    fade: options.fade,
+                    trees: options.trees,
+                    max_level: options.lod.max_level,
+                };
+                let budget = Budget {
+                    budget_ms,
+                    max_tiles: renderer.cache_slots() as usize,
+                    shadows: motion.shadows,
+                    deadline: None,
+                };
+                let look = Lookahead { tau_s: motion.frame_s * f64::from(select_every.max(1)), limits: motion.limits };
+                Some(BudgetFlight::new(selector, budget, look, prior, options.geomorph).map_err(FlyError::Thread)?)
+            }
+        };
+        Ok(Flight { store, lod, sse })
+    }
+
+    /// The cost model a budget flight has calibrated so far.
+    pub fn model(&self) -> Option<CostModel> {
+        self.lod.as_ref().map(BudgetFlight::model)
+    }
+
+    /// Bounds the camera's motion anew (a budget flight's selections look
+    /// ahead by it).
+    pub fn set_limits(&mut self, limits: crate::lod::predict::MotionLimits) {
+        if let Some(lod) = &mut self.lod {
+            lod.set_limits(limits);
+        }
+    }
+
+    /// Selects, loads and renders `shot`, reading back what `readback` asks
+    /// (everything under a budget, whose cost model learns from the
+    /// frame's fetches).
+    pub fn frame(
+        &mut self,
+        source: &dyn TileSource,
+        renderer: &mut Renderer,
+        options: &FlyOptions,
+        shot: &Shot,
+        readback: Readback,
+    ) -> Result<Framed, FlyError> {
+        let readback = if self.lod.is_some() { Readback::All } else { readback };
+        frame(source, renderer, (&mut self.store, self.lod.as_mut(), self.sse.as_mut()), options, (shot, readback))
+    }
 }
 
 /// The tiles of one frame and how they were chosen.
@@ -297,7 +402,7 @@ struct Chosen {
 fn choose(
     source: &dyn TileSource,
     (store, lod, sse): (&mut TileStore, Option<&mut BudgetFlight>, Option<&mut SseSelector>),
-    (t_s, camera): (f64, &super::camera::Camera),
+    (t_s, camera): (f64, &Camera),
     (options, slots): (&FlyOptions, u32),
 ) -> Result<Chosen, FlyError> {
     let Some(lod) = lod else {
@@ -334,16 +439,14 @@ fn choose(
 
 fn frame(
     source: &dyn TileSource,
-    path: &CameraPath,
     renderer: &mut Renderer,
     (store, mut lod, sse): (&mut TileStore, Option<&mut BudgetFlight>, Option<&mut SseSelector>),
     options: &FlyOptions,
-    k: usize,
-) -> Result<FrameRecord, FlyError> {
+    (shot, readback): (&Shot, Readback),
+) -> Result<Framed, FlyError> {
     let start = Instant::now();
     let bytes_before = source.bytes_fetched();
-    let camera = path.camera(k, options.frames, options.size);
-    let t_s = path.time(k, options.frames);
+    let (camera, t_s) = (shot.camera, shot.t_s);
     let chosen = choose(source, (store, lod.as_deref_mut(), sse), (t_s, &camera), (options, renderer.cache_slots()))?;
     let (tiles, error_px) = (&chosen.tiles, chosen.error_px);
     let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -351,7 +454,7 @@ fn frame(
     let settings = FrameSettings {
         traversal: options.traversal,
         shadow_steps: options.shadow_steps,
-        sun_ecef: path.sun_ecef(),
+        sun_ecef: shot.sun_ecef,
         fade,
     };
     let budgets = chosen.selected.as_ref().map(|s| &s.cut.tree_budgets);
@@ -367,7 +470,7 @@ fn frame(
             morph_weight: chosen.weights[k],
         })
         .collect();
-    let mut out = renderer.render_draws(&camera, &draws, &settings, Readback::All)?;
+    let mut out = renderer.render_draws(&camera, &draws, &settings, readback)?;
     if options.hold_ms > 0.0 {
         let held = held(renderer, (&camera, &draws, &settings), options.hold_ms)?;
         (out.stats.gpu_ms, out.stats.gpu_rays_ms, out.stats.wall_ms) = (held.gpu_ms, held.gpu_rays_ms, held.wall_ms);
@@ -382,26 +485,14 @@ fn frame(
     let model_ms = lod.map(|lod| {
         lod.observe(&camera, &drawn, &trees.drawn, (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), &steps)).model_ms
     });
-    if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
-        let file = dir.join(format!("frame_{k:05}.png"));
-        let bytes: Vec<u8> = out.colour.iter().flatten().copied().collect();
-        let png = crate::encode::png(
-            &bytes,
-            options.size.0 as usize,
-            options.size.1 as usize,
-            image::ExtendedColorType::Rgba8,
-        )
-        .map_err(|e| io(&file, std::io::Error::other(e.0)))?;
-        std::fs::write(&file, png).map_err(|e| io(&file, e))?;
-    }
     let mut levels = BTreeMap::new();
     for t in tiles {
         *levels.entry(t.id().level).or_insert(0) += 1;
     }
     let rays: Vec<&[u32; 2]> = out.fetches.iter().filter(|f| f[0] > 0).collect();
     let n = rays.len().max(1) as f64;
-    Ok(FrameRecord {
-        frame: k,
+    let record = FrameRecord {
+        frame: shot.index,
         cpu_ms,
         gpu_ms: out.stats.gpu_ms,
         gpu_rays_ms: out.stats.gpu_rays_ms,
@@ -430,7 +521,8 @@ fn frame(
         trees: trees.drawn.trees,
         splats: out.stats.splats as usize,
         splat_fill_px: trees.drawn.fill_px,
-    })
+    };
+    Ok(Framed { record, rendered: out, tiles: chosen.tiles })
 }
 
 /// A frame's trees.
@@ -446,7 +538,7 @@ struct FrameTrees {
 fn tree_splats(
     options: &FlyOptions,
     tiles: &[Arc<TileData>],
-    camera: &super::camera::Camera,
+    camera: &Camera,
     (blend, budgets): (&TreeBlend, Option<&trees::TreeBudgets>),
 ) -> FrameTrees {
     let mut out = FrameTrees { splats: vec![Vec::new(); tiles.len()], ..FrameTrees::default() };
@@ -464,7 +556,7 @@ pub fn visible_tiles(
     source: &dyn TileSource,
     store: &mut TileStore,
     mut sse: Option<&mut SseSelector>,
-    camera: &super::camera::Camera,
+    camera: &Camera,
     options: &FlyOptions,
     slots: u32,
 ) -> Result<(Vec<Arc<TileData>>, f64, usize), FlyError> {
@@ -500,7 +592,7 @@ fn io(path: &std::path::Path, source: std::io::Error) -> FlyError {
 /// CPU-bound flight's next frame.
 fn held(
     renderer: &mut Renderer,
-    (camera, draws, settings): (&super::camera::Camera, &[Draw], &FrameSettings),
+    (camera, draws, settings): (&Camera, &[Draw], &FrameSettings),
     hold_ms: f64,
 ) -> Result<FrameStats, FlyError> {
     let start = Instant::now();
@@ -574,15 +666,21 @@ pub fn summary(records: &[FrameRecord]) -> String {
         format!("{:.2} ms GPU", gpu.iter().sum::<f64>() / gpu.len() as f64)
     };
     let (first, last) = (records.first(), records.last());
+    // Fetches are counted where frames were read back (`sylva view` reads
+    // back none unless under a budget).
+    let fetches = if records.iter().any(|r| r.ray_pixels > 0) {
+        let max = records.iter().map(|r| r.view_fetches.1).max().unwrap_or(0);
+        format!("view fetches/pixel mean {:.1}, max {max}; ", mean(&|r| r.view_fetches.0))
+    } else {
+        String::new()
+    };
     format!(
-        "{} frames: {:.2} ms CPU (select + load), {:.2} ms render, {gpu_text} per frame; {:.1} tiles ({:.1} ray cast); view fetches/pixel mean {:.1}, max {}; {} bytes fetched; RSS {:.0} → {:.0} MiB",
+        "{} frames: {:.2} ms CPU (select + load), {:.2} ms render, {gpu_text} per frame; {:.1} tiles ({:.1} ray cast); {fetches}{} bytes fetched; RSS {:.0} → {:.0} MiB",
         records.len(),
         mean(&|r| r.cpu_ms),
         mean(&|r| r.render_ms),
         mean(&|r| (r.tiles_ray + r.tiles_plain) as f64),
         mean(&|r| r.tiles_ray as f64),
-        mean(&|r| r.view_fetches.0),
-        records.iter().map(|r| r.view_fetches.1).max().unwrap_or(0),
         records.iter().map(|r| r.bytes_fetched).sum::<u64>(),
         first.map_or(0.0, |r| r.rss_mib),
         last.map_or(0.0, |r| r.rss_mib),

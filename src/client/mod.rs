@@ -35,3 +35,5 @@ pub mod terrain;
 pub mod tile;
 pub mod tiletree;
 pub mod trees;
+#[cfg(feature = "window")]
+pub mod view;

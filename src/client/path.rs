@@ -50,6 +50,15 @@ pub struct Sun {
     pub elevation_deg: f64,
 }
 
+impl Sun {
+    /// Unit direction to the sun (ECEF) as seen at `lon`, `lat` (degrees).
+    pub fn ecef(&self, lon: f64, lat: f64) -> DVec3 {
+        let (sa, ca) = self.azimuth_deg.to_radians().sin_cos();
+        let (se, ce) = self.elevation_deg.to_radians().sin_cos();
+        globe::enu_basis(lon, lat) * DVec3::new(sa * ce, ca * ce, se)
+    }
+}
+
 /// A camera path.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -189,11 +198,8 @@ impl CameraPath {
 
     /// Unit direction to the sun (ECEF), if the path has one.
     pub fn sun_ecef(&self) -> Option<DVec3> {
-        let sun = self.sun?;
         let k = self.key[0];
-        let (sa, ca) = sun.azimuth_deg.to_radians().sin_cos();
-        let (se, ce) = sun.elevation_deg.to_radians().sin_cos();
-        Some(globe::enu_basis(k.lon, k.lat) * DVec3::new(sa * ce, ca * ce, se))
+        Some(self.sun?.ecef(k.lon, k.lat))
     }
 }
 

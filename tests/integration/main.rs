@@ -12,11 +12,11 @@ mod clients; // GDAL's WMS driver and OWSLib against the server, values against 
 mod common; // shared helpers: data paths, regions, comparisons
 mod config_files; // every file in config/ parses and builds its region
 mod conservative; // acceleration bounds never below the surface, exhaustively
-mod extreme;
-mod fly; // `sylva fly` in process and against a server; tiles over HTTP equal tiles in process // stiff and extreme inputs: huge ranges, cliffs, nodata, poles, sizes
+mod extreme; // stiff and extreme inputs: huge ranges, cliffs, nodata, poles, sizes
+mod fly; // `sylva fly` in process and against a server; tiles over HTTP equal tiles in process
 mod http; // a `sylva serve` process for tests, and an HTTP client
-mod real_data;
-mod render; // the GPU ray caster against the exact CPU reference // rmnp, mt_hood, storm_lake, nz_forest against their sources
+mod real_data; // rmnp, mt_hood, storm_lake, nz_forest against their sources
+mod render; // the GPU ray caster against the exact CPU reference
 mod seamless; // tiles equal windows of whole-area builds; neighbours agree
 mod seed; // sylva seed: cache hits identical to the server's, dry runs, coverages, kill and resume, failures
 mod seed_shared; // many seeders and servers on one directory or Redis cache, shards
@@ -25,3 +25,4 @@ mod skipped_work; // stages nobody needs do not run (counted)
 mod sources; // broken and hostile files give errors that name them
 mod sse; // the flight's SSE selection: deferred equals full re-evaluation along the flyovers, fewer nodes
 mod upstream; // proxy sources over HTTP: WMS and Terrarium upstreams, failures, stale tiles
+mod view; // `sylva view` on a virtual X display: scripted runs, no display

@@ -117,6 +117,12 @@ impl BudgetFlight {
         &self.budget
     }
 
+    /// Bounds the camera's motion anew (an interactive camera's speed
+    /// changes): the next selections' conservative camera grows with them.
+    pub fn set_limits(&mut self, limits: crate::lod::predict::MotionLimits) {
+        self.look.limits = limits;
+    }
+
     /// The view-ray steps the next selection prices tiles with.
     pub fn steps(&self) -> &ViewSteps {
         &self.steps

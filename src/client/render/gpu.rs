@@ -1,5 +1,5 @@
-//! The headless GPU: an adapter and device without a window, with
-//! timestamp queries when the adapter has them. `WGPU_BACKEND` (e.g.
+//! The GPU: an adapter and device, headless or able to present to a
+//! window's surface, with timestamp queries when the adapter has them. `WGPU_BACKEND` (e.g.
 //! `vulkan`, `gl`) picks the backend; on a machine without a GPU Mesa's
 //! lavapipe serves Vulkan in software.
 
@@ -18,6 +18,8 @@ pub enum GpuError {
 
 /// An opened GPU.
 pub struct Gpu {
+    /// The adapter.
+    pub adapter: wgpu::Adapter,
     /// The device.
     pub device: wgpu::Device,
     /// Its queue.
@@ -36,8 +38,15 @@ impl Gpu {
     /// Opens the best adapter, headless.
     pub fn open() -> Result<Gpu, GpuError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        Gpu::open_on(&instance, None)
+    }
+
+    /// Opens the best adapter of `instance`, one that can present to
+    /// `surface` if given.
+    pub fn open_on(instance: &wgpu::Instance, surface: Option<&wgpu::Surface>) -> Result<Gpu, GpuError> {
         let options = wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,
+            compatible_surface: surface,
             ..Default::default()
         };
         let adapter =
@@ -57,7 +66,7 @@ impl Gpu {
         };
         let (device, queue) =
             pollster::block_on(adapter.request_device(&desc)).map_err(|e| GpuError::Device(e.to_string()))?;
-        Ok(Gpu { device, queue, info: adapter.get_info(), timestamps, early_depth })
+        Ok(Gpu { info: adapter.get_info(), adapter, device, queue, timestamps, early_depth })
     }
 
     /// A one-line description: name, backend, driver.

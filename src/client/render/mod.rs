@@ -220,6 +220,11 @@ impl Renderer {
         &self.gpu
     }
 
+    /// The colour target of the last frame rendered, if any.
+    pub fn colour(&self) -> Option<&wgpu::Texture> {
+        self.targets.as_ref().map(|t| &t.colour)
+    }
+
     /// Tiles the GPU cache holds at most.
     pub fn cache_slots(&self) -> u32 {
         self.cache.capacity()

@@ -4,7 +4,8 @@
 //! module (hull fragments, plain meshes, splats) reads its tile from a
 //! uniform at a dynamic offset, and holds the entry point that needs
 //! `SHADER_EARLY_DEPTH_TEST` only where the device has it; the compute
-//! module casts rays in a compute pass and reads its tiles from an array.
+//! module casts rays in a compute pass and reads its tiles from an array;
+//! the window's module stands alone.
 
 /// `(file name, source)` of the parts both modules share, in order.
 pub const SHARED_PARTS: [(&str, &str); 5] = [
@@ -27,6 +28,10 @@ pub const EARLY_DEPTH_PART: (&str, &str) = ("early_depth.wgsl", include_str!("..
 
 /// The compute module's own part.
 pub const COMPUTE_PART: (&str, &str) = ("compute.wgsl", include_str!("../../../shaders/compute.wgsl"));
+
+/// The window's module: a rendered frame copied to the screen
+/// (`sylva view`).
+pub const PRESENT: (&str, &str) = ("present.wgsl", include_str!("../../../shaders/present.wgsl"));
 
 /// The fragment module's source, with [`EARLY_DEPTH_PART`] if
 /// `early_depth`.
@@ -63,7 +68,7 @@ mod tests {
 
     /// Every module parses and validates with naga, no GPU needed: the
     /// fragment module with and without the early-depth entry point, and
-    /// the compute module.
+    /// the compute module, and the window's.
     #[test]
     fn shaders_validate() {
         for early_depth in [false, true] {
@@ -74,5 +79,7 @@ mod tests {
         }
         let module = validated(&compute_source());
         assert!(module.entry_points.iter().any(|e| e.name == "cs_rays"));
+        let module = validated(PRESENT.1);
+        assert_eq!(module.entry_points.len(), 2);
     }
 }

@@ -1,0 +1,316 @@
+//! The viewer's camera controls, free of any window: keys held and mouse
+//! motion move a geodetic pose the way terrain viewers do — forward along
+//! the heading over the ground, sideways, up and down — at a speed that
+//! grows with the height above the surface, so a valley floor and orbit
+//! are both a few seconds of flight away. The pose never sinks under
+//! [`MIN_CLEARANCE_M`] above the surface the frame drew.
+
+use super::super::camera::Camera;
+use super::super::globe::{self, Geodetic};
+use super::super::raycast::{Fade, TileView};
+use super::super::reference;
+use super::super::tile::TileData;
+use crate::lod::predict::MotionLimits;
+use glam::DVec3;
+use std::sync::Arc;
+
+/// Closest the eye comes to the surface, metres.
+pub const MIN_CLEARANCE_M: f64 = 2.0;
+/// Speed per metre of height above the surface, 1/s.
+const SPEED_PER_CLEARANCE: f64 = 0.5;
+/// Slowest and fastest speeds at multiplier 1, m/s.
+const SPEED_RANGE_MPS: (f64, f64) = (5.0, 50_000.0);
+/// Speed multiplier while the boost key is held.
+const BOOST: f64 = 4.0;
+/// Speed multiplier per mouse-wheel notch.
+const WHEEL_STEP: f64 = 1.25;
+/// The multiplier's bounds.
+const MULTIPLIER_RANGE: (f64, f64) = (0.01, 100.0);
+/// Turn rate of the arrow keys, degrees per second.
+const KEY_TURN_DEGPS: f64 = 60.0;
+/// Mouse look, degrees per pixel dragged.
+const MOUSE_DEG_PER_PX: f64 = 0.15;
+/// Pitch stays within ± this, degrees.
+const PITCH_LIMIT_DEG: f64 = 89.0;
+/// Highest eye, metres above the ellipsoid.
+const MAX_HEIGHT_M: f64 = 2.0e7;
+/// The surface under the eye is looked for from this height (or the
+/// eye's, if higher): above every mountain and its canopy.
+const PROBE_FROM_M: f64 = 10_000.0;
+
+/// Where the eye is and where it looks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose {
+    /// Longitude, latitude and height above the ellipsoid.
+    pub eye: Geodetic,
+    /// Degrees clockwise from north.
+    pub heading_deg: f64,
+    /// Degrees above the horizon.
+    pub pitch_deg: f64,
+}
+
+impl Pose {
+    /// The camera of this pose.
+    pub fn camera(&self, fov_y_deg: f64, size: (u32, u32)) -> Camera {
+        Camera::looking(self.eye, self.heading_deg, self.pitch_deg, fov_y_deg, size)
+    }
+}
+
+/// Movement keys held: each axis −1, 0 or +1.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Held {
+    /// Backward (−1) or forward (+1) along the heading.
+    pub forward: i8,
+    /// Left (−1) or right (+1).
+    pub right: i8,
+    /// Down (−1) or up (+1).
+    pub up: i8,
+    /// Turn left (−1) or right (+1).
+    pub turn: i8,
+    /// Pitch down (−1) or up (+1).
+    pub tilt: i8,
+    /// Faster while held.
+    pub boost: bool,
+}
+
+/// The controls' state: the pose, the keys held and the speed multiplier.
+#[derive(Clone, Debug)]
+pub struct Controls {
+    /// The pose now.
+    pub pose: Pose,
+    /// Keys held.
+    pub held: Held,
+    multiplier: f64,
+    /// Height above the surface under the eye, metres, as last measured.
+    clearance_m: f64,
+}
+
+impl Controls {
+    /// Controls starting at `pose`, the surface assumed `clearance_m` below.
+    pub fn new(pose: Pose, clearance_m: f64) -> Controls {
+        Controls { pose, held: Held::default(), multiplier: 1.0, clearance_m }
+    }
+
+    /// The speed now, m/s.
+    pub fn speed_mps(&self) -> f64 {
+        let (lo, hi) = SPEED_RANGE_MPS;
+        let boost = if self.held.boost { BOOST } else { 1.0 };
+        (self.clearance_m * SPEED_PER_CLEARANCE).clamp(lo, hi) * self.multiplier * boost
+    }
+
+    /// The fastest the eye may move and turn at this speed setting,
+    /// whatever keys are held: the bounds a conservative camera needs.
+    pub fn limits(&self) -> MotionLimits {
+        let (lo, hi) = SPEED_RANGE_MPS;
+        let speed = (self.clearance_m * SPEED_PER_CLEARANCE).clamp(lo, hi) * self.multiplier * BOOST;
+        // Three axes at once, and a mouse drag of a few hundred pixels a second.
+        MotionLimits { max_speed_mps: speed * 3f64.sqrt(), max_turn_radps: (4.0 * KEY_TURN_DEGPS).to_radians() }
+    }
+
+    /// Height above the surface under the eye, as last measured, metres.
+    pub fn clearance_m(&self) -> f64 {
+        self.clearance_m
+    }
+
+    /// Mouse wheel: `notches` up speed up, down slow down.
+    pub fn wheel(&mut self, notches: f64) {
+        let (lo, hi) = MULTIPLIER_RANGE;
+        self.multiplier = (self.multiplier * WHEEL_STEP.powf(notches)).clamp(lo, hi);
+    }
+
+    /// Mouse drag by `(dx, dy)` pixels: look around.
+    pub fn drag(&mut self, dx: f64, dy: f64) {
+        self.turn(dx * MOUSE_DEG_PER_PX, -dy * MOUSE_DEG_PER_PX);
+    }
+
+    /// Advances `dt_s` seconds with the keys held.
+    pub fn step(&mut self, dt_s: f64) {
+        let dt_s = dt_s.clamp(0.0, 0.5);
+        let h = self.held;
+        self.turn(f64::from(h.turn) * KEY_TURN_DEGPS * dt_s, f64::from(h.tilt) * KEY_TURN_DEGPS * dt_s);
+        let (sh, ch) = self.pose.heading_deg.to_radians().sin_cos();
+        let east_north_up = DVec3::new(
+            f64::from(h.forward) * sh + f64::from(h.right) * ch,
+            f64::from(h.forward) * ch - f64::from(h.right) * sh,
+            f64::from(h.up),
+        );
+        if east_north_up != DVec3::ZERO {
+            let step = east_north_up.normalize() * self.speed_mps() * dt_s;
+            self.translate(step);
+        }
+    }
+
+    /// Records the height above the surface just measured under the eye
+    /// (`None`: no surface there) and lifts the eye to [`MIN_CLEARANCE_M`]
+    /// if it is lower.
+    pub fn ground(&mut self, clearance_m: Option<f64>) {
+        let Some(clearance_m) = clearance_m else { return };
+        if clearance_m < MIN_CLEARANCE_M {
+            self.pose.eye.height_m += MIN_CLEARANCE_M - clearance_m;
+        }
+        self.clearance_m = clearance_m.max(MIN_CLEARANCE_M);
+    }
+
+    fn turn(&mut self, heading_deg: f64, pitch_deg: f64) {
+        self.pose.heading_deg = (self.pose.heading_deg + heading_deg).rem_euclid(360.0);
+        self.pose.pitch_deg = (self.pose.pitch_deg + pitch_deg).clamp(-PITCH_LIMIT_DEG, PITCH_LIMIT_DEG);
+    }
+
+    /// Moves the eye by `enu` metres (east, north, up) at its position,
+    /// keeping the heading's direction over the ground: north turns as the
+    /// eye moves over the globe, so the direction it looked is carried to
+    /// the new tangent plane and its heading read there.
+    fn translate(&mut self, enu: DVec3) {
+        let eye = self.pose.eye;
+        let basis = globe::enu_basis(eye.lon_deg, eye.lat_deg);
+        let moved = Geodetic::from_ecef(eye.to_ecef() + basis * DVec3::new(enu.x, enu.y, 0.0));
+        let (sh, ch) = self.pose.heading_deg.to_radians().sin_cos();
+        let ahead = globe::enu_basis(moved.lon_deg, moved.lat_deg).transpose() * (basis * DVec3::new(sh, ch, 0.0));
+        self.pose.heading_deg = ahead.x.atan2(ahead.y).to_degrees().rem_euclid(360.0);
+        let height_m = (eye.height_m + enu.z).min(MAX_HEIGHT_M);
+        self.pose.eye = Geodetic::new(moved.lon_deg, moved.lat_deg, height_m);
+    }
+}
+
+/// The height of `eye` above the surface of `tiles` under it, canopy
+/// included (negative below it), metres; `None` where no tile has surface
+/// under the eye. Exact: a ray down the ellipsoid's normal from above every
+/// summit, intersected with each tile's surface by the reference caster.
+pub fn clearance_m(eye: Geodetic, tiles: &[Arc<TileData>]) -> Option<f64> {
+    let top_m = eye.height_m.max(PROBE_FROM_M);
+    let top = Geodetic::new(eye.lon_deg, eye.lat_deg, top_m).to_ecef();
+    let down = -globe::enu_basis(eye.lon_deg, eye.lat_deg).z_axis;
+    let nearest = tiles
+        .iter()
+        .filter_map(|tile| {
+            let to_local = tile.frame.basis.transpose();
+            let view =
+                TileView { tile, camera_m: tile.frame.to_local(top), sun: None, fade: Fade::NONE, shadow_steps: 0 };
+            reference::intersect(&view, view.camera_m, to_local * down, 0.0, top_m + PROBE_FROM_M).map(|hit| hit.t_m)
+        })
+        .min_by(f64::total_cmp)?;
+    Some(eye.height_m - (top_m - nearest))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn controls(height_m: f64, clearance_m: f64) -> Controls {
+        let pose = Pose { eye: Geodetic::new(10.0, 46.0, height_m), heading_deg: 90.0, pitch_deg: -10.0 };
+        Controls::new(pose, clearance_m)
+    }
+
+    fn moved_m(a: Geodetic, b: Geodetic) -> f64 {
+        (a.to_ecef() - b.to_ecef()).length()
+    }
+
+    #[test]
+    fn forward_moves_along_the_heading_at_a_speed_set_by_the_clearance() {
+        for clearance in [100.0, 1000.0] {
+            let mut c = controls(2000.0, clearance);
+            let start = c.pose.eye;
+            c.held.forward = 1;
+            c.step(0.1);
+            let expected = clearance * SPEED_PER_CLEARANCE * 0.1;
+            assert!((moved_m(start, c.pose.eye) - expected).abs() < 1e-3 * expected, "{clearance}");
+            // Heading 90°: east, level.
+            assert!(c.pose.eye.lon_deg > start.lon_deg);
+            assert!((c.pose.eye.lat_deg - start.lat_deg).abs() < 1e-7);
+            assert!((c.pose.eye.height_m - start.height_m).abs() < 1e-3);
+        }
+    }
+
+    #[test]
+    fn keys_turn_and_pitch_within_limits_and_the_wheel_scales_speed() {
+        let mut c = controls(2000.0, 500.0);
+        c.held.turn = 1;
+        c.step(0.5);
+        c.step(0.5);
+        assert!((c.pose.heading_deg - 150.0).abs() < 1e-9);
+        // A long stall is taken as half a second.
+        c.step(10.0);
+        assert!((c.pose.heading_deg - 180.0).abs() < 1e-9);
+        c.held.turn = -1;
+        c.step(0.5);
+        c.held = Held { tilt: 1, ..Held::default() };
+        for _ in 0..10 {
+            c.step(0.5);
+        }
+        assert_eq!(c.pose.pitch_deg, PITCH_LIMIT_DEG);
+        c.drag(-200.0, 0.0);
+        assert!((c.pose.heading_deg - 120.0).abs() < 1e-9);
+        c.drag(-1000.0, 0.0);
+        assert!((c.pose.heading_deg - 330.0).abs() < 1e-9);
+        let base = c.speed_mps();
+        c.wheel(2.0);
+        assert!((c.speed_mps() / base - WHEEL_STEP * WHEEL_STEP).abs() < 1e-12);
+        c.wheel(-1000.0);
+        assert!((c.speed_mps() / base - MULTIPLIER_RANGE.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_eye_is_lifted_above_the_surface_and_down_stops_there() {
+        let mut c = controls(1500.0, 10.0);
+        c.held.up = -1;
+        c.step(0.5);
+        // The surface now 3 m above the eye: lifted to the minimum.
+        let before = c.pose.eye.height_m;
+        c.ground(Some(-3.0));
+        assert!((c.pose.eye.height_m - before - 3.0 - MIN_CLEARANCE_M).abs() < 1e-9);
+        assert_eq!(c.clearance_m(), MIN_CLEARANCE_M);
+        // No surface measured: nothing changes.
+        let pose = c.pose;
+        c.ground(None);
+        assert_eq!(c.pose, pose);
+    }
+
+    #[test]
+    fn limits_bound_every_motion_the_keys_can_make() {
+        let mut c = controls(3000.0, 800.0);
+        let limits = c.limits();
+        c.held = Held { forward: 1, right: 1, up: 1, turn: 1, tilt: 1, boost: true };
+        let (start, dt) = (c.pose, 0.05);
+        c.step(dt);
+        assert!(moved_m(start.eye, c.pose.eye) / dt <= limits.max_speed_mps);
+        let turn = start.camera(60.0, (4, 3)).forward().angle_between(c.pose.camera(60.0, (4, 3)).forward());
+        assert!(turn / dt <= limits.max_turn_radps, "{turn}");
+    }
+
+    #[test]
+    fn clearance_is_the_height_above_the_demo_surface() {
+        let region = Arc::new(crate::config::load(None).unwrap());
+        let source = crate::client::source::RegionSource::new(region.clone());
+        let b = region.bounds;
+        let (lon, lat) = (0.5 * (b.west + b.east), 0.5 * (b.south + b.north));
+        let id = region.tiles.tile_containing(lon, lat, 11);
+        let payload = crate::client::source::TileSource::fetch(&source, id, 4).unwrap().unwrap();
+        let tile = Arc::new(TileData::prepare(&region.tiles, payload).unwrap());
+        let range = tile.range.heights_m;
+        let tiles = [tile];
+        let high = clearance_m(Geodetic::new(lon, lat, 5000.0), &tiles).unwrap();
+        assert!(high <= 5000.0 - range.0 + 1e-6 && high >= 5000.0 - range.1 - 1e-6, "{high} over {range:?}");
+        // Exact: 100 m lower is 100 m closer, and below the surface negative.
+        let lower = clearance_m(Geodetic::new(lon, lat, 4900.0), &tiles).unwrap();
+        assert!((high - lower - 100.0).abs() < 1e-6, "{high} {lower}");
+        let surface_m = 5000.0 - high;
+        let under = clearance_m(Geodetic::new(lon, lat, surface_m - 30.0), &tiles).unwrap();
+        assert!((under + 30.0).abs() < 1e-6, "{under}");
+        // Beside the tile: no surface.
+        assert_eq!(clearance_m(Geodetic::new(lon + 5.0, lat, 5000.0), &tiles), None);
+    }
+
+    #[test]
+    fn flying_over_the_pole_and_the_antimeridian_stays_finite() {
+        let pose = Pose { eye: Geodetic::new(179.9, 89.9, 5000.0), heading_deg: 45.0, pitch_deg: 0.0 };
+        let mut c = Controls::new(pose, 5000.0);
+        c.held.forward = 1;
+        for _ in 0..200 {
+            c.step(0.1);
+        }
+        let eye = c.pose.eye;
+        assert!(eye.lon_deg.is_finite() && eye.lat_deg.is_finite() && eye.height_m.is_finite());
+        assert!((-180.0..=180.0).contains(&eye.lon_deg) && (-90.0..=90.0).contains(&eye.lat_deg));
+        assert!((eye.height_m - 5000.0).abs() < 50.0, "{}", eye.height_m);
+    }
+}

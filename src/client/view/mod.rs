@@ -1,0 +1,353 @@
+//! `sylva view` (feature `window`): the renderer in a window, flown with
+//! keyboard and mouse. Each frame is a flight's frame ([`super::fly::Flight`]:
+//! the same selection, loading and ray casting as `sylva fly`) from the
+//! camera the controls ([`controls`]) move, copied to the window
+//! ([`present`]); the window's title shows the frame rate, the tiles and
+//! the height above the surface.
+//!
+//! Keys: W/S or ↑/↓ forward and back, A/D sideways, Q/E down and up, ←/→
+//! turn, R/F pitch, Shift faster, the mouse wheel sets the speed, a left
+//! drag looks around; L switches the sun (and its shadow rays) on and off,
+//! T switches between the exact traversal and the linear march, P saves
+//! the frame as PNG, Esc quits.
+
+pub mod controls;
+pub mod present;
+
+use super::fly::{self, FlyError, FlyOptions, FrameRecord, Motion, Shot};
+use super::globe::Geodetic;
+use super::path::{CameraPath, Sun};
+use super::raycast::Traversal;
+use super::render::gpu::{Gpu, GpuError};
+use super::render::{Readback, Renderer};
+use super::source::TileSource;
+use controls::{Controls, Held, Pose};
+use glam::DVec3;
+use present::{PresentError, Presenter};
+use std::collections::HashSet;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+use winit::application::ApplicationHandler;
+use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, EventLoop};
+use winit::keyboard::{KeyCode, PhysicalKey};
+use winit::window::{Window, WindowId};
+
+/// How to view.
+#[derive(Clone, Debug)]
+pub struct ViewOptions {
+    /// How frames are rendered and tiles chosen; `size` is the window's
+    /// first size (its `frames`, `out_dir`, `write_frames` and `hold_ms`
+    /// are not used).
+    pub render: FlyOptions,
+    /// Where the eye starts.
+    pub start: Pose,
+    /// Vertical field of view, degrees.
+    pub fov_deg: f64,
+    /// Unit direction to the sun (ECEF), if it is on.
+    pub sun_ecef: Option<DVec3>,
+    /// GPU tile cache budget, bytes.
+    pub gpu_budget_bytes: usize,
+    /// Close after this many frames (scripted runs).
+    pub exit_after: Option<usize>,
+    /// Where the frames' statistics (`stats.csv`) go on closing, with the
+    /// last frame of a scripted run, and where `P` saves frames (default:
+    /// the current directory).
+    pub out_dir: Option<PathBuf>,
+}
+
+/// Why the viewer stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewError {
+    /// No window system.
+    #[error("no window could be opened ({0}); `sylva view` needs a display (X11 or Wayland)")]
+    Window(String),
+    /// No GPU.
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    /// The window could not show frames.
+    #[error(transparent)]
+    Present(#[from] PresentError),
+    /// A frame failed.
+    #[error(transparent)]
+    Fly(#[from] FlyError),
+}
+
+/// The eye of a view given no start: above the middle of the source's
+/// region, this high above its highest surface, looking north and down.
+pub const START_ABOVE_M: f64 = 1500.0;
+/// ... and down by this much, degrees.
+pub const START_PITCH_DEG: f64 = -25.0;
+
+/// The field of view of a view without a path, degrees.
+pub const FOV_DEG: f64 = 60.0;
+/// The sun of a view without a path: south-east, 35° high.
+pub const SUN: Sun = Sun { azimuth_deg: 135.0, elevation_deg: 35.0 };
+
+/// Where a view starting on `path` begins: its first keyframe.
+pub fn path_start(path: &CameraPath) -> Pose {
+    let k = path.key[0];
+    Pose { eye: Geodetic::new(k.lon, k.lat, k.height_m), heading_deg: k.heading_deg, pitch_deg: k.pitch_deg }
+}
+
+/// Where a view without a start begins ([`START_ABOVE_M`] above the
+/// highest surface the coarse tiles over the region know).
+pub fn default_start(source: &dyn TileSource) -> Result<Pose, crate::client::source::FetchError> {
+    let b = source.bounds();
+    let sector = crate::grid::Sector { min_lat: b.south, max_lat: b.north, min_lon: b.west, max_lon: b.east };
+    let top_m = super::envelope::HeightEnvelope::fetch(source)?.range(&sector).map_or(0.0, |(_, hi)| hi);
+    let eye = Geodetic::new(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), top_m + START_ABOVE_M);
+    Ok(Pose { eye, heading_deg: 0.0, pitch_deg: START_PITCH_DEG })
+}
+
+/// Opens a window over `source` and flies until it is closed; returns
+/// every frame's statistics.
+pub fn run(source: &dyn TileSource, options: ViewOptions) -> Result<Vec<FrameRecord>, ViewError> {
+    let event_loop = EventLoop::new().map_err(|e| ViewError::Window(e.to_string()))?;
+    let mut app = App { source, options, state: None, records: Vec::new(), error: None };
+    event_loop.run_app(&mut app).map_err(|e| ViewError::Window(e.to_string()))?;
+    if let Some(error) = app.error {
+        return Err(error);
+    }
+    if let Some(dir) = &app.options.out_dir {
+        let file = dir.join("stats.csv");
+        std::fs::write(&file, fly::to_csv(&app.records))
+            .map_err(|e| FlyError::Io { path: file.display().to_string(), source: e })?;
+    }
+    Ok(app.records)
+}
+
+/// The event loop's handler.
+struct App<'a> {
+    source: &'a dyn TileSource,
+    options: ViewOptions,
+    /// Made when the event loop first resumes.
+    state: Option<Viewer>,
+    records: Vec<FrameRecord>,
+    error: Option<ViewError>,
+}
+
+/// The window and what draws into it.
+struct Viewer {
+    window: Arc<Window>,
+    renderer: Renderer,
+    presenter: Presenter,
+    flight: fly::Flight,
+    controls: Controls,
+    keys: HashSet<KeyCode>,
+    /// The cursor while the left button is down.
+    dragging: Option<(f64, f64)>,
+    sun_on: bool,
+    traversal: Traversal,
+    /// Save the next frame.
+    snapshot: bool,
+    started: Instant,
+    last: Instant,
+    /// Frames drawn.
+    frames: usize,
+    /// Frames drawn when the title was last updated, and when.
+    title: (usize, Instant),
+}
+
+impl ApplicationHandler for App<'_> {
+    fn resumed(&mut self, event_loop: &ActiveEventLoop) {
+        if self.state.is_none() {
+            match Viewer::open(event_loop, self.source, &self.options) {
+                Ok(viewer) => {
+                    viewer.window.request_redraw();
+                    self.state = Some(viewer);
+                }
+                Err(e) => self.fail(event_loop, e),
+            }
+        }
+    }
+
+    fn window_event(&mut self, event_loop: &ActiveEventLoop, _: WindowId, event: WindowEvent) {
+        let Some(viewer) = &mut self.state else { return };
+        match event {
+            WindowEvent::CloseRequested => event_loop.exit(),
+            WindowEvent::Resized(size) => viewer.presenter.resize(viewer.renderer.gpu(), (size.width, size.height)),
+            WindowEvent::KeyboardInput { event, .. } => {
+                let PhysicalKey::Code(key) = event.physical_key else { return };
+                if event.state == ElementState::Pressed && !event.repeat && viewer.toggle(key) {
+                    event_loop.exit();
+                }
+                if event.state == ElementState::Pressed {
+                    viewer.keys.insert(key);
+                } else {
+                    viewer.keys.remove(&key);
+                }
+                viewer.controls.held = held(&viewer.keys);
+            }
+            WindowEvent::MouseInput { state, button: MouseButton::Left, .. } => {
+                viewer.dragging = (state == ElementState::Pressed).then_some((f64::NAN, f64::NAN));
+            }
+            WindowEvent::CursorMoved { position, .. } => {
+                if let Some((x, y)) = viewer.dragging.replace((position.x, position.y)).filter(|p| p.0.is_finite()) {
+                    viewer.controls.drag(position.x - x, position.y - y);
+                }
+            }
+            WindowEvent::MouseWheel { delta, .. } => viewer.controls.wheel(match delta {
+                MouseScrollDelta::LineDelta(_, lines) => f64::from(lines),
+                MouseScrollDelta::PixelDelta(px) => px.y / 40.0,
+            }),
+            WindowEvent::RedrawRequested => {
+                // A scripted run's last frame is kept.
+                let last = self.options.exit_after.is_some_and(|n| self.records.len() + 1 >= n);
+                viewer.snapshot |= last && self.options.out_dir.is_some();
+                match viewer.frame(self.source, &self.options) {
+                    Ok(record) => self.records.push(record),
+                    Err(e) => return self.fail(event_loop, e),
+                }
+                if self.options.exit_after.is_some_and(|n| self.records.len() >= n) {
+                    event_loop.exit();
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn about_to_wait(&mut self, _: &ActiveEventLoop) {
+        if let Some(viewer) = &self.state {
+            viewer.window.request_redraw();
+        }
+    }
+}
+
+impl App<'_> {
+    fn fail(&mut self, event_loop: &ActiveEventLoop, error: ViewError) {
+        self.error.get_or_insert(error);
+        event_loop.exit();
+    }
+}
+
+impl Viewer {
+    fn open(event_loop: &ActiveEventLoop, source: &dyn TileSource, options: &ViewOptions) -> Result<Viewer, ViewError> {
+        let (w, h) = options.render.size;
+        let attributes =
+            Window::default_attributes().with_title("Sylva").with_inner_size(winit::dpi::PhysicalSize::new(w, h));
+        let window = Arc::new(event_loop.create_window(attributes).map_err(|e| ViewError::Window(e.to_string()))?);
+        let display = Box::new(event_loop.owned_display_handle());
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_with_display_handle_from_env(display));
+        let surface = instance.create_surface(window.clone()).map_err(|e| ViewError::Window(e.to_string()))?;
+        let gpu = Gpu::open_on(&instance, Some(&surface))?;
+        let size = window.inner_size();
+        let presenter = Presenter::new(&gpu, surface, (size.width, size.height))?;
+        let r = &options.render;
+        let renderer = Renderer::new(gpu, source.grid().samples(), r.halo as u32, options.gpu_budget_bytes, r.geomorph)
+            .with_hull_factor(r.hull_factor)
+            .with_ray_pass(r.ray_pass);
+        let controls = Controls::new(options.start, options.start.eye.height_m);
+        let motion = Motion { frame_s: 1.0 / 60.0, limits: controls.limits(), shadows: options.sun_ecef.is_some() };
+        let flight = fly::Flight::new(source, &renderer, r, motion)?;
+        let now = Instant::now();
+        Ok(Viewer {
+            window,
+            renderer,
+            presenter,
+            flight,
+            controls,
+            keys: HashSet::new(),
+            dragging: None,
+            sun_on: options.sun_ecef.is_some(),
+            traversal: r.traversal,
+            snapshot: false,
+            started: now,
+            last: now,
+            frames: 0,
+            title: (0, now),
+        })
+    }
+
+    /// Acts on a key just pressed; true to quit.
+    fn toggle(&mut self, key: KeyCode) -> bool {
+        match key {
+            KeyCode::Escape => return true,
+            KeyCode::KeyL => self.sun_on = !self.sun_on,
+            KeyCode::KeyT => {
+                self.traversal = match self.traversal {
+                    Traversal::Exact => Traversal::Linear(LINEAR_STEPS),
+                    Traversal::Linear(_) => Traversal::Exact,
+                }
+            }
+            KeyCode::KeyP => self.snapshot = true,
+            _ => {}
+        }
+        false
+    }
+
+    /// Moves the eye, renders and shows a frame.
+    fn frame(&mut self, source: &dyn TileSource, options: &ViewOptions) -> Result<FrameRecord, ViewError> {
+        let now = Instant::now();
+        self.controls.step((now - self.last).as_secs_f64());
+        self.last = now;
+        self.flight.set_limits(self.controls.limits());
+        let shot = Shot {
+            index: self.frames,
+            t_s: (now - self.started).as_secs_f64(),
+            camera: self.controls.pose.camera(options.fov_deg, self.presenter.size()),
+            sun_ecef: options.sun_ecef.filter(|_| self.sun_on),
+        };
+        let render = FlyOptions { traversal: self.traversal, ..options.render.clone() };
+        let readback = if self.snapshot { Readback::Colour } else { Readback::None };
+        let framed = self.flight.frame(source, &mut self.renderer, &render, &shot, readback)?;
+        self.controls.ground(controls::clearance_m(self.controls.pose.eye, &framed.tiles));
+        if let Some(colour) = self.renderer.colour() {
+            self.presenter.show(self.renderer.gpu(), colour)?;
+        }
+        if std::mem::take(&mut self.snapshot) {
+            let dir = options.out_dir.as_deref().unwrap_or(std::path::Path::new("."));
+            let size = (shot.camera.width_px, shot.camera.height_px);
+            fly::write_png(&dir.join(format!("view_{:05}.png", shot.index)), &framed.rendered, size)?;
+        }
+        self.frames += 1;
+        self.show_title(&framed.record);
+        Ok(framed.record)
+    }
+
+    /// Frame rate, tiles, height and speed in the title, twice a second.
+    fn show_title(&mut self, record: &FrameRecord) {
+        let (frames, since) = self.title;
+        let elapsed = since.elapsed().as_secs_f64();
+        if elapsed < TITLE_EVERY_S {
+            return;
+        }
+        let fps = (self.frames - frames) as f64 / elapsed;
+        let gpu = record.gpu_ms.map_or(String::new(), |ms| format!(", GPU {ms:.1} ms"));
+        let traversal = match self.traversal {
+            Traversal::Exact => "exact".to_string(),
+            Traversal::Linear(n) => format!("linear {n}"),
+        };
+        self.window.set_title(&format!(
+            "Sylva — {fps:.0} frames/s{gpu}, {} tiles, {traversal}, {:.0} m above the surface, {:.0} m/s{}",
+            record.tiles_ray + record.tiles_plain,
+            self.controls.clearance_m(),
+            self.controls.speed_mps(),
+            if self.sun_on { "" } else { ", no sun" },
+        ));
+        self.title = (self.frames, Instant::now());
+    }
+}
+
+/// Steps of the linear march that `T` switches to (the dissertation's
+/// fastest setting).
+const LINEAR_STEPS: u32 = 30;
+/// Seconds between title updates.
+const TITLE_EVERY_S: f64 = 0.5;
+
+/// The movement the keys held ask for.
+fn held(keys: &HashSet<KeyCode>) -> Held {
+    let axis = |minus: &[KeyCode], plus: &[KeyCode]| {
+        let down = |set: &[KeyCode]| set.iter().any(|k| keys.contains(k));
+        i8::from(down(plus)) - i8::from(down(minus))
+    };
+    Held {
+        forward: axis(&[KeyCode::KeyS, KeyCode::ArrowDown], &[KeyCode::KeyW, KeyCode::ArrowUp]),
+        right: axis(&[KeyCode::KeyA], &[KeyCode::KeyD]),
+        up: axis(&[KeyCode::KeyQ], &[KeyCode::KeyE]),
+        turn: axis(&[KeyCode::ArrowLeft], &[KeyCode::ArrowRight]),
+        tilt: axis(&[KeyCode::KeyF], &[KeyCode::KeyR]),
+        boost: keys.contains(&KeyCode::ShiftLeft) || keys.contains(&KeyCode::ShiftRight),
+    }
+}

@@ -1,0 +1,118 @@
+//! `sylva view` in a window on a virtual X display (Xvfb, which
+//! `scripts/setup.sh` installs): scripted runs that close after a few
+//! frames, their statistics and last frame, and the error without a
+//! display.
+
+use crate::common::{self, TempDir};
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
+
+/// An Xvfb server on a display of its own, stopped on drop.
+struct VirtualDisplay {
+    child: Child,
+    name: String,
+}
+
+impl VirtualDisplay {
+    fn start() -> VirtualDisplay {
+        // Xvfb picks a free display and writes its number to stdout.
+        let mut child = Command::new("Xvfb")
+            .args(["-displayfd", "1", "-screen", "0", "320x240x24", "-nolisten", "tcp"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("Xvfb (apt-get install -y xvfb; scripts/setup.sh installs it)");
+        let mut line = String::new();
+        let stdout = child.stdout.take().expect("Xvfb's stdout");
+        std::io::BufRead::read_line(&mut std::io::BufReader::new(stdout), &mut line).expect("Xvfb's display");
+        assert!(line.trim().parse::<u32>().is_ok(), "Xvfb did not start: {line:?}");
+        VirtualDisplay { child, name: format!(":{}", line.trim()) }
+    }
+}
+
+impl Drop for VirtualDisplay {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn view(display: Option<&str>, args: &[&str]) -> Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_sylva"));
+    command.arg("view").args(args).env("XDG_RUNTIME_DIR", std::env::temp_dir()).env_remove("WAYLAND_DISPLAY");
+    match display {
+        Some(name) => command.env("DISPLAY", name),
+        None => command.env_remove("DISPLAY"),
+    };
+    command.output().expect("run sylva view")
+}
+
+/// The rows of a `stats.csv`, without its header.
+fn rows(out: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(out.join("stats.csv")).expect("stats.csv");
+    text.lines().skip(1).map(str::to_string).collect()
+}
+
+/// Pixels of a PNG that are not the sky's colour.
+fn ground_share(file: &Path) -> f64 {
+    let image = image::open(file).unwrap_or_else(|e| panic!("{}: {e}", file.display())).to_rgba8();
+    let sky = sylva::client::reference::rgba(sylva::client::raycast::SKY);
+    let is_sky = |p: &image::Rgba<u8>| p.0.iter().zip(sky).all(|(&a, b)| a.abs_diff(b) <= 2);
+    image.pixels().filter(|p| !is_sky(p)).count() as f64 / image.pixels().len() as f64
+}
+
+#[test]
+fn a_scripted_view_closes_after_its_frames_with_statistics_and_the_last_frame() {
+    let display = VirtualDisplay::start();
+    let dir = TempDir::new("view-demo");
+    let out = dir.join("out");
+    let output = view(Some(&display.name), &["--frames", "4", "--size", "96x64", "--out", out.to_str().unwrap()]);
+    assert!(output.status.success(), "sylva view failed: {}", String::from_utf8_lossy(&output.stderr));
+    assert!(String::from_utf8_lossy(&output.stdout).contains("4 frames"));
+    assert_eq!(rows(&out).len(), 4);
+    // The default start looks down over the demo valley: mostly ground.
+    let share = ground_share(&out.join("view_00003.png"));
+    assert!(share > 0.5, "{share}");
+}
+
+#[test]
+fn a_view_starts_on_a_path_and_flies_under_a_budget() {
+    let display = VirtualDisplay::start();
+    let dir = TempDir::new("view-budget");
+    let out = dir.join("out");
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    let args = [
+        "--path",
+        path.to_str().unwrap(),
+        "--lod",
+        "budget",
+        "--budget-ms",
+        "200",
+        "--frames",
+        "3",
+        "--size",
+        "96x64",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let output = view(Some(&display.name), &args);
+    assert!(output.status.success(), "sylva view failed: {}", String::from_utf8_lossy(&output.stderr));
+    let rows = rows(&out);
+    assert_eq!(rows.len(), 3);
+    // Under a budget every frame is priced before it is drawn.
+    let header = std::fs::read_to_string(out.join("stats.csv")).unwrap();
+    let column = header.lines().next().unwrap().split(',').position(|h| h == "predicted_ms").unwrap();
+    for row in &rows {
+        let predicted: f64 = row.split(',').nth(column).unwrap().parse().unwrap();
+        assert!(predicted > 0.0, "{row}");
+    }
+    assert!(ground_share(&out.join("view_00002.png")) > 0.2);
+}
+
+#[test]
+fn without_a_display_the_view_says_so() {
+    let output = view(None, &["--frames", "1"]);
+    assert_eq!(output.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("needs a display"), "{stderr}");
+}
