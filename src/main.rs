@@ -678,7 +678,7 @@ fn run(command: Command) -> Result<()> {
                 exit_after: frames,
                 out_dir: out,
             };
-            let records = sylva::client::view::run(source.as_ref(), options)?;
+            let records = sylva::client::view::run(source.into(), options)?;
             println!("{}", sylva::client::fly::summary(&records));
             Ok(())
         }

@@ -11,7 +11,7 @@
 //! steer refinement; hulls and culling of drawn tiles use their own data.
 
 use super::source::{FetchError, TileSource};
-use crate::grid::{Sector, TileId};
+use crate::grid::{BBox, Sector, TileGrid, TileId};
 
 /// One coarse tile's samples (no halo), row 0 at the north.
 struct Coarse {
@@ -29,19 +29,12 @@ pub struct HeightEnvelope {
 impl HeightEnvelope {
     /// Fetches the coarse tiles over `source`'s region.
     pub fn fetch(source: &dyn TileSource) -> Result<HeightEnvelope, FetchError> {
-        let (grid, b) = (source.grid(), source.bounds());
-        let extent = (b.east - b.west).max(b.north - b.south);
-        let level = (0..30).take_while(|&l| grid.tile_delta_deg(l) >= extent).last().unwrap_or(0);
-        let a = grid.tile_containing(b.west, b.south, level);
-        let z = grid.tile_containing(b.east, b.north, level);
+        let grid = source.grid();
         let mut tiles = Vec::new();
-        for row in a.row.min(z.row)..=a.row.max(z.row) {
-            for col in a.col.min(z.col)..=a.col.max(z.col) {
-                let id = TileId::new(level, row, col);
-                if let Some(p) = source.fetch(id, 0)? {
-                    let sector = grid.sector(id);
-                    tiles.push(Coarse { sector, samples: grid.samples() as usize, ground: p.dem, cem: p.cem });
-                }
+        for id in covering(&grid, &source.bounds()) {
+            if let Some(p) = source.fetch(id, 0)? {
+                let sector = grid.sector(id);
+                tiles.push(Coarse { sector, samples: grid.samples() as usize, ground: p.dem, cem: p.cem });
             }
         }
         Ok(HeightEnvelope { tiles })
@@ -53,6 +46,17 @@ impl HeightEnvelope {
         let ranges = self.tiles.iter().filter_map(|t| t.range(sector));
         ranges.reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)))
     }
+}
+
+/// The tiles of the deepest level whose tiles are at least as large as
+/// `bounds` that cover it (at most 2 × 2): every deeper tile over the region
+/// lies in one of them.
+pub fn covering(grid: &TileGrid, b: &BBox) -> Vec<TileId> {
+    let extent = (b.east - b.west).max(b.north - b.south);
+    let level = (0..30).take_while(|&l| grid.tile_delta_deg(l) >= extent).last().unwrap_or(0);
+    let (a, z) = (grid.tile_containing(b.west, b.south, level), grid.tile_containing(b.east, b.north, level));
+    let rows = a.row.min(z.row)..=a.row.max(z.row);
+    rows.flat_map(|row| (a.col.min(z.col)..=a.col.max(z.col)).map(move |col| TileId::new(level, row, col))).collect()
 }
 
 impl Coarse {

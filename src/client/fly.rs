@@ -354,6 +354,18 @@ impl Flight {
         Ok(Flight { store, lod, sse })
     }
 
+    /// From now on loads tiles in the background: a frame draws the tiles
+    /// here, their nearest loaded ancestors standing in for the rest
+    /// ([`TileStore::load_in_background`]).
+    pub fn load_in_background(&mut self, source: Arc<dyn TileSource>) -> Result<(), FlyError> {
+        Ok(self.store.load_in_background(source)?)
+    }
+
+    /// Tiles loading in the background.
+    pub fn pending(&self) -> usize {
+        self.store.pending()
+    }
+
     /// The cost model a budget flight has calibrated so far.
     pub fn model(&self) -> Option<CostModel> {
         self.lod.as_ref().map(BudgetFlight::model)
@@ -412,7 +424,7 @@ fn choose(
     };
     let selected = lod.frame(t_s, camera);
     let ids: Vec<_> = selected.cut.tiles.iter().map(|c| c.id).collect();
-    let mut tiles = store.get(source, &ids)?;
+    let mut tiles = store.get_cut(source, &ids)?;
     let drawn: Vec<_> = tiles.iter().map(|t| t.id()).collect();
     let morphing = lod.morphs(t_s, &drawn);
     let mut weights = vec![1.0; tiles.len()];
@@ -570,7 +582,7 @@ pub fn visible_tiles(
         touched += selection.visited;
         if selection.tiles.len() <= slots as usize || rule.max_error_px > 1e6 {
             let ids: Vec<_> = selection.tiles.iter().map(|s| s.id).collect();
-            return Ok((store.get(source, &ids)?, rule.max_error_px, touched));
+            return Ok((store.get_cut(source, &ids)?, rule.max_error_px, touched));
         }
         rule.max_error_px *= 1.25;
     }

@@ -6,13 +6,18 @@
 //! tiles known to be empty so they are not asked again.
 //!
 //! Missing tiles of a frame are fetched and prepared in parallel on the
-//! store's own thread pool, whose size bounds the requests in flight.
+//! store's own thread pool, whose size bounds the requests in flight: while
+//! the frame waits (`sylva fly`), or in the background (`sylva view`: a
+//! frame never waits; tiles still loading are drawn as their nearest loaded
+//! ancestor, [`TileStore::get_cut`], and the coarse tiles over the region
+//! are loaded first and kept, so every tile has one).
 
 use super::source::{FetchError, TileSource};
 use super::tile::{TileData, TileError};
 use crate::grid::TileId;
 use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
+use std::sync::mpsc::{Receiver, Sender, channel};
 use std::sync::{Arc, PoisonError, RwLock};
 
 /// What a loaded tile told about itself.
@@ -75,16 +80,37 @@ struct Entry {
     bytes: usize,
 }
 
+/// A tile loaded on the store's threads: its id and what came of it.
+type Loaded = (TileId, Result<Option<TileData>, LoadError>);
+
+/// Loading in the background: the source, the tiles asked for and not yet
+/// back, and the channel they come back on.
+struct Background {
+    source: Arc<dyn TileSource>,
+    pending: HashSet<TileId>,
+    sender: Sender<Loaded>,
+    receiver: Receiver<Loaded>,
+}
+
+/// Tiles asked for in the background and not yet back, at most: a camera
+/// moving fast asks for more than the source can deliver, and what it
+/// passed by need not load.
+const PENDING_LIMIT: usize = 64;
+
 /// Prepared tiles in memory.
 pub struct TileStore {
     halo: usize,
     budget_bytes: usize,
     tiles: HashMap<TileId, Entry>,
     empty: HashSet<TileId>,
+    /// Never evicted: the coarse tiles that stand in for any tile loading
+    /// in the background.
+    pinned: HashSet<TileId>,
     known: Knowledge,
     bytes: usize,
     clock: u64,
     pool: rayon::ThreadPool,
+    background: Option<Background>,
 }
 
 impl TileStore {
@@ -101,10 +127,30 @@ impl TileStore {
             budget_bytes,
             tiles: HashMap::new(),
             empty: HashSet::new(),
+            pinned: HashSet::new(),
             known: Knowledge::default(),
             bytes: 0,
             clock: 0,
+            background: None,
         })
+    }
+
+    /// From now on loads tiles from `source` in the background, after
+    /// loading and keeping the coarse tiles over its region
+    /// ([`super::envelope::covering`]): [`Self::get`] returns at once with the tiles
+    /// here and asks for the rest.
+    pub fn load_in_background(&mut self, source: Arc<dyn TileSource>) -> Result<(), LoadError> {
+        let anchors = super::envelope::covering(&source.grid(), &source.bounds());
+        self.get(source.as_ref(), &anchors)?;
+        self.pinned.extend(anchors);
+        let (sender, receiver) = channel();
+        self.background = Some(Background { source, pending: HashSet::new(), sender, receiver });
+        Ok(())
+    }
+
+    /// Tiles asked for in the background and not yet loaded.
+    pub fn pending(&self) -> usize {
+        self.background.as_ref().map_or(0, |b| b.pending.len())
     }
 
     /// Bytes held.
@@ -124,41 +170,97 @@ impl TileStore {
     }
 
     /// Loads the tiles of `ids` that are not here (in parallel), then
-    /// returns those with data, in the order asked.
+    /// returns those with data, in the order asked. Loading in the
+    /// background, returns those here and asks for the rest.
     pub fn get(&mut self, source: &dyn TileSource, ids: &[TileId]) -> Result<Vec<Arc<TileData>>, LoadError> {
         self.clock += 1;
         let missing: Vec<TileId> =
             ids.iter().filter(|id| !self.tiles.contains_key(id) && !self.empty.contains(id)).copied().collect();
-        let grid = source.grid();
-        let halo = self.halo;
-        let loaded: Vec<(TileId, Option<TileData>)> = self.pool.install(|| {
-            missing
-                .par_iter()
-                .map(|&id| -> Result<_, LoadError> {
-                    let tile = source.fetch(id, halo)?.map(|p| TileData::prepare(&grid, p)).transpose()?;
-                    Ok((id, tile))
-                })
-                .collect::<Result<_, _>>()
-        })?;
-        for (id, tile) in loaded {
-            match tile {
-                Some(t) => self.insert(t),
-                None => {
-                    self.empty.insert(id);
-                }
+        if self.background.is_some() {
+            self.receive()?;
+            self.ask(&missing);
+        } else {
+            let grid = source.grid();
+            let halo = self.halo;
+            let loaded: Vec<(TileId, Option<TileData>)> = self.pool.install(|| {
+                missing.par_iter().map(|&id| Ok((id, load(source, &grid, id, halo)?))).collect::<Result<_, LoadError>>()
+            })?;
+            for (id, tile) in loaded {
+                self.keep(id, tile);
             }
         }
-        let clock = self.clock;
-        let out = ids
-            .iter()
-            .filter_map(|id| {
-                let e = self.tiles.get_mut(id)?;
-                e.last_used = clock;
-                Some(e.tile.clone())
-            })
-            .collect();
+        let out = ids.iter().filter_map(|&id| self.touch(id)).collect();
         self.evict();
         Ok(out)
+    }
+
+    /// The tiles of the cut `ids`: those here, and for each still loading in
+    /// the background its nearest ancestor here instead (once, and without
+    /// the tiles under it, so the tiles drawn still cover the view once).
+    pub fn get_cut(&mut self, source: &dyn TileSource, ids: &[TileId]) -> Result<Vec<Arc<TileData>>, LoadError> {
+        let here = self.get(source, ids)?;
+        if here.len() == ids.len() || self.background.is_none() {
+            return Ok(here);
+        }
+        let loading: Vec<TileId> =
+            ids.iter().filter(|id| self.background.iter().any(|b| b.pending.contains(id))).copied().collect();
+        let stand_ins: Vec<TileId> = loading.iter().filter_map(|&id| self.nearest_ancestor(id)).collect();
+        let drawn = stand_in(&here.iter().map(|t| t.id()).collect::<Vec<_>>(), &stand_ins);
+        Ok(drawn.into_iter().filter_map(|id| self.touch(id)).collect())
+    }
+
+    /// The nearest ancestor of `id` held here.
+    fn nearest_ancestor(&self, id: TileId) -> Option<TileId> {
+        std::iter::successors(id.parent(), TileId::parent).find(|a| self.tiles.contains_key(a))
+    }
+
+    /// The tile `id` if held, marked used this frame.
+    fn touch(&mut self, id: TileId) -> Option<Arc<TileData>> {
+        let e = self.tiles.get_mut(&id)?;
+        e.last_used = self.clock;
+        Some(e.tile.clone())
+    }
+
+    /// Keeps a loaded tile, or remembers that it has no data.
+    fn keep(&mut self, id: TileId, tile: Option<TileData>) {
+        match tile {
+            Some(t) => self.insert(t),
+            None => {
+                self.empty.insert(id);
+            }
+        }
+    }
+
+    /// Keeps the tiles loaded in the background since the last frame; the
+    /// first failure among them is the frame's.
+    fn receive(&mut self) -> Result<(), LoadError> {
+        let Some(b) = &mut self.background else { return Ok(()) };
+        let done: Vec<Loaded> = b.receiver.try_iter().collect();
+        for (id, _) in &done {
+            b.pending.remove(id);
+        }
+        for (id, tile) in done {
+            self.keep(id, tile?);
+        }
+        Ok(())
+    }
+
+    /// Asks for `missing` tiles in the background, up to [`PENDING_LIMIT`]
+    /// in all.
+    fn ask(&mut self, missing: &[TileId]) {
+        let Some(b) = &mut self.background else { return };
+        for &id in missing {
+            if b.pending.len() >= PENDING_LIMIT {
+                break;
+            }
+            if b.pending.insert(id) {
+                let (source, sender, halo) = (b.source.clone(), b.sender.clone(), self.halo);
+                self.pool.spawn(move || {
+                    // The store may be gone: nobody waits for the tile then.
+                    let _ = sender.send((id, load(source.as_ref(), &source.grid(), id, halo)));
+                });
+            }
+        }
     }
 
     fn insert(&mut self, tile: TileData) {
@@ -169,13 +271,14 @@ impl TileStore {
         self.tiles.insert(tile.id(), Entry { tile: Arc::new(tile), last_used: self.clock, bytes });
     }
 
-    /// Drops least recently used tiles not used this frame until within budget.
+    /// Drops least recently used tiles not used this frame until within
+    /// budget, the pinned ones never.
     fn evict(&mut self) {
         while self.bytes > self.budget_bytes {
             let victim = self
                 .tiles
                 .iter()
-                .filter(|(_, e)| e.last_used < self.clock)
+                .filter(|(id, e)| e.last_used < self.clock && !self.pinned.contains(id))
                 .min_by_key(|(_, e)| e.last_used)
                 .map(|(id, _)| *id);
             let Some(id) = victim else { break };
@@ -183,5 +286,75 @@ impl TileStore {
                 self.bytes -= e.bytes;
             }
         }
+    }
+}
+
+/// Fetches and prepares one tile.
+fn load(
+    source: &dyn TileSource,
+    grid: &crate::grid::TileGrid,
+    id: TileId,
+    halo: usize,
+) -> Result<Option<TileData>, LoadError> {
+    Ok(source.fetch(id, halo)?.map(|p| TileData::prepare(grid, p)).transpose()?)
+}
+
+/// A cut's tiles with `stand_ins` (ancestors of tiles not here) added once,
+/// and the tiles under any of them left out: each place is drawn once.
+fn stand_in(here: &[TileId], stand_ins: &[TileId]) -> Vec<TileId> {
+    let all: HashSet<TileId> = here.iter().chain(stand_ins).copied().collect();
+    let covered = |id: &TileId| std::iter::successors(id.parent(), TileId::parent).any(|a| all.contains(&a));
+    let mut drawn: Vec<TileId> = all.iter().filter(|id| !covered(id)).copied().collect();
+    drawn.sort_unstable_by_key(|id| (id.level, id.row, id.col));
+    drawn
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::client::source::RegionSource;
+
+    #[test]
+    fn stand_ins_replace_the_tiles_under_them_once() {
+        let parent = TileId::new(11, 100, 200);
+        let [a, b, c, _] = parent.children();
+        let elsewhere = TileId::new(12, 0, 0);
+        // Three children here, the fourth loading twice over (two of its
+        // own children asked): the parent is drawn once, alone.
+        let drawn = stand_in(&[a, b, c, elsewhere], &[parent, parent]);
+        assert_eq!(drawn, vec![parent, elsewhere]);
+        // Nothing loading: the cut as it is.
+        assert_eq!(stand_in(&[a, b], &[]), vec![a, b]);
+    }
+
+    #[test]
+    fn a_background_store_answers_at_once_and_loads_for_later_frames() {
+        let region = Arc::new(crate::config::load(None).unwrap());
+        let source: Arc<dyn TileSource> = Arc::new(RegionSource::new(region.clone()));
+        // A budget below one tile: only the pinned coarse tiles survive.
+        let mut store = TileStore::new(4, 1, 2).unwrap();
+        store.load_in_background(source.clone()).unwrap();
+        let anchors = crate::client::envelope::covering(&source.grid(), &source.bounds());
+        let b = region.bounds;
+        let fine = region.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), 12);
+        let cut = fine.parent().unwrap().children();
+        let first = store.get_cut(source.as_ref(), &cut).unwrap();
+        let first: Vec<TileId> = first.iter().map(|t| t.id()).collect();
+        assert!(first.iter().all(|id| anchors.contains(id)), "{first:?} stand in for {cut:?}");
+        assert_eq!(first.len(), 1);
+        assert_eq!(store.pending(), 4);
+        let start = std::time::Instant::now();
+        let drawn = loop {
+            let drawn: Vec<TileId> = store.get_cut(source.as_ref(), &cut).unwrap().iter().map(|t| t.id()).collect();
+            if store.pending() == 0 {
+                break drawn;
+            }
+            assert!(start.elapsed().as_secs() < 120, "tiles still loading");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        };
+        assert_eq!(drawn, cut.to_vec());
+        // Evicted to the budget, but for the coarse tiles.
+        assert!(store.get(source.as_ref(), &anchors[..1]).unwrap().len() == 1);
+        assert_eq!(store.tiles.len(), anchors.len());
     }
 }

@@ -3,7 +3,8 @@
 //! the same selection, loading and ray casting as `sylva fly`) from the
 //! camera the controls ([`controls`]) move, copied to the window
 //! ([`present`]); the window's title shows the frame rate, the tiles and
-//! the height above the surface.
+//! the height above the surface. A frame never waits for tiles: they load
+//! in the background, their nearest loaded ancestors drawn meanwhile.
 //!
 //! Keys: W/S or ↑/↓ forward and back, A/D sideways, Q/E down and up, ←/→
 //! turn, R/F pitch, Shift faster, the mouse wheel sets the speed, a left
@@ -103,7 +104,7 @@ pub fn default_start(source: &dyn TileSource) -> Result<Pose, crate::client::sou
 
 /// Opens a window over `source` and flies until it is closed; returns
 /// every frame's statistics.
-pub fn run(source: &dyn TileSource, options: ViewOptions) -> Result<Vec<FrameRecord>, ViewError> {
+pub fn run(source: Arc<dyn TileSource>, options: ViewOptions) -> Result<Vec<FrameRecord>, ViewError> {
     let event_loop = EventLoop::new().map_err(|e| ViewError::Window(e.to_string()))?;
     let mut app = App { source, options, state: None, records: Vec::new(), error: None };
     event_loop.run_app(&mut app).map_err(|e| ViewError::Window(e.to_string()))?;
@@ -119,8 +120,8 @@ pub fn run(source: &dyn TileSource, options: ViewOptions) -> Result<Vec<FrameRec
 }
 
 /// The event loop's handler.
-struct App<'a> {
-    source: &'a dyn TileSource,
+struct App {
+    source: Arc<dyn TileSource>,
     options: ViewOptions,
     /// Made when the event loop first resumes.
     state: Option<Viewer>,
@@ -150,10 +151,10 @@ struct Viewer {
     title: (usize, Instant),
 }
 
-impl ApplicationHandler for App<'_> {
+impl ApplicationHandler for App {
     fn resumed(&mut self, event_loop: &ActiveEventLoop) {
         if self.state.is_none() {
-            match Viewer::open(event_loop, self.source, &self.options) {
+            match Viewer::open(event_loop, &self.source, &self.options) {
                 Ok(viewer) => {
                     viewer.window.request_redraw();
                     self.state = Some(viewer);
@@ -196,7 +197,7 @@ impl ApplicationHandler for App<'_> {
                 // A scripted run's last frame is kept.
                 let last = self.options.exit_after.is_some_and(|n| self.records.len() + 1 >= n);
                 viewer.snapshot |= last && self.options.out_dir.is_some();
-                match viewer.frame(self.source, &self.options) {
+                match viewer.frame(self.source.as_ref(), &self.options) {
                     Ok(record) => self.records.push(record),
                     Err(e) => return self.fail(event_loop, e),
                 }
@@ -215,7 +216,7 @@ impl ApplicationHandler for App<'_> {
     }
 }
 
-impl App<'_> {
+impl App {
     fn fail(&mut self, event_loop: &ActiveEventLoop, error: ViewError) {
         self.error.get_or_insert(error);
         event_loop.exit();
@@ -223,7 +224,11 @@ impl App<'_> {
 }
 
 impl Viewer {
-    fn open(event_loop: &ActiveEventLoop, source: &dyn TileSource, options: &ViewOptions) -> Result<Viewer, ViewError> {
+    fn open(
+        event_loop: &ActiveEventLoop,
+        source: &Arc<dyn TileSource>,
+        options: &ViewOptions,
+    ) -> Result<Viewer, ViewError> {
         let (w, h) = options.render.size;
         let attributes =
             Window::default_attributes().with_title("Sylva").with_inner_size(winit::dpi::PhysicalSize::new(w, h));
@@ -240,7 +245,8 @@ impl Viewer {
             .with_ray_pass(r.ray_pass);
         let controls = Controls::new(options.start, options.start.eye.height_m);
         let motion = Motion { frame_s: 1.0 / 60.0, limits: controls.limits(), shadows: options.sun_ecef.is_some() };
-        let flight = fly::Flight::new(source, &renderer, r, motion)?;
+        let mut flight = fly::Flight::new(source.as_ref(), &renderer, r, motion)?;
+        flight.load_in_background(source.clone())?;
         let now = Instant::now();
         Ok(Viewer {
             window,
@@ -319,8 +325,12 @@ impl Viewer {
             Traversal::Exact => "exact".to_string(),
             Traversal::Linear(n) => format!("linear {n}"),
         };
+        let loading = match self.flight.pending() {
+            0 => String::new(),
+            n => format!(" ({n} loading)"),
+        };
         self.window.set_title(&format!(
-            "Sylva — {fps:.0} frames/s{gpu}, {} tiles, {traversal}, {:.0} m above the surface, {:.0} m/s{}",
+            "Sylva — {fps:.0} frames/s{gpu}, {} tiles{loading}, {traversal}, {:.0} m above the surface, {:.0} m/s{}",
             record.tiles_ray + record.tiles_plain,
             self.controls.clearance_m(),
             self.controls.speed_mps(),
