@@ -191,8 +191,6 @@ enum Command {
     },
 }
 
-/// `sylva seed`.
-#[cfg(feature = "server")]
 /// Where a flight's tiles come from.
 #[cfg(feature = "client")]
 #[derive(clap::Args)]
@@ -313,6 +311,8 @@ impl RenderArgs {
     }
 }
 
+/// `sylva seed`.
+#[cfg(feature = "server")]
 #[derive(clap::Args)]
 struct SeedArgs {
     /// Region and tile cache configuration (default: the embedded demo region).

@@ -283,6 +283,12 @@ pub struct Motion {
     pub shadows: bool,
 }
 
+/// What a budget flight's selections, made every `select_every` frames,
+/// look ahead by.
+fn lookahead(select_every: u32, motion: &Motion) -> Lookahead {
+    Lookahead { tau_s: motion.frame_s * f64::from(select_every.max(1)), limits: motion.limits }
+}
+
 /// One frame to render: its camera, its time and its sun.
 #[derive(Clone, Copy, Debug)]
 pub struct Shot {
@@ -347,7 +353,7 @@ impl Flight {
                     shadows: motion.shadows,
                     deadline: None,
                 };
-                let look = Lookahead { tau_s: motion.frame_s * f64::from(select_every.max(1)), limits: motion.limits };
+                let look = lookahead(select_every, &motion);
                 Some(BudgetFlight::new(selector, budget, look, prior, options.geomorph).map_err(FlyError::Thread)?)
             }
         };
@@ -371,12 +377,17 @@ impl Flight {
         self.lod.as_ref().map(BudgetFlight::model)
     }
 
-    /// Bounds the camera's motion anew (a budget flight's selections look
-    /// ahead by it).
-    pub fn set_limits(&mut self, limits: crate::lod::predict::MotionLimits) {
-        if let Some(lod) = &mut self.lod {
-            lod.set_limits(limits);
+    /// The camera moves as `motion` says from now on (a budget flight's
+    /// selections look ahead by it).
+    pub fn set_motion(&mut self, options: &FlyOptions, motion: Motion) {
+        if let (Some(lod), LodMode::Budget { select_every, .. }) = (&mut self.lod, options.mode) {
+            lod.set_motion(lookahead(select_every, &motion), motion.shadows);
         }
+    }
+
+    /// The finest tile held that contains the point `(lon, lat)`, degrees.
+    pub fn tile_at(&self, grid: &crate::grid::TileGrid, lon: f64, lat: f64) -> Option<Arc<TileData>> {
+        self.store.finest_at(grid, lon, lat)
     }
 
     /// Selects, loads and renders `shot`, reading back what `readback` asks

@@ -209,6 +209,12 @@ impl TileStore {
         Ok(drawn.into_iter().filter_map(|id| self.touch(id)).collect())
     }
 
+    /// The finest tile held that contains the point `(lon, lat)`, degrees.
+    pub fn finest_at(&self, grid: &crate::grid::TileGrid, lon: f64, lat: f64) -> Option<Arc<TileData>> {
+        let deepest = self.tiles.keys().map(|id| id.level).max()?;
+        (0..=deepest).rev().find_map(|level| Some(self.tiles.get(&grid.tile_containing(lon, lat, level))?.tile.clone()))
+    }
+
     /// The nearest ancestor of `id` held here.
     fn nearest_ancestor(&self, id: TileId) -> Option<TileId> {
         std::iter::successors(id.parent(), TileId::parent).find(|a| self.tiles.contains_key(a))

@@ -117,10 +117,12 @@ impl BudgetFlight {
         &self.budget
     }
 
-    /// Bounds the camera's motion anew (an interactive camera's speed
-    /// changes): the next selections' conservative camera grows with them.
-    pub fn set_limits(&mut self, limits: crate::lod::predict::MotionLimits) {
-        self.look.limits = limits;
+    /// Looks ahead by `look` from the next selection on, pricing shadow
+    /// rays or not (an interactive camera's speed, frame time and sun
+    /// change; geomorphs keep the period they started with).
+    pub fn set_motion(&mut self, look: Lookahead, shadows: bool) {
+        self.look = look;
+        self.budget.shadows = shadows;
     }
 
     /// The view-ray steps the next selection prices tiles with.

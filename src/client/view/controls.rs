@@ -2,8 +2,9 @@
 //! motion move a geodetic pose the way terrain viewers do — forward along
 //! the heading over the ground, sideways, up and down — at a speed that
 //! grows with the height above the surface, so a valley floor and orbit
-//! are both a few seconds of flight away. The pose never sinks under
-//! [`MIN_CLEARANCE_M`] above the surface the frame drew.
+//! are both a few seconds of flight away. Given the surface under the eye
+//! before each frame ([`clearance_m`]; the ellipsoid where no tile is
+//! loaded), the eye is kept [`MIN_CLEARANCE_M`] above it.
 
 use super::super::camera::Camera;
 use super::super::globe::{self, Geodetic};
@@ -11,31 +12,43 @@ use super::super::raycast::{Fade, TileView};
 use super::super::reference;
 use super::super::tile::TileData;
 use crate::lod::predict::MotionLimits;
-use glam::DVec3;
+use glam::{DQuat, DVec3};
 use std::sync::Arc;
 
-/// Closest the eye comes to the surface, metres.
+/// Closest the eye comes to the surface, metres: about a person's eye
+/// above a tree top.
 pub const MIN_CLEARANCE_M: f64 = 2.0;
-/// Speed per metre of height above the surface, 1/s.
+/// Speed per metre of height above the surface, 1/s: the ground below
+/// passes by at the same few degrees of view per second at any height.
 const SPEED_PER_CLEARANCE: f64 = 0.5;
-/// Slowest and fastest speeds at multiplier 1, m/s.
+/// Slowest and fastest speeds at multiplier 1, m/s: a fast walk near the
+/// canopy, and a continent in a minute from orbit.
 const SPEED_RANGE_MPS: (f64, f64) = (5.0, 50_000.0);
+/// Fastest speed whatever the setting, m/s: a step of a long frame stays a
+/// few degrees of the globe.
+const MAX_SPEED_MPS: f64 = 1.0e6;
 /// Speed multiplier while the boost key is held.
 const BOOST: f64 = 4.0;
 /// Speed multiplier per mouse-wheel notch.
 const WHEEL_STEP: f64 = 1.25;
-/// The multiplier's bounds.
+/// The multiplier's bounds (about ±20 notches).
 const MULTIPLIER_RANGE: (f64, f64) = (0.01, 100.0);
 /// Turn rate of the arrow keys, degrees per second.
 const KEY_TURN_DEGPS: f64 = 60.0;
-/// Mouse look, degrees per pixel dragged.
+/// Mouse look, degrees per pixel dragged: a drag across a 1280-pixel
+/// window turns the view half round.
 const MOUSE_DEG_PER_PX: f64 = 0.15;
-/// Pitch stays within ± this, degrees.
+/// A drag turns the view at most this fast, degrees per second; the rest of
+/// a faster drag follows over the next frames (so the conservative camera's
+/// turn rate bounds it).
+const LOOK_DEGPS: f64 = 240.0;
+/// Pitch stays within ± this, degrees (straight up or down has no heading).
 const PITCH_LIMIT_DEG: f64 = 89.0;
-/// Highest eye, metres above the ellipsoid.
+/// Highest eye, metres above the ellipsoid (beyond geostationary orbit's
+/// half).
 const MAX_HEIGHT_M: f64 = 2.0e7;
 /// The surface under the eye is looked for from this height (or the
-/// eye's, if higher): above every mountain and its canopy.
+/// eye's, if higher): above every summit and its canopy.
 const PROBE_FROM_M: f64 = 10_000.0;
 
 /// Where the eye is and where it looks.
@@ -83,28 +96,38 @@ pub struct Controls {
     multiplier: f64,
     /// Height above the surface under the eye, metres, as last measured.
     clearance_m: f64,
+    /// Heading and pitch dragged and not yet turned, degrees.
+    look_deg: (f64, f64),
 }
 
 impl Controls {
     /// Controls starting at `pose`, the surface assumed `clearance_m` below.
     pub fn new(pose: Pose, clearance_m: f64) -> Controls {
-        Controls { pose, held: Held::default(), multiplier: 1.0, clearance_m }
+        Controls { pose, held: Held::default(), multiplier: 1.0, clearance_m, look_deg: (0.0, 0.0) }
     }
 
     /// The speed now, m/s.
     pub fn speed_mps(&self) -> f64 {
-        let (lo, hi) = SPEED_RANGE_MPS;
-        let boost = if self.held.boost { BOOST } else { 1.0 };
-        (self.clearance_m * SPEED_PER_CLEARANCE).clamp(lo, hi) * self.multiplier * boost
+        (self.base_speed_mps() * if self.held.boost { BOOST } else { 1.0 }).min(MAX_SPEED_MPS)
     }
 
     /// The fastest the eye may move and turn at this speed setting,
-    /// whatever keys are held: the bounds a conservative camera needs.
+    /// whatever keys are held and however fast the mouse drags: the bounds
+    /// a conservative camera needs.
     pub fn limits(&self) -> MotionLimits {
+        // The view turns by at most the heading's and the pitch's changes
+        // together, each from keys and drag.
+        let turn_degps = 2.0 * (KEY_TURN_DEGPS + LOOK_DEGPS);
+        // 2 % more: a step over the globe, at the eye's height above the
+        // ellipsoid, is a chord a little longer or shorter than the speed.
+        let speed = (self.base_speed_mps() * BOOST).min(MAX_SPEED_MPS) * 1.02;
+        MotionLimits { max_speed_mps: speed, max_turn_radps: turn_degps.to_radians() }
+    }
+
+    /// The speed without boost, m/s.
+    fn base_speed_mps(&self) -> f64 {
         let (lo, hi) = SPEED_RANGE_MPS;
-        let speed = (self.clearance_m * SPEED_PER_CLEARANCE).clamp(lo, hi) * self.multiplier * BOOST;
-        // Three axes at once, and a mouse drag of a few hundred pixels a second.
-        MotionLimits { max_speed_mps: speed * 3f64.sqrt(), max_turn_radps: (4.0 * KEY_TURN_DEGPS).to_radians() }
+        (self.clearance_m * SPEED_PER_CLEARANCE).clamp(lo, hi) * self.multiplier
     }
 
     /// Height above the surface under the eye, as last measured, metres.
@@ -118,16 +141,22 @@ impl Controls {
         self.multiplier = (self.multiplier * WHEEL_STEP.powf(notches)).clamp(lo, hi);
     }
 
-    /// Mouse drag by `(dx, dy)` pixels: look around.
+    /// Mouse drag by `(dx, dy)` pixels: look around (turned by the next
+    /// steps, at most [`LOOK_DEGPS`]).
     pub fn drag(&mut self, dx: f64, dy: f64) {
-        self.turn(dx * MOUSE_DEG_PER_PX, -dy * MOUSE_DEG_PER_PX);
+        self.look_deg.0 += dx * MOUSE_DEG_PER_PX;
+        self.look_deg.1 -= dy * MOUSE_DEG_PER_PX;
     }
 
     /// Advances `dt_s` seconds with the keys held.
     pub fn step(&mut self, dt_s: f64) {
         let dt_s = dt_s.clamp(0.0, 0.5);
         let h = self.held;
-        self.turn(f64::from(h.turn) * KEY_TURN_DEGPS * dt_s, f64::from(h.tilt) * KEY_TURN_DEGPS * dt_s);
+        let most = LOOK_DEGPS * dt_s;
+        let look = (self.look_deg.0.clamp(-most, most), self.look_deg.1.clamp(-most, most));
+        self.look_deg = (self.look_deg.0 - look.0, self.look_deg.1 - look.1);
+        let keys = (f64::from(h.turn) * KEY_TURN_DEGPS * dt_s, f64::from(h.tilt) * KEY_TURN_DEGPS * dt_s);
+        self.turn(keys.0 + look.0, keys.1 + look.1);
         let (sh, ch) = self.pose.heading_deg.to_radians().sin_cos();
         let east_north_up = DVec3::new(
             f64::from(h.forward) * sh + f64::from(h.right) * ch,
@@ -141,10 +170,10 @@ impl Controls {
     }
 
     /// Records the height above the surface just measured under the eye
-    /// (`None`: no surface there) and lifts the eye to [`MIN_CLEARANCE_M`]
-    /// if it is lower.
+    /// (`None`: no surface there, so the ellipsoid is the ground) and lifts
+    /// the eye to [`MIN_CLEARANCE_M`] above it if it is lower.
     pub fn ground(&mut self, clearance_m: Option<f64>) {
-        let Some(clearance_m) = clearance_m else { return };
+        let clearance_m = clearance_m.unwrap_or(self.pose.eye.height_m);
         if clearance_m < MIN_CLEARANCE_M {
             self.pose.eye.height_m += MIN_CLEARANCE_M - clearance_m;
         }
@@ -156,17 +185,26 @@ impl Controls {
         self.pose.pitch_deg = (self.pose.pitch_deg + pitch_deg).clamp(-PITCH_LIMIT_DEG, PITCH_LIMIT_DEG);
     }
 
-    /// Moves the eye by `enu` metres (east, north, up) at its position,
-    /// keeping the heading's direction over the ground: north turns as the
-    /// eye moves over the globe, so the direction it looked is carried to
-    /// the new tangent plane and its heading read there.
+    /// Moves the eye by `enu` metres (east, north, up) at its position:
+    /// over the globe along the great circle the horizontal part points
+    /// along (however long the step), then up, keeping the heading's
+    /// direction — north turns as the eye moves, so the direction it looked
+    /// is carried along the circle and its heading read at the new place.
     fn translate(&mut self, enu: DVec3) {
         let eye = self.pose.eye;
         let basis = globe::enu_basis(eye.lon_deg, eye.lat_deg);
-        let moved = Geodetic::from_ecef(eye.to_ecef() + basis * DVec3::new(enu.x, enu.y, 0.0));
+        let (p, horizontal) = (eye.to_ecef(), basis * DVec3::new(enu.x, enu.y, 0.0));
         let (sh, ch) = self.pose.heading_deg.to_radians().sin_cos();
-        let ahead = globe::enu_basis(moved.lon_deg, moved.lat_deg).transpose() * (basis * DVec3::new(sh, ch, 0.0));
-        self.pose.heading_deg = ahead.x.atan2(ahead.y).to_degrees().rem_euclid(360.0);
+        let mut ahead = basis * DVec3::new(sh, ch, 0.0);
+        let mut moved = p;
+        if horizontal.length() > 0.0 {
+            let turn =
+                DQuat::from_axis_angle(basis.z_axis.cross(horizontal).normalize(), horizontal.length() / p.length());
+            (moved, ahead) = (turn * p, turn * ahead);
+        }
+        let moved = Geodetic::from_ecef(moved);
+        let local = globe::enu_basis(moved.lon_deg, moved.lat_deg).transpose() * ahead;
+        self.pose.heading_deg = local.x.atan2(local.y).to_degrees().rem_euclid(360.0);
         let height_m = (eye.height_m + enu.z).min(MAX_HEIGHT_M);
         self.pose.eye = Geodetic::new(moved.lon_deg, moved.lat_deg, height_m);
     }
@@ -238,9 +276,15 @@ mod tests {
             c.step(0.5);
         }
         assert_eq!(c.pose.pitch_deg, PITCH_LIMIT_DEG);
+        c.held = Held::default();
         c.drag(-200.0, 0.0);
+        c.step(0.5);
         assert!((c.pose.heading_deg - 120.0).abs() < 1e-9);
+        // A fast drag turns at most LOOK_DEGPS, the rest on later steps.
         c.drag(-1000.0, 0.0);
+        c.step(0.5);
+        assert!((c.pose.heading_deg - 0.0).abs() < 1e-9);
+        c.step(0.5);
         assert!((c.pose.heading_deg - 330.0).abs() < 1e-9);
         let base = c.speed_mps();
         c.wheel(2.0);
@@ -259,22 +303,40 @@ mod tests {
         c.ground(Some(-3.0));
         assert!((c.pose.eye.height_m - before - 3.0 - MIN_CLEARANCE_M).abs() < 1e-9);
         assert_eq!(c.clearance_m(), MIN_CLEARANCE_M);
-        // No surface measured: nothing changes.
-        let pose = c.pose;
+        // Down again: at the slowest speed for a frame, then held there.
+        let surface_m = c.pose.eye.height_m - MIN_CLEARANCE_M;
+        for _ in 0..20 {
+            c.step(0.05);
+            let clearance = c.pose.eye.height_m - surface_m;
+            c.ground(Some(clearance));
+            assert!(c.pose.eye.height_m - surface_m >= MIN_CLEARANCE_M - 1e-9);
+        }
+        // No surface known: the ellipsoid is the ground.
+        let mut c = controls(100.0, 100.0);
+        c.pose.eye.height_m = -400.0;
         c.ground(None);
-        assert_eq!(c.pose, pose);
+        assert_eq!(c.pose.eye.height_m, MIN_CLEARANCE_M);
     }
 
     #[test]
-    fn limits_bound_every_motion_the_keys_can_make() {
-        let mut c = controls(3000.0, 800.0);
-        let limits = c.limits();
-        c.held = Held { forward: 1, right: 1, up: 1, turn: 1, tilt: 1, boost: true };
-        let (start, dt) = (c.pose, 0.05);
-        c.step(dt);
-        assert!(moved_m(start.eye, c.pose.eye) / dt <= limits.max_speed_mps);
-        let turn = start.camera(60.0, (4, 3)).forward().angle_between(c.pose.camera(60.0, (4, 3)).forward());
-        assert!(turn / dt <= limits.max_turn_radps, "{turn}");
+    fn limits_bound_every_motion_the_keys_and_mouse_can_make() {
+        for (height_m, notches, dt) in [(3000.0, 0.0, 0.05), (100_000.0, 40.0, 0.05), (100_000.0, 40.0, 0.5)] {
+            let mut c = controls(height_m, height_m - 1000.0);
+            c.wheel(notches);
+            let limits = c.limits();
+            c.held = Held { forward: 1, right: 1, up: 1, turn: 1, tilt: -1, boost: true };
+            c.drag(1e6, 1e6);
+            for _ in 0..5 {
+                let start = c.pose;
+                c.step(dt);
+                let speed = moved_m(start.eye, c.pose.eye) / dt;
+                assert!(speed <= limits.max_speed_mps, "{speed} > {limits:?}");
+                // Near the bound: keys and the speed setting reach it.
+                assert!(speed >= 0.95 * limits.max_speed_mps, "{speed} < {limits:?}");
+                let turn = start.camera(60.0, (4, 3)).forward().angle_between(c.pose.camera(60.0, (4, 3)).forward());
+                assert!(turn / dt <= limits.max_turn_radps, "{turn}");
+            }
+        }
     }
 
     #[test]
@@ -301,16 +363,31 @@ mod tests {
     }
 
     #[test]
-    fn flying_over_the_pole_and_the_antimeridian_stays_finite() {
-        let pose = Pose { eye: Geodetic::new(179.9, 89.9, 5000.0), heading_deg: 45.0, pitch_deg: 0.0 };
+    fn flying_north_over_the_pole_comes_down_the_other_side_heading_south() {
+        let pose = Pose { eye: Geodetic::new(10.0, 89.95, 5000.0), heading_deg: 0.0, pitch_deg: 0.0 };
         let mut c = Controls::new(pose, 5000.0);
         c.held.forward = 1;
-        for _ in 0..200 {
+        // 2,500 m/s for 5 s: 12.5 km, past the pole 5.6 km away.
+        for _ in 0..50 {
             c.step(0.1);
         }
         let eye = c.pose.eye;
-        assert!(eye.lon_deg.is_finite() && eye.lat_deg.is_finite() && eye.height_m.is_finite());
-        assert!((-180.0..=180.0).contains(&eye.lon_deg) && (-90.0..=90.0).contains(&eye.lat_deg));
+        assert!((eye.lon_deg - -170.0).abs() < 1e-3, "{eye:?}");
+        assert!((eye.lat_deg - (90.0 - (12_500.0 - 5_580.0) / 111_700.0)).abs() < 2e-3, "{eye:?}");
+        assert!((c.pose.heading_deg - 180.0).abs() < 1e-3, "{}", c.pose.heading_deg);
         assert!((eye.height_m - 5000.0).abs() < 50.0, "{}", eye.height_m);
+    }
+
+    #[test]
+    fn flying_east_over_the_antimeridian_keeps_the_track() {
+        let pose = Pose { eye: Geodetic::new(179.99, 0.0, 5000.0), heading_deg: 90.0, pitch_deg: 0.0 };
+        let mut c = Controls::new(pose, 5000.0);
+        c.held.forward = 1;
+        for _ in 0..10 {
+            c.step(0.1);
+        }
+        let eye = c.pose.eye;
+        assert!(eye.lon_deg < -179.98 && eye.lat_deg.abs() < 1e-9, "{eye:?}");
+        assert!((c.pose.heading_deg - 90.0).abs() < 1e-9);
     }
 }

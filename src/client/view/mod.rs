@@ -13,6 +13,7 @@
 //! the frame as PNG, Esc quits.
 
 pub mod controls;
+pub mod input;
 pub mod present;
 
 use super::fly::{self, FlyError, FlyOptions, FrameRecord, Motion, Shot};
@@ -22,10 +23,10 @@ use super::raycast::Traversal;
 use super::render::gpu::{Gpu, GpuError};
 use super::render::{Readback, Renderer};
 use super::source::TileSource;
-use controls::{Controls, Held, Pose};
+use controls::{Controls, Pose};
 use glam::DVec3;
+use input::Input;
 use present::{PresentError, Presenter};
-use std::collections::HashSet;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
@@ -136,9 +137,7 @@ struct Viewer {
     presenter: Presenter,
     flight: fly::Flight,
     controls: Controls,
-    keys: HashSet<KeyCode>,
-    /// The cursor while the left button is down.
-    dragging: Option<(f64, f64)>,
+    input: Input,
     sun_on: bool,
     traversal: Traversal,
     /// Save the next frame.
@@ -168,25 +167,26 @@ impl ApplicationHandler for App {
         let Some(viewer) = &mut self.state else { return };
         match event {
             WindowEvent::CloseRequested => event_loop.exit(),
-            WindowEvent::Resized(size) => viewer.presenter.resize(viewer.renderer.gpu(), (size.width, size.height)),
+            WindowEvent::Resized(_) => viewer.presenter.fit(viewer.renderer.gpu()),
             WindowEvent::KeyboardInput { event, .. } => {
                 let PhysicalKey::Code(key) = event.physical_key else { return };
-                if event.state == ElementState::Pressed && !event.repeat && viewer.toggle(key) {
+                let pressed = event.state == ElementState::Pressed;
+                if pressed && !event.repeat && viewer.toggle(key, &self.options) {
                     event_loop.exit();
                 }
-                if event.state == ElementState::Pressed {
-                    viewer.keys.insert(key);
-                } else {
-                    viewer.keys.remove(&key);
-                }
-                viewer.controls.held = held(&viewer.keys);
+                viewer.input.key(key, pressed);
+                viewer.controls.held = viewer.input.held();
+            }
+            WindowEvent::Focused(false) => {
+                viewer.input.release_all();
+                viewer.controls.held = viewer.input.held();
             }
             WindowEvent::MouseInput { state, button: MouseButton::Left, .. } => {
-                viewer.dragging = (state == ElementState::Pressed).then_some((f64::NAN, f64::NAN));
+                viewer.input.button(state == ElementState::Pressed);
             }
             WindowEvent::CursorMoved { position, .. } => {
-                if let Some((x, y)) = viewer.dragging.replace((position.x, position.y)).filter(|p| p.0.is_finite()) {
-                    viewer.controls.drag(position.x - x, position.y - y);
+                if let Some((dx, dy)) = viewer.input.moved(position.x, position.y) {
+                    viewer.controls.drag(dx, dy);
                 }
             }
             WindowEvent::MouseWheel { delta, .. } => viewer.controls.wheel(match delta {
@@ -237,8 +237,7 @@ impl Viewer {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_with_display_handle_from_env(display));
         let surface = instance.create_surface(window.clone()).map_err(|e| ViewError::Window(e.to_string()))?;
         let gpu = Gpu::open_on(&instance, Some(&surface))?;
-        let size = window.inner_size();
-        let presenter = Presenter::new(&gpu, surface, (size.width, size.height))?;
+        let presenter = Presenter::new(&gpu, window.clone(), surface)?;
         let r = &options.render;
         let renderer = Renderer::new(gpu, source.grid().samples(), r.halo as u32, options.gpu_budget_bytes, r.geomorph)
             .with_hull_factor(r.hull_factor)
@@ -254,8 +253,7 @@ impl Viewer {
             presenter,
             flight,
             controls,
-            keys: HashSet::new(),
-            dragging: None,
+            input: Input::default(),
             sun_on: options.sun_ecef.is_some(),
             traversal: r.traversal,
             snapshot: false,
@@ -267,10 +265,10 @@ impl Viewer {
     }
 
     /// Acts on a key just pressed; true to quit.
-    fn toggle(&mut self, key: KeyCode) -> bool {
+    fn toggle(&mut self, key: KeyCode, options: &ViewOptions) -> bool {
         match key {
             KeyCode::Escape => return true,
-            KeyCode::KeyL => self.sun_on = !self.sun_on,
+            KeyCode::KeyL => self.sun_on = !self.sun_on && options.sun_ecef.is_some(),
             KeyCode::KeyT => {
                 self.traversal = match self.traversal {
                     Traversal::Exact => Traversal::Linear(LINEAR_STEPS),
@@ -286,9 +284,11 @@ impl Viewer {
     /// Moves the eye, renders and shows a frame.
     fn frame(&mut self, source: &dyn TileSource, options: &ViewOptions) -> Result<FrameRecord, ViewError> {
         let now = Instant::now();
-        self.controls.step((now - self.last).as_secs_f64());
+        let dt_s = (now - self.last).as_secs_f64();
         self.last = now;
-        self.flight.set_limits(self.controls.limits());
+        self.move_eye(source, dt_s);
+        let motion = Motion { frame_s: dt_s, limits: self.controls.limits(), shadows: self.sun_on };
+        self.flight.set_motion(&options.render, motion);
         let shot = Shot {
             index: self.frames,
             t_s: (now - self.started).as_secs_f64(),
@@ -298,18 +298,26 @@ impl Viewer {
         let render = FlyOptions { traversal: self.traversal, ..options.render.clone() };
         let readback = if self.snapshot { Readback::Colour } else { Readback::None };
         let framed = self.flight.frame(source, &mut self.renderer, &render, &shot, readback)?;
-        self.controls.ground(controls::clearance_m(self.controls.pose.eye, &framed.tiles));
         if let Some(colour) = self.renderer.colour() {
             self.presenter.show(self.renderer.gpu(), colour)?;
         }
         if std::mem::take(&mut self.snapshot) {
             let dir = options.out_dir.as_deref().unwrap_or(std::path::Path::new("."));
             let size = (shot.camera.width_px, shot.camera.height_px);
-            fly::write_png(&dir.join(format!("view_{:05}.png", shot.index)), &framed.rendered, size)?;
+            fly::write_png(&free_name(dir, shot.index), &framed.rendered, size)?;
         }
         self.frames += 1;
         self.show_title(&framed.record);
         Ok(framed.record)
+    }
+
+    /// Moves the eye by the keys and drag of `dt_s` seconds, then keeps it
+    /// above the surface of the finest tile loaded under it.
+    fn move_eye(&mut self, source: &dyn TileSource, dt_s: f64) {
+        self.controls.step(dt_s);
+        let eye = self.controls.pose.eye;
+        let under: Vec<_> = self.flight.tile_at(&source.grid(), eye.lon_deg, eye.lat_deg).into_iter().collect();
+        self.controls.ground(controls::clearance_m(eye, &under));
     }
 
     /// Frame rate, tiles, height and speed in the title, twice a second.
@@ -346,18 +354,13 @@ const LINEAR_STEPS: u32 = 30;
 /// Seconds between title updates.
 const TITLE_EVERY_S: f64 = 0.5;
 
-/// The movement the keys held ask for.
-fn held(keys: &HashSet<KeyCode>) -> Held {
-    let axis = |minus: &[KeyCode], plus: &[KeyCode]| {
-        let down = |set: &[KeyCode]| set.iter().any(|k| keys.contains(k));
-        i8::from(down(plus)) - i8::from(down(minus))
+/// `view_NNNNN.png` in `dir` for frame `index`, with a suffix if a file
+/// of that name is there (from an earlier view): frames saved never replace
+/// others.
+fn free_name(dir: &std::path::Path, index: usize) -> PathBuf {
+    let name = |k: usize| match k {
+        0 => dir.join(format!("view_{index:05}.png")),
+        k => dir.join(format!("view_{index:05}-{k}.png")),
     };
-    Held {
-        forward: axis(&[KeyCode::KeyS, KeyCode::ArrowDown], &[KeyCode::KeyW, KeyCode::ArrowUp]),
-        right: axis(&[KeyCode::KeyA], &[KeyCode::KeyD]),
-        up: axis(&[KeyCode::KeyQ], &[KeyCode::KeyE]),
-        turn: axis(&[KeyCode::ArrowLeft], &[KeyCode::ArrowRight]),
-        tilt: axis(&[KeyCode::KeyF], &[KeyCode::KeyR]),
-        boost: keys.contains(&KeyCode::ShiftLeft) || keys.contains(&KeyCode::ShiftRight),
-    }
+    (0..).map(name).find(|p| !p.exists()).unwrap_or_else(|| name(0))
 }

@@ -5,6 +5,8 @@
 
 use super::super::render::gpu::Gpu;
 use super::super::render::shaders;
+use std::sync::Arc;
+use winit::window::Window;
 
 /// Why a frame could not be shown.
 #[derive(Debug, thiserror::Error)]
@@ -22,6 +24,7 @@ pub enum PresentError {
 
 /// A window's surface and the pass that fills it.
 pub struct Presenter {
+    window: Arc<Window>,
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
     pipeline: wgpu::RenderPipeline,
@@ -29,15 +32,16 @@ pub struct Presenter {
 }
 
 impl Presenter {
-    /// Configures `surface` for `gpu` at `size` pixels.
-    pub fn new(gpu: &Gpu, surface: wgpu::Surface<'static>, size: (u32, u32)) -> Result<Presenter, PresentError> {
+    /// Configures `window`'s `surface` for `gpu` at the window's size.
+    pub fn new(gpu: &Gpu, window: Arc<Window>, surface: wgpu::Surface<'static>) -> Result<Presenter, PresentError> {
+        let size = fitted(gpu, &window);
         let caps = surface.get_capabilities(&gpu.adapter);
         let format = pick_format(&caps.formats).ok_or(PresentError::NoFormat)?;
         let config = wgpu::SurfaceConfiguration {
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
             format,
-            width: size.0.max(1),
-            height: size.1.max(1),
+            width: size.0,
+            height: size.1,
             // Fifo is always there; a frame waits for the display, as an
             // interactive viewer should.
             present_mode: wgpu::PresentMode::Fifo,
@@ -48,27 +52,29 @@ impl Presenter {
         };
         surface.configure(&gpu.device, &config);
         let (pipeline, layout) = pipeline(&gpu.device, format);
-        Ok(Presenter { surface, config, pipeline, layout })
+        Ok(Presenter { window, surface, config, pipeline, layout })
     }
 
-    /// The surface's size, pixels.
+    /// The surface's size, pixels: the frames' size.
     pub fn size(&self) -> (u32, u32) {
         (self.config.width, self.config.height)
     }
 
-    /// Follows the window to `size` pixels.
-    pub fn resize(&mut self, gpu: &Gpu, size: (u32, u32)) {
-        (self.config.width, self.config.height) = (size.0.max(1), size.1.max(1));
+    /// Follows the window's size (within what the GPU can render).
+    pub fn fit(&mut self, gpu: &Gpu) {
+        (self.config.width, self.config.height) = fitted(gpu, &self.window);
         self.surface.configure(&gpu.device, &self.config);
     }
 
     /// Copies `colour` (the size of the surface) to the window.
     pub fn show(&mut self, gpu: &Gpu, colour: &wgpu::Texture) -> Result<(), PresentError> {
-        let frame = match self.surface.get_current_texture() {
-            wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
+        let (frame, suboptimal) = match self.surface.get_current_texture() {
+            wgpu::CurrentSurfaceTexture::Success(t) => (t, false),
+            // Shown, then fitted to the window for the next frame.
+            wgpu::CurrentSurfaceTexture::Suboptimal(t) => (t, true),
             wgpu::CurrentSurfaceTexture::Outdated => {
-                // Resized under us: take the new size on the next frame.
-                self.surface.configure(&gpu.device, &self.config);
+                // Resized under us: the next frame has the window's size.
+                self.fit(gpu);
                 return Ok(());
             }
             wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => return Ok(()),
@@ -103,8 +109,17 @@ impl Presenter {
         }
         gpu.queue.submit([encoder.finish()]);
         gpu.queue.present(frame);
+        if suboptimal {
+            self.fit(gpu);
+        }
         Ok(())
     }
+}
+
+/// The window's size, at least a pixel and at most what the GPU renders.
+fn fitted(gpu: &Gpu, window: &Window) -> (u32, u32) {
+    let (size, most) = (window.inner_size(), gpu.device.limits().max_texture_dimension_2d);
+    (size.width.clamp(1, most), size.height.clamp(1, most))
 }
 
 /// The surface format frames are shown in: an 8-bit one without sRGB
@@ -169,4 +184,18 @@ fn pipeline(device: &wgpu::Device, format: wgpu::TextureFormat) -> (wgpu::Render
         cache: None,
     });
     (pipeline, layout)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use wgpu::TextureFormat as F;
+
+    #[test]
+    fn frames_go_to_a_plain_8_bit_format_first() {
+        assert_eq!(pick_format(&[F::Bgra8UnormSrgb, F::Rgba16Float, F::Bgra8Unorm]), Some(F::Bgra8Unorm));
+        assert_eq!(pick_format(&[F::Rgba16Float, F::Rgba8UnormSrgb]), Some(F::Rgba8UnormSrgb));
+        assert_eq!(pick_format(&[F::Rgb10a2Unorm]), Some(F::Rgb10a2Unorm));
+        assert_eq!(pick_format(&[]), None);
+    }
 }
