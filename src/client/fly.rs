@@ -372,6 +372,11 @@ impl Flight {
         self.store.pending()
     }
 
+    /// Tile loads that failed in the background (each is tried again).
+    pub fn failures(&self) -> usize {
+        self.store.failures()
+    }
+
     /// The cost model a budget flight has calibrated so far.
     pub fn model(&self) -> Option<CostModel> {
         self.lod.as_ref().map(BudgetFlight::model)
@@ -455,7 +460,10 @@ fn choose(
         }
     }
     let steps_of: std::collections::HashMap<_, _> = selected.cut.tiles.iter().map(|c| (c.id, c.shadow_steps)).collect();
-    let steps = tiles.iter().map(|t| steps_of.get(&t.id()).copied().unwrap_or(0)).collect();
+    // A loaded ancestor standing in for tiles still loading takes the most
+    // shadow steps the selection gave any tile.
+    let most = selected.cut.tiles.iter().map(|c| c.shadow_steps).max().unwrap_or(0);
+    let steps = tiles.iter().map(|t| steps_of.get(&t.id()).copied().unwrap_or(most)).collect();
     let morphing = weights.iter().filter(|&&w| w < 1.0).count();
     Ok(Chosen { tiles, steps, weights, error_px: f64::NAN, selected: Some(selected), morphing, touched: None })
 }
@@ -470,7 +478,12 @@ fn frame(
     let start = Instant::now();
     let bytes_before = source.bytes_fetched();
     let (camera, t_s) = (shot.camera, shot.t_s);
-    let chosen = choose(source, (store, lod.as_deref_mut(), sse), (t_s, &camera), (options, renderer.cache_slots()))?;
+    let mut chosen =
+        choose(source, (store, lod.as_deref_mut(), sse), (t_s, &camera), (options, renderer.cache_slots()))?;
+    if shot.sun_ecef.is_none() {
+        // No sun, no shadow rays: none drawn, none priced.
+        chosen.steps.fill(0);
+    }
     let (tiles, error_px) = (&chosen.tiles, chosen.error_px);
     let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
     let fade = trees::canopy_fade(options.fade, options.trees.as_ref(), camera.focal_px());

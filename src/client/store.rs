@@ -8,9 +8,10 @@
 //! Missing tiles of a frame are fetched and prepared in parallel on the
 //! store's own thread pool, whose size bounds the requests in flight: while
 //! the frame waits (`sylva fly`), or in the background (`sylva view`: a
-//! frame never waits; tiles still loading are drawn as their nearest loaded
-//! ancestor, [`TileStore::get_cut`], and the coarse tiles over the region
-//! are loaded first and kept, so every tile has one).
+//! frame never waits; a tile not here yet is drawn as its nearest loaded
+//! ancestor, [`TileStore::get_cut`]; its ancestors load coarsest first, and
+//! the coarse tiles over the region are loaded first and kept, so every
+//! tile of the region has one).
 
 use super::source::{FetchError, TileSource};
 use super::tile::{TileData, TileError};
@@ -19,6 +20,7 @@ use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::sync::{Arc, PoisonError, RwLock};
+use std::time::Instant;
 
 /// What a loaded tile told about itself.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -88,9 +90,15 @@ type Loaded = (TileId, Result<Option<TileData>, LoadError>);
 struct Background {
     source: Arc<dyn TileSource>,
     pending: HashSet<TileId>,
+    /// Tiles whose load failed, and when.
+    failed: HashMap<TileId, Instant>,
+    failures: usize,
     sender: Sender<Loaded>,
     receiver: Receiver<Loaded>,
 }
+
+/// Seconds before a tile that failed to load is asked for again.
+const RETRY_S: f64 = 2.0;
 
 /// Tiles asked for in the background and not yet back, at most: a camera
 /// moving fast asks for more than the source can deliver, and what it
@@ -144,7 +152,8 @@ impl TileStore {
         self.get(source.as_ref(), &anchors)?;
         self.pinned.extend(anchors);
         let (sender, receiver) = channel();
-        self.background = Some(Background { source, pending: HashSet::new(), sender, receiver });
+        let (pending, failed) = (HashSet::new(), HashMap::new());
+        self.background = Some(Background { source, pending, failed, failures: 0, sender, receiver });
         Ok(())
     }
 
@@ -173,15 +182,12 @@ impl TileStore {
     /// returns those with data, in the order asked. Loading in the
     /// background, returns those here and asks for the rest.
     pub fn get(&mut self, source: &dyn TileSource, ids: &[TileId]) -> Result<Vec<Arc<TileData>>, LoadError> {
-        self.clock += 1;
-        let missing: Vec<TileId> =
-            ids.iter().filter(|id| !self.tiles.contains_key(id) && !self.empty.contains(id)).copied().collect();
         if self.background.is_some() {
-            self.receive()?;
+            self.receive();
+            let missing = self.missing(ids);
             self.ask(&missing);
         } else {
-            let grid = source.grid();
-            let halo = self.halo;
+            let (missing, grid, halo) = (self.missing(ids), source.grid(), self.halo);
             let loaded: Vec<(TileId, Option<TileData>)> = self.pool.install(|| {
                 missing.par_iter().map(|&id| Ok((id, load(source, &grid, id, halo)?))).collect::<Result<_, LoadError>>()
             })?;
@@ -194,19 +200,29 @@ impl TileStore {
         Ok(out)
     }
 
-    /// The tiles of the cut `ids`: those here, and for each still loading in
-    /// the background its nearest ancestor here instead (once, and without
-    /// the tiles under it, so the tiles drawn still cover the view once).
+    /// A frame's cut `ids`: the tiles here, and for each not here yet (while
+    /// loading in the background) its nearest ancestor here instead — once,
+    /// and without the tiles under it, so the tiles drawn still cover the
+    /// view once. Tiles not used by this frame may be evicted.
     pub fn get_cut(&mut self, source: &dyn TileSource, ids: &[TileId]) -> Result<Vec<Arc<TileData>>, LoadError> {
+        self.clock += 1;
         let here = self.get(source, ids)?;
         if here.len() == ids.len() || self.background.is_none() {
             return Ok(here);
         }
-        let loading: Vec<TileId> =
-            ids.iter().filter(|id| self.background.iter().any(|b| b.pending.contains(id))).copied().collect();
-        let stand_ins: Vec<TileId> = loading.iter().filter_map(|&id| self.nearest_ancestor(id)).collect();
+        let stand_ins: Vec<TileId> = self.missing(ids).into_iter().filter_map(|id| self.nearest_ancestor(id)).collect();
         let drawn = stand_in(&here.iter().map(|t| t.id()).collect::<Vec<_>>(), &stand_ins);
         Ok(drawn.into_iter().filter_map(|id| self.touch(id)).collect())
+    }
+
+    /// Tiles loading failures in the background so far.
+    pub fn failures(&self) -> usize {
+        self.background.as_ref().map_or(0, |b| b.failures)
+    }
+
+    /// The tiles of `ids` neither here nor known to be empty.
+    fn missing(&self, ids: &[TileId]) -> Vec<TileId> {
+        ids.iter().filter(|id| !self.tiles.contains_key(id) && !self.empty.contains(id)).copied().collect()
     }
 
     /// The finest tile held that contains the point `(lon, lat)`, degrees.
@@ -237,29 +253,48 @@ impl TileStore {
         }
     }
 
-    /// Keeps the tiles loaded in the background since the last frame; the
-    /// first failure among them is the frame's.
-    fn receive(&mut self) -> Result<(), LoadError> {
-        let Some(b) = &mut self.background else { return Ok(()) };
+    /// Keeps the tiles loaded in the background since the last frame. A
+    /// tile that failed is asked again after [`RETRY_S`] (and counted).
+    fn receive(&mut self) {
+        let Some(b) = &mut self.background else { return };
         let done: Vec<Loaded> = b.receiver.try_iter().collect();
-        for (id, _) in &done {
-            b.pending.remove(id);
+        let mut kept = Vec::with_capacity(done.len());
+        for (id, result) in done {
+            b.pending.remove(&id);
+            match result {
+                Ok(tile) => kept.push((id, tile)),
+                Err(_) => {
+                    b.failed.insert(id, Instant::now());
+                    b.failures += 1;
+                }
+            }
         }
-        for (id, tile) in done {
-            self.keep(id, tile?);
+        for (id, tile) in kept {
+            self.keep(id, tile);
         }
-        Ok(())
     }
 
-    /// Asks for `missing` tiles in the background, up to [`PENDING_LIMIT`]
-    /// in all.
+    /// Asks for `missing` tiles in the background, coarsest first, each with
+    /// the ancestors between it and the nearest one here (so a place shows
+    /// finer tiles as they come, not the coarsest until all arrive), up to
+    /// [`PENDING_LIMIT`] in all.
     fn ask(&mut self, missing: &[TileId]) {
+        let mut wanted: Vec<TileId> = missing
+            .iter()
+            .flat_map(|&id| {
+                let up = std::iter::successors(Some(id), TileId::parent);
+                up.take_while(|a| !self.tiles.contains_key(a) && !self.empty.contains(a)).collect::<Vec<_>>()
+            })
+            .collect();
+        wanted.sort_unstable_by_key(|id| (id.level, id.row, id.col));
+        wanted.dedup();
         let Some(b) = &mut self.background else { return };
-        for &id in missing {
+        for id in wanted {
             if b.pending.len() >= PENDING_LIMIT {
                 break;
             }
-            if b.pending.insert(id) {
+            let failed_lately = b.failed.get(&id).is_some_and(|t| t.elapsed().as_secs_f64() < RETRY_S);
+            if !failed_lately && b.pending.insert(id) {
                 let (source, sender, halo) = (b.source.clone(), b.sender.clone(), self.halo);
                 self.pool.spawn(move || {
                     // The store may be gone: nobody waits for the tile then.
@@ -274,7 +309,9 @@ impl TileStore {
         self.known.insert(tile.id(), known);
         let bytes = tile.gpu_bytes() + tile.hull.vertices.len() * 20 + tile.hull.indices.len() * 4;
         self.bytes += bytes;
-        self.tiles.insert(tile.id(), Entry { tile: Arc::new(tile), last_used: self.clock, bytes });
+        if let Some(old) = self.tiles.insert(tile.id(), Entry { tile: Arc::new(tile), last_used: self.clock, bytes }) {
+            self.bytes -= old.bytes;
+        }
     }
 
     /// Drops least recently used tiles not used this frame until within
@@ -333,34 +370,72 @@ mod tests {
         assert_eq!(stand_in(&[a, b], &[]), vec![a, b]);
     }
 
+    /// The demo region as a source whose tiles of `failing` never load.
+    struct Flaky {
+        inner: RegionSource,
+        failing: TileId,
+    }
+
+    impl TileSource for Flaky {
+        fn grid(&self) -> crate::grid::TileGrid {
+            self.inner.grid()
+        }
+        fn bounds(&self) -> crate::grid::BBox {
+            self.inner.bounds()
+        }
+        fn fetch(&self, id: TileId, halo: usize) -> Result<Option<super::super::tile::TilePayload>, FetchError> {
+            if id == self.failing {
+                return Err(FetchError::Http { id, url: "test".into(), reason: "refused".into() });
+            }
+            self.inner.fetch(id, halo)
+        }
+        fn bytes_fetched(&self) -> u64 {
+            0
+        }
+        fn describe(&self) -> String {
+            "a flaky demo".into()
+        }
+    }
+
+    /// Calls `get_cut` until nothing is loading; the tiles drawn then.
+    fn settle(store: &mut TileStore, source: &dyn TileSource, cut: &[TileId]) -> Vec<TileId> {
+        let start = std::time::Instant::now();
+        loop {
+            let drawn: Vec<TileId> = store.get_cut(source, cut).unwrap().iter().map(|t| t.id()).collect();
+            if store.pending() == 0 {
+                return drawn;
+            }
+            assert!(start.elapsed().as_secs() < 120, "tiles still loading");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+    }
+
     #[test]
     fn a_background_store_answers_at_once_and_loads_for_later_frames() {
         let region = Arc::new(crate::config::load(None).unwrap());
-        let source: Arc<dyn TileSource> = Arc::new(RegionSource::new(region.clone()));
+        let b = region.bounds;
+        let fine = region.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), 12);
+        let [a, _, c, d] = fine.parent().unwrap().children();
+        let failing = fine.parent().unwrap().children()[1];
+        let source: Arc<dyn TileSource> = Arc::new(Flaky { inner: RegionSource::new(region.clone()), failing });
         // A budget below one tile: only the pinned coarse tiles survive.
         let mut store = TileStore::new(4, 1, 2).unwrap();
         store.load_in_background(source.clone()).unwrap();
         let anchors = crate::client::envelope::covering(&source.grid(), &source.bounds());
-        let b = region.bounds;
-        let fine = region.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), 12);
-        let cut = fine.parent().unwrap().children();
-        let first = store.get_cut(source.as_ref(), &cut).unwrap();
-        let first: Vec<TileId> = first.iter().map(|t| t.id()).collect();
-        assert!(first.iter().all(|id| anchors.contains(id)), "{first:?} stand in for {cut:?}");
+        let cut = [a, failing, c, d];
+        let first: Vec<TileId> = store.get_cut(source.as_ref(), &cut).unwrap().iter().map(|t| t.id()).collect();
         assert_eq!(first.len(), 1);
-        assert_eq!(store.pending(), 4);
-        let start = std::time::Instant::now();
-        let drawn = loop {
-            let drawn: Vec<TileId> = store.get_cut(source.as_ref(), &cut).unwrap().iter().map(|t| t.id()).collect();
-            if store.pending() == 0 {
-                break drawn;
-            }
-            assert!(start.elapsed().as_secs() < 120, "tiles still loading");
-            std::thread::sleep(std::time::Duration::from_millis(20));
-        };
-        assert_eq!(drawn, cut.to_vec());
+        assert!(anchors.contains(&first[0]), "{first:?} stands in for {cut:?}");
+        // The four, and their ancestors below the coarse tile, coarsest first.
+        assert_eq!(store.pending(), 4 + (fine.level - first[0].level - 1) as usize);
+        // Three arrive; the fourth failed, so its parent stands in for it
+        // alone (with no tile under it drawn twice), and the failure is
+        // counted instead of ending the frame.
+        let drawn = settle(&mut store, source.as_ref(), &cut);
+        assert_eq!(drawn, vec![fine.parent().unwrap()]);
+        assert!(store.failures() >= 1);
         // Evicted to the budget, but for the coarse tiles.
-        assert!(store.get(source.as_ref(), &anchors[..1]).unwrap().len() == 1);
+        store.get_cut(source.as_ref(), &anchors[..1]).unwrap();
         assert_eq!(store.tiles.len(), anchors.len());
     }
 }

@@ -15,6 +15,8 @@ use crate::lod::predict::MotionLimits;
 use glam::{DQuat, DVec3};
 use std::sync::Arc;
 
+/// The longest step, seconds: a longer stall moves the eye no further.
+pub const LONGEST_STEP_S: f64 = 0.5;
 /// Closest the eye comes to the surface, metres: about a person's eye
 /// above a tree top.
 pub const MIN_CLEARANCE_M: f64 = 2.0;
@@ -150,7 +152,7 @@ impl Controls {
 
     /// Advances `dt_s` seconds with the keys held.
     pub fn step(&mut self, dt_s: f64) {
-        let dt_s = dt_s.clamp(0.0, 0.5);
+        let dt_s = dt_s.clamp(0.0, LONGEST_STEP_S);
         let h = self.held;
         let most = LOOK_DEGPS * dt_s;
         let look = (self.look_deg.0.clamp(-most, most), self.look_deg.1.clamp(-most, most));

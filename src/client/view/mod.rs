@@ -168,10 +168,10 @@ impl ApplicationHandler for App {
         match event {
             WindowEvent::CloseRequested => event_loop.exit(),
             WindowEvent::Resized(_) => viewer.presenter.fit(viewer.renderer.gpu()),
-            WindowEvent::KeyboardInput { event, .. } => {
+            WindowEvent::KeyboardInput { event, is_synthetic, .. } => {
                 let PhysicalKey::Code(key) = event.physical_key else { return };
                 let pressed = event.state == ElementState::Pressed;
-                if pressed && !event.repeat && viewer.toggle(key, &self.options) {
+                if pressed && !event.repeat && !is_synthetic && viewer.toggle(key, &self.options) {
                     event_loop.exit();
                 }
                 viewer.input.key(key, pressed);
@@ -284,7 +284,9 @@ impl Viewer {
     /// Moves the eye, renders and shows a frame.
     fn frame(&mut self, source: &dyn TileSource, options: &ViewOptions) -> Result<FrameRecord, ViewError> {
         let now = Instant::now();
-        let dt_s = (now - self.last).as_secs_f64();
+        // A stall (pipelines built, the window hidden) counts as a long
+        // frame, no longer: the controls and the look-ahead agree.
+        let dt_s = (now - self.last).as_secs_f64().min(controls::LONGEST_STEP_S);
         self.last = now;
         self.move_eye(source, dt_s);
         let motion = Motion { frame_s: dt_s, limits: self.controls.limits(), shadows: self.sun_on };
@@ -304,7 +306,10 @@ impl Viewer {
         if std::mem::take(&mut self.snapshot) {
             let dir = options.out_dir.as_deref().unwrap_or(std::path::Path::new("."));
             let size = (shot.camera.width_px, shot.camera.height_px);
-            fly::write_png(&free_name(dir, shot.index), &framed.rendered, size)?;
+            if let Err(e) = fly::write_png(&free_name(dir, shot.index), &framed.rendered, size) {
+                // Said, and the view goes on.
+                eprintln!("sylva view: the frame was not saved: {e}");
+            }
         }
         self.frames += 1;
         self.show_title(&framed.record);
@@ -333,9 +338,10 @@ impl Viewer {
             Traversal::Exact => "exact".to_string(),
             Traversal::Linear(n) => format!("linear {n}"),
         };
-        let loading = match self.flight.pending() {
-            0 => String::new(),
-            n => format!(" ({n} loading)"),
+        let loading = match (self.flight.pending(), self.flight.failures()) {
+            (0, 0) => String::new(),
+            (n, 0) => format!(" ({n} loading)"),
+            (n, failed) => format!(" ({n} loading, {failed} failed loads)"),
         };
         self.window.set_title(&format!(
             "Sylva — {fps:.0} frames/s{gpu}, {} tiles{loading}, {traversal}, {:.0} m above the surface, {:.0} m/s{}",
