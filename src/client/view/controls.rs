@@ -144,7 +144,7 @@ impl Controls {
     }
 
     /// Mouse drag by `(dx, dy)` pixels: look around (turned by the next
-    /// steps, at most [`LOOK_DEGPS`]).
+    /// steps, at most `LOOK_DEGPS`).
     pub fn drag(&mut self, dx: f64, dy: f64) {
         self.look_deg.0 += dx * MOUSE_DEG_PER_PX;
         self.look_deg.1 -= dy * MOUSE_DEG_PER_PX;
