@@ -3,8 +3,8 @@
 //!
 //! The pipeline follows Figure 6.1 of the dissertation in
 //! `shared/seeds/002_…`: a vegetation cover map from a map, classes or canopy
-//! percentages ([`cem::cover`]); the DEM resampled onto the tile's sample grid
-//! ([`cem::elevation`]); a world-anchored canopy proxy scaled by the cover and
+//! percentages ([`cem::landcover`]); the DEM resampled onto the tile's sample grid
+//! ([`raster::resample`]); a world-anchored canopy proxy scaled by the cover and
 //! added to the ground ([`canopy`], [`cem::combine`]); a surface-type channel
 //! ([`cem::surface`]); and conservative ray-casting acceleration data
 //! ([`cem::accel`]). [`grid`] holds the World Wind tile math, [`source`] the

@@ -47,7 +47,7 @@ pub struct FrameTime {
     /// The cost model's prediction for what the frame drew (`None`
     /// without the `model_ms` column).
     pub model_ms: Option<f64>,
-    /// The work the frame measurably did ([`WORK`]; `None` without those
+    /// The work the frame measurably did (`WORK`; `None` without those
     /// columns).
     pub work: Option<[f64; WORK]>,
 }

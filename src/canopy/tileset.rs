@@ -8,7 +8,7 @@
 //! Tiles are square, `tile_px` (a power of two) texels of `cell_m` metres;
 //! each has a box-filtered mip chain down to one texel, for sampling at
 //! coarse spacings. On disk the tiles are an atlas, `colours²` tiles across,
-//! in the order of [`TileSet::index`].
+//! in the order of [`Layout::index`].
 //!
 //! Invariant: every texel is a finite height ≥ 0.
 

@@ -1,6 +1,6 @@
 //! A tileable, non-repeating canopy proxy from a canopy height model: a
 //! complete set of Wang tiles (dissertation 6.3: "for large areas, we propose
-//! a tileable, non-repeating solution such as Wang tiles [CSHD03]"). The set
+//! a tileable, non-repeating solution such as Wang tiles \[CSHD03\]"). The set
 //! with one colour is a single periodic tile.
 //!
 //! Each tile blends four fields of the CHM ([`super::quilt`] chooses where

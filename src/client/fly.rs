@@ -93,7 +93,7 @@ pub struct FlyOptions {
     /// Where rays are cast ([`Renderer::with_ray_pass`]).
     pub ray_pass: RayPass,
     /// Each frame is rendered again for this long and its median time
-    /// reported and fed to the cost model (0: once): see [`held`].
+    /// reported and fed to the cost model (0: once): see `held`.
     pub hold_ms: f64,
 }
 

@@ -4,7 +4,7 @@
 //! The pure parts — the ellipsoid ([`globe`]), tile frames ([`frame`]), the
 //! camera ([`camera`]), prepared tiles and their hulls ([`tile`],
 //! [`hull`]), the ray-casting model shared by both ray casters
-//! ([`raycast`]), the exact CPU reference ([`reference`]) and the LOD
+//! ([`raycast`]), the exact CPU reference ([`reference`](mod@reference)) and the LOD
 //! selection under a frame budget ([`lod`]) and the trees drawn as splats
 //! near the camera ([`trees`]) — know nothing of wgpu; the GPU
 //! path lives in `render` (feature `client`).

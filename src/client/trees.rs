@@ -310,7 +310,7 @@ pub struct Drawn {
     /// Groups with a splat.
     pub groups: usize,
     /// Pixels the splats' quads cover, overlaps counted: the fragments
-    /// the rasteriser shades ([`Crown::fill_px`]).
+    /// the rasteriser shades (`Crown::fill_px`).
     pub fill_px: f64,
 }
 

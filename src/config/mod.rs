@@ -1,6 +1,6 @@
 //! Configuration, in two stages: serde structs with one `Default` each (this
 //! file; `config/default.toml` shows every option at its default), then
-//! validation into a checked [`Region`] ([`build`]).
+//! validation into a checked [`crate::region::Region`] (`build`).
 //!
 //! With no file, or a file that names no DEM, the region is the embedded demo.
 //! Relative paths are relative to the configuration file.

@@ -3,7 +3,7 @@
 //! float heights, north up.
 //!
 //! Pixel centres go to the terrain's UTM frame through the projection exactly
-//! every [`MESH_PX`] pixels (global indices, so blocks agree) and bilinearly
+//! every `MESH_PX` pixels (global indices, so blocks agree) and bilinearly
 //! between: over 16″ the projection is linear to far below a millimetre.
 //!
 //! It covers [`super::BBOX`] plus 18″ (≈ 550 m east–west, 390 m north–south)

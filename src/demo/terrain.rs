@@ -7,7 +7,7 @@
 //! shapes) less an origin near the region's centre. The origin is a multiple
 //! of the node spacing, like the sheet's corner, so the sheet's pixel corners
 //! fall on quarter nodes and the map interpolates with four fixed weight sets
-//! ([`Patch::sub_grid`]). The landforms themselves are in [`super::shape`].
+//! ([`Patch::sub_grid`]). The landforms themselves are in `super::shape`.
 //!
 //! The terrain is defined on a world-anchored lattice of nodes [`NODE_M`]
 //! apart: each node holds the shape, gullies cut down the shape's slope (the

@@ -34,7 +34,7 @@ use std::time::Duration;
 use thiserror::Error;
 
 /// Why a request failed, sorted by who is at fault (mapped to HTTP statuses in
-/// [`respond`]).
+/// `respond`).
 #[derive(Clone, Debug, Error)]
 pub enum ServeError {
     /// The request is wrong (400).

@@ -4,7 +4,7 @@
 //! The cache is weighted by bytes and evicts least-recently-used blocks beyond
 //! its budget. Concurrent requests for one missing block compute it once (the
 //! cache's own single-flight insertion), waiting for each other a bounded
-//! time ([`LOAD_WAIT`]). A cache may give its blocks a time
+//! time (`LOAD_WAIT`). A cache may give its blocks a time
 //! to live, for regions fed by upstream servers: an expired block is read
 //! again from its source.
 
