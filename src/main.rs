@@ -658,7 +658,7 @@ fn run(command: Command) -> Result<()> {
         Command::View { tiles, path, frames, out, render } => {
             if let Some(dir) = &out {
                 std::fs::create_dir_all(dir).with_context(|| format!("{}", dir.display()))?;
-                outputs::check(&[], &[&dir.join("stats.csv")])?;
+                outputs::check(&[], &[&dir.join(sylva::client::fly::STATS_FILE)])?;
             }
             let source = tiles.open()?;
             let path = path.as_deref().map(sylva::client::path::CameraPath::load).transpose()?;

@@ -218,7 +218,7 @@ pub enum FlyError {
 }
 
 /// The flight's statistics in its output directory.
-const STATS_FILE: &str = "stats.csv";
+pub const STATS_FILE: &str = "stats.csv";
 /// The calibrated cost model of a budget flight, in its output directory.
 const MODEL_FILE: &str = "cost_model.json";
 
@@ -251,8 +251,7 @@ pub fn fly(
         records.push(framed.record);
     }
     if let Some(dir) = &options.out_dir {
-        let csv = dir.join(STATS_FILE);
-        std::fs::write(&csv, to_csv(&records)).map_err(|e| io(&csv, e))?;
+        write_stats(dir, &records)?;
         if let Some(model) = flight.model() {
             // The calibrated model, for `--cost-model` on the next flight.
             let file = dir.join(MODEL_FILE);
@@ -261,6 +260,12 @@ pub fn fly(
         }
     }
     Ok(records)
+}
+
+/// Writes `records` as [`STATS_FILE`] in `dir`.
+pub fn write_stats(dir: &std::path::Path, records: &[FrameRecord]) -> Result<(), FlyError> {
+    let csv = dir.join(STATS_FILE);
+    std::fs::write(&csv, to_csv(records)).map_err(|e| io(&csv, e))
 }
 
 /// Writes a frame's colour as PNG.

@@ -262,7 +262,10 @@ impl TileStore {
         for (id, result) in done {
             b.pending.remove(&id);
             match result {
-                Ok(tile) => kept.push((id, tile)),
+                Ok(tile) => {
+                    b.failed.remove(&id);
+                    kept.push((id, tile));
+                }
                 Err(_) => {
                     b.failed.insert(id, Instant::now());
                     b.failures += 1;
@@ -286,7 +289,7 @@ impl TileStore {
                 up.take_while(|a| !self.tiles.contains_key(a) && !self.empty.contains(a)).collect::<Vec<_>>()
             })
             .collect();
-        wanted.sort_unstable_by_key(|id| (id.level, id.row, id.col));
+        wanted.sort_unstable();
         wanted.dedup();
         let Some(b) = &mut self.background else { return };
         for id in wanted {
@@ -348,7 +351,7 @@ fn stand_in(here: &[TileId], stand_ins: &[TileId]) -> Vec<TileId> {
     let all: HashSet<TileId> = here.iter().chain(stand_ins).copied().collect();
     let covered = |id: &TileId| std::iter::successors(id.parent(), TileId::parent).any(|a| all.contains(&a));
     let mut drawn: Vec<TileId> = all.iter().filter(|id| !covered(id)).copied().collect();
-    drawn.sort_unstable_by_key(|id| (id.level, id.row, id.col));
+    drawn.sort_unstable();
     drawn
 }
 
@@ -418,8 +421,7 @@ mod tests {
         let [a, _, c, d] = fine.parent().unwrap().children();
         let failing = fine.parent().unwrap().children()[1];
         let source: Arc<dyn TileSource> = Arc::new(Flaky { inner: RegionSource::new(region.clone()), failing });
-        // A budget below one tile: only the pinned coarse tiles survive.
-        let mut store = TileStore::new(4, 1, 2).unwrap();
+        let mut store = TileStore::new(4, usize::MAX, 2).unwrap();
         store.load_in_background(source.clone()).unwrap();
         let anchors = crate::client::envelope::covering(&source.grid(), &source.bounds());
         let cut = [a, failing, c, d];
@@ -434,7 +436,8 @@ mod tests {
         let drawn = settle(&mut store, source.as_ref(), &cut);
         assert_eq!(drawn, vec![fine.parent().unwrap()]);
         assert!(store.failures() >= 1);
-        // Evicted to the budget, but for the coarse tiles.
+        // A budget below one tile: evicted to it, but for the coarse tiles.
+        store.budget_bytes = 1;
         store.get_cut(source.as_ref(), &anchors[..1]).unwrap();
         assert_eq!(store.tiles.len(), anchors.len());
     }

@@ -113,9 +113,7 @@ pub fn run(source: Arc<dyn TileSource>, options: ViewOptions) -> Result<Vec<Fram
         return Err(error);
     }
     if let Some(dir) = &app.options.out_dir {
-        let file = dir.join("stats.csv");
-        std::fs::write(&file, fly::to_csv(&app.records))
-            .map_err(|e| FlyError::Io { path: file.display().to_string(), source: e })?;
+        fly::write_stats(dir, &app.records)?;
     }
     Ok(app.records)
 }
