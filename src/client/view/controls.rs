@@ -362,6 +362,16 @@ mod tests {
         assert!((under + 30.0).abs() < 1e-6, "{under}");
         // Beside the tile: no surface.
         assert_eq!(clearance_m(Geodetic::new(lon + 5.0, lat, 5000.0), &tiles), None);
+        // Over a fine tile and a coarse one (a stand-in), the higher surface.
+        let coarse = crate::client::source::TileSource::fetch(&source, region.tiles.tile_containing(lon, lat, 8), 4)
+            .unwrap()
+            .unwrap();
+        let coarse = Arc::new(TileData::prepare(&region.tiles, coarse).unwrap());
+        let eye = Geodetic::new(lon, lat, 5000.0);
+        let alone = clearance_m(eye, std::slice::from_ref(&coarse)).unwrap();
+        assert_ne!(alone, high, "the levels' surfaces differ here");
+        let both = clearance_m(eye, &[tiles[0].clone(), coarse]).unwrap();
+        assert_eq!(both, alone.min(high));
     }
 
     #[test]

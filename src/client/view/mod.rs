@@ -23,6 +23,7 @@ use super::raycast::Traversal;
 use super::render::gpu::{Gpu, GpuError};
 use super::render::{Readback, Renderer};
 use super::source::TileSource;
+use super::tile::TileData;
 use controls::{Controls, Pose};
 use glam::DVec3;
 use input::Input;
@@ -134,6 +135,8 @@ struct Viewer {
     renderer: Renderer,
     presenter: Presenter,
     flight: fly::Flight,
+    /// The tiles of the last frame drawn.
+    drawn: Vec<Arc<TileData>>,
     controls: Controls,
     input: Input,
     sun_on: bool,
@@ -235,7 +238,7 @@ impl Viewer {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_with_display_handle_from_env(display));
         let surface = instance.create_surface(window.clone()).map_err(|e| ViewError::Window(e.to_string()))?;
         let gpu = Gpu::open_on(&instance, Some(&surface))?;
-        let presenter = Presenter::new(&gpu, window.clone(), surface)?;
+        let presenter = Presenter::new(&gpu, instance.clone(), window.clone(), surface)?;
         let r = &options.render;
         let renderer = Renderer::new(gpu, source.grid().samples(), r.halo as u32, options.gpu_budget_bytes, r.geomorph)
             .with_hull_factor(r.hull_factor)
@@ -250,6 +253,7 @@ impl Viewer {
             renderer,
             presenter,
             flight,
+            drawn: Vec::new(),
             controls,
             input: Input::default(),
             sun_on: options.sun_ecef.is_some(),
@@ -311,15 +315,20 @@ impl Viewer {
         }
         self.frames += 1;
         self.show_title(&framed.record);
+        self.drawn = framed.tiles;
         Ok(framed.record)
     }
 
     /// Moves the eye by the keys and drag of `dt_s` seconds, then keeps it
-    /// above the surface of the finest tile loaded under it.
+    /// above the surface under it: that of the finest tile loaded there and
+    /// that of the tile the last frame drew there (a coarser stand-in while
+    /// finer tiles load, or a coarser level chosen), whichever is higher.
     fn move_eye(&mut self, source: &dyn TileSource, dt_s: f64) {
         self.controls.step(dt_s);
         let eye = self.controls.pose.eye;
-        let under: Vec<_> = self.flight.tile_at(&source.grid(), eye.lon_deg, eye.lat_deg).into_iter().collect();
+        let finest = self.flight.tile_at(&source.grid(), eye.lon_deg, eye.lat_deg);
+        let drawn = self.drawn.iter().filter(|t| t.frame.sector.contains(eye.lon_deg, eye.lat_deg)).cloned();
+        let under: Vec<_> = finest.into_iter().chain(drawn).collect();
         self.controls.ground(controls::clearance_m(eye, &under));
     }
 

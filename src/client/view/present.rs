@@ -2,6 +2,9 @@
 //! GPU, and a pass that copies the renderer's colour target onto it
 //! (`shaders/present.wgsl`). The colour target holds sRGB-encoded bytes,
 //! copied as they are to a plain surface format, decoded for an sRGB one.
+//! A surface the window system takes away (`Lost`: a display mode change,
+//! a compositor restart) is made again from the window, and the view goes
+//! on.
 
 use super::super::render::gpu::Gpu;
 use super::super::render::shaders;
@@ -14,9 +17,9 @@ pub enum PresentError {
     /// The surface has no format the GPU can render to.
     #[error("the window's surface offers no format this GPU can render to")]
     NoFormat,
-    /// The surface is gone and must be made again.
-    #[error("the window's surface was lost")]
-    Lost,
+    /// The surface was lost and could not be made again.
+    #[error("the window's surface was lost and could not be made again: {0}")]
+    Lost(String),
     /// The surface refused the frame.
     #[error("the window's surface refused the frame: {0}")]
     Refused(&'static str),
@@ -24,6 +27,8 @@ pub enum PresentError {
 
 /// A window's surface and the pass that fills it.
 pub struct Presenter {
+    /// Makes the surface again when it is lost.
+    instance: wgpu::Instance,
     window: Arc<Window>,
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
@@ -32,8 +37,14 @@ pub struct Presenter {
 }
 
 impl Presenter {
-    /// Configures `window`'s `surface` for `gpu` at the window's size.
-    pub fn new(gpu: &Gpu, window: Arc<Window>, surface: wgpu::Surface<'static>) -> Result<Presenter, PresentError> {
+    /// Configures `window`'s `surface` (made by `instance`, as `gpu`) for
+    /// `gpu` at the window's size.
+    pub fn new(
+        gpu: &Gpu,
+        instance: wgpu::Instance,
+        window: Arc<Window>,
+        surface: wgpu::Surface<'static>,
+    ) -> Result<Presenter, PresentError> {
         let size = fitted(gpu, &window);
         let caps = surface.get_capabilities(&gpu.adapter);
         let format = pick_format(&caps.formats).ok_or(PresentError::NoFormat)?;
@@ -52,7 +63,7 @@ impl Presenter {
         };
         surface.configure(&gpu.device, &config);
         let (pipeline, layout) = pipeline(&gpu.device, format);
-        Ok(Presenter { window, surface, config, pipeline, layout })
+        Ok(Presenter { instance, window, surface, config, pipeline, layout })
     }
 
     /// The surface's size, pixels: the frames' size.
@@ -64,6 +75,20 @@ impl Presenter {
     pub fn fit(&mut self, gpu: &Gpu) {
         (self.config.width, self.config.height) = fitted(gpu, &self.window);
         self.surface.configure(&gpu.device, &self.config);
+    }
+
+    /// A new surface for the window, configured as the lost one was (its
+    /// format, if the new one still offers it).
+    fn remake(&mut self, gpu: &Gpu) -> Result<(), PresentError> {
+        let lost = |e: &dyn std::fmt::Display| PresentError::Lost(e.to_string());
+        let surface = self.instance.create_surface(self.window.clone()).map_err(|e| lost(&e))?;
+        let formats = surface.get_capabilities(&gpu.adapter).formats;
+        if !formats.contains(&self.config.format) {
+            return Err(lost(&"the new surface does not offer the old one's format"));
+        }
+        self.surface = surface;
+        self.fit(gpu);
+        Ok(())
     }
 
     /// Copies `colour` (the size of the surface) to the window.
@@ -78,7 +103,11 @@ impl Presenter {
                 return Ok(());
             }
             wgpu::CurrentSurfaceTexture::Timeout | wgpu::CurrentSurfaceTexture::Occluded => return Ok(()),
-            wgpu::CurrentSurfaceTexture::Lost => return Err(PresentError::Lost),
+            wgpu::CurrentSurfaceTexture::Lost => {
+                // Made again now; this frame is not shown.
+                self.remake(gpu)?;
+                return Ok(());
+            }
             wgpu::CurrentSurfaceTexture::Validation => return Err(PresentError::Refused("validation error")),
         };
         let target = frame.texture.create_view(&wgpu::TextureViewDescriptor::default());
