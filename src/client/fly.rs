@@ -520,9 +520,7 @@ fn frame(
     let predicted_ms = lod.as_deref().zip(selected).map(|(l, s)| l.expected_ms(s));
     let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
     let drawn: Vec<Choice> = draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
-    let ids: Vec<_> = drawn.iter().map(|c| c.id).collect();
-    let view: Vec<u32> = out.fetches.iter().map(|f| f[0]).collect();
-    let steps = FrameSteps::measure(&view, &out.draws, &ids);
+    let steps = FrameSteps::measure(&out.fetches, &out.draws, &drawn);
     let model_ms = lod.map(|lod| {
         lod.observe(&camera, &drawn, &trees.drawn, (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), &steps)).model_ms
     });
@@ -543,7 +541,7 @@ fn frame(
         tiles_plain: out.stats.tiles_plain,
         error_px,
         ray_pixels: rays.len(),
-        view_fetches: (steps.mean, rays.iter().map(|f| f[0]).max().unwrap_or(0)),
+        view_fetches: (steps.view.mean.unwrap_or(0.0), rays.iter().map(|f| f[0]).max().unwrap_or(0)),
         shadow_fetches_mean: rays.iter().map(|f| f[1] as f64).sum::<f64>() / n,
         bytes_fetched: source.bytes_fetched() - bytes_before,
         gpu_bytes: out.stats.resident_bytes,

@@ -104,7 +104,9 @@ pub struct CostFeatures {
     pub tiles: f64,
     /// View-ray casting work: millions of pixel·steps.
     pub raycast_mpx_steps: f64,
-    /// Shadow-ray work: millions of pixel·shadow steps.
+    /// Shadow-ray work: millions of pixel·shadow steps, each step weighed
+    /// by the fetches it takes (fewer where rays stop early, more under a
+    /// fading canopy).
     pub shadow_mpx_steps: f64,
     /// Point splats drawn, thousands.
     pub splats_k: f64,

@@ -7,7 +7,9 @@
 //! (a draw call, its meshes), view rays on the pixels it covers (each at
 //! the steps per pixel the renderer measured lately on the tile,
 //! [`super::steps`]: rays graze coarse far tiles and plunge into near ones)
-//! and shadow rays, pixels × shadow steps. The model's constants come from
+//! and shadow rays, pixels × shadow steps × the fetches a step took lately
+//! on the tile (a shadow ray stops above the tile's summit; under a fading
+//! canopy a step reads the ground too). The model's constants come from
 //! measured frame times ([`crate::lod::calibrate`]).
 //!
 //! **Shadow quality** is continuous: 0 to [`MAX_SHADOW_STEPS`] samples per
@@ -15,8 +17,9 @@
 //! so a variable is a *shading region* — a candidate at one level `q`, or
 //! a candidate leaf above it — and regions partition the view whatever the
 //! cut: a drawn tile at or below `q` takes its region's steps, a drawn tile
-//! above `q` the pixel-weighted mean of the regions it spans (which costs
-//! exactly what the regions were charged, cost being linear in steps).
+//! above `q` the mean of the regions it spans weighted by what a step
+//! costs on each (which costs what the regions were charged, cost being
+//! linear in steps, where its shadow rays fetch per pixel as theirs do).
 //! `q` is the deepest level with at most [`MAX_REGIONS`] regions.
 //! A region's full-resolution benefit is [`SHADOW_WORTH`] of the benefit of
 //! its head's geometry: shadows sharpen what the terrain shows, so they
@@ -185,7 +188,7 @@ pub fn features(c: &Candidate, steps: u32) -> CostFeatures {
         tiles: 1.0,
         raycast_mpx_steps,
         faded_mpx_steps: if c.faded { raycast_mpx_steps } else { 0.0 },
-        shadow_mpx_steps: c.ray_px * f64::from(steps) / 1e6,
+        shadow_mpx_steps: c.ray_px * f64::from(steps) * c.shadow_fetches / 1e6,
         ..CostFeatures::default()
     }
 }
@@ -361,7 +364,7 @@ impl Regions {
                 Continuous {
                     weight: if casts { SHADOW_WORTH * c.benefit } else { 0.0 },
                     capacity: f64::from(MAX_SHADOW_STEPS),
-                    cost_per_unit_ms: ms_per_px_step * c.ray_px,
+                    cost_per_unit_ms: ms_per_px_step * c.ray_px * c.shadow_fetches,
                 }
             })
             .collect()
@@ -373,13 +376,15 @@ impl Regions {
         if let Some(r) = self.of[i as usize] {
             return at(r).floor().clamp(0.0, f64::from(MAX_SHADOW_STEPS)) as u32;
         }
-        // Above the region level: the pixel-weighted mean of the regions below.
+        // Above the region level: the mean of the regions below, weighted
+        // by what a step costs on each.
         let (mut sum, mut px) = (0.0, 0.0);
         let mut stack = vec![i];
         while let Some(v) = stack.pop() {
             match self.of[v as usize] {
                 Some(r) => {
-                    let w = candidates[v as usize].ray_px;
+                    let c = &candidates[v as usize];
+                    let w = c.ray_px * c.shadow_fetches;
                     sum += w * at(r);
                     px += w;
                 }
@@ -419,7 +424,7 @@ mod tests {
     use crate::client::camera::Camera;
     use crate::client::globe::Geodetic;
     use crate::client::lod::candidates::{Scope, candidates};
-    use crate::client::lod::steps::{VIEW_STEPS, ViewSteps};
+    use crate::client::lod::steps::{RaySteps, VIEW_STEPS};
     use crate::grid::{BBox, TileGrid};
     use glam::DVec3;
 
@@ -436,7 +441,7 @@ mod tests {
             range: &|_| Some((500.0, 3500.0)),
             max_level: 16,
             limit: 100_000,
-            steps: &ViewSteps::new(VIEW_STEPS),
+            steps: &RaySteps::new(VIEW_STEPS),
         };
         candidates(&scope).tiles
     }

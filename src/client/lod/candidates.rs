@@ -41,7 +41,7 @@ use super::super::raycast;
 use super::super::store::Known;
 use super::super::trees::{TreeSettings, canopy_fade};
 use super::coverage;
-use super::steps::ViewSteps;
+use super::steps::RaySteps;
 use crate::grid::{BBox, Sector, TileGrid, TileId};
 use crate::lod::model::{Smooth, tile_benefit_seen};
 use crate::lod::predict::Cone;
@@ -60,8 +60,11 @@ pub struct Candidate {
     pub seen_px: f64,
     /// Pixels it casts rays on: the most any camera sees, 0 if drawn plain.
     pub ray_px: f64,
-    /// View-ray steps per ray-cast pixel it is priced at ([`ViewSteps::of`]).
+    /// View-ray steps per ray-cast pixel it is priced at ([`RaySteps::view`]).
     pub view_steps: f64,
+    /// Shadow-ray fetches per ray-cast pixel and shadow step it is priced
+    /// at ([`RaySteps::shadow`]).
+    pub shadow_fetches: f64,
     /// Whether a camera casts its rays through a fading canopy (the far
     /// fade or the trees' blend reaches it), which the renderer draws with
     /// a costlier pipeline than a whole canopy.
@@ -92,8 +95,8 @@ pub struct Scope<'a> {
     pub max_level: u32,
     /// Candidates at most (a guard; the walk stops refining there).
     pub limit: usize,
-    /// The view-ray steps measured per tile.
-    pub steps: &'a ViewSteps,
+    /// The rays' fetches measured per tile.
+    pub steps: &'a RaySteps,
 }
 
 /// The candidates, parents before children.
@@ -238,7 +241,8 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
             benefit: benefit / k,
             seen_px: seen / k,
             ray_px: ray,
-            view_steps: scope.steps.of(frame.id),
+            view_steps: scope.steps.view(frame.id),
+            shadow_fetches: scope.steps.shadow(frame.id),
             faded,
         },
         refinable,
@@ -318,7 +322,7 @@ mod tests {
             range,
             max_level,
             limit: 100_000,
-            steps: &ViewSteps::new(20.0),
+            steps: &RaySteps::new(20.0),
         };
         candidates(&scope)
     }
@@ -443,6 +447,7 @@ mod tests {
             seen_px,
             ray_px,
             view_steps: 20.0,
+            shadow_fetches: 1.0,
             faded: false,
         };
         // A chain around the camera: each tile's plane lies just under the

@@ -5,7 +5,7 @@
 //! (grown on the tiles last drawn) while the last finished cut is drawn;
 //! after each frame its features and measured time go to the calibrator
 //! (001 §4.2), so the next selection predicts with constants fitted to this
-//! GPU, and its view-ray steps per tile to [`super::steps`], so the next
+//! GPU, and its rays' fetches per tile to [`super::steps`], so the next
 //! selection prices each tile's rays as they were last measured.
 //! With geomorphing on it also keeps the morphs of the cuts drawn
 //! ([`super::morphs`]).
@@ -16,7 +16,7 @@ use super::super::trees;
 use super::ahead::{self, Lookahead, WINDOW};
 use super::budget::{self, Budget, Choice, TreeItem};
 use super::morphs::{Morphing, Morphs, Pairs};
-use super::steps::{FrameSteps, VIEW_STEPS, ViewSteps};
+use super::steps::{FrameSteps, RaySteps, VIEW_STEPS};
 use super::worker::{Request, Worker};
 use super::{Selected, Selector};
 use crate::grid::{TileGrid, TileId};
@@ -47,7 +47,7 @@ pub struct BudgetFlight {
     budget: Budget,
     /// View-ray steps per tile, as last measured (shared with the request
     /// in flight; copied on write).
-    steps: Arc<ViewSteps>,
+    steps: Arc<RaySteps>,
     look: Lookahead,
     predictor: PathPredictor,
     worker: Worker,
@@ -93,7 +93,7 @@ impl BudgetFlight {
             selector,
             calibrator: CostCalibrator::new(prior, calibration()),
             budget,
-            steps: Arc::new(ViewSteps::new(VIEW_STEPS)),
+            steps: Arc::new(RaySteps::new(VIEW_STEPS)),
             look,
             predictor: PathPredictor::new(WINDOW),
             current: None,
@@ -126,7 +126,7 @@ impl BudgetFlight {
     }
 
     /// The view-ray steps the next selection prices tiles with.
-    pub fn steps(&self) -> &ViewSteps {
+    pub fn steps(&self) -> &RaySteps {
         &self.steps
     }
 
@@ -302,6 +302,7 @@ fn coarsens(current: &Selected, next: &Selected) -> bool {
 mod tests {
     use super::*;
     use crate::client::globe::Geodetic;
+    use crate::client::lod::steps::Means;
     use crate::client::store::Knowledge;
     use crate::grid::{BBox, TileGrid};
     use crate::lod::predict::MotionLimits;
@@ -355,7 +356,7 @@ mod tests {
 
     /// A frame whose every pixel took `steps` view-ray steps.
     fn even(steps: f64) -> FrameSteps {
-        FrameSteps { mean: steps, tiles: Vec::new() }
+        FrameSteps { view: Means { mean: Some(steps), tiles: Vec::new() }, shadow: Means::default() }
     }
 
     #[test]
@@ -363,7 +364,7 @@ mod tests {
         let mut f = flight();
         let cam = camera(10.05);
         let cut = f.frame(0.0, &cam).cut;
-        let at_20 = ViewSteps::new(20.0);
+        let at_20 = RaySteps::new(20.0);
         let before = f.model().predict_ms(&f.selector.features(&cam, &cut.tiles, &at_20));
         // The first frame builds pipelines and teaches nothing.
         f.observe(&cam, &cut.tiles, &trees::Drawn::default(), (1000.0, &even(20.0)));
@@ -376,23 +377,31 @@ mod tests {
     }
 
     #[test]
-    fn selections_price_each_tiles_view_rays_with_the_steps_last_measured_on_it() {
+    fn selections_price_each_tiles_rays_with_the_fetches_last_measured_on_it() {
         let mut f = flight();
         let cam = camera(10.05);
         let mut tiles = f.frame(0.0, &cam).cut.tiles;
         assert!(tiles.len() > 1);
-        assert_eq!(f.steps().of(tiles[0].id), VIEW_STEPS, "before any frame");
+        assert_eq!(f.steps().view(tiles[0].id), VIEW_STEPS, "before any frame");
         // Ray pixels: priced at 10⁶ steps, a tile costs its pixels in Mpx·steps.
-        let px = |tiles: &[Choice]| f.selector.features(&cam, tiles, &ViewSteps::new(1e6)).raycast_mpx_steps;
+        let px = |tiles: &[Choice]| f.selector.features(&cam, tiles, &RaySteps::new(1e6)).raycast_mpx_steps;
         tiles.sort_by(|a, b| px(&[*b]).total_cmp(&px(&[*a])));
+        tiles.iter_mut().for_each(|c| c.shadow_steps = 10);
         let (first, rest) = (px(&tiles[..1]), px(&tiles[1..]));
         assert!(first > 0.0 && rest > 0.0);
-        // The largest tile's rays took 35 steps a pixel, the frame's 12.
-        let measured = FrameSteps { mean: 12.0, tiles: vec![(tiles[0].id, 35.0)] };
+        // The largest tile's view rays took 35 steps a pixel, the frame's
+        // 12; its shadow rays 1.6 fetches a step, the frame's 0.5.
+        let measured = FrameSteps {
+            view: Means { mean: Some(12.0), tiles: vec![(tiles[0].id, 35.0)] },
+            shadow: Means { mean: Some(0.5), tiles: vec![(tiles[0].id, 1.6)] },
+        };
         let features = f.observe(&cam, &tiles, &trees::Drawn::default(), (50.0, &measured)).features;
         let expected = (first * 35.0 + rest * 12.0) / 1e6;
         assert!((features.raycast_mpx_steps / expected - 1.0).abs() < 1e-9, "{features:?} against {expected}");
-        assert_eq!((f.steps().of(tiles[0].id), f.steps().of(tiles[1].id)), (35.0, 12.0));
+        let expected = (first * 1.6 + rest * 0.5) * 10.0 / 1e6;
+        assert!((features.shadow_mpx_steps / expected - 1.0).abs() < 1e-9, "{features:?} against {expected}");
+        assert_eq!((f.steps().view(tiles[0].id), f.steps().view(tiles[1].id)), (35.0, 12.0));
+        assert_eq!((f.steps().shadow(tiles[0].id), f.steps().shadow(tiles[1].id)), (1.6, 0.5));
     }
 
     #[test]
@@ -404,7 +413,7 @@ mod tests {
         // Frames measured as the model prices them, so it stays.
         let draw = |f: &mut BudgetFlight, tiles: &[Choice]| {
             let ms = f.model().predict_ms(&f.selector.features(&cam, tiles, &steps));
-            f.observe(&cam, tiles, &trees::Drawn::default(), (ms, &even(steps.mean())));
+            f.observe(&cam, tiles, &trees::Drawn::default(), (ms, &even(steps.view_mean())));
         };
         // Frames drawing what their selection priced: the aim stays.
         for _ in 0..3 {

@@ -39,7 +39,7 @@ use crate::lod::predict::Cone;
 use budget::{Budget, Choice, Cut, TreeItem};
 use candidates::Scope;
 use std::time::Instant;
-use steps::ViewSteps;
+use steps::RaySteps;
 
 /// Candidates looked at, at most: far more than a frame draws (the GPU
 /// cache holds at most 256 tiles), few enough to select in milliseconds.
@@ -84,7 +84,7 @@ impl Selector {
         cone: Option<Cone>,
         trees: &[TreeItem],
         (model, budget): (&CostModel, &Budget),
-        steps: &ViewSteps,
+        steps: &RaySteps,
     ) -> Selected {
         let start = Instant::now();
         let found = self.with_scope(cameras, cone, steps, candidates::candidates);
@@ -96,7 +96,7 @@ impl Selector {
     /// What drawing `drawn` from `camera` costs with tiles' view rays at
     /// `steps`, measured as a selection measures its candidates (so
     /// calibrated constants fit predictions).
-    pub fn features(&self, camera: &Camera, drawn: &[Choice], steps: &ViewSteps) -> CostFeatures {
+    pub fn features(&self, camera: &Camera, drawn: &[Choice], steps: &RaySteps) -> CostFeatures {
         self.with_scope(std::slice::from_ref(camera), None, steps, |scope| {
             drawn
                 .iter()
@@ -109,7 +109,7 @@ impl Selector {
         &self,
         cameras: &[Camera],
         cone: Option<Cone>,
-        steps: &ViewSteps,
+        steps: &RaySteps,
         f: impl FnOnce(&Scope) -> R,
     ) -> R {
         let known = |id| self.knowledge.get(id);

@@ -6,7 +6,7 @@
 
 use super::super::camera::Camera;
 use super::budget::{Budget, TreeItem};
-use super::steps::ViewSteps;
+use super::steps::RaySteps;
 use super::{Selected, Selector};
 use crate::lod::model::CostModel;
 use crate::lod::predict::Cone;
@@ -28,7 +28,7 @@ pub struct Request {
     /// The budget.
     pub budget: Budget,
     /// The view-ray steps per tile.
-    pub steps: Arc<ViewSteps>,
+    pub steps: Arc<RaySteps>,
 }
 
 /// The selection thread and its channels.
