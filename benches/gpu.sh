@@ -42,7 +42,7 @@ rmnp=(--config config/examples/rmnp.toml --path config/paths/rmnp_valley.toml)
 fly() {
   local limit=$1 name=$2
   shift 2
-  step "$limit" "fly-$name" "$sylva" fly "$@" --no-frames --ray-pass compute --hold-ms "$hold" --out "$out/$name"
+  step "$limit" "fly-$name" "$sylva" fly "$@" --no-frames --ray-pass compute --hold-ms "$hold" --out "$out/$name" --overwrite
 }
 fly 60 rmnp-sse "${rmnp[@]}" --frames 30 --size "$size"
 budget=$(python3 -c "

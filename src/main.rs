@@ -112,6 +112,9 @@ enum Command {
         /// Output directory for frame_NNNNN.png and stats.csv.
         #[arg(long)]
         out: PathBuf,
+        /// Replace an earlier flight's outputs in --out (else refused).
+        #[arg(long)]
+        overwrite: bool,
         /// Statistics only, no PNG frames.
         #[arg(long)]
         no_frames: bool,
@@ -142,6 +145,9 @@ enum Command {
         /// --frames is given) and for frames saved with P (default: here).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Replace an earlier run's stats.csv in --out (else refused).
+        #[arg(long)]
+        overwrite: bool,
         #[command(flatten)]
         render: RenderArgs,
     },
@@ -221,7 +227,7 @@ struct RenderArgs {
     #[arg(long, default_value = "exact")]
     traversal: String,
     /// Shadow samples per hit (0: none).
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(0..=256))]
     shadow_steps: u32,
     /// Tile selection: `sse` (refine to --max-error-px) or `budget`
     /// (the most benefit whose predicted frame time fits --budget-ms).
@@ -232,7 +238,7 @@ struct RenderArgs {
     budget_ms: f64,
     /// Frames between selections of `--lod budget` (the selection
     /// thread's period).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     select_every: u32,
     /// Geomorph between tile levels over the selection period (`--lod
     /// budget`; a morphing tile is prepared and uploaded once, with the
@@ -251,7 +257,7 @@ struct RenderArgs {
     #[arg(long, default_value_t = 13)]
     max_level: u32,
     /// GPU tile cache budget, MiB.
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = 512, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     gpu_budget_mib: usize,
     /// Draw the canopy by ray casting alone, without trees as point
     /// splats near the camera.
@@ -275,8 +281,8 @@ impl RenderArgs {
     /// The flight options these arguments set (the rest default).
     fn options(&self) -> Result<sylva::client::fly::FlyOptions> {
         let mode = match self.lod.as_str() {
-            "sse" if self.geomorph || self.select_every != 1 => {
-                bail!("--geomorph and --select-every apply to --lod budget only, not to --lod sse")
+            "sse" if self.geomorph || self.select_every != 1 || self.cost_model.is_some() => {
+                bail!("--geomorph, --select-every and --cost-model apply to --lod budget only, not to --lod sse")
             }
             "sse" => sylva::client::fly::LodMode::Sse,
             "budget" if self.budget_ms.is_finite() && self.budget_ms > 0.0 => sylva::client::fly::LodMode::Budget {
@@ -639,10 +645,11 @@ fn run(command: Command) -> Result<()> {
             Ok(())
         }
         #[cfg(feature = "client")]
-        Command::Fly { tiles, path, frames, out, no_frames, hold_ms, render } => {
+        Command::Fly { tiles, path, frames, out, overwrite, no_frames, hold_ms, render } => {
             let options = sylva::client::fly::FlyOptions {
                 frames,
                 out_dir: Some(out),
+                overwrite,
                 write_frames: !no_frames,
                 hold_ms,
                 ..render.options()?
@@ -655,10 +662,9 @@ fn run(command: Command) -> Result<()> {
             Ok(())
         }
         #[cfg(feature = "window")]
-        Command::View { tiles, path, frames, out, render } => {
+        Command::View { tiles, path, frames, out, overwrite, render } => {
             if let Some(dir) = &out {
-                std::fs::create_dir_all(dir).with_context(|| format!("{}", dir.display()))?;
-                outputs::check(&[], &[&dir.join(sylva::client::fly::STATS_FILE)])?;
+                sylva::client::fly::prepare_out_dir(dir, overwrite)?;
             }
             let source = tiles.open()?;
             let path = path.as_deref().map(sylva::client::path::CameraPath::load).transpose()?;
@@ -751,7 +757,7 @@ fn parse_size(text: &str) -> Result<(u32, u32)> {
     let parsed = text.split_once(['x', 'X']).and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)));
     match parsed {
         Some((w, h)) if (1..=16384).contains(&w) && (1..=16384).contains(&h) => Ok((w, h)),
-        _ => bail!("bad size {text:?}; expected WxH, e.g. 640x480"),
+        _ => bail!("bad size {text:?}; expected WxH, each 1 to 16384, e.g. 640x480"),
     }
 }
 

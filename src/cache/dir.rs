@@ -28,6 +28,24 @@ impl DirStore {
         DirStore { root: root.into(), counter: AtomicU64::new(0) }
     }
 
+    /// A store rooted at `root`, made if missing and checked writable (a
+    /// probe file written and removed), so that a server or seeder with a
+    /// cache it cannot use says so when it starts, not on every tile.
+    pub fn open(root: impl Into<PathBuf>) -> Result<DirStore, CacheError> {
+        let store = DirStore::new(root);
+        let root = store.root();
+        if root.exists() && !root.is_dir() {
+            return Err(CacheError::io(
+                root,
+                io::Error::other("the tile cache must be a directory, and this is a file"),
+            ));
+        }
+        fs::create_dir_all(root).map_err(|e| CacheError::io(root, e))?;
+        let probe = store.temporary(&root.join("probe"));
+        fs::write(&probe, b"").and_then(|()| fs::remove_file(&probe)).map_err(|e| CacheError::io(root, e))?;
+        Ok(store)
+    }
+
     /// The directory.
     pub fn root(&self) -> &Path {
         &self.root

@@ -129,7 +129,7 @@ pub enum Backend {
 /// error at start-up, not at the first tile).
 pub fn open(backend: &Backend) -> Result<Arc<dyn TileStore>, CacheError> {
     match backend {
-        Backend::Directory(dir) => Ok(Arc::new(DirStore::new(dir))),
+        Backend::Directory(dir) => Ok(Arc::new(DirStore::open(dir)?)),
         #[cfg(feature = "server")]
         Backend::Redis { url, prefix } => Ok(Arc::new(redis::RedisStore::open(url, prefix)?)),
         #[cfg(not(feature = "server"))]

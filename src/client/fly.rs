@@ -65,6 +65,8 @@ pub struct FlyOptions {
     pub size: (u32, u32),
     /// Where frames (`frame_NNNNN.png`) and `stats.csv` go, if anywhere.
     pub out_dir: Option<PathBuf>,
+    /// Replace an earlier run's outputs in `out_dir` (else refused).
+    pub overwrite: bool,
     /// Write every frame's PNG (else only the statistics).
     pub write_frames: bool,
     /// View-ray traversal.
@@ -103,6 +105,7 @@ impl Default for FlyOptions {
             frames: 60,
             size: (640, 480),
             out_dir: None,
+            overwrite: false,
             write_frames: true,
             traversal: Traversal::Exact,
             shadow_steps: 10,
@@ -207,6 +210,12 @@ pub enum FlyError {
     /// An output file cannot be written (found before the flight starts).
     #[error(transparent)]
     Output(#[from] crate::outputs::OutputError),
+    /// The output directory holds an earlier run's outputs.
+    #[error(
+        "{0}: holds an earlier flight's or view's outputs ({1} files: stats.csv, frames, cost model); \
+         give another --out, or --overwrite to replace them"
+    )]
+    Earlier(PathBuf, usize),
     /// Writing frames or statistics failed.
     #[error("{path}: {source}")]
     Io {
@@ -230,8 +239,7 @@ pub fn fly(
     options: &FlyOptions,
 ) -> Result<Vec<FrameRecord>, FlyError> {
     if let Some(dir) = &options.out_dir {
-        std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
-        crate::outputs::check(&[], &[&dir.join(STATS_FILE), &dir.join(MODEL_FILE)])?;
+        prepare_out_dir(dir, options.overwrite)?;
     }
     let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
     let motion = Motion { frame_s, limits: path.motion_limits(MOTION_STEPS), shadows: path.sun.is_some() };
@@ -260,6 +268,47 @@ pub fn fly(
         }
     }
     Ok(records)
+}
+
+/// Makes `dir` ready for a flight's or a view's outputs: made if missing;
+/// an earlier run's outputs there ([`STATS_FILE`], the cost model, frames)
+/// refused, or with `overwrite` removed first, so that a directory never
+/// mixes two runs.
+pub fn prepare_out_dir(dir: &std::path::Path, overwrite: bool) -> Result<(), FlyError> {
+    std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
+    crate::outputs::check(&[], &[&dir.join(STATS_FILE), &dir.join(MODEL_FILE)])?;
+    let earlier = earlier_outputs(dir).map_err(|e| io(dir, e))?;
+    if earlier.is_empty() {
+        return Ok(());
+    }
+    if !overwrite {
+        return Err(FlyError::Earlier(dir.to_path_buf(), earlier.len()));
+    }
+    earlier.iter().try_for_each(|f| std::fs::remove_file(f).map_err(|e| io(f, e)))
+}
+
+/// The files in `dir` a flight or view writes: [`STATS_FILE`], the cost
+/// model and `frame_NNNNN.png` (not the view's saved `view_NNNNN.png`,
+/// which never replace a file).
+fn earlier_outputs(dir: &std::path::Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut found = Vec::new();
+    for entry in std::fs::read_dir(dir)? {
+        let path = entry?.path();
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+        let frame = name.starts_with("frame_") && name.ends_with(".png");
+        if path.is_file() && (frame || name == STATS_FILE || name == MODEL_FILE) {
+            found.push(path);
+        }
+    }
+    Ok(found)
+}
+
+/// The mean of `values`; 0 (not the −0 an empty sum is) for none.
+fn mean_or_zero(values: impl ExactSizeIterator<Item = f64>) -> f64 {
+    match values.len() {
+        0 => 0.0,
+        n => values.sum::<f64>() / n as f64,
+    }
 }
 
 /// Writes `records` as [`STATS_FILE`] in `dir`.
@@ -529,7 +578,6 @@ fn frame(
         *levels.entry(t.id().level).or_insert(0) += 1;
     }
     let rays: Vec<&[u32; 2]> = out.fetches.iter().filter(|f| f[0] > 0).collect();
-    let n = rays.len().max(1) as f64;
     let record = FrameRecord {
         frame: shot.index,
         cpu_ms,
@@ -542,7 +590,7 @@ fn frame(
         error_px,
         ray_pixels: rays.len(),
         view_fetches: (steps.view.mean.unwrap_or(0.0), rays.iter().map(|f| f[0]).max().unwrap_or(0)),
-        shadow_fetches_mean: rays.iter().map(|f| f[1] as f64).sum::<f64>() / n,
+        shadow_fetches_mean: mean_or_zero(rays.iter().map(|f| f64::from(f[1]))),
         bytes_fetched: source.bytes_fetched() - bytes_before,
         gpu_bytes: out.stats.resident_bytes,
         cpu_bytes: store.bytes(),
@@ -556,7 +604,7 @@ fn frame(
         bound: selected.map(|s| s.cut.bound()),
         morphing: chosen.morphing,
         nodes_touched: chosen.touched,
-        shadow_steps_mean: chosen.steps.iter().map(|&s| f64::from(s)).sum::<f64>() / chosen.steps.len().max(1) as f64,
+        shadow_steps_mean: mean_or_zero(chosen.steps.iter().map(|&s| f64::from(s))),
         trees: trees.drawn.trees,
         splats: out.stats.splats as usize,
         splat_fill_px: trees.drawn.fill_px,

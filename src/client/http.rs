@@ -43,8 +43,7 @@ impl HttpSource {
             .fetch(&url)
             .map_err(|e| bad(e.to_string()))?
             .ok_or_else(|| bad("not found: is it a sylva server?".into()))?;
-        let tileset: Tileset = serde_json::from_slice(&body).map_err(|e| bad(format!("not a tileset: {e}")))?;
-        let grid = TileGrid::new(tileset.level0_delta_deg, tileset.samples).map_err(|e| bad(e.to_string()))?;
+        let (tileset, grid) = read_tileset(&body).map_err(bad)?;
         Ok(HttpSource { base, tileset, grid, link, bytes: AtomicU64::new(body.len() as u64) })
     }
 
@@ -105,6 +104,16 @@ impl TileSource for HttpSource {
     }
 }
 
+/// A server's tileset and its grid, checked: a grid Sylva can tile and
+/// bounds that are a box on the globe.
+fn read_tileset(body: &[u8]) -> Result<(Tileset, TileGrid), String> {
+    let tileset: Tileset = serde_json::from_slice(body).map_err(|e| format!("not a tileset: {e}"))?;
+    let grid = TileGrid::new(tileset.level0_delta_deg, tileset.samples).map_err(|e| e.to_string())?;
+    let [west, south, east, north] = tileset.bounds;
+    BBox { west, south, east, north }.checked().map_err(|e| format!("bounds: {e}"))?;
+    Ok((tileset, grid))
+}
+
 /// Little-endian float32 samples; the BIL nodata value becomes NaN.
 fn decode_bil32(body: &[u8], count: usize) -> Result<Vec<f32>, String> {
     if body.len() != count * 4 {
@@ -123,4 +132,29 @@ fn decode_rgba(body: &[u8], count: usize) -> Result<Vec<[u8; 4]>, String> {
         return Err(format!("image is {}×{}, expected {count} pixels", img.width(), img.height()));
     }
     Ok(img.pixels().map(|p| p.0).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tileset(bounds: &str) -> String {
+        format!(r#"{{"name": "x", "level0_delta_deg": 36.0, "samples": 513, "bounds": [{bounds}], "max_halo": 64}}"#)
+    }
+
+    #[test]
+    fn a_tileset_whose_bounds_are_no_box_is_refused() {
+        let (t, grid) = read_tileset(tileset("10.0, 46.3, 10.25, 46.45").as_bytes()).unwrap();
+        assert_eq!((t.bounds[2], grid.samples()), (10.25, 513));
+        for (bounds, needle) in [
+            ("10.25, 46.45, 10.0, 46.3", "need west < east"),
+            ("10.25, 46.3, 10.0, 46.45", "need west < east"),
+            ("10.0, 46.45, 10.25, 46.3", "need -90 ≤ south < north ≤ 90"),
+            ("10.0, 46.3, 10.25, 95.0", "need -90 ≤ south < north ≤ 90"),
+        ] {
+            let e = read_tileset(tileset(bounds).as_bytes()).unwrap_err();
+            assert!(e.starts_with("bounds: ") && e.contains(needle), "{bounds}: {e}");
+        }
+        assert!(read_tileset(b"{}").unwrap_err().contains("not a tileset"));
+    }
 }

@@ -120,11 +120,7 @@ impl CameraPath {
             return Err(format!("sun {sun:?}: need a finite azimuth_deg and elevation_deg within -90..90"));
         }
         for (k, key) in path.key.iter().enumerate() {
-            let finite =
-                [key.t, key.lon, key.lat, key.height_m, key.heading_deg, key.pitch_deg].iter().all(|v| v.is_finite());
-            if !finite || key.lat.abs() > 90.0 || key.pitch_deg.abs() > 90.0 {
-                return Err(format!("key {} is out of range: {key:?}", k + 1));
-            }
+            key.check().map_err(|e| format!("key {}: {e}", k + 1))?;
             if k > 0 && key.t <= path.key[k - 1].t {
                 return Err(format!("key {} is not later than the one before", k + 1));
             }
@@ -132,7 +128,8 @@ impl CameraPath {
         Ok(path)
     }
 
-    /// The pose at time `t` (clamped to the keys' span).
+    /// The pose at time `t` (clamped to the keys' span); longitudes
+    /// change the short way round, across the antimeridian too.
     pub fn at(&self, t: f64) -> Key {
         let keys = &self.key;
         let last = keys.len() - 1;
@@ -145,10 +142,19 @@ impl CameraPath {
         let before = keys[k.saturating_sub(1)];
         let after = keys[(k + 2).min(last)];
         let spline = |f: fn(&Key) -> f64| catmull_rom(f(&before), f(&a), f(&b), f(&after), u);
+        // Longitudes as seen from `a`'s, within half a turn of it.
+        let near = |k: &Key| a.lon + (k.lon - a.lon + 540.0).rem_euclid(360.0) - 180.0;
+        let lon = catmull_rom(near(&before), a.lon, near(&b), near(&after), u);
         let turn = (b.heading_deg - a.heading_deg + 540.0).rem_euclid(360.0) - 180.0;
         Key {
             t,
-            lon: spline(|k| k.lon),
+            lon: if lon > 180.0 {
+                lon - 360.0
+            } else if lon < -180.0 {
+                lon + 360.0
+            } else {
+                lon
+            },
             lat: spline(|k| k.lat).clamp(-90.0, 90.0),
             height_m: spline(|k| k.height_m),
             heading_deg: a.heading_deg + turn * u,
@@ -200,6 +206,34 @@ impl CameraPath {
     pub fn sun_ecef(&self) -> Option<DVec3> {
         let k = self.key[0];
         Some(self.sun?.ecef(k.lon, k.lat))
+    }
+}
+
+/// Lowest camera height a path may ask for, metres (below the Dead Sea
+/// shore, the lowest dry land, with room for a mine).
+pub const LOWEST_M: f64 = -1_000.0;
+/// Highest, metres (beyond the geostationary orbit).
+pub const HIGHEST_M: f64 = 100_000_000.0;
+
+impl Key {
+    /// Checks each value: the message names the field, what it must be and
+    /// what it is.
+    fn check(&self) -> Result<(), String> {
+        let fields = [
+            ("t", self.t, f64::MIN, f64::MAX),
+            ("lon", self.lon, -180.0, 180.0),
+            ("lat", self.lat, -90.0, 90.0),
+            ("height_m", self.height_m, LOWEST_M, HIGHEST_M),
+            ("heading_deg", self.heading_deg, f64::MIN, f64::MAX),
+            ("pitch_deg", self.pitch_deg, -90.0, 90.0),
+        ];
+        for (name, value, lo, hi) in fields {
+            if !(value.is_finite() && (lo..=hi).contains(&value)) {
+                let range = if lo == f64::MIN { "a finite number".into() } else { format!("within {lo}..{hi}") };
+                return Err(format!("{name} = {value}: must be {range}"));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -264,5 +298,26 @@ pitch_deg = -30.0
         assert!(CameraPath::parse(&typo).is_err());
         let dark = PATH.replace("elevation_deg = 30.0", "elevation_deg = nan");
         assert!(CameraPath::parse(&dark).unwrap_err().contains("sun"));
+        // Each value by name, its range and what it was.
+        for (from, to, needle) in [
+            ("lat = 46.0", "lat = 95.0", "key 1: lat = 95: must be within -90..90"),
+            ("lon = 10.2", "lon = 500.0", "key 2: lon = 500: must be within -180..180"),
+            ("height_m = 1000.0", "height_m = -5000.0", "key 1: height_m = -5000: must be within -1000..100000000"),
+            ("t = 0.0", "t = inf", "key 1: t = inf: must be a finite number"),
+        ] {
+            let e = CameraPath::parse(&PATH.replace(from, to)).unwrap_err();
+            assert!(e.contains(needle), "{e}");
+        }
+    }
+
+    #[test]
+    fn longitudes_change_the_short_way_across_the_antimeridian() {
+        let p = CameraPath::parse(&PATH.replace("lon = 10.0", "lon = 179.9").replace("lon = 10.2", "lon = -179.9"))
+            .unwrap();
+        let mid = p.at(1.0).lon;
+        assert!(mid.abs() > 179.9 && mid.abs() <= 180.0, "over the antimeridian, not round the world: {mid}");
+        assert_eq!(p.at(0.0).lon, 179.9);
+        assert!((p.at(2.0).lon - -179.9).abs() < 1e-9, "keys are met: {}", p.at(2.0).lon);
+        assert!(p.at(1.5).lon < -179.9, "{}", p.at(1.5).lon);
     }
 }

@@ -85,6 +85,7 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
         return Err(invalid(format!("[encoding] png16_offset_m must be a finite number, got {}", enc.png16_offset_m)));
     }
     config.canopy.check().map_err(|m| invalid(format!("[canopy] {m}")))?;
+    config.server.check().map_err(|m| invalid(format!("[server] {m}")))?;
     // Check every value before opening any file.
     let landcover_rule =
         config.landcover.as_ref().map(rule).transpose().map_err(|m| invalid(format!("[landcover] {m}")))?;
@@ -99,7 +100,13 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
         (Some(path), None) => {
             let crs = parse_crs(&config.dem.crs).map_err(|m| invalid(format!("[dem] {m}")))?;
             let options = OpenOptions { crs, nodata: config.dem.nodata.clone(), classes: false };
-            let dem = source::open_file(&resolve(path), &options, &cache)?;
+            let dem =
+                source::open_file(&resolve(path), &options, &cache).map_err(|e| invalid(format!("[dem] path: {e}")))?;
+            let bands = dem.base().source().bands();
+            if bands != 1 {
+                let file = resolve(path);
+                return Err(invalid(format!("[dem] path: {} has {bands} bands; a DEM has one", file.display())));
+            }
             let s = dem.bounds();
             let bounds = BBox { west: s.min_lon, south: s.min_lat, east: s.max_lon, north: s.max_lat };
             let name = path.file_stem().map_or_else(|| "dem".into(), |s| s.to_string_lossy().into_owned());
@@ -203,7 +210,8 @@ fn landcover(
             let crs = parse_crs(&lc.crs).map_err(invalid)?;
             let options =
                 OpenOptions { crs, nodata: NodataPolicy::Propagate, classes: lc.kind == LandcoverKind::Classes };
-            let raster = source::open_file(&resolve(path), &options, cache)?;
+            let raster =
+                source::open_file(&resolve(path), &options, cache).map_err(|e| invalid(format!("path: {e}")))?;
             (raster.base().clone(), raster.georef().clone())
         }
         (None, None) if lc.kind == LandcoverKind::Map => {
@@ -353,11 +361,15 @@ fn forests(
                 }
                 (Some(path), true) => {
                     let path = resolve(path);
-                    Arc::new(TiledProxy::new(path.display().to_string(), source::proxy::open(&path)?, seed))
+                    let tiles = source::proxy::open(&path)
+                        .map_err(|e| invalid(format!("[[forest]] {:?} proxy: {e}", f.name)))?;
+                    Arc::new(TiledProxy::new(path.display().to_string(), tiles, seed))
                 }
                 (None, false) => {
                     let files = f.lidar.iter().map(resolve).collect();
-                    Arc::new(crate::lidar::proxy(&crate::lidar::Options::new(files, f.resolution_m), seed)?)
+                    let proxy = crate::lidar::proxy(&crate::lidar::Options::new(files, f.resolution_m), seed)
+                        .map_err(|e| invalid(format!("[[forest]] {:?} lidar: {e}", f.name)))?;
+                    Arc::new(proxy)
                 }
                 (None, true) => fallback.clone(),
             };

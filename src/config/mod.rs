@@ -154,6 +154,50 @@ pub struct ServerConfig {
     pub public_url: Option<String>,
 }
 
+/// Most tile worker threads `[server] workers` may ask for.
+pub const MAX_WORKERS: usize = 1024;
+/// Most tile computations `[server] queue` may let wait.
+pub const MAX_QUEUE: usize = 1 << 20;
+/// Longest `[server] request_timeout_s`: a day.
+pub const MAX_REQUEST_TIMEOUT_S: f64 = 86_400.0;
+/// Largest `[server] max_size` (a float32 GetMap of 16384² is 1 GiB).
+pub const MAX_MAP_SIZE: usize = 16_384;
+/// Largest `[server] max_halo`, samples.
+pub const MAX_HALO: usize = 1024;
+
+impl ServerConfig {
+    /// Checks every value: the message names the key, what it must be and
+    /// what it is.
+    pub fn check(&self) -> Result<(), String> {
+        let bind = self.bind.rsplit_once(':');
+        if !bind.is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok()) {
+            return Err(format!("bind = {:?}: must be HOST:PORT", self.bind));
+        }
+        let within = |key: &str, value: usize, most: usize| match value <= most {
+            true => Ok(()),
+            false => Err(format!("{key} = {value}: must be at most {most}")),
+        };
+        within("workers", self.workers, MAX_WORKERS)?;
+        within("queue", self.queue, MAX_QUEUE)?;
+        within("max_halo", self.max_halo, MAX_HALO)?;
+        if !(1..=MAX_MAP_SIZE).contains(&self.max_size) {
+            return Err(format!("max_size = {}: must be 1 to {MAX_MAP_SIZE}", self.max_size));
+        }
+        let t = self.request_timeout_s;
+        if !(t > 0.0 && t <= MAX_REQUEST_TIMEOUT_S) {
+            return Err(format!(
+                "request_timeout_s = {t}: must be above 0 and at most {MAX_REQUEST_TIMEOUT_S} (a day)"
+            ));
+        }
+        match &self.public_url {
+            Some(url) if !(url.starts_with("http://") || url.starts_with("https://")) => {
+                Err(format!("public_url = {url:?}: must start with http:// or https://"))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
 impl Default for ServerConfig {
     fn default() -> Self {
         ServerConfig {

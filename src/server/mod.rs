@@ -199,8 +199,3 @@ fn shutdown_signal() -> std::io::Result<impl std::future::Future<Output = ()> + 
         tracing::info!("shutting down: finishing requests in flight");
     })
 }
-
-/// Seconds as a duration, refusing nonsense.
-fn seconds(s: f64) -> Duration {
-    Duration::from_secs_f64(if s.is_finite() && s > 0.0 { s } else { 30.0 })
-}

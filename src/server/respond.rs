@@ -60,6 +60,9 @@ fn insert(headers: &mut HeaderMap, name: impl axum::http::header::IntoHeaderName
     }
 }
 
+/// What a client is told of a server failure.
+const INTERNAL: &str = "internal error; the server's log has the details";
+
 impl ServeError {
     /// The status (who is at fault), headers (when to retry an overloaded
     /// server) and message of the error's response; server failures are logged.
@@ -75,7 +78,8 @@ impl ServeError {
             ServeError::Upstream(_) => StatusCode::BAD_GATEWAY,
             ServeError::Internal(m) => {
                 tracing::error!(error = %m, "request failed");
-                StatusCode::INTERNAL_SERVER_ERROR
+                // The details (paths, say) stay in the server's log.
+                return (StatusCode::INTERNAL_SERVER_ERROR, headers, INTERNAL.into());
             }
         };
         (status, headers, self.to_string())

@@ -35,7 +35,7 @@ pub fn router(state: Arc<AppState>) -> Router {
     Router::new()
         .route("/health", get(health))
         .route("/metrics", get(metrics))
-        .route("/wms", get(super::wms::handle))
+        .route("/wms", get(super::wms::handle).fallback(super::wms::other_method))
         .route("/tiles.json", get(tileset))
         .route("/tiles", get(tile_query))
         .route("/tiles/{layer}/{level}/{row}/{file}", get(tile_path))
@@ -61,7 +61,8 @@ fn cors() -> CorsLayer {
 async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Next) -> Response {
     let start = Instant::now();
     let route = request.extensions().get::<MatchedPath>().map_or("other", |p| route_label(p.as_str()));
-    let timeout = super::seconds(state.settings.request_timeout_s);
+    // Checked with the configuration: positive and at most a day.
+    let timeout = std::time::Duration::from_secs_f64(state.settings.request_timeout_s);
     // Kept for a WMS timeout's report, which speaks the request's version.
     let query = (route == "wms").then(|| request.uri().query().unwrap_or("").to_string());
     let response = if request.uri().to_string().len() > MAX_URI_BYTES {

@@ -116,12 +116,20 @@ impl TileService {
         loop {
             let (store, k, ttl, upstream_ttl) =
                 (self.store.clone(), key.clone(), self.lock_ttl, self.region.upstream_ttl);
-            let claim = tokio::task::spawn_blocking(move || {
+            let claimed = tokio::task::spawn_blocking(move || {
                 flight::claim(&*store, &k, &|s| !flight::expired(upstream_ttl, s), ttl)
             })
             .await
-            .map_err(ServeError::internal)?
             .map_err(ServeError::internal)?;
+            let claim = match claimed {
+                Ok(claim) => claim,
+                // The cache is down (a Redis gone, a disk failing): the
+                // tile is computed here and served, not refused.
+                Err(e) => {
+                    tracing::warn!(error = %e, "tile cache unreadable; computing the tile without it");
+                    return self.fill(&key, product, Lookup::Miss).await;
+                }
+            };
             match claim {
                 Claim::Ready(stored) => {
                     self.metrics.cache(CacheResult::Hit);

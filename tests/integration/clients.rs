@@ -138,3 +138,24 @@ fn owslib_reads_the_capabilities_and_a_dem_map_that_matches_build() {
         assert_matches(&format!("OWSLib {version}"), &tiff_values(&out), &reference);
     }
 }
+
+#[test]
+fn the_shipped_gdal_description_reads_the_demo_heights() {
+    let dir = TempDir::new("client-gdal-doc");
+    let server = Server::start(None, &dir.join("cache"));
+    let shipped = std::fs::read_to_string(common::repo().join("docs/gdal-dem.xml")).unwrap();
+    assert!(shipped.starts_with("<GDAL_WMS>"), "GDAL reads nothing before the element");
+    let xml = dir.join("gdal-dem.xml");
+    std::fs::write(&xml, shipped.replace("http://127.0.0.1:8080", &server.base)).unwrap();
+    let out = dir.join("dem.tif");
+    run(Command::new("gdal_translate").arg("-q").arg(&xml).arg(&out), "gdal_translate");
+    let mut decoder = tiff::decoder::Decoder::new(std::io::BufReader::new(std::fs::File::open(&out).unwrap())).unwrap();
+    assert_eq!(decoder.dimensions().unwrap(), (1024, 614));
+    let tiff::decoder::DecodingResult::F32(heights) = decoder.read_image().unwrap() else { panic!("not float32") };
+    // The demo valley's floor and summits, no nodata.
+    assert!(
+        heights.iter().all(|h| (500.0..4000.0).contains(h)),
+        "{:?}",
+        heights.iter().fold((f32::MAX, f32::MIN), |(a, b), &h| (a.min(h), b.max(h)))
+    );
+}

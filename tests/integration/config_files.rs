@@ -62,6 +62,18 @@ fn bad_configs_name_the_file_and_the_problem() {
         ("gaps.toml", "[canopy]\ngap_fraction = 1.5\n", "[canopy] gap_fraction = 1.5: must be 0 to 1"),
         ("tall.toml", "[canopy]\nheight_m = inf\n", "[canopy] height_m = inf"),
         ("offset.toml", "[encoding]\npng16_offset_m = inf\n", "png16_offset_m must be a finite number"),
+        ("missing_key.toml", "[dem]\npath = \"nowhere.tif\"\n", "[dem] path: "),
+        (
+            "timeout.toml",
+            "[server]\nrequest_timeout_s = 1e20\n",
+            "[server] request_timeout_s = 100000000000000000000: must be",
+        ),
+        ("no_timeout.toml", "[server]\nrequest_timeout_s = 0\n", "request_timeout_s = 0: must be above 0"),
+        ("workers.toml", "[server]\nworkers = 100000\n", "[server] workers = 100000: must be at most 1024"),
+        ("queue.toml", "[server]\nqueue = 9223372036854775807\n", "queue = 9223372036854775807: must be at most"),
+        ("bind.toml", "[server]\nbind = \"nonsense\"\n", "[server] bind = \"nonsense\": must be HOST:PORT"),
+        ("size.toml", "[server]\nmax_size = 0\n", "max_size = 0: must be 1 to 16384"),
+        ("url.toml", "[server]\npublic_url = \"example.org\"\n", "public_url = \"example.org\": must start with"),
         (
             "classes.toml",
             "[dem]\npath = \"x.hgt\"\n[landcover]\nkind = \"classes\"\npath = \"c.tif\"\n",
@@ -92,4 +104,9 @@ fn bad_configs_name_the_file_and_the_problem() {
         assert!(err.contains(needle), "{name}: {err}");
         assert!(err.contains(name) || err.contains(needle), "{name}: {err}");
     }
+    // A picture is no DEM.
+    let picture = dir.join("picture.toml");
+    std::fs::write(&picture, format!("[dem]\npath = {:?}\n", common::data("rmnp/rmnp-rgb.tif"))).unwrap();
+    let err = sylva::config::load(Some(&picture)).expect_err("a picture").to_string();
+    assert!(err.contains("picture.toml: [dem] path: ") && err.contains("has 3 bands; a DEM has one"), "{err}");
 }

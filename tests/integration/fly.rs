@@ -122,6 +122,32 @@ fn bad_flight_input_is_explained() {
     assert!(!e.status.success() && stderr.contains("model.json") && stderr.contains("constant 3"), "{stderr}");
 }
 
+#[test]
+fn a_flight_never_mixes_with_an_earlier_one_in_its_directory() {
+    let dir = TempDir::new("fly-again");
+    let out = dir.join("out");
+    let valley = common::repo().join("config/paths/demo_valley.toml");
+    let dive = common::repo().join("config/paths/demo_dive.toml");
+    fly(&["--path", valley.to_str().unwrap(), "--frames", "2", "--size", "32x24"], &out);
+    // Refused, and the earlier flight is whole.
+    let again = std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(["fly", "--path", dive.to_str().unwrap(), "--frames", "1", "--size", "32x24", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&again.stderr);
+    assert!(
+        !again.status.success() && err.contains("holds an earlier flight's") && err.contains("--overwrite"),
+        "{err}"
+    );
+    assert_eq!(stats(&out).len(), 2);
+    assert!(out.join("frame_00001.png").exists());
+    // Replaced whole with --overwrite: no frame of the earlier flight is left.
+    fly(&["--path", dive.to_str().unwrap(), "--frames", "1", "--size", "32x24", "--overwrite"], &out);
+    assert_eq!(stats(&out).len(), 1);
+    assert!(out.join("frame_00000.png").exists() && !out.join("frame_00001.png").exists());
+}
+
 /// The rows of a `--lod budget` flight of `frames` 96×64 frames along the
 /// demo valley under `ms`, written to `out`.
 fn budget_flight(

@@ -100,6 +100,10 @@ fn maps_reaching_past_the_data_keep_their_encoding_and_background() {
     let heights = image::load_from_memory(&empty.body).unwrap();
     assert_eq!(heights.color(), image::ColorType::L16);
     assert!(heights.into_luma16().pixels().all(|p| p.0[0] == 0), "code 0 is nodata");
+    // With the headers of any map: how its codes decode, an ETag.
+    for name in ["x-sylva-offset", "x-sylva-scale", "etag", "cache-control"] {
+        assert!(empty.header(name).is_some(), "{name} missing from an empty map");
+    }
 }
 
 #[test]
@@ -439,4 +443,48 @@ fn a_request_that_times_out_leaves_its_tile_computed_for_the_retry() {
     assert_eq!(patient.get(&path).status, 200);
     assert_eq!(patient.metric("sylva_tile_computations_total"), 0.0, "the retry computed nothing");
     assert_eq!(impatient.metric("sylva_tile_computations_total"), 1.0);
+}
+
+#[test]
+fn a_failing_tile_cache_still_serves_and_one_unusable_at_start_is_refused() {
+    let dir = TempDir::new("srv-broken-cache");
+    let cache = dir.join("cache");
+    let server = Server::start(None, &cache);
+    // The cache directory turns into a file under the running server.
+    std::fs::remove_dir_all(&cache).unwrap();
+    std::fs::write(&cache, b"not a directory").unwrap();
+    let t = demo_tile();
+    let reply = server.get(&format!("/tiles/dem/{}/{}/{}_{}.bil32", t.level, t.row, t.row, t.col));
+    assert_eq!((reply.status, reply.body.len()), (200, 513 * 513 * 4), "{}", reply.text());
+    drop(server);
+    // A server started on it says so and stops.
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(["serve", "--bind", "127.0.0.1:0", "--cache-dir"])
+        .arg(&cache)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while child.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("sylva serve started on a file as its tile cache");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("must be a directory"), "{err}");
+}
+
+#[test]
+fn wms_by_another_method_than_get_is_an_ogc_report() {
+    let dir = TempDir::new("srv-post");
+    let server = Server::start(None, &dir.join("cache"));
+    let agent: ureq::Agent = ureq::Agent::config_builder().http_status_as_error(false).build().into();
+    let mut response = agent.post(&format!("{}/wms", server.base)).send_empty().unwrap();
+    assert_eq!(response.status().as_u16(), 405);
+    assert_eq!(response.headers().get("allow").and_then(|v| v.to_str().ok()), Some("GET, HEAD"));
+    let body = response.body_mut().read_to_string().unwrap();
+    assert!(body.contains("ServiceExceptionReport") && body.contains("OperationNotSupported"), "{body}");
 }

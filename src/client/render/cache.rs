@@ -84,7 +84,7 @@ fn mesh_bytes(samples: u32) -> usize {
 
 /// The cache is smaller than one frame's tiles.
 #[derive(Debug, thiserror::Error)]
-#[error("the GPU tile cache has {slots} slots and this frame needs more")]
+#[error("the GPU tile cache has {slots} slots and this frame needs more; give it a larger budget (--gpu-budget-mib)")]
 pub struct CacheFull {
     /// Slots in the cache.
     pub slots: u32,

@@ -64,12 +64,24 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
     }
 }
 
+/// Answers a request to `/wms` by another method than GET (or HEAD): the
+/// service takes key-value pairs in the query.
+pub async fn other_method() -> Response {
+    let e = Exception::new(
+        super::exception::Code::OperationNotSupported,
+        "WMS here is GET with the query's key-value pairs",
+    );
+    let (mime, body) = e.report(request::Version::V130);
+    (StatusCode::METHOD_NOT_ALLOWED, [(header::CONTENT_TYPE, mime), (header::ALLOW, "GET, HEAD")], body).into_response()
+}
+
 /// The absolute URL of this endpoint: configured, or from the Host header.
 fn endpoint(state: &AppState, headers: &HeaderMap) -> String {
     if let Some(url) = &state.settings.public_url {
         return format!("{}/wms", url.trim_end_matches('/'));
     }
-    let host = headers.get(header::HOST).and_then(|h| h.to_str().ok()).unwrap_or("localhost");
+    let host = headers.get(header::HOST).and_then(|h| h.to_str().ok()).filter(|h| !h.is_empty());
+    let host = host.unwrap_or("localhost");
     format!("http://{host}/wms")
 }
 
@@ -90,9 +102,11 @@ async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<
         },
     };
     if tile.bytes.is_empty() {
-        // No data here: WMS still answers with an image, empty.
+        // No data here: WMS still answers with an image, empty, with the
+        // headers of any other (its heights' encoding, its ETag).
         let body = inimage::blank(&map.grid, map.layer, map.format, state.region().heights_16, map.background);
-        return Ok(([(header::CONTENT_TYPE, map.format.mime())], body).into_response());
+        let blank = super::service::Tile::new(body, "blank".into());
+        return Ok(respond::tile(&blank, &meta(state, map.layer, encoding), headers));
     }
     let tile = match map.background {
         Some(colour) if map.layer.is_picture() => {
