@@ -771,7 +771,12 @@ pub fn summary(records: &[FrameRecord]) -> String {
         records.iter().map(|r| r.bytes_fetched).sum::<u64>(),
         first.map_or(0.0, |r| r.rss_mib),
         last.map_or(0.0, |r| r.rss_mib),
-    )
+    ) + if records.iter().all(|r| r.tiles_ray + r.tiles_plain == 0) {
+        // Blank frames are no error, but rarely what was meant.
+        "\nno frame drew a tile: does the camera look at the region?"
+    } else {
+        ""
+    }
 }
 
 /// Parses `exact` or `linear:STEPS`.

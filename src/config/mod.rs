@@ -173,9 +173,8 @@ impl ServerConfig {
         if !bind.is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok()) {
             return Err(format!("bind = {:?}: must be HOST:PORT", self.bind));
         }
-        let within = |key: &str, value: usize, most: usize| match value <= most {
-            true => Ok(()),
-            false => Err(format!("{key} = {value}: must be at most {most}")),
+        let within = |key: &str, value: usize, most: usize| {
+            if value <= most { Ok(()) } else { Err(format!("{key} = {value}: must be at most {most}")) }
         };
         within("workers", self.workers, MAX_WORKERS)?;
         within("queue", self.queue, MAX_QUEUE)?;

@@ -148,6 +148,20 @@ fn a_flight_never_mixes_with_an_earlier_one_in_its_directory() {
     assert!(out.join("frame_00000.png").exists() && !out.join("frame_00001.png").exists());
 }
 
+#[test]
+fn a_flight_that_sees_no_tile_says_so() {
+    let dir = TempDir::new("fly-away");
+    let away = dir.join("away.toml");
+    let text = std::fs::read_to_string(common::repo().join("config/paths/demo_valley.toml")).unwrap();
+    // The same flight 70° further west, over the Atlantic.
+    std::fs::write(&away, text.replace("lon = 10.", "lon = -60.")).unwrap();
+    let summary = fly(&["--path", away.to_str().unwrap(), "--frames", "1", "--size", "32x24"], &dir.join("out"));
+    assert!(summary.contains("no frame drew a tile"), "{summary}");
+    let home = common::repo().join("config/paths/demo_valley.toml");
+    let summary = fly(&["--path", home.to_str().unwrap(), "--frames", "1", "--size", "32x24"], &dir.join("home"));
+    assert!(!summary.contains("no frame drew a tile"), "{summary}");
+}
+
 /// The rows of a `--lod budget` flight of `frames` 96×64 frames along the
 /// demo valley under `ms`, written to `out`.
 fn budget_flight(
