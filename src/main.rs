@@ -664,6 +664,7 @@ fn run(command: Command) -> Result<()> {
         #[cfg(feature = "window")]
         Command::View { tiles, path, frames, out, overwrite, render } => {
             if let Some(dir) = &out {
+                // Refused here, before the window opens; replaced on closing.
                 sylva::client::fly::prepare_out_dir(dir, overwrite)?;
             }
             let source = tiles.open()?;
@@ -673,7 +674,7 @@ fn run(command: Command) -> Result<()> {
                 None => sylva::client::view::default_start(source.as_ref())?,
             };
             let options = sylva::client::view::ViewOptions {
-                render: render.options()?,
+                render: sylva::client::fly::FlyOptions { overwrite, ..render.options()? },
                 start,
                 fov_deg: path.as_ref().map_or(sylva::client::view::FOV_DEG, |p| p.fov_deg),
                 sun_ecef: match &path {

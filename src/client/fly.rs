@@ -238,9 +238,10 @@ pub fn fly(
     renderer: &mut Renderer,
     options: &FlyOptions,
 ) -> Result<Vec<FrameRecord>, FlyError> {
-    if let Some(dir) = &options.out_dir {
-        prepare_out_dir(dir, options.overwrite)?;
-    }
+    let mut earlier = match &options.out_dir {
+        Some(dir) => prepare_out_dir(dir, options.overwrite)?,
+        None => Vec::new(),
+    };
     let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
     let motion = Motion { frame_s, limits: path.motion_limits(MOTION_STEPS), shadows: path.sun.is_some() };
     let mut flight = Flight::new(source, renderer, options, motion)?;
@@ -253,6 +254,8 @@ pub fn fly(
             sun_ecef: path.sun_ecef(),
         };
         let framed = flight.frame(source, renderer, options, &shot, Readback::All)?;
+        // The earlier run's outputs go once this one has a frame to show.
+        remove_outputs(&std::mem::take(&mut earlier))?;
         if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
             write_png(&dir.join(format!("frame_{k:05}.png")), &framed.rendered, options.size)?;
         }
@@ -272,19 +275,22 @@ pub fn fly(
 
 /// Makes `dir` ready for a flight's or a view's outputs: made if missing;
 /// an earlier run's outputs there ([`STATS_FILE`], the cost model, frames)
-/// refused, or with `overwrite` removed first, so that a directory never
-/// mixes two runs.
-pub fn prepare_out_dir(dir: &std::path::Path, overwrite: bool) -> Result<(), FlyError> {
+/// refused, or with `overwrite` returned, for [`remove_outputs`] once the
+/// new run has something to write: a directory never mixes two runs, and a
+/// run that fails before its first frame leaves the earlier one whole.
+pub fn prepare_out_dir(dir: &std::path::Path, overwrite: bool) -> Result<Vec<PathBuf>, FlyError> {
     std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
     crate::outputs::check(&[], &[&dir.join(STATS_FILE), &dir.join(MODEL_FILE)])?;
     let earlier = earlier_outputs(dir).map_err(|e| io(dir, e))?;
-    if earlier.is_empty() {
-        return Ok(());
-    }
-    if !overwrite {
+    if !earlier.is_empty() && !overwrite {
         return Err(FlyError::Earlier(dir.to_path_buf(), earlier.len()));
     }
-    earlier.iter().try_for_each(|f| std::fs::remove_file(f).map_err(|e| io(f, e)))
+    Ok(earlier)
+}
+
+/// Removes an earlier run's outputs (from [`prepare_out_dir`]).
+pub fn remove_outputs(files: &[PathBuf]) -> Result<(), FlyError> {
+    files.iter().try_for_each(|f| std::fs::remove_file(f).map_err(|e| io(f, e)))
 }
 
 /// The files in `dir` a flight or view writes: [`STATS_FILE`], the cost

@@ -142,6 +142,17 @@ fn a_flight_never_mixes_with_an_earlier_one_in_its_directory() {
     );
     assert_eq!(stats(&out).len(), 2);
     assert!(out.join("frame_00001.png").exists());
+    // A run that fails at its first frame (a GPU cache too small for it)
+    // leaves the earlier one whole.
+    let failed = std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(["fly", "--path", dive.to_str().unwrap(), "--size", "32x24", "--overwrite", "--gpu-budget-mib", "1"])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&failed.stderr);
+    assert!(!failed.status.success() && err.contains("--gpu-budget-mib"), "{err}");
+    assert_eq!(stats(&out).len(), 2);
     // Replaced whole with --overwrite: no frame of the earlier flight is left.
     fly(&["--path", dive.to_str().unwrap(), "--frames", "1", "--size", "32x24", "--overwrite"], &out);
     assert_eq!(stats(&out).len(), 1);
