@@ -217,7 +217,7 @@ fn bad_input_is_named_with_the_problem() {
         (&["--levels", "0-5", "--layers", "trees"], "unknown \"trees\""),
         (
             &["--levels", "0-5", "--cache-dir", cache.to_str().unwrap()],
-            "a-file/cache/.sylva-seed-probe.lock: Not a directory",
+            "a-file/cache: Not a directory",
         ),
     ];
     for (args, needle) in cases {
