@@ -145,7 +145,8 @@ enum Command {
         /// --frames is given) and for frames saved with P (default: here).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Replace an earlier run's stats.csv in --out (else refused).
+        /// Replace an earlier flight's or view's outputs in --out (else
+        /// refused).
         #[arg(long)]
         overwrite: bool,
         #[command(flatten)]

@@ -23,14 +23,16 @@ pub struct DirStore {
 }
 
 impl DirStore {
-    /// A store rooted at `root` (created on first write).
+    /// A store rooted at `root`, unchecked (its directories are made on
+    /// first write).
     pub fn new(root: impl Into<PathBuf>) -> DirStore {
         DirStore { root: root.into(), counter: AtomicU64::new(0) }
     }
 
-    /// A store rooted at `root`, made if missing and checked writable (a
-    /// probe file written and removed), so that a server or seeder with a
-    /// cache it cannot use says so when it starts, not on every tile.
+    /// A store rooted at `root`, made if missing, so that a server or seeder
+    /// whose cache cannot be a directory says so when it starts, not on every
+    /// tile. A read-only directory is accepted (a server reads a seeded cache
+    /// and serves what is missing uncached; the seeder probes writing).
     pub fn open(root: impl Into<PathBuf>) -> Result<DirStore, CacheError> {
         let store = DirStore::new(root);
         let root = store.root();
@@ -41,8 +43,6 @@ impl DirStore {
             ));
         }
         fs::create_dir_all(root).map_err(|e| CacheError::io(root, e))?;
-        let probe = store.temporary(&root.join("probe"));
-        fs::write(&probe, b"").and_then(|()| fs::remove_file(&probe)).map_err(|e| CacheError::io(root, e))?;
         Ok(store)
     }
 

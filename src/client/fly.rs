@@ -242,6 +242,11 @@ pub fn fly(
         Some(dir) => prepare_out_dir(dir, options.overwrite)?,
         None => Vec::new(),
     };
+    // A budget flight replaces the cost model at its end, whole: until
+    // then it may be the model this flight started from.
+    if matches!(options.mode, LodMode::Budget { .. }) {
+        earlier.retain(|f| !f.ends_with(MODEL_FILE));
+    }
     let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
     let motion = Motion { frame_s, limits: path.motion_limits(MOTION_STEPS), shadows: path.sun.is_some() };
     let mut flight = Flight::new(source, renderer, options, motion)?;
@@ -777,7 +782,7 @@ pub fn summary(records: &[FrameRecord]) -> String {
         records.iter().map(|r| r.bytes_fetched).sum::<u64>(),
         first.map_or(0.0, |r| r.rss_mib),
         last.map_or(0.0, |r| r.rss_mib),
-    ) + if records.iter().all(|r| r.tiles_ray + r.tiles_plain == 0) {
+    ) + if !records.is_empty() && records.iter().all(|r| r.tiles_ray + r.tiles_plain == 0) {
         // Blank frames are no error, but rarely what was meant.
         "\nno frame drew a tile: does the camera look at the region?"
     } else {

@@ -142,9 +142,10 @@ impl CameraPath {
         let before = keys[k.saturating_sub(1)];
         let after = keys[(k + 2).min(last)];
         let spline = |f: fn(&Key) -> f64| catmull_rom(f(&before), f(&a), f(&b), f(&after), u);
-        // Longitudes as seen from `a`'s, within half a turn of it.
-        let near = |k: &Key| a.lon + (k.lon - a.lon + 540.0).rem_euclid(360.0) - 180.0;
-        let lon = catmull_rom(near(&before), a.lon, near(&b), near(&after), u);
+        // Each longitude within half a turn of its neighbour's, from `a` on.
+        let unwrap = |lon: f64, from: f64| from + (lon - from + 540.0).rem_euclid(360.0) - 180.0;
+        let b_lon = unwrap(b.lon, a.lon);
+        let lon = catmull_rom(unwrap(before.lon, a.lon), a.lon, b_lon, unwrap(after.lon, b_lon), u);
         let turn = (b.heading_deg - a.heading_deg + 540.0).rem_euclid(360.0) - 180.0;
         Key {
             t,

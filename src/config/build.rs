@@ -41,9 +41,6 @@ pub enum ConfigError {
     /// A source named by the configuration cannot be opened.
     #[error(transparent)]
     Source(#[from] SourceError),
-    /// A forest type's point clouds give no proxy.
-    #[error(transparent)]
-    Lidar(#[from] crate::lidar::LidarError),
 }
 
 /// Loads the region of a configuration file, or the demo region without one.

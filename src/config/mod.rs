@@ -169,8 +169,10 @@ impl ServerConfig {
     /// Checks every value: the message names the key, what it must be and
     /// what it is.
     pub fn check(&self) -> Result<(), String> {
+        // An IPv6 host is bracketed: `[::1]:8080`.
+        let host_ok = |h: &str| !h.is_empty() && (!h.contains(':') || (h.starts_with('[') && h.ends_with(']')));
         let bind = self.bind.rsplit_once(':');
-        if !bind.is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok()) {
+        if !bind.is_some_and(|(host, port)| host_ok(host) && port.parse::<u16>().is_ok()) {
             return Err(format!("bind = {:?}: must be HOST:PORT", self.bind));
         }
         let within = |key: &str, value: usize, most: usize| {

@@ -163,12 +163,16 @@ fn coverage(o: &SeedOptions, region: &Region) -> Result<(Coverage, String), Seed
         (Some(_), Some(_)) => Err(SeedError::Usage("give --bbox or --coverage, not both".into())),
         (Some(text), None) => {
             let b = BBox::parse(text).map_err(|e| SeedError::Usage(format!("--bbox: {e}")))?;
-            let b = clip(b, region.bounds).ok_or_else(|| {
-                let r = region.bounds;
-                let region = format!("{},{},{},{}", r.west, r.south, r.east, r.north);
-                SeedError::Usage(format!("--bbox {text}: does not meet the region, whose bounds are {region}"))
-            })?;
-            Ok((Coverage::Box(b), format!("bbox {text}")))
+            let r = region.bounds;
+            let usage = |why: &str| {
+                let bounds = format!("{},{},{},{}", r.west, r.south, r.east, r.north);
+                SeedError::Usage(format!("--bbox {text}: {why}; the region's bounds are {bounds}"))
+            };
+            match clip(b, r)[..] {
+                [] => Err(usage("does not meet the region")),
+                [part] => Ok((Coverage::Box(part), format!("bbox {text}"))),
+                _ => Err(usage("meets the region on both sides of the antimeridian: give each side its own --bbox")),
+            }
         }
         (None, Some(path)) => {
             let text = std::fs::read(path).unwrap_or_default();
@@ -178,19 +182,17 @@ fn coverage(o: &SeedOptions, region: &Region) -> Result<(Coverage, String), Seed
     }
 }
 
-/// The part of `b` over the region's `bounds` (a turn east or west of
-/// it where `b` reaches across the antimeridian), if any: tiles beyond the
-/// region's data hold nothing to seed.
-fn clip(b: BBox, bounds: BBox) -> Option<BBox> {
-    [0.0, -360.0, 360.0].into_iter().find_map(|turn| {
-        let c = BBox {
-            west: (b.west + turn).max(bounds.west),
-            south: b.south.max(bounds.south),
-            east: (b.east + turn).min(bounds.east),
-            north: b.north.min(bounds.north),
-        };
-        (c.west < c.east && c.south < c.north).then_some(c)
-    })
+/// The parts of `b` over the region's `bounds` (`b` as given, and a turn
+/// east and west of it, for a box that reaches across the antimeridian):
+/// tiles beyond the region's data hold nothing to seed.
+fn clip(b: BBox, bounds: BBox) -> Vec<BBox> {
+    let part = |turn: f64| BBox {
+        west: (b.west + turn).max(bounds.west),
+        south: b.south.max(bounds.south),
+        east: (b.east + turn).min(bounds.east),
+        north: b.north.min(bounds.north),
+    };
+    [0.0, -360.0, 360.0].into_iter().map(part).filter(|c| c.west < c.east && c.south < c.north).collect()
 }
 
 /// A comma-separated list of names.
@@ -268,13 +270,16 @@ mod tests {
     fn a_box_is_clipped_to_the_region() {
         let region = BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 };
         let world = BBox { west: -180.0, south: -90.0, east: 180.0, north: 90.0 };
-        assert_eq!(clip(world, region), Some(region));
+        assert_eq!(clip(world, region), [region]);
         let part = BBox { west: 10.1, south: 40.0, east: 20.0, north: 46.4 };
-        assert_eq!(clip(part, region), Some(BBox { west: 10.1, south: 46.3, east: 10.25, north: 46.4 }));
-        assert_eq!(clip(BBox { west: 11.0, south: 46.3, east: 12.0, north: 46.4 }, region), None);
+        assert_eq!(clip(part, region), [BBox { west: 10.1, south: 46.3, east: 10.25, north: 46.4 }]);
+        assert_eq!(clip(BBox { west: 11.0, south: 46.3, east: 12.0, north: 46.4 }, region), []);
         // Across the antimeridian, from 170° E to 170° W, over a region at 175° W.
         let pacific = BBox { west: -176.0, south: -20.0, east: -174.0, north: -18.0 };
         let across = BBox { west: 170.0, south: -30.0, east: 190.0, north: 0.0 };
-        assert_eq!(clip(across, pacific), Some(pacific));
+        assert_eq!(clip(across, pacific), [pacific]);
+        // Over a region on both sides: two parts.
+        let both = clip(across, BBox { west: -180.0, ..world });
+        assert_eq!(both.len(), 2, "{both:?}");
     }
 }

@@ -45,6 +45,8 @@ pub enum CacheResult {
     Corrupt,
     /// Expired (upstream-fed tiles): recomputed, or served stale.
     Stale,
+    /// The tile cache failed: computed and served without it.
+    Unavailable,
 }
 
 /// The server's metrics.
@@ -95,6 +97,7 @@ impl Metrics {
             CacheResult::Miss => "miss",
             CacheResult::Corrupt => "corrupt",
             CacheResult::Stale => "stale",
+            CacheResult::Unavailable => "unavailable",
         };
         self.cache.get_or_create(&ResultLabel { result }).inc();
     }

@@ -91,6 +91,7 @@ impl AppState {
         lock_ttl: Duration,
         settings: ServerConfig,
     ) -> std::io::Result<Arc<AppState>> {
+        settings.check().map_err(|e| std::io::Error::other(format!("[server] {e}")))?;
         let metrics = Arc::new(Metrics::new());
         let pool = Arc::new(Pool::new(settings.workers, settings.queue)?);
         let memory = settings.memory_cache_mb.max(1) * 1024 * 1024;

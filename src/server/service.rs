@@ -127,7 +127,8 @@ impl TileService {
                 // tile is computed here and served, not refused.
                 Err(e) => {
                     tracing::warn!(error = %e, "tile cache unreadable; computing the tile without it");
-                    return self.fill(&key, product, Lookup::Miss).await;
+                    self.metrics.cache(CacheResult::Unavailable);
+                    return Ok(Arc::new(tile_of(self.compute(product).await?)));
                 }
             };
             match claim {

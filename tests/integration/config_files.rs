@@ -53,7 +53,7 @@ fn the_default_file_is_the_built_in_default() {
 fn bad_configs_name_the_file_and_the_problem() {
     let dir = TempDir::new("bad-config");
     let cases = [
-        ("missing.toml", "[dem]\npath = \"nowhere.tif\"\n", "nowhere.tif"),
+        ("missing.toml", "[dem]\npath = \"nowhere.tif\"\n", "missing.toml: [dem] path: "),
         ("typo.toml", "[dem]\npaht = \"x.tif\"\n", "unknown field `paht`"),
         ("delta.toml", "[grid]\nlevel0_delta_deg = 7.0\n", "must divide 180"),
         ("close.toml", "[landcover]\nkind = \"map\"\nclose = \"DXE\"\n", "sequence of D and E"),
@@ -62,7 +62,6 @@ fn bad_configs_name_the_file_and_the_problem() {
         ("gaps.toml", "[canopy]\ngap_fraction = 1.5\n", "[canopy] gap_fraction = 1.5: must be 0 to 1"),
         ("tall.toml", "[canopy]\nheight_m = inf\n", "[canopy] height_m = inf"),
         ("offset.toml", "[encoding]\npng16_offset_m = inf\n", "png16_offset_m must be a finite number"),
-        ("missing_key.toml", "[dem]\npath = \"nowhere.tif\"\n", "[dem] path: "),
         (
             "timeout.toml",
             "[server]\nrequest_timeout_s = 1e20\n",

@@ -215,10 +215,7 @@ fn bad_input_is_named_with_the_problem() {
         (&["--levels", "0-5", "--shard", "4/4"], "--shard \"4/4\""),
         (&["--tiles-from", list.to_str().unwrap()], "list.txt:2"),
         (&["--levels", "0-5", "--layers", "trees"], "unknown \"trees\""),
-        (
-            &["--levels", "0-5", "--cache-dir", cache.to_str().unwrap()],
-            "a-file/cache: Not a directory",
-        ),
+        (&["--levels", "0-5", "--cache-dir", cache.to_str().unwrap()], "a-file/cache: Not a directory"),
     ];
     for (args, needle) in cases {
         let out = seed(&dir.0, args);

@@ -456,6 +456,7 @@ fn a_failing_tile_cache_still_serves_and_one_unusable_at_start_is_refused() {
     let t = demo_tile();
     let reply = server.get(&format!("/tiles/dem/{}/{}/{}_{}.bil32", t.level, t.row, t.row, t.col));
     assert_eq!((reply.status, reply.body.len()), (200, 513 * 513 * 4), "{}", reply.text());
+    assert_eq!(server.metric("sylva_tile_cache_total{result=\"unavailable\"}"), 1.0);
     drop(server);
     // A server started on it says so and stops.
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))

@@ -494,6 +494,31 @@ mod tests {
     }
 
     #[test]
+    fn shadow_steps_that_fetch_more_buy_fewer_steps_within_the_budget() {
+        let c = demo_candidates();
+        // A budget that buys everything at 0.5 fetches per shadow step,
+        // not at 2.
+        let at = |shadow_fetches: f64| {
+            let priced: Vec<Candidate> = c.iter().map(|t| Candidate { shadow_fetches, ..*t }).collect();
+            choose(&priced, &[], &MODEL, &budget(4.0, true))
+        };
+        let (light, heavy) = (at(0.5), at(2.0));
+        let steps = |cut: &Cut| cut.tiles.iter().map(|t| f64::from(t.shadow_steps)).sum::<f64>();
+        assert_eq!((light.stop, heavy.stop), (Some(Stop::FullResolution), Some(Stop::Budget)));
+        assert!(heavy.predicted_ms <= 4.0 + 1e-9, "{heavy:?}");
+        assert!(steps(&heavy) < steps(&light), "{} vs {}", steps(&heavy), steps(&light));
+        // Priced as drawn: ray-cast pixels × steps × fetches per step.
+        let priced = |cut: &Cut, fetches: f64| -> f64 {
+            let px = |id| c.iter().find(|t| t.id == id).map_or(0.0, |t| t.ray_px);
+            cut.tiles.iter().map(|t| px(t.id) * f64::from(t.shadow_steps) * fetches / 1e6).sum()
+        };
+        for (cut, fetches) in [(&light, 0.5), (&heavy, 2.0)] {
+            let expected = priced(cut, fetches);
+            assert!(expected > 0.0 && (cut.features.shadow_mpx_steps / expected - 1.0).abs() < 1e-9, "{expected}");
+        }
+    }
+
+    #[test]
     fn tiles_under_a_fading_canopy_pay_its_pipelines_surcharge() {
         let c = demo_candidates();
         let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0, 0.0, 0.5] };

@@ -45,8 +45,8 @@ pub struct BudgetFlight {
     selector: Selector,
     calibrator: CostCalibrator,
     budget: Budget,
-    /// View-ray steps per tile, as last measured (shared with the request
-    /// in flight; copied on write).
+    /// View- and shadow-ray fetches per tile, as last measured (shared with
+    /// the request in flight; copied on write).
     steps: Arc<RaySteps>,
     look: Lookahead,
     predictor: PathPredictor,
@@ -125,7 +125,7 @@ impl BudgetFlight {
         self.budget.shadows = shadows;
     }
 
-    /// The view-ray steps the next selection prices tiles with.
+    /// The rays' fetches the next selection prices tiles with.
     pub fn steps(&self) -> &RaySteps {
         &self.steps
     }

@@ -93,7 +93,7 @@ impl Selector {
         Selected { cut, candidates: found.tiles.len(), ms: start.elapsed().as_secs_f64() * 1e3 }
     }
 
-    /// What drawing `drawn` from `camera` costs with tiles' view rays at
+    /// What drawing `drawn` from `camera` costs with tiles' rays priced at
     /// `steps`, measured as a selection measures its candidates (so
     /// calibrated constants fit predictions).
     pub fn features(&self, camera: &Camera, drawn: &[Choice], steps: &RaySteps) -> CostFeatures {

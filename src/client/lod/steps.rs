@@ -28,6 +28,11 @@ pub const VIEW_STEPS: f64 = 20.0;
 /// a step, every step taken.
 pub const SHADOW_FETCHES_PER_STEP: f64 = 1.0;
 
+/// Least shadow-ray fetches per step a tile is priced at: rays that all
+/// stopped at once cost their set-up, and given more steps they may not
+/// stop at once (a tile priced at nothing would take the most steps).
+pub const SHADOW_FETCHES_FLOOR: f64 = 0.1;
+
 /// Frames after which a tile's measurements no longer price it: the
 /// camera has moved on (a second at 30 frames/s).
 pub const MAX_AGE_FRAMES: u64 = 32;
@@ -142,9 +147,9 @@ impl RaySteps {
     }
 
     /// Shadow-ray fetches per ray-cast pixel and shadow step to price tile
-    /// `id` with.
+    /// `id` with (at least [`SHADOW_FETCHES_FLOOR`]).
     pub fn shadow(&self, id: TileId) -> f64 {
-        self.shadow.of(id, self.frame)
+        self.shadow.of(id, self.frame).max(SHADOW_FETCHES_FLOOR)
     }
 
     /// Records a drawn frame; a frame without ray-cast pixels (or without
@@ -206,6 +211,10 @@ mod tests {
         // Shadow rays that all stop at once: measured, at nothing.
         let m = FrameSteps::measure(&[[10, 0]], &[3], &drawn);
         assert_eq!(m.shadow, Means { mean: Some(0.0), tiles: vec![(ids[2], 0.0)] });
+        // ... and priced at the floor: given more steps they may not stop.
+        let mut steps = RaySteps::new(20.0);
+        steps.record(&m);
+        assert_eq!(steps.shadow(ids[2]), SHADOW_FETCHES_FLOOR);
     }
 
     #[test]

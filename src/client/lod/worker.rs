@@ -27,7 +27,7 @@ pub struct Request {
     pub model: CostModel,
     /// The budget.
     pub budget: Budget,
-    /// The view-ray steps per tile.
+    /// The rays' fetches per tile.
     pub steps: Arc<RaySteps>,
 }
 
