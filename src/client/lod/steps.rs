@@ -103,16 +103,10 @@ impl FrameSteps {
                 (s.view, s.shadow, s.pixels) = (s.view + u64::from(f[0]), s.shadow + u64::from(f[1]), s.pixels + 1);
             }
         }
-        let per_tile = |part: &dyn Fn(&Sums, u32) -> (u64, u64)| -> Vec<(TileId, u64, u64)> {
-            drawn
-                .iter()
-                .zip(&sums)
-                .map(|(c, s)| (c.id, part(s, c.shadow_steps)))
-                .map(|(id, (n, d))| (id, n, d))
-                .collect()
-        };
-        let view = Means::of(per_tile(&|s, _| (s.view, s.pixels)), Some((total, pixels)));
-        let shadow = Means::of(per_tile(&|s, steps| (s.shadow, s.pixels * u64::from(steps))), None);
+        let tiles = || drawn.iter().zip(&sums);
+        let view = tiles().map(|(c, s)| (c.id, s.view, s.pixels)).collect();
+        let shadow = tiles().map(|(c, s)| (c.id, s.shadow, s.pixels * u64::from(c.shadow_steps))).collect();
+        let (view, shadow) = (Means::of(view, Some((total, pixels))), Means::of(shadow, None));
         FrameSteps { view, shadow }
     }
 }
