@@ -53,7 +53,7 @@ pub struct Exception {
     /// What went wrong, for people.
     pub message: String,
     /// The parameter concerned.
-    pub locator: Option<&'static str>,
+    pub locator: Option<String>,
 }
 
 impl Exception {
@@ -63,8 +63,8 @@ impl Exception {
     }
 
     /// The same exception, naming the parameter at fault.
-    pub fn locator(mut self, parameter: &'static str) -> Exception {
-        self.locator = Some(parameter);
+    pub fn locator(mut self, parameter: impl Into<String>) -> Exception {
+        self.locator = Some(parameter.into());
         self
     }
 
@@ -74,7 +74,7 @@ impl Exception {
             Code::NoApplicableCode => String::new(),
             c => format!(" code=\"{}\"", c.as_str()),
         };
-        let locator = self.locator.map(|l| format!(" locator=\"{l}\"")).unwrap_or_default();
+        let locator = self.locator.as_deref().map(|l| format!(" locator=\"{}\"", escape(l))).unwrap_or_default();
         let message = escape(&self.message);
         match version {
             Version::V111 => (

@@ -146,14 +146,16 @@ pub async fn bind(config: Option<&Path>, options: ServeOptions) -> anyhow::Resul
     let config = config.map(Path::to_path_buf);
     let (cfg, region) =
         tokio::task::spawn_blocking(move || crate::config::load_with_config(config.as_deref())).await??;
-    let settings = cfg.server.clone();
+    let mut settings = cfg.server.clone();
     let bind = options.bind.unwrap_or_else(|| settings.bind.clone());
     let backend = cfg.tile_cache.backend(options.cache_dir.as_deref());
     let store = tokio::task::spawn_blocking(move || crate::cache::open(&backend)).await??;
     let cache = store.describe();
-    let state = AppState::new(region, store, cfg.tile_cache.lock_ttl(), settings)?;
     let listener =
         tokio::net::TcpListener::bind(&bind).await.map_err(|e| anyhow::anyhow!("cannot listen on {bind}: {e}"))?;
+    // The address listened on, its port chosen if 0 was asked for.
+    settings.bind = listener.local_addr()?.to_string();
+    let state = AppState::new(region, store, cfg.tile_cache.lock_ttl(), settings)?;
     Ok(Bound { listener, state, cache })
 }
 

@@ -6,6 +6,8 @@
 
 use super::products::{Encoding, Product};
 use super::respond::{self, TileMeta};
+use super::service::Tile;
+use super::wms::picture::{self, PictureFormat};
 use super::wms::request::MapLayer;
 use super::{AppState, ServeError};
 use crate::cem::Layer;
@@ -66,30 +68,32 @@ async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Nex
     // Kept for a WMS timeout's report, which speaks the request's version.
     let query = (route == "wms").then(|| request.uri().query().unwrap_or("").to_string());
     let response = if request.uri().to_string().len() > MAX_URI_BYTES {
-        (StatusCode::URI_TOO_LONG, format!("request URI longer than {MAX_URI_BYTES} bytes")).into_response()
+        let message = format!("request URI longer than {MAX_URI_BYTES} bytes");
+        refused(query.as_deref(), StatusCode::URI_TOO_LONG, message)
     } else {
         match tokio::time::timeout(timeout, next.run(request)).await {
             Ok(response) => response,
-            Err(_) => timed_out(query.as_deref(), timeout),
+            // Its tile is still computed and cached for the retry.
+            Err(_) => {
+                let message = format!("the request took longer than {timeout:?}; retry later");
+                let mut response = refused(query.as_deref(), StatusCode::SERVICE_UNAVAILABLE, message);
+                response.headers_mut().insert(header::RETRY_AFTER, axum::http::HeaderValue::from_static("5"));
+                response
+            }
         }
     };
     state.metrics.request(route, response.status().as_u16(), start.elapsed());
     response
 }
 
-/// 503 for a request past the timeout (its tile is still computed and
-/// cached for the retry): a ServiceExceptionReport for a WMS `query`, text
-/// elsewhere.
-fn timed_out(wms_query: Option<&str>, timeout: std::time::Duration) -> Response {
-    let message = format!("the request took longer than {timeout:?}; retry later");
-    let retry = (header::RETRY_AFTER, "5");
-    if let Some(query) = wms_query {
-        let version = super::wms::request::version_of(query);
-        let (mime, body) =
-            super::exception::Exception::new(super::exception::Code::NoApplicableCode, message).report(version);
-        return (StatusCode::SERVICE_UNAVAILABLE, [(header::CONTENT_TYPE, mime), retry], body).into_response();
-    }
-    (StatusCode::SERVICE_UNAVAILABLE, [retry], message).into_response()
+/// A request refused before its handler answered: a ServiceExceptionReport
+/// (in the version asked for) for a WMS `query`, text elsewhere.
+fn refused(wms_query: Option<&str>, status: StatusCode, message: String) -> Response {
+    let Some(query) = wms_query else { return (status, message).into_response() };
+    let version = super::wms::request::version_of(query);
+    let (mime, body) =
+        super::exception::Exception::new(super::exception::Code::NoApplicableCode, message).report(version);
+    (status, [(header::CONTENT_TYPE, mime)], body).into_response()
 }
 
 fn route_label(path: &str) -> &'static str {
@@ -172,47 +176,80 @@ async fn tile(
     headers: &HeaderMap,
 ) -> Result<Response, ServeError> {
     let layer = parse_layer(layer)?;
-    let encoding = match (layer, ext.to_ascii_lowercase().as_str()) {
-        (layer, "png") if layer.is_picture() => Encoding::Rgba,
-        (layer, _) if layer.is_picture() => {
-            return Err(ServeError::BadRequest(format!("{} tiles are .png", layer.name())));
-        }
-        (_, "bil" | "bil16") => Encoding::Data(Format::Bil16),
-        (_, "bil32") => Encoding::Data(Format::Bil32),
-        (_, "png") => Encoding::Data(Format::Png16),
-        (_, "tif" | "tiff") => Encoding::Data(Format::Tiff),
-        (_, other) => {
+    if layer.is_picture() {
+        let format = picture_extension(layer, ext)?;
+        tile_exists(state, id)?;
+        let t = state.tiles.get(Product::Tile { layer, id, halo, encoding: Encoding::Rgba }).await?;
+        return picture_tile(state, layer, t, format, headers);
+    }
+    let encoding = match ext.to_ascii_lowercase().as_str() {
+        "bil" | "bil16" => Encoding::Data(Format::Bil16),
+        "bil32" => Encoding::Data(Format::Bil32),
+        "png" => Encoding::Data(Format::Png16),
+        "tif" | "tiff" => Encoding::Data(Format::Tiff),
+        other => {
             return Err(ServeError::BadRequest(format!("tile extension .{other}: use bil, bil32, png or tif")));
         }
     };
-    if state.region().tiles.check(id).is_err() {
-        return Err(ServeError::NotFound);
-    }
+    tile_exists(state, id)?;
     let product = Product::Tile { layer, id, halo, encoding };
     let t = state.tiles.get(product).await?;
     Ok(respond::tile(&t, &meta(state, layer, encoding), headers))
 }
 
-/// `/xyz/{layer}/{z}/{x}/{y}.png`: Terrarium heights, or the relief preview.
+/// `/xyz/{layer}/{z}/{x}/{y}.png`: Terrarium heights, or the pictures (also
+/// `.jpg`).
 async fn xyz(
     State(state): State<Arc<AppState>>,
     Path((layer, z, x, file)): Path<(String, u32, u64, String)>,
     headers: HeaderMap,
 ) -> Result<Response, ServeError> {
-    let y: u64 = file.strip_suffix(".png").and_then(|s| s.parse().ok()).ok_or(ServeError::NotFound)?;
     let layer = parse_layer(&layer)?;
     if matches!(layer, MapLayer::Data(Layer::Cover | Layer::Surface)) {
         return Err(ServeError::BadRequest(format!(
-            "{} is not a height: XYZ tiles carry heights or the relief",
+            "{} is not a height: XYZ tiles carry heights or the pictures",
             layer.name()
         )));
     }
+    let (y, ext) = file.rsplit_once('.').ok_or(ServeError::NotFound)?;
+    let picture = match layer.is_picture() {
+        true => Some(picture_extension(layer, ext)?),
+        false if ext.eq_ignore_ascii_case("png") => None,
+        false => return Err(ServeError::BadRequest(format!("{} XYZ tiles are Terrarium .png", layer.name()))),
+    };
+    let y: u64 = y.parse().map_err(|_| ServeError::NotFound)?;
     if z > 24 || x >= 1 << z || y >= 1 << z {
         return Err(ServeError::NotFound);
     }
     let t = state.tiles.get(Product::Xyz { layer, zxy: (z, x, y) }).await?;
-    let encoding = if layer.is_picture() { Encoding::Rgba } else { Encoding::Terrarium };
-    Ok(respond::tile(&t, &meta(&state, layer, encoding), &headers))
+    match picture {
+        Some(format) => picture_tile(&state, layer, t, format, &headers),
+        None => Ok(respond::tile(&t, &meta(&state, layer, Encoding::Terrarium), &headers)),
+    }
+}
+
+/// The encoding a picture tile's extension asks for.
+fn picture_extension(layer: MapLayer, ext: &str) -> Result<PictureFormat, ServeError> {
+    PictureFormat::of_extension(ext)
+        .ok_or_else(|| ServeError::BadRequest(format!("{} tiles are .png or .jpg", layer.name())))
+}
+
+/// A cached picture tile answered as a transparent PNG or as JPEG on white.
+fn picture_tile(
+    state: &AppState,
+    layer: MapLayer,
+    t: Arc<Tile>,
+    format: PictureFormat,
+    headers: &HeaderMap,
+) -> Result<Response, ServeError> {
+    let t = picture::answer(t, None, format)?;
+    let meta = TileMeta { mime: format.mime(), ..meta(state, layer, Encoding::Rgba) };
+    Ok(respond::tile(&t, &meta, headers))
+}
+
+/// Tiles outside the region's tiling are not found.
+fn tile_exists(state: &AppState, id: TileId) -> Result<(), ServeError> {
+    state.region().tiles.check(id).map_err(|_| ServeError::NotFound)
 }
 
 fn parse_layer(name: &str) -> Result<MapLayer, ServeError> {

@@ -131,12 +131,18 @@ pub fn get(url: &str, headers: &[(&str, &str)]) -> Reply {
 /// GET with `Accept-Encoding: gzip` over a bare socket, without decompressing
 /// (to see what the server sends on the wire).
 pub fn get_raw(url: &str) -> Reply {
-    use std::io::Write;
     let rest = url.strip_prefix("http://").expect("http URL");
     let (host, path) = rest.split_at(rest.find('/').unwrap_or(rest.len()));
+    let request = format!("GET {path} HTTP/1.1\r\nHost: {host}\r\nAccept-Encoding: gzip\r\nConnection: close\r\n\r\n");
+    send_raw(host, &request)
+}
+
+/// Sends `request` as it is written to `host` (`address:port`) and reads
+/// the reply, dechunked.
+pub fn send_raw(host: &str, request: &str) -> Reply {
+    use std::io::Write;
     let mut stream = std::net::TcpStream::connect(host).expect("connect");
-    write!(stream, "GET {path} HTTP/1.1\r\nHost: {host}\r\nAccept-Encoding: gzip\r\nConnection: close\r\n\r\n")
-        .expect("send");
+    stream.write_all(request.as_bytes()).expect("send");
     let mut all = Vec::new();
     stream.read_to_end(&mut all).expect("read");
     let split = all.windows(4).position(|w| w == b"\r\n\r\n").expect("headers end");

@@ -42,6 +42,17 @@ fn capabilities_are_valid_in_both_versions() {
 }
 
 #[test]
+fn capabilities_without_a_host_header_name_the_port_listened_on() {
+    let dir = TempDir::new("srv-nohost");
+    let server = Server::start(None, &dir.join("cache"));
+    let address = server.base.trim_start_matches("http://");
+    let port = address.rsplit_once(':').unwrap().1;
+    let r = crate::http::send_raw(address, "GET /wms?SERVICE=WMS&REQUEST=GetCapabilities HTTP/1.0\r\n\r\n");
+    assert_eq!(r.status, 200);
+    assert!(r.text().contains(&format!("http://localhost:{port}/wms")), "{}", r.text());
+}
+
+#[test]
 fn the_same_area_in_every_axis_order_gives_identical_bytes() {
     let dir = TempDir::new("srv-axes");
     let server = Server::start(None, &dir.join("cache"));
@@ -104,6 +115,39 @@ fn maps_reaching_past_the_data_keep_their_encoding_and_background() {
     for name in ["x-sylva-offset", "x-sylva-scale", "etag", "cache-control"] {
         assert!(empty.header(name).is_some(), "{name} missing from an empty map");
     }
+}
+
+#[test]
+fn pictures_are_offered_in_jpeg_on_their_background() {
+    let dir = TempDir::new("srv-jpeg");
+    let server = Server::start(None, &dir.join("cache"));
+    let jpeg = |path: &str| {
+        let r = server.get(path);
+        assert_eq!((r.status, r.header("content-type")), (200, Some("image/jpeg")), "{path}: {}", r.text());
+        image::load_from_memory_with_format(&r.body, image::ImageFormat::Jpeg).unwrap().into_rgb8()
+    };
+    let relief = "/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=relief&STYLES=&CRS=CRS:84&BBOX=9.9,46.25,10.4,46.5&WIDTH=100&HEIGHT=50";
+    let png = server.get(&format!("{relief}&FORMAT=image/png"));
+    let png = image::load_from_memory(&png.body).unwrap().into_rgb8();
+    let on_white = jpeg(&format!("{relief}&FORMAT=image/jpeg"));
+    let near = |a: [u8; 3], b: [u8; 3], by: u8| a.iter().zip(b).all(|(x, y)| x.abs_diff(y) <= by);
+    assert!(near(on_white.get_pixel(0, 0).0, [255, 255, 255], 3), "no data: white");
+    let tinted = jpeg(&format!("{relief}&FORMAT=image/jpeg&BGCOLOR=0x203040&TRANSPARENT=TRUE"));
+    assert!(near(tinted.get_pixel(0, 0).0, [0x20, 0x30, 0x40], 3), "JPEG lies on BGCOLOR even if transparent is asked");
+    // The data is the PNG's, within JPEG's loss: mean difference of a few levels.
+    let (x0, y0, x1, y1) = (35, 15, 65, 35);
+    let diff: u32 = (y0..y1)
+        .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            (0..3).map(|c| u32::from(png.get_pixel(x, y).0[c].abs_diff(on_white.get_pixel(x, y).0[c]))).sum::<u32>()
+        })
+        .sum();
+    let mean = f64::from(diff) / f64::from(3 * (x1 - x0) * (y1 - y0));
+    assert!(mean < 8.0, "mean difference from the PNG {mean:.1}");
+    let t = demo_tile();
+    assert_eq!(jpeg(&format!("/tiles/relief/{}/{}/{}_{}.jpg", t.level, t.row, t.row, t.col)).dimensions(), (513, 513));
+    let trees = format!("{relief}&FORMAT=image/jpeg&EXCEPTIONS=INIMAGE").replace("LAYERS=relief", "LAYERS=trees");
+    assert_eq!(jpeg(&trees).dimensions(), (100, 50), "an in-image exception in JPEG");
 }
 
 #[test]
@@ -228,6 +272,20 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
         ("/tiles/cem/3/1/1_1.bil?halo=100000", ""),
         ("/tiles?T=cem&L=x&X=1&Y=1", ""),
         ("/xyz/cover/3/1/1.png", ""),
+        ("/xyz/dem/3/1/1.jpg", "Terrarium .png"),
+        ("/tiles/relief/3/1/1_1.gif", ".png or .jpg"),
+        (
+            "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/jpeg",
+            "InvalidFormat",
+        ),
+        (
+            "/wms?REQUEST=GetMap&VERSION=abc&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png",
+            "1.1.1 and 1.3.0",
+        ),
+        (
+            "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png&LAYERS=cem",
+            "given twice",
+        ),
     ];
     for (path, code) in cases {
         let r = server.get(path);
@@ -237,8 +295,10 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
     for path in ["/tiles/cem/99/1/1_1.bil", "/tiles/cem/3/1/2_1.bil", "/xyz/dem/3/99/1.png", "/nowhere"] {
         assert_eq!(server.get(path).status, 404, "{path}");
     }
-    let long = format!("/wms?x={}", "a".repeat(10_000));
-    assert_eq!(server.get(&long).status, 414);
+    let long = server.get(&format!("/wms?x={}", "a".repeat(10_000)));
+    assert_eq!(long.status, 414);
+    assert!(long.text().contains("ServiceExceptionReport"), "{}", long.text());
+    assert_eq!(server.get(&format!("/tiles?x={}", "a".repeat(10_000))).status, 414);
     assert_eq!(server.get("/health").status, 200, "still up");
 }
 
@@ -298,6 +358,9 @@ fn xyz_tiles_are_terrarium_heights() {
     let heights: Vec<f64> = img.pixels().map(|p| sylva::encode::terrarium::height(p.0)).collect();
     assert!(heights.iter().all(|h| (800.0..3600.0).contains(h)), "{:?}", &heights[..4]);
     assert_eq!(server.get(&format!("/xyz/relief/{z}/{tx}/{ty}.png")).status, 200);
+    let jpeg = server.get(&format!("/xyz/relief/{z}/{tx}/{ty}.jpg"));
+    assert_eq!((jpeg.status, jpeg.header("content-type")), (200, Some("image/jpeg")));
+    assert_eq!(image::load_from_memory(&jpeg.body).unwrap().into_rgb8().dimensions(), (256, 256));
 }
 
 #[test]

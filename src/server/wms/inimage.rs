@@ -3,6 +3,7 @@
 //! message (PNG) or nothing (transparent PNG, nodata grids); and the empty
 //! map answered where a request has no data.
 
+use super::picture::{self, PictureFormat};
 use super::request::{MapFormat, MapLayer};
 use crate::cem::Layer;
 use crate::encode::{self, Format, Quantization, Samples};
@@ -27,10 +28,12 @@ pub fn blank(
 ) -> Vec<u8> {
     let (w, h) = (grid.width(), grid.height());
     let MapLayer::Data(layer) = layer else {
-        return rgba_png(&super::background::filled(w * h, background), w, h);
+        let picture = format.picture().unwrap_or(PictureFormat::Png);
+        return picture::encode(&picture::filled(w * h, background), w, h, background, picture).unwrap_or_default();
     };
     let f = match format {
-        MapFormat::Png => Format::Png16,
+        // A data layer is never asked for in JPEG (the request is refused).
+        MapFormat::Png | MapFormat::Jpeg => Format::Png16,
         MapFormat::Bil16 => Format::Bil16,
         MapFormat::Bil32 => Format::Bil32,
         MapFormat::Tiff => Format::Tiff,
@@ -45,10 +48,10 @@ pub fn blank(
     encoded.map(|e| e.bytes).unwrap_or_default()
 }
 
-/// An RGBA PNG of `w × h` of `background` (transparent if none) with
+/// A picture of `w × h` of `background` (transparent if none and PNG) with
 /// `message` written on it.
-pub fn message(message: &str, w: usize, h: usize, background: Option<[u8; 3]>) -> Vec<u8> {
-    let mut rgba = super::background::filled(w * h, background);
+pub fn message(message: &str, w: usize, h: usize, background: Option<[u8; 3]>, format: PictureFormat) -> Vec<u8> {
+    let mut rgba = picture::filled(w * h, background);
     if let Ok(font) = FontRef::try_from_slice(FONT) {
         let scaled = font.as_scaled(PxScale::from(TEXT_PX));
         let advance = scaled.h_advance(font.glyph_id('M')).max(1.0);
@@ -73,7 +76,7 @@ pub fn message(message: &str, w: usize, h: usize, background: Option<[u8; 3]>) -
             }
         }
     }
-    rgba_png(&rgba, w, h)
+    picture::encode(&rgba, w, h, background, format).unwrap_or_default()
 }
 
 /// Dark red ink of `coverage` on one RGBA pixel: blended into an opaque
@@ -91,21 +94,17 @@ fn ink(pixel: &mut [u8], coverage: f32, opaque: bool) {
     }
 }
 
-fn rgba_png(rgba: &[u8], w: usize, h: usize) -> Vec<u8> {
-    encode::png(rgba, w, h, image::ExtendedColorType::Rgba8).unwrap_or_default()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn messages_leave_ink_and_blanks_are_empty() {
-        let png = message("LayerNotDefined: layer \"x\" is not served", 200, 60, None);
+        let png = message("LayerNotDefined: layer \"x\" is not served", 200, 60, None, PictureFormat::Png);
         let img = image::load_from_memory(&png).unwrap().into_rgba8();
         assert_eq!(img.dimensions(), (200, 60));
         assert!(img.pixels().filter(|p| p.0[3] > 128).count() > 100);
-        let on_white = message("LayerNotDefined", 200, 60, Some([255, 255, 255]));
+        let on_white = message("LayerNotDefined", 200, 60, Some([255, 255, 255]), PictureFormat::Png);
         let img = image::load_from_memory(&on_white).unwrap().into_rgba8();
         assert!(img.pixels().all(|p| p.0[3] == 255), "opaque on its background");
         assert!(img.pixels().filter(|p| p.0[1] < 128).count() > 50, "with red ink");
@@ -124,5 +123,8 @@ mod tests {
         assert!(see_through.into_rgba8().pixels().all(|p| p.0[3] == 0));
         let white = blank(&grid, MapLayer::Relief, MapFormat::Png, q, Some([255, 250, 240]));
         assert!(image::load_from_memory(&white).unwrap().into_rgba8().pixels().all(|p| p.0 == [255, 250, 240, 255]));
+        let jpeg = blank(&grid, MapLayer::Colour, MapFormat::Jpeg, q, None);
+        let jpeg = image::load_from_memory_with_format(&jpeg, image::ImageFormat::Jpeg).unwrap().into_rgb8();
+        assert!(jpeg.pixels().all(|p| p.0.iter().all(|&c| c >= 250)), "JPEG has no alpha: white");
     }
 }

@@ -4,13 +4,14 @@
 //! comes from the tile cache; one whose pixel centres lie on a level's lattice
 //! is stitched from cached tiles; any other grid is computed directly.
 
-mod background;
 pub mod capabilities;
 mod inimage;
+pub mod picture;
 pub mod request;
 
 use super::exception::Exception;
 use super::products::{Encoding, Product};
+use super::respond::TileMeta;
 use super::routes::meta;
 use super::{AppState, ServeError, respond};
 use crate::cem::Layer;
@@ -20,6 +21,7 @@ use crate::raster::{Raster, Window};
 use axum::extract::{RawQuery, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use picture::PictureFormat;
 use request::{ExceptionStyle, GetMap, Limits, MapFormat, MapLayer, Reply, Request};
 use std::sync::Arc;
 
@@ -75,24 +77,31 @@ pub async fn other_method() -> Response {
     (StatusCode::METHOD_NOT_ALLOWED, [(header::CONTENT_TYPE, mime), (header::ALLOW, "GET, HEAD")], body).into_response()
 }
 
-/// The absolute URL of this endpoint: configured, or from the Host header.
+/// The absolute URL of this endpoint: configured, or from the Host header
+/// (an HTTP/1.0 request may have none: `localhost` at the port listened on).
 fn endpoint(state: &AppState, headers: &HeaderMap) -> String {
     if let Some(url) = &state.settings.public_url {
         return format!("{}/wms", url.trim_end_matches('/'));
     }
-    let host = headers.get(header::HOST).and_then(|h| h.to_str().ok()).filter(|h| !h.is_empty());
-    let host = host.unwrap_or("localhost");
-    format!("http://{host}/wms")
+    match headers.get(header::HOST).and_then(|h| h.to_str().ok()).filter(|h| !h.is_empty()) {
+        Some(host) => format!("http://{host}/wms"),
+        None => {
+            let port = state.settings.bind.rsplit_once(':').map_or("80", |(_, port)| port);
+            format!("http://localhost:{port}/wms")
+        }
+    }
 }
 
 async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<Response, ServeError> {
-    let encoding = match (map.layer, map.format) {
-        (layer, _) if layer.is_picture() => Encoding::Rgba,
-        (_, MapFormat::Png) => Encoding::Data(Format::Png16),
-        (_, MapFormat::Tiff) => Encoding::Data(Format::Tiff),
-        (_, MapFormat::Bil16) => Encoding::Data(Format::Bil16),
-        (_, MapFormat::Bil32) => Encoding::Data(Format::Bil32),
+    let encoding = match map.format {
+        _ if map.layer.is_picture() => Encoding::Rgba,
+        MapFormat::Png => Encoding::Data(Format::Png16),
+        MapFormat::Tiff => Encoding::Data(Format::Tiff),
+        MapFormat::Bil16 => Encoding::Data(Format::Bil16),
+        MapFormat::Bil32 => Encoding::Data(Format::Bil32),
+        MapFormat::Jpeg => return Err(ServeError::BadRequest("JPEG is offered for the pictures only".into())),
     };
+    let meta = TileMeta { mime: map.format.mime(), ..meta(state, map.layer, encoding) };
     let tiles = &state.region().tiles;
     let tile = match tiles.tile_of(&map.grid) {
         Some(id) => state.tiles.get(Product::Tile { layer: map.layer, id, halo: 0, encoding }).await?,
@@ -106,16 +115,13 @@ async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<
         // headers of any other (its heights' encoding, its ETag).
         let body = inimage::blank(&map.grid, map.layer, map.format, state.region().heights_16, map.background);
         let blank = super::service::Tile::new(body, "blank".into());
-        return Ok(respond::tile(&blank, &meta(state, map.layer, encoding), headers));
+        return Ok(respond::tile(&blank, &meta, headers));
     }
-    let tile = match map.background {
-        Some(colour) if map.layer.is_picture() => {
-            let opaque = background::flatten(&tile.bytes, colour).map_err(ServeError::internal)?;
-            Arc::new(super::service::Tile::new(opaque, tile.timing.clone()))
-        }
-        _ => tile,
+    let tile = match map.format.picture().filter(|_| map.layer.is_picture()) {
+        Some(format) => picture::answer(tile, map.background, format)?,
+        None => tile,
     };
-    Ok(respond::tile(&tile, &meta(state, map.layer, encoding), headers))
+    Ok(respond::tile(&tile, &meta, headers))
 }
 
 /// The image stitched from cached BIL32 tiles, when its pixel centres lie on
@@ -174,8 +180,9 @@ fn paste(out: &mut Raster<f32>, bil32: &[u8], n1: i64, (x0, y0): (i64, i64)) {
 /// An exception answered as the request asked: a report (400), or an image.
 fn exception(e: &Exception, reply: Reply, state: &AppState) -> Response {
     match (reply.style, reply.image) {
-        (ExceptionStyle::InImage, Some((w, h, MapFormat::Png))) => {
-            ([(header::CONTENT_TYPE, "image/png")], inimage::message(&e.to_string(), w, h, reply.background))
+        (ExceptionStyle::InImage, Some((w, h, format @ (MapFormat::Png | MapFormat::Jpeg)))) => {
+            let picture = if format == MapFormat::Jpeg { PictureFormat::Jpeg } else { PictureFormat::Png };
+            ([(header::CONTENT_TYPE, format.mime())], inimage::message(&e.to_string(), w, h, reply.background, picture))
                 .into_response()
         }
         (ExceptionStyle::InImage | ExceptionStyle::Blank, Some((w, h, format))) => {
@@ -184,7 +191,10 @@ fn exception(e: &Exception, reply: Reply, state: &AppState) -> Response {
                 Ok(g) => {
                     // The request did not parse: a picture of its background,
                     // or nodata in the format asked for.
-                    let layer = if format == MapFormat::Png { MapLayer::Relief } else { MapLayer::Data(Layer::Dem) };
+                    let layer = match format.picture() {
+                        Some(_) => MapLayer::Relief,
+                        None => MapLayer::Data(Layer::Dem),
+                    };
                     (
                         [(header::CONTENT_TYPE, format.mime())],
                         inimage::blank(&g, layer, format, state.region().heights_16, reply.background),

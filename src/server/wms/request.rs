@@ -6,6 +6,7 @@
 //! box as lat,lon; CRS:84, EPSG:3857 and all of WMS 1.1.1 as x,y (lon,lat).
 
 use super::super::exception::{Code, Exception};
+use super::picture::PictureFormat;
 use crate::cem::Layer;
 use crate::grid::mercator::MercatorBox;
 use crate::grid::{BBox, SampleGrid};
@@ -101,12 +102,15 @@ pub enum MapFormat {
     Png,
     /// `image/tiff`: float32 GeoTIFF.
     Tiff,
+    /// `image/jpeg`: pictures only (`relief`, `colour`), on their background.
+    Jpeg,
 }
 
 impl MapFormat {
     /// Every format, as named in capabilities.
-    pub const ALL: [(MapFormat, &'static str); 4] = [
+    pub const ALL: [(MapFormat, &'static str); 5] = [
         (MapFormat::Png, "image/png"),
+        (MapFormat::Jpeg, "image/jpeg"),
         (MapFormat::Tiff, "image/tiff"),
         (MapFormat::Bil16, "application/bil16"),
         (MapFormat::Bil32, "application/bil32"),
@@ -118,6 +122,16 @@ impl MapFormat {
             "image/tiff" | "image/geotiff" | "tiff" => Some(MapFormat::Tiff),
             "application/bil16" | "application/bil" | "image/bil" => Some(MapFormat::Bil16),
             "application/bil32" => Some(MapFormat::Bil32),
+            "image/jpeg" | "image/jpg" | "jpeg" | "jpg" => Some(MapFormat::Jpeg),
+            _ => None,
+        }
+    }
+
+    /// The picture encoding of PNG and JPEG.
+    pub fn picture(self) -> Option<PictureFormat> {
+        match self {
+            MapFormat::Png => Some(PictureFormat::Png),
+            MapFormat::Jpeg => Some(PictureFormat::Jpeg),
             _ => None,
         }
     }
@@ -192,6 +206,10 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)>
     let version = negotiate(&params);
     let mut reply = Reply { version, style: ExceptionStyle::Xml, image: None, background: None };
     let fail = |e: Exception, reply: Reply| Err((e, reply));
+    if let Some((key, [first, second])) = &params.conflict {
+        let message = format!("{key} is given twice, as {first:?} and {second:?}: give it once");
+        return fail(Exception::new(Code::InvalidParameterValue, message).locator(key.as_str()), reply);
+    }
     if let Some(service) = params.get("SERVICE").filter(|s| !s.eq_ignore_ascii_case("WMS")) {
         return fail(
             Exception::new(Code::InvalidParameterValue, format!("SERVICE={service}: only WMS is served")),
@@ -206,7 +224,7 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)>
         "getmap" | "map" => {
             reply.style = exception_style(params.get("EXCEPTIONS"));
             reply.image = image_of(&params);
-            reply.background = background(params.get("TRANSPARENT"), params.get("BGCOLOR")).unwrap_or(None);
+            reply.background = background(&params, reply.image.map(|(_, _, f)| f)).unwrap_or(None);
             get_map(&params, version, limits).map(Request::GetMap).map_err(|e| (e, reply))
         }
         other => fail(Exception::new(Code::OperationNotSupported, format!("REQUEST={other} is not supported")), reply),
@@ -222,15 +240,31 @@ pub fn version_of(query: &str) -> Version {
 /// version lower than the one asked for, 1.1.1 (also the lowest known, for
 /// anything older); 1.3.0 from there on, and when none or no number is given.
 fn negotiate(params: &Params) -> Version {
-    let asked = params.get("VERSION").or(params.get("WMTVER"));
-    // "1.3" is 1.3.0: missing parts are zeros.
-    let number = |text: &str| -> Option<[u32; 3]> {
-        let parts: Vec<u32> = text.trim().split('.').map(|p| p.parse().ok()).collect::<Option<_>>()?;
-        (parts.len() <= 3).then(|| std::array::from_fn(|i| parts.get(i).copied().unwrap_or(0)))
-    };
-    match asked.and_then(number) {
+    match asked_version(params).and_then(|(_, number)| number) {
         Some(v) if v < [1, 3, 0] => Version::V111,
         _ => Version::V130,
+    }
+}
+
+/// The version asked for (`VERSION`, or WMS 1.0's `WMTVER`) as written and
+/// as a number, if it is one ("1.3" is 1.3.0: missing parts are zeros).
+fn asked_version(params: &Params) -> Option<(&str, Option<[u32; 3]>)> {
+    let text = params.get("VERSION").or(params.get("WMTVER"))?;
+    let parts: Option<Vec<u32>> = text.trim().split('.').map(|p| p.parse().ok()).collect();
+    let number = parts.filter(|p| p.len() <= 3).map(|p| std::array::from_fn(|i| p.get(i).copied().unwrap_or(0)));
+    Some((text, number))
+}
+
+/// A GetMap names a version served (1.0 and 1.1 read as 1.1.1), or none
+/// (1.3.0): only capabilities are negotiated.
+fn check_map_version(params: &Params) -> Result<(), Exception> {
+    match asked_version(params) {
+        None | Some((_, Some([1, 0 | 1, _] | [1, 3, 0]))) => Ok(()),
+        Some((text, _)) => Err(Exception::new(
+            Code::InvalidParameterValue,
+            format!("VERSION={text}: GetMap is served in WMS 1.1.1 and 1.3.0"),
+        )
+        .locator("VERSION")),
     }
 }
 
@@ -260,6 +294,7 @@ fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, 
             .filter(|v| !v.is_empty())
             .ok_or_else(|| Exception::new(Code::MissingParameterValue, format!("{key} is missing")))
     };
+    check_map_version(params)?;
     let layers = required("LAYERS")?;
     let layer = match layers.split(',').collect::<Vec<_>>()[..] {
         [one] => MapLayer::parse(one.trim()).ok_or_else(|| {
@@ -280,20 +315,33 @@ fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, 
     let format = MapFormat::parse(format_text).ok_or_else(|| {
         Exception::new(Code::InvalidFormat, format!("format {format_text:?} is not offered")).locator("FORMAT")
     })?;
-    if layer.is_picture() && format != MapFormat::Png {
-        return Err(Exception::new(Code::InvalidFormat, format!("{} is an image: ask for image/png", layer.name()))
-            .locator("FORMAT"));
+    if layer.is_picture() && format.picture().is_none() {
+        return Err(Exception::new(
+            Code::InvalidFormat,
+            format!("{} is a picture: ask for image/png or image/jpeg", layer.name()),
+        )
+        .locator("FORMAT"));
+    }
+    if !layer.is_picture() && format == MapFormat::Jpeg {
+        return Err(Exception::new(
+            Code::InvalidFormat,
+            format!("{} is data: JPEG is offered for the pictures (relief, colour)", layer.name()),
+        )
+        .locator("FORMAT"));
     }
     let (width, height) = (size(required("WIDTH")?, "WIDTH", limits)?, size(required("HEIGHT")?, "HEIGHT", limits)?);
     let bbox = numbers(required("BBOX")?)?;
     let grid = grid(bbox, crs, version, width, height)?;
-    let background = background(params.get("TRANSPARENT"), params.get("BGCOLOR"))?;
+    let background = background(params, Some(format))?;
     Ok(GetMap { version, layer, crs, grid, format, background })
 }
 
 /// `TRANSPARENT` (`FALSE` unless given) and `BGCOLOR` (`0xRRGGBB`, white
-/// unless given): the background colour, or `None` for transparent.
-fn background(transparent: Option<&str>, colour: Option<&str>) -> Result<Option<[u8; 3]>, Exception> {
+/// unless given): the background colour, or `None` for transparent. JPEG
+/// has no alpha: it lies on `BGCOLOR` whatever `TRANSPARENT` says.
+fn background(params: &Params, format: Option<MapFormat>) -> Result<Option<[u8; 3]>, Exception> {
+    let transparent = params.get("TRANSPARENT").filter(|_| format != Some(MapFormat::Jpeg));
+    let colour = params.get("BGCOLOR");
     let bad = |key: &'static str, text: &str, want: &str| {
         Exception::new(Code::InvalidParameterValue, format!("{key}={text}: {want}")).locator(key)
     };
@@ -364,22 +412,35 @@ fn grid(b: [f64; 4], crs: RequestCrs, version: Version, width: usize, height: us
     }
 }
 
-/// Query parameters with upper-cased keys; the first value of a key wins.
-struct Params(HashMap<String, String>);
+/// Query parameters with upper-cased keys. A key given twice alike (a
+/// client adding `SERVICE=WMS` to a URL that has it) is one; given twice
+/// differently it is ambiguous, kept in `conflict` to be refused.
+struct Params {
+    values: HashMap<String, String>,
+    /// The first key given two different values, and the two.
+    conflict: Option<(String, [String; 2])>,
+}
 
 impl Params {
     fn new(query: &str) -> Params {
-        let mut map = HashMap::new();
+        let mut values: HashMap<String, String> = HashMap::new();
+        let mut conflict = None;
         for (k, v) in form_urlencoded::parse(query.as_bytes()) {
-            if !k.is_empty() {
-                map.entry(k.to_ascii_uppercase()).or_insert_with(|| v.into_owned());
+            if k.is_empty() {
+                continue;
+            }
+            let key = k.to_ascii_uppercase();
+            match values.get(&key) {
+                None => _ = values.insert(key, v.into_owned()),
+                Some(first) if first.trim().eq_ignore_ascii_case(v.trim()) => {}
+                Some(first) => _ = conflict.get_or_insert_with(|| (key, [first.clone(), v.into_owned()])),
             }
         }
-        Params(map)
+        Params { values, conflict }
     }
 
     fn get(&self, key: &str) -> Option<&str> {
-        self.0.get(key).map(String::as_str)
+        self.values.get(key).map(String::as_str)
     }
 }
 
@@ -490,6 +551,32 @@ mod tests {
         }
         for v in ["1.3.0", "1.3", "1.4.0", "2.0.0", "", "x.y"] {
             assert_eq!(asked(v), Version::V130, "{v}");
+        }
+    }
+
+    #[test]
+    fn get_map_names_a_version_served() {
+        let base = "SERVICE=WMS&REQUEST=GetMap&LAYERS=dem&SRS=CRS:84&CRS=CRS:84&BBOX=-106,40,-105,41&WIDTH=4&HEIGHT=2&FORMAT=image/png";
+        for (v, version) in [("1.0.0", Version::V111), ("1.1.0", Version::V111), ("1.1.1", Version::V111)] {
+            assert_eq!(map(&format!("{base}&VERSION={v}")).version, version, "{v}");
+        }
+        assert_eq!(map(&format!("{base}&VERSION=1.3")).version, Version::V130);
+        assert_eq!(map(base).version, Version::V130, "no version: the latest");
+        for v in ["abc", "1.2.0", "1.4.0", "2.0.0", "1.3.0.1", ""] {
+            let Err((e, _)) = parse(&format!("{base}&VERSION={v}"), LIMITS) else { panic!("{v} accepted") };
+            assert_eq!(e.code, Code::InvalidParameterValue, "{v}");
+            assert!(e.to_string().contains("1.1.1 and 1.3.0"), "{v}: {e}");
+        }
+    }
+
+    #[test]
+    fn a_key_given_twice_must_say_the_same() {
+        let base = "SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&CRS=EPSG:4326&BBOX=40,-106,41,-105&WIDTH=4&HEIGHT=2&FORMAT=image/png&LAYERS=dem";
+        assert_eq!(map(&format!("{base}&service=wms&Layers=DEM ")).layer, MapLayer::Data(Layer::Dem));
+        for twice in ["&LAYERS=cem", "&version=1.1.1", "&bbox=40,-106,41,-104"] {
+            let Err((e, _)) = parse(&format!("{base}{twice}"), LIMITS) else { panic!("{twice} accepted") };
+            assert_eq!(e.code, Code::InvalidParameterValue, "{twice}");
+            assert!(e.to_string().contains("given twice"), "{twice}: {e}");
         }
     }
 
