@@ -159,3 +159,21 @@ fn the_shipped_gdal_description_reads_the_demo_heights() {
         heights.iter().fold((f32::MAX, f32::MIN), |(a, b), &h| (a.min(h), b.max(h)))
     );
 }
+
+#[test]
+fn gdal_reads_the_relief_from_a_plain_wms_url_in_its_default_jpeg() {
+    let dir = TempDir::new("client-gdal-jpeg");
+    let server = Server::start(None, &dir.join("cache"));
+    let url = format!(
+        "WMS:{}/wms?SERVICE=WMS&VERSION=1.1.1&REQUEST=GetMap&LAYERS=relief&SRS=EPSG:4326&BBOX=10.0,46.3,10.25,46.45",
+        server.base
+    );
+    let out = dir.join("relief.png");
+    run(Command::new("gdal_translate").args(["-q", "-outsize", "256", "154"]).arg(&url).arg(&out), "gdal_translate");
+    let relief = image::open(&out).unwrap();
+    assert_eq!(relief.color(), image::ColorType::Rgb8, "GDAL reads three 8-bit bands");
+    let grey: Vec<f64> = relief.into_luma8().pixels().map(|p| f64::from(p.0[0])).collect();
+    let mean = grey.iter().sum::<f64>() / grey.len() as f64;
+    let sd = (grey.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / grey.len() as f64).sqrt();
+    assert!((60.0..200.0).contains(&mean) && sd > 15.0, "a shaded map, not a blank: mean {mean:.0}, sd {sd:.0}");
+}
