@@ -523,6 +523,7 @@ enum Bench {
 
 fn main() {
     let cli = Cli::parse();
+    logs(&cli.command);
     if let Err(e) = run(cli.command) {
         eprintln!("sylva: {}", explain(&e));
         std::process::exit(1);
@@ -737,18 +738,27 @@ fn run(command: Command) -> Result<()> {
     }
 }
 
-/// Logs to stderr (`RUST_LOG` filters, default `info`; JSON lines with
-/// `SYLVA_LOG_FORMAT=json`), then serves until SIGTERM.
-#[cfg(feature = "server")]
-fn serve(config: Option<PathBuf>, options: sylva::server::ServeOptions) -> Result<()> {
-    let filter =
-        tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info,tower_http=warn".into());
+/// Logs to stderr, filtered by `RUST_LOG`: by default the server's `info`,
+/// the other commands' warnings (a tile server being retried, say) without
+/// the GPU stack's; JSON lines with `SYLVA_LOG_FORMAT=json`.
+fn logs(command: &Command) {
+    let default = match command {
+        #[cfg(feature = "server")]
+        Command::Serve { .. } => "info,tower_http=warn",
+        _ => "warn,wgpu_core=error,wgpu_hal=error,naga=error",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| default.into());
     let logs = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
     if std::env::var("SYLVA_LOG_FORMAT").is_ok_and(|f| f.eq_ignore_ascii_case("json")) {
         logs.json().init();
     } else {
         logs.with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr())).init();
     }
+}
+
+/// Serves until SIGTERM.
+#[cfg(feature = "server")]
+fn serve(config: Option<PathBuf>, options: sylva::server::ServeOptions) -> Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     runtime.block_on(sylva::server::serve(config.as_deref(), options))
 }

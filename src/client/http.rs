@@ -22,6 +22,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 const SETTINGS: LinkSettings =
     LinkSettings { timeout_ms: 60_000, retries: 6, backoff_ms: 250, breaker_failures: 5, breaker_cooldown_s: 5.0 };
 
+/// Retries and timeouts of `/tiles.json`, which computes nothing: a server
+/// that has not answered it in 10 s is not serving (three tries, 30 s).
+const CONNECT: LinkSettings = LinkSettings { timeout_ms: 10_000, retries: 2, ..SETTINGS };
+
 /// A tile server as a tile source.
 pub struct HttpSource {
     base: String,
@@ -36,14 +40,17 @@ impl HttpSource {
     /// reads its tileset.
     pub fn connect(base: &str) -> Result<HttpSource, super::source::OpenError> {
         let base = base.trim_end_matches('/').to_string();
-        let link = Link::new(&SETTINGS);
         let url = format!("{base}/tiles.json");
         let bad = |reason: String| super::source::OpenError::Server(format!("{url}: {reason}"));
-        let body = link
+        let body = Link::new(&CONNECT)
             .fetch(&url)
-            .map_err(|e| bad(e.to_string()))?
+            .map_err(|e| match e {
+                crate::source::SourceError::Upstream { problem, .. } => bad(problem),
+                other => bad(other.to_string()),
+            })?
             .ok_or_else(|| bad("not found: is it a sylva server?".into()))?;
         let (tileset, grid) = read_tileset(&body).map_err(bad)?;
+        let link = Link::new(&SETTINGS);
         Ok(HttpSource { base, tileset, grid, link, bytes: AtomicU64::new(body.len() as u64) })
     }
 

@@ -89,7 +89,11 @@ impl Link {
                     self.failures.store(0, Ordering::Relaxed);
                     return Ok(body);
                 }
-                Err(e) => last = e,
+                Err(e) => {
+                    let attempt = format!("{} of {}", attempt + 1, self.retries + 1);
+                    tracing::warn!(url, attempt, error = %e, "request failed");
+                    last = e;
+                }
             }
         }
         if self.failures.fetch_add(1, Ordering::Relaxed) + 1 >= self.threshold

@@ -105,7 +105,9 @@ fn bad_flight_input_is_explained() {
     assert!(String::from_utf8_lossy(&e.stderr).contains("stats.csv: is a directory"));
     assert!(!out_dir.join("frame_00000.png").exists(), "no frame was rendered");
     let e = run(&["--path", path.to_str().unwrap(), "--out", o, "--server", "http://127.0.0.1:9"]);
-    assert!(String::from_utf8_lossy(&e.stderr).contains("tiles.json"), "{}", String::from_utf8_lossy(&e.stderr));
+    let said = String::from_utf8_lossy(&e.stderr);
+    assert!(said.contains("tiles.json") && said.contains("after 3 attempts"), "{said}");
+    assert!(said.contains("attempt=\"1 of 3\""), "each failed try is logged: {said}");
     let model = dir.join("model.json");
     std::fs::write(&model, r#"{"constants_ms": [1, 1, 1, -1, 1, 1, 1, 1]}"#).unwrap();
     let e = run(&[
