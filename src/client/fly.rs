@@ -271,8 +271,7 @@ pub fn fly(
         if let Some(model) = flight.model() {
             // The calibrated model, for `--cost-model` on the next flight.
             let file = dir.join(MODEL_FILE);
-            let json = serde_json::to_string_pretty(&model).map_err(|e| io(&file, e.into()))?;
-            std::fs::write(&file, json).map_err(|e| io(&file, e))?;
+            std::fs::write(&file, model.to_json()).map_err(|e| io(&file, e))?;
         }
     }
     Ok(records)

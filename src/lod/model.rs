@@ -158,12 +158,24 @@ impl CostFeatures {
 
 /// Milliseconds per unit of each feature: `predicted = Σ cᵢ fᵢ` (000 §5.3:
 /// `cost_d = c_vertex n`, `cost_c = c_splat N x + c_tree`). Serialised as
-/// `{"constants_ms": [...]}`, so a model calibrated on one machine can start
-/// the next flight there.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+/// `{"units": 2, "constants_ms": [...]}`, so a model calibrated on one
+/// machine can start the next flight there.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CostModel {
     /// Fixed per-frame ms, then ms per unit of each [`CostFeatures`] field.
     pub constants_ms: [f64; FEATURES],
+}
+
+/// What the features measure, as saved with a model: 2 since shadow rays are
+/// priced by their measured fetches (files without `units` are older, their
+/// shadow constant per nominal shadow step).
+const UNITS: u32 = 2;
+
+/// A cost model's JSON form.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct ModelFile {
+    units: Option<u32>,
+    constants_ms: [f64; FEATURES],
 }
 
 impl Default for CostModel {
@@ -183,14 +195,28 @@ impl Default for CostModel {
 }
 
 impl CostModel {
-    /// A model from its JSON form; every constant must be finite and not
-    /// negative.
+    /// A model from its JSON form: in this version's units, every constant
+    /// finite and not negative.
     pub fn from_json(text: &str) -> Result<CostModel, String> {
-        let model: CostModel = serde_json::from_str(text).map_err(|e| format!("not a cost model: {e}"))?;
+        let file: ModelFile = serde_json::from_str(text).map_err(|e| format!("not a cost model: {e}"))?;
+        if file.units != Some(UNITS) {
+            let units = file.units.map_or("none".into(), |u| u.to_string());
+            return Err(format!(
+                "a cost model in other units (units {units}, this sylva's are {UNITS}): \
+                 fly once without --cost-model to calibrate a new one"
+            ));
+        }
+        let model = CostModel { constants_ms: file.constants_ms };
         match model.constants_ms.iter().position(|c| !c.is_finite() || *c < 0.0) {
             Some(i) => Err(format!("constant {i} is {}, not a finite non-negative ms", model.constants_ms[i])),
             None => Ok(model),
         }
+    }
+
+    /// The model's JSON form, which [`CostModel::from_json`] reads.
+    pub fn to_json(&self) -> String {
+        let file = ModelFile { units: Some(UNITS), constants_ms: self.constants_ms };
+        serde_json::to_string_pretty(&file).unwrap_or_default()
     }
 
     /// Predicted milliseconds for `features`.
@@ -217,12 +243,15 @@ mod tests {
     #[test]
     fn cost_models_round_trip_through_json_and_bad_ones_are_refused() {
         let model = CostModel { constants_ms: [2.5, 0.3, 40.0, 12.0, 0.0, 1e-3, 0.5, 20.0] };
-        let text = serde_json::to_string(&model).unwrap();
-        assert_eq!(CostModel::from_json(&text), Ok(model));
-        assert!(CostModel::from_json("{\"constants_ms\": [1, 2]}").unwrap_err().contains("not a cost model"));
-        let negative = "{\"constants_ms\": [1, 2, 3, -4, 5, 6, 7, 8]}";
+        assert_eq!(CostModel::from_json(&model.to_json()), Ok(model));
+        assert!(
+            CostModel::from_json("{\"units\": 2, \"constants_ms\": [1, 2]}").unwrap_err().contains("not a cost model")
+        );
+        let negative = "{\"units\": 2, \"constants_ms\": [1, 2, 3, -4, 5, 6, 7, 8]}";
         assert!(CostModel::from_json(negative).unwrap_err().contains("constant 3 is -4"));
         assert!(CostModel::from_json("ms").is_err());
+        let older = "{\"constants_ms\": [1, 2, 3, 4, 5, 6, 7, 8]}";
+        assert!(CostModel::from_json(older).unwrap_err().contains("units none, this sylva's are 2"));
     }
 
     #[test]
