@@ -24,6 +24,8 @@ pub enum Code {
     InvalidParameterValue,
     /// Request type not supported.
     OperationNotSupported,
+    /// GetFeatureInfo's pixel is off the map (1.3.0).
+    InvalidPoint,
     /// The server failed (no standard code; reported without one).
     NoApplicableCode,
 }
@@ -33,6 +35,7 @@ impl Code {
     pub fn as_str(self) -> &'static str {
         match self {
             Code::LayerNotDefined => "LayerNotDefined",
+            Code::InvalidPoint => "InvalidPoint",
             Code::StyleNotDefined => "StyleNotDefined",
             Code::InvalidCrs => "InvalidCRS",
             Code::InvalidSrs => "InvalidSRS",

@@ -195,10 +195,19 @@ impl TileService {
     }
 
     async fn compute(&self, product: Product) -> Result<Computed, ServeError> {
-        let region = self.region.clone();
-        let computed = self.pool.run(move || products::compute(&region, &product)).await??;
+        let computed = self.run(move |region| products::compute(region, &product)).await?;
         self.metrics.computed(&computed.stats, computed.encode);
         Ok(computed)
+    }
+
+    /// Runs `job` over the region on the compute pool (503 when it is
+    /// full): work that is not a cached product, such as a GetFeatureInfo.
+    pub async fn run<T: Send + 'static, E: Into<ServeError> + Send + 'static>(
+        &self,
+        job: impl FnOnce(&Region) -> Result<T, E> + Send + 'static,
+    ) -> Result<T, ServeError> {
+        let region = self.region.clone();
+        self.pool.run(move || job(&region)).await?.map_err(Into::into)
     }
 }
 

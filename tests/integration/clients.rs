@@ -177,3 +177,24 @@ fn gdal_reads_the_relief_from_a_plain_wms_url_in_its_default_jpeg() {
     let sd = (grey.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / grey.len() as f64).sqrt();
     assert!((60.0..200.0).contains(&mean) && sd > 15.0, "a shaded map, not a blank: mean {mean:.0}, sd {sd:.0}");
 }
+
+#[test]
+fn gdal_locationinfo_reads_the_heights_under_a_point() {
+    let dir = TempDir::new("client-gdal-info");
+    let server = Server::start(None, &dir.join("cache"));
+    let url = format!(
+        "WMS:{}/wms?SERVICE=WMS&VERSION=1.1.1&REQUEST=GetMap&LAYERS=relief&SRS=EPSG:4326&BBOX=10.0,46.3,10.25,46.45",
+        server.base
+    );
+    // GDAL asks GetFeatureInfo for GML and prints it per band.
+    let report = run(Command::new("gdallocationinfo").args(["-wgs84", &url, "10.125", "46.375"]), "gdallocationinfo");
+    let dem = report
+        .split("<sylva:dem")
+        .nth(1)
+        .and_then(|f| f.split("<sylva:value>").nth(1))
+        .and_then(|v| v.split('<').next())
+        .and_then(|v| v.parse::<f64>().ok())
+        .unwrap_or_else(|| panic!("no dem value in:\n{report}"));
+    assert!((500.0..4000.0).contains(&dem), "{dem}");
+    assert!(report.contains("<sylva:class>"), "the surface class is named:\n{report}");
+}

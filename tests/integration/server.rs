@@ -68,6 +68,45 @@ fn the_same_area_in_every_axis_order_gives_identical_bytes() {
 }
 
 #[test]
+fn feature_info_gives_the_values_the_map_shows() {
+    let dir = TempDir::new("srv-info");
+    let server = Server::start(None, &dir.join("cache"));
+    let map = "SERVICE=WMS&VERSION=1.3.0&STYLES=&CRS=CRS:84&BBOX=10.05,46.33,10.2,46.42&WIDTH=300&HEIGHT=200";
+    let layers = ["dem", "canopy", "cem", "surface"];
+    let maps: Vec<Vec<f32>> = layers
+        .iter()
+        .map(|l| bil32(&server.get(&format!("/wms?{map}&REQUEST=GetMap&LAYERS={l}&FORMAT=application/bil32")).body))
+        .collect();
+    // The tallest canopy, and pixels spread over the map.
+    let tallest = (0..maps[1].len()).max_by(|&a, &b| maps[1][a].total_cmp(&maps[1][b])).unwrap();
+    assert!(maps[1][tallest] > 5.0, "the demo has forest here");
+    for k in [tallest, 0, 299, 200 * 300 - 1, 123 * 300 + 45] {
+        let (i, j) = (k % 300, k / 300);
+        let query = format!(
+            "/wms?{map}&REQUEST=GetFeatureInfo&LAYERS=relief&FORMAT=image/png&QUERY_LAYERS=dem,canopy,cem,surface&INFO_FORMAT=application/json&I={i}&J={j}"
+        );
+        let r = server.get(&query);
+        assert_eq!((r.status, r.header("content-type")), (200, Some("application/json")), "{}", r.text());
+        let doc: serde_json::Value = serde_json::from_str(&r.text()).unwrap();
+        for (n, feature) in doc["features"].as_array().unwrap().iter().enumerate() {
+            assert_eq!(feature["id"], layers[n]);
+            let value = feature["properties"]["value"].as_f64().unwrap() as f32;
+            assert_eq!(value, maps[n][k], "{} at pixel ({i}, {j})", layers[n]);
+        }
+    }
+    // WMS 1.1.1 names the pixel X, Y and reads EPSG:4326 as lon,lat.
+    let (i, j) = (tallest % 300, tallest / 300);
+    let old = format!("/wms?{map}&REQUEST=GetFeatureInfo&LAYERS=cem&FORMAT=image/png&QUERY_LAYERS=canopy&X={i}&Y={j}")
+        .replace("VERSION=1.3.0", "VERSION=1.1.1")
+        .replace("CRS=CRS:84", "SRS=EPSG:4326");
+    let text = server.get(&old).text();
+    assert!(text.contains(&format!("canopy = {:.2} m", maps[1][tallest])), "{text}");
+    let off = server
+        .get(&format!("/wms?{map}&REQUEST=GetFeatureInfo&LAYERS=cem&FORMAT=image/png&QUERY_LAYERS=cem&I=300&J=0"));
+    assert!(off.status == 400 && off.text().contains("InvalidPoint"), "{}", off.text());
+}
+
+#[test]
 fn browsers_may_read_tiles_from_any_page() {
     let dir = TempDir::new("srv-cors");
     let server = Server::start(None, &dir.join("cache"));
@@ -266,7 +305,8 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
             "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=nan,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png",
             "InvalidParameterValue",
         ),
-        ("/wms?REQUEST=GetFeatureInfo", "OperationNotSupported"),
+        ("/wms?REQUEST=GetLegendGraphic", "OperationNotSupported"),
+        ("/wms?REQUEST=GetFeatureInfo", "MissingParameterValue"),
         ("/tiles/cem/3/1/1_1.gif", ""),
         ("/tiles/trees/3/1/1_1.bil", ""),
         ("/tiles/cem/3/1/1_1.bil?halo=100000", ""),

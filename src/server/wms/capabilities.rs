@@ -1,10 +1,11 @@
 //! WMS GetCapabilities documents, 1.1.1 and 1.3.0: one root layer holding
 //! the served layers, their geographic box and a bounding box per CRS in
 //! that CRS's axis order (1.3.0 EPSG:4326 is lat,lon), the formats, the size
-//! limits, and — in each layer's abstract — how 16-bit PNG codes map to
-//! values.
+//! limits, the GetFeatureInfo formats (every layer is queryable), and
+//! — in each layer's abstract — how 16-bit PNG codes map to values.
 
 use super::super::exception::escape;
+use super::info::InfoFormat;
 use super::request::{LAYERS, MapFormat, MapLayer, RequestCrs, Version};
 use crate::encode::{self, Quantization};
 use crate::grid::BBox;
@@ -44,6 +45,7 @@ fn v130(s: &Service) -> String {
 <Capability><Request>
 <GetCapabilities><Format>text/xml</Format>{dcp}</GetCapabilities>
 <GetMap>{formats}{dcp}</GetMap>
+<GetFeatureInfo>{info}{dcp}</GetFeatureInfo>
 </Request>
 <Exception><Format>XML</Format><Format>INIMAGE</Format><Format>BLANK</Format></Exception>
 <Layer><Title>{title}</Title>{crs}
@@ -56,6 +58,7 @@ fn v130(s: &Service) -> String {
         title = escape(s.title),
         max = s.max_side,
         dcp = dcp(&url),
+        info = info_formats(),
         w = b.west,
         e = b.east,
         so = b.south,
@@ -82,6 +85,7 @@ fn v111(s: &Service) -> String {
 <Capability><Request>
 <GetCapabilities><Format>application/vnd.ogc.wms_xml</Format>{dcp}</GetCapabilities>
 <GetMap>{formats}{dcp}</GetMap>
+<GetFeatureInfo>{info}{dcp}</GetFeatureInfo>
 </Request>
 <Exception><Format>application/vnd.ogc.se_xml</Format><Format>application/vnd.ogc.se_inimage</Format><Format>application/vnd.ogc.se_blank</Format></Exception>
 <Layer><Title>{title}</Title>{srs}
@@ -93,6 +97,7 @@ fn v111(s: &Service) -> String {
 "#,
         title = escape(s.title),
         dcp = dcp_111(&url),
+        info = info_formats(),
         w = b.west,
         e = b.east,
         so = b.south,
@@ -100,6 +105,10 @@ fn v111(s: &Service) -> String {
         boxes = bounding_boxes(b, Version::V111),
         layers = layers(s, Version::V111),
     )
+}
+
+fn info_formats() -> String {
+    InfoFormat::ALL.iter().map(|(_, m)| format!("<Format>{m}</Format>")).collect()
 }
 
 fn dcp(url: &str) -> String {
@@ -135,7 +144,7 @@ fn layers(s: &Service, version: Version) -> String {
         .iter()
         .map(|&l| {
             format!(
-                r#"<Layer queryable="0"><Name>{}</Name><Title>{}</Title><Abstract>{}</Abstract>{}</Layer>"#,
+                r#"<Layer queryable="1"><Name>{}</Name><Title>{}</Title><Abstract>{}</Abstract>{}</Layer>"#,
                 l.name(),
                 title(l),
                 escape(&abstract_of(l, s)),
@@ -214,6 +223,13 @@ mod tests {
                 .filter_map(|n| n.text())
                 .collect();
             assert_eq!(names, ["dem", "cover", "canopy", "cem", "surface", "colour", "relief"]);
+            let queryable: Vec<&str> = doc
+                .descendants()
+                .filter(|n| n.has_tag_name("Layer"))
+                .filter_map(|n| n.attribute("queryable"))
+                .collect();
+            assert_eq!(queryable, ["1"; 7], "every layer answers GetFeatureInfo");
+            assert!(doc.descendants().any(|n| n.has_tag_name("GetFeatureInfo")));
         }
     }
 

@@ -1,10 +1,12 @@
-//! The `/wms` endpoint: GetCapabilities and GetMap, with OGC exceptions.
+//! The `/wms` endpoint: GetCapabilities, GetMap and GetFeatureInfo, with
+//! OGC exceptions.
 //!
 //! A GetMap whose pixel centres are exactly a tile's samples is that tile and
 //! comes from the tile cache; one whose pixel centres lie on a level's lattice
 //! is stitched from cached tiles; any other grid is computed directly.
 
 pub mod capabilities;
+pub mod info;
 mod inimage;
 pub mod picture;
 pub mod request;
@@ -46,24 +48,35 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
             let (mime, body) = capabilities::document(&service, version);
             ([(header::CONTENT_TYPE, mime)], body).into_response()
         }
-        Ok(Request::GetMap(map)) => {
-            let reply = Reply { version: map.version, style: ExceptionStyle::Xml, image: None, background: None };
-            match get_map(&state, &map, &headers).await {
-                Ok(response) => response,
-                Err(ServeError::BadRequest(m)) => {
-                    exception(&Exception::new(super::exception::Code::InvalidParameterValue, m), reply, &state)
-                }
-                // The server's or an upstream's failure: still a report, with the status.
-                Err(e) => {
-                    let (status, mut headers, message) = e.parts();
-                    let (mime, body) =
-                        Exception::new(super::exception::Code::NoApplicableCode, message).report(map.version);
-                    headers.insert(header::CONTENT_TYPE, axum::http::HeaderValue::from_static(mime));
-                    (status, headers, body).into_response()
-                }
-            }
+        Ok(Request::GetMap(map)) => answer(&state, map.version, get_map(&state, &map, &headers).await),
+        Ok(Request::GetFeatureInfo(info)) => answer(&state, info.map.version, feature_info(&state, &info).await),
+    }
+}
+
+/// A GetMap's or GetFeatureInfo's answer, or its failure as a report.
+fn answer(state: &AppState, version: request::Version, result: Result<Response, ServeError>) -> Response {
+    let reply = Reply { version, style: ExceptionStyle::Xml, image: None, background: None };
+    match result {
+        Ok(response) => response,
+        Err(ServeError::BadRequest(m)) => {
+            exception(&Exception::new(super::exception::Code::InvalidParameterValue, m), reply, state)
+        }
+        // The server's or an upstream's failure: still a report, with the status.
+        Err(e) => {
+            let (status, mut headers, message) = e.parts();
+            let (mime, body) = Exception::new(super::exception::Code::NoApplicableCode, message).report(version);
+            headers.insert(header::CONTENT_TYPE, axum::http::HeaderValue::from_static(mime));
+            (status, headers, body).into_response()
         }
     }
+}
+
+/// The values of the queried layers at the pixel, computed on the pool.
+async fn feature_info(state: &AppState, info: &info::FeatureInfo) -> Result<Response, ServeError> {
+    let (grid, layers) = (info::point(info), info.layers.clone());
+    let values = state.tiles.run(move |region| info::values(region, &grid, &layers)).await?;
+    let (mime, body) = info::document(info, info::point(info).lon_lat(0, 0), &values);
+    Ok(([(header::CONTENT_TYPE, mime)], body).into_response())
 }
 
 /// Answers a request to `/wms` by another method than GET (or HEAD): the

@@ -178,6 +178,8 @@ pub enum Request {
     GetCapabilities(Version),
     /// A map.
     GetMap(GetMap),
+    /// Values at a pixel of a map.
+    GetFeatureInfo(super::info::FeatureInfo),
 }
 
 /// Limits a request must respect.
@@ -226,6 +228,9 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)>
             reply.image = image_of(&params);
             reply.background = background(&params, reply.image.map(|(_, _, f)| f)).unwrap_or(None);
             get_map(&params, version, limits).map(Request::GetMap).map_err(|e| (e, reply))
+        }
+        "getfeatureinfo" | "feature_info" => {
+            super::info::parse(&params, version, limits).map(Request::GetFeatureInfo).map_err(|e| (e, reply))
         }
         other => fail(Exception::new(Code::OperationNotSupported, format!("REQUEST={other} is not supported")), reply),
     }
@@ -287,7 +292,8 @@ fn image_of(params: &Params) -> Option<(usize, usize, MapFormat)> {
     (w > 0 && h > 0 && w <= 8192 && h <= 8192).then_some((w, h, f))
 }
 
-fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, Exception> {
+/// The map part of a GetMap or a GetFeatureInfo.
+pub(super) fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, Exception> {
     let required = |key: &'static str| {
         params
             .get(key)
@@ -415,14 +421,14 @@ fn grid(b: [f64; 4], crs: RequestCrs, version: Version, width: usize, height: us
 /// Query parameters with upper-cased keys. A key given twice alike (a
 /// client adding `SERVICE=WMS` to a URL that has it) is one; given twice
 /// differently it is ambiguous, kept in `conflict` to be refused.
-struct Params {
+pub(super) struct Params {
     values: HashMap<String, String>,
     /// The first key given two different values, and the two.
     conflict: Option<(String, [String; 2])>,
 }
 
 impl Params {
-    fn new(query: &str) -> Params {
+    pub(super) fn new(query: &str) -> Params {
         let mut values: HashMap<String, String> = HashMap::new();
         let mut conflict = None;
         for (k, v) in form_urlencoded::parse(query.as_bytes()) {
@@ -439,7 +445,7 @@ impl Params {
         Params { values, conflict }
     }
 
-    fn get(&self, key: &str) -> Option<&str> {
+    pub(super) fn get(&self, key: &str) -> Option<&str> {
         self.values.get(key).map(String::as_str)
     }
 }
@@ -506,7 +512,7 @@ mod tests {
             code(&(base.replace("BBOX=40,-106,41,-105", "BBOX=a,b") + "&LAYERS=dem")),
             Code::InvalidParameterValue
         );
-        assert_eq!(code("SERVICE=WMS&REQUEST=GetFeatureInfo"), Code::OperationNotSupported);
+        assert_eq!(code("SERVICE=WMS&REQUEST=GetLegendGraphic"), Code::OperationNotSupported);
         assert_eq!(code("SERVICE=WMS"), Code::MissingParameterValue);
         assert_eq!(code(&format!("{base}&LAYERS=relief").replace("image/png", "image/tiff")), Code::InvalidFormat);
         assert_eq!(code(&format!("{base}&LAYERS=dem&STYLES=fancy")), Code::StyleNotDefined);
