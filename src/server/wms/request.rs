@@ -602,6 +602,60 @@ mod tests {
         );
     }
 
+    /// Queries giving each parameter a value good for it (which may not go
+    /// with the others'), one bad for any, or none, in a shuffled order.
+    fn queries() -> impl proptest::strategy::Strategy<Value = String> {
+        use proptest::prelude::*;
+        let fields: [(&str, &[&str]); 18] = [
+            ("SERVICE", &["WMS", "wms"]),
+            ("version", &["1.3.0", "1.1.1", "1.3", "1.0.0"]),
+            ("REQUEST", &["GetMap", "GetFeatureInfo", "GetCapabilities"]),
+            ("LAYERS", &["dem", "relief", "surface", "colour"]),
+            ("STYLES", &["", "default"]),
+            ("CRS", &["EPSG:4326", "CRS:84", "EPSG:3857"]),
+            ("srs", &["EPSG:4326", "EPSG:3857"]),
+            ("BBOX", &["46.3,10,46.45,10.25", "10,46.3,10.25,46.45", "-90,-180,90,180", "1e6,5e6,2e6,6e6"]),
+            ("WIDTH", &["1", "256", "4096"]),
+            ("height", &["1", "200", "4096"]),
+            ("FORMAT", &["image/png", "image/jpeg", "application/bil32", "image/tiff"]),
+            ("TRANSPARENT", &["TRUE", "false"]),
+            ("BGCOLOR", &["0xFFFFFF", "0x203040"]),
+            ("EXCEPTIONS", &["XML", "INIMAGE", "application/vnd.ogc.se_blank"]),
+            ("QUERY_LAYERS", &["dem", "colour,cover", "cem"]),
+            ("INFO_FORMAT", &["text/plain", "application/vnd.ogc.gml", "application/json"]),
+            ("I", &["0", "255"]),
+            ("j", &["0", "199"]),
+        ];
+        let bad = ["", "%ZZ", "NaN", "-1", "1e308,0,-1e308,1", "18446744073709551616", "a\u{0}b"];
+        let pairs: Vec<BoxedStrategy<Option<String>>> = fields
+            .into_iter()
+            .map(|(key, good)| {
+                let value =
+                    prop_oneof![15 => prop::sample::select(good.to_vec()), 1 => prop::sample::select(bad.to_vec())];
+                prop::option::weighted(0.9, value).prop_map(move |v| v.map(|v| format!("{key}={v}"))).boxed()
+            })
+            .collect();
+        pairs.prop_map(|p| p.into_iter().flatten().collect::<Vec<_>>()).prop_shuffle().prop_map(|p| p.join("&"))
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config::with_cases(2000))]
+        #[test]
+        fn any_query_parses_or_is_refused_without_panic(query in queries()) {
+            match parse(&query, LIMITS) {
+                Ok(Request::GetMap(m)) => {
+                    proptest::prop_assert!(m.grid.width() <= 4096 && m.grid.height() <= 4096);
+                }
+                Ok(Request::GetFeatureInfo(info)) => {
+                    proptest::prop_assert!(info.pixel.0 < info.map.grid.width() && info.pixel.1 < info.map.grid.height());
+                    proptest::prop_assert!(!info.layers.is_empty());
+                }
+                Ok(Request::GetCapabilities(_)) => {}
+                Err((e, _)) => proptest::prop_assert!(!e.message.is_empty()),
+            }
+        }
+    }
+
     #[test]
     fn web_mercator_boxes_give_mercator_grids() {
         let m = map(
