@@ -7,7 +7,8 @@
 //! tiles blend with (a third of a slot each, one layer per two slots).
 //!
 //! Invariant: bytes resident ≤ the budget (slots and layers are allocated
-//! up front).
+//! up front; a budget of a single slot allocates a second layer, unused, that
+//! wgpu's GL backend needs to see an array).
 
 use super::super::hull::{self, HullVertex, QUAD_SAMPLES};
 use super::super::terrain::TerrainVertex;
@@ -126,10 +127,13 @@ impl TileCache {
                 .clamp(1, MAX_SLOTS.min(device.limits().max_texture_array_layers)),
         );
         let layers = if geomorph { array_layers((count / 2).max(1)) } else { 0 };
-        let array = |label, (w, h, count), format| {
+        // At least two layers: wgpu's GL backend takes a one-layer texture for
+        // a plain 2-D one, which the shaders' 2-D array bindings cannot read
+        // (with one slot in the budget, the second layer stays unused).
+        let array = |label, (w, h, count): (u32, u32, u32), format| {
             device.create_texture(&wgpu::TextureDescriptor {
                 label: Some(label),
-                size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: count },
+                size: wgpu::Extent3d { width: w, height: h, depth_or_array_layers: count.max(2) },
                 mip_level_count: 1,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
