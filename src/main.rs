@@ -738,14 +738,15 @@ fn run(command: Command) -> Result<()> {
     }
 }
 
-/// Logs to stderr, filtered by `RUST_LOG`: by default the server's `info`,
-/// the other commands' warnings (a tile server being retried, say) without
-/// the GPU stack's; JSON lines with `SYLVA_LOG_FORMAT=json`.
+/// Logs to stderr, filtered by `RUST_LOG`: by default the server's `info`;
+/// for the other commands sylva's warnings (a tile server being retried,
+/// say) and other crates' errors, but none of the window system's (winit
+/// warns of ordinary X11 set-ups); JSON lines with `SYLVA_LOG_FORMAT=json`.
 fn logs(command: &Command) {
     let default = match command {
         #[cfg(feature = "server")]
         Command::Serve { .. } => "info,tower_http=warn",
-        _ => "warn,wgpu_core=error,wgpu_hal=error,naga=error",
+        _ => "error,sylva=warn,winit=off",
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| default.into());
     let logs = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);

@@ -180,7 +180,7 @@ async fn tile(
         let format = picture_extension(layer, ext)?;
         tile_exists(state, id)?;
         let t = state.tiles.get(Product::Tile { layer, id, halo, encoding: Encoding::Rgba }).await?;
-        return picture_tile(state, layer, t, format, headers);
+        return picture_tile(state, layer, t, format, headers).await;
     }
     let encoding = match ext.to_ascii_lowercase().as_str() {
         "bil" | "bil16" => Encoding::Data(Format::Bil16),
@@ -223,7 +223,7 @@ async fn xyz(
     }
     let t = state.tiles.get(Product::Xyz { layer, zxy: (z, x, y) }).await?;
     match picture {
-        Some(format) => picture_tile(&state, layer, t, format, &headers),
+        Some(format) => picture_tile(&state, layer, t, format, &headers).await,
         None => Ok(respond::tile(&t, &meta(&state, layer, Encoding::Terrarium), &headers)),
     }
 }
@@ -235,14 +235,14 @@ fn picture_extension(layer: MapLayer, ext: &str) -> Result<PictureFormat, ServeE
 }
 
 /// A cached picture tile answered as a transparent PNG or as JPEG on white.
-fn picture_tile(
+async fn picture_tile(
     state: &AppState,
     layer: MapLayer,
     t: Arc<Tile>,
     format: PictureFormat,
     headers: &HeaderMap,
 ) -> Result<Response, ServeError> {
-    let t = picture::answer(t, None, format)?;
+    let t = picture::answer(&state.tiles, t, None, format).await?;
     let meta = TileMeta { mime: format.mime(), ..meta(state, layer, Encoding::Rgba) };
     Ok(respond::tile(&t, &meta, headers))
 }

@@ -9,15 +9,21 @@ use sylva::client::source::{RegionSource, TileSource};
 use sylva::grid::TileId;
 
 fn fly(args: &[&str], out: &std::path::Path) -> String {
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))
-        .arg("fly")
-        .args(args)
-        .arg("--out")
-        .arg(out)
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .expect("run sylva fly");
-    assert!(output.status.success(), "sylva fly failed: {}", String::from_utf8_lossy(&output.stderr));
+    fly_on(args, out, None)
+}
+
+/// `sylva fly`, on the wgpu `backend` if one is named; a flight that went
+/// well says nothing on stderr.
+fn fly_on(args: &[&str], out: &std::path::Path, backend: Option<&str>) -> String {
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_sylva"));
+    command.arg("fly").args(args).arg("--out").arg(out).env("XDG_RUNTIME_DIR", std::env::temp_dir());
+    if let Some(backend) = backend {
+        command.env("WGPU_BACKEND", backend);
+    }
+    let output = command.output().expect("run sylva fly");
+    let said = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "sylva fly failed: {said}");
+    assert!(said.is_empty(), "a flight that went well logged:\n{said}");
     String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
@@ -49,6 +55,15 @@ fn a_flight_over_the_demo_writes_frames_and_statistics() {
         let ground = img.pixels().skip(96 * 40).filter(|p| p.0[..3] != [158, 189, 224]).count();
         assert!(ground > 96 * 20, "frame {k} shows the ground");
     }
+}
+
+#[test]
+fn a_flight_on_opengl_logs_nothing() {
+    let dir = TempDir::new("fly-gl");
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    let args = ["--path", path.to_str().unwrap(), "--frames", "2", "--size", "64x48", "--no-frames"];
+    let summary = fly_on(&args, &dir.join("out"), Some("gl"));
+    assert!(summary.contains("2 frames"), "{summary}");
 }
 
 #[test]

@@ -101,6 +101,18 @@ fn feature_info_gives_the_values_the_map_shows() {
         .replace("CRS=CRS:84", "SRS=EPSG:4326");
     let text = server.get(&old).text();
     assert!(text.contains(&format!("canopy = {:.2} m", maps[1][tallest])), "{text}");
+    // Web Mercator maps too.
+    let mercator =
+        "SERVICE=WMS&VERSION=1.3.0&STYLES=&CRS=EPSG:3857&BBOX=1118890,5836000,1141000,5850000&WIDTH=256&HEIGHT=256";
+    let cem = bil32(&server.get(&format!("/wms?{mercator}&REQUEST=GetMap&LAYERS=cem&FORMAT=application/bil32")).body);
+    let r = server.get(&format!(
+        "/wms?{mercator}&REQUEST=GetFeatureInfo&LAYERS=cem&FORMAT=image/png&QUERY_LAYERS=cem&INFO_FORMAT=application/json&I=77&J=190"
+    ));
+    let doc: serde_json::Value = serde_json::from_str(&r.text()).unwrap();
+    assert_eq!(doc["features"][0]["properties"]["value"].as_f64().unwrap() as f32, cem[190 * 256 + 77]);
+    // A pixel past the antimeridian is named by its longitude on the globe.
+    let east = server.get("/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetFeatureInfo&LAYERS=dem&STYLES=&CRS=CRS:84&BBOX=179.9,0,180.1,1&WIDTH=2&HEIGHT=1&FORMAT=image/png&QUERY_LAYERS=dem&I=1&J=0");
+    assert!(east.text().contains("lon -179.95000000"), "{}", east.text());
     let off = server
         .get(&format!("/wms?{map}&REQUEST=GetFeatureInfo&LAYERS=cem&FORMAT=image/png&QUERY_LAYERS=cem&I=300&J=0"));
     assert!(off.status == 400 && off.text().contains("InvalidPoint"), "{}", off.text());
@@ -446,6 +458,13 @@ fn get_maps_on_the_tile_lattice_come_from_the_tile_cache() {
             let expected = quad[dr][dc][j * 513 + i];
             assert_eq!(image[y * 600 + x].to_bits(), expected.to_bits(), "pixel ({x}, {y})");
         }
+    }
+    // GetFeatureInfo on the stitched map gives its values.
+    for (x, y) in [(0, 0), (599, 599), (257, 300)] {
+        let info =
+            wms(west, south, 600).replace("GetMap", "GetFeatureInfo") + &format!("&QUERY_LAYERS=cem&I={x}&J={y}");
+        let text = server.get(&info).text();
+        assert!(text.contains(&format!("cem = {:.2} m", image[y * 600 + x])), "({x}, {y}): {text}");
     }
     // A GetMap whose pixel centres are exactly one tile's samples is that tile.
     let whole = server.get(&wms(sector.min_lon - 0.5 * s, sector.min_lat - 0.5 * s, 513));

@@ -90,15 +90,15 @@ pub(super) fn parse(params: &Params, version: Version, limits: Limits) -> Result
         Some(text) => InfoFormat::parse(text).ok_or_else(|| {
             Exception::new(
                 Code::InvalidFormat,
-                format!("INFO_FORMAT={text}: offered are text/plain, text/html, application/json"),
+                format!("INFO_FORMAT={text}: offered are {}", InfoFormat::ALL.map(|(_, m)| m).join(", ")),
             )
             .locator("INFO_FORMAT")
         })?,
     };
     let (x_key, y_key) = if version == Version::V130 { ("I", "J") } else { ("X", "Y") };
     let pixel = (
-        coordinate(params, [x_key, "I", "X"], map.grid.width(), version)?,
-        coordinate(params, [y_key, "J", "Y"], map.grid.height(), version)?,
+        coordinate(params, [x_key, "I", "X"], map.grid.width())?,
+        coordinate(params, [y_key, "J", "Y"], map.grid.height())?,
     );
     Ok(FeatureInfo { map, layers, pixel, format })
 }
@@ -115,18 +115,16 @@ fn queried(name: &str) -> Result<Vec<Layer>, Exception> {
     }
 }
 
-/// The pixel coordinate under the first of `keys` given: a whole number
-/// below `len` (the map's width or height).
-fn coordinate(params: &Params, keys: [&'static str; 3], len: usize, version: Version) -> Result<usize, Exception> {
+/// The pixel coordinate under the first of `keys` given, below `len` (the
+/// map's width or height); a fraction, which some web clients send, is the
+/// pixel it falls in.
+fn coordinate(params: &Params, keys: [&'static str; 3], len: usize) -> Result<usize, Exception> {
     let Some((key, text)) = keys.into_iter().find_map(|k| params.get(k).map(|v| (k, v))) else {
         return Err(Exception::new(Code::MissingParameterValue, format!("{} is missing", keys[0])));
     };
-    let code = if version == Version::V130 { Code::InvalidPoint } else { Code::InvalidParameterValue };
-    text.trim()
-        .parse::<usize>()
-        .ok()
-        .filter(|&v| v < len)
-        .ok_or_else(|| Exception::new(code, format!("{key}={text}: need a pixel 0 to {}", len - 1)).locator(key))
+    text.trim().parse::<f64>().ok().filter(|v| (0.0..len as f64).contains(v)).map(|v| v.floor() as usize).ok_or_else(
+        || Exception::new(Code::InvalidPoint, format!("{key}={text}: need a pixel 0 to {}", len - 1)).locator(key),
+    )
 }
 
 /// The one-sample grid of the pixel asked for.
@@ -278,6 +276,9 @@ mod tests {
         assert_eq!(code("&I=0&J=0"), Code::MissingParameterValue);
         assert_eq!(code("&QUERY_LAYERS=dem&I=10&J=0"), Code::InvalidPoint);
         assert_eq!(code("&QUERY_LAYERS=dem&I=-1&J=0"), Code::InvalidPoint);
+        assert_eq!(code("&QUERY_LAYERS=dem&I=NaN&J=0"), Code::InvalidPoint);
+        let fraction = parsed(&format!("{BASE}&QUERY_LAYERS=dem&I=9.7&J=0.2")).unwrap();
+        assert_eq!(fraction.pixel, (9, 0), "the pixel a fraction falls in");
         assert_eq!(code("&QUERY_LAYERS=dem&I=0"), Code::MissingParameterValue);
         assert_eq!(code("&QUERY_LAYERS=dem&I=0&J=0&INFO_FORMAT=image/png"), Code::InvalidFormat);
     }

@@ -75,7 +75,8 @@ fn answer(state: &AppState, version: request::Version, result: Result<Response, 
 async fn feature_info(state: &AppState, info: &info::FeatureInfo) -> Result<Response, ServeError> {
     let (grid, layers) = (info::point(info), info.layers.clone());
     let values = state.tiles.run(move |region| info::values(region, &grid, &layers)).await?;
-    let (mime, body) = info::document(info, info::point(info).lon_lat(0, 0), &values);
+    // Longitudes wrapped into [-180, 180) (a box may reach past the antimeridian).
+    let (mime, body) = info::document(info, info::point(info).on_globe(0, 0), &values);
     Ok(([(header::CONTENT_TYPE, mime)], body).into_response())
 }
 
@@ -131,7 +132,7 @@ async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<
         return Ok(respond::tile(&blank, &meta, headers));
     }
     let tile = match map.format.picture().filter(|_| map.layer.is_picture()) {
-        Some(format) => picture::answer(tile, map.background, format)?,
+        Some(format) => picture::answer(&state.tiles, tile, map.background, format).await?,
         None => tile,
     };
     Ok(respond::tile(&tile, &meta, headers))

@@ -6,8 +6,9 @@
 
 use crate::encode::{self, EncodeError};
 use crate::server::ServeError;
-use crate::server::service::Tile;
+use crate::server::service::{Tile, TileService};
 use std::sync::Arc;
+use std::time::Instant;
 
 /// What a picture's no-data shows in JPEG when no background was asked for.
 pub const WHITE: [u8; 3] = [255, 255, 255];
@@ -72,33 +73,36 @@ pub fn encode(
     }
 }
 
-/// A cached RGBA PNG answered in `format` on `background` (see [`encode`]);
-/// `None` when the PNG is the answer as it is.
-pub fn reencode(
-    png: &[u8],
-    background: Option<[u8; 3]>,
-    format: PictureFormat,
-) -> Result<Option<Vec<u8>>, EncodeError> {
-    if format == PictureFormat::Png && background.is_none() {
-        return Ok(None);
-    }
+/// A cached RGBA PNG answered in `format` on `background` (see [`encode`]).
+pub fn reencode(png: &[u8], background: Option<[u8; 3]>, format: PictureFormat) -> Result<Vec<u8>, EncodeError> {
     let picture =
         image::load_from_memory_with_format(png, image::ImageFormat::Png).map_err(|e| EncodeError(e.to_string()))?;
     let rgba = picture.into_rgba8();
     let (w, h) = rgba.dimensions();
-    encode(rgba.as_raw(), w as usize, h as usize, background, format).map(Some)
+    encode(rgba.as_raw(), w as usize, h as usize, background, format)
 }
 
-/// A cached picture tile answered in `format` on `background` (see
-/// [`encode`]); an absent tile (no bytes) stays absent.
-pub fn answer(tile: Arc<Tile>, background: Option<[u8; 3]>, format: PictureFormat) -> Result<Arc<Tile>, ServeError> {
-    if tile.bytes.is_empty() {
+/// A cached picture tile answered in `format` on `background`: as it is (a
+/// transparent PNG, or an absent tile), else re-encoded on the compute pool
+/// (503 when it is full), its time added to `Server-Timing`.
+pub async fn answer(
+    tiles: &TileService,
+    tile: Arc<Tile>,
+    background: Option<[u8; 3]>,
+    format: PictureFormat,
+) -> Result<Arc<Tile>, ServeError> {
+    if tile.bytes.is_empty() || (format == PictureFormat::Png && background.is_none()) {
         return Ok(tile);
     }
-    match reencode(&tile.bytes, background, format).map_err(ServeError::internal)? {
-        Some(bytes) => Ok(Arc::new(Tile { stale: tile.stale, ..Tile::new(bytes, tile.timing.clone()) })),
-        None => Ok(tile),
-    }
+    let png = tile.bytes.clone();
+    let (bytes, took) = tiles
+        .run(move |_| {
+            let start = Instant::now();
+            reencode(&png, background, format).map(|b| (b, start.elapsed())).map_err(ServeError::internal)
+        })
+        .await?;
+    let timing = format!("{}, picture;dur={:.2}", tile.timing, took.as_secs_f64() * 1e3);
+    Ok(Arc::new(Tile { stale: tile.stale, ..Tile::new(bytes, timing) }))
 }
 
 /// RGBA pixels composited over an opaque `background`: RGB pixels.
@@ -133,12 +137,10 @@ mod tests {
 
     #[test]
     fn a_picture_is_laid_on_its_background() {
-        let flat = image::load_from_memory(&reencode(&png(), Some([0, 0, 255]), PictureFormat::Png).unwrap().unwrap())
-            .unwrap();
+        let flat = image::load_from_memory(&reencode(&png(), Some([0, 0, 255]), PictureFormat::Png).unwrap()).unwrap();
         assert_eq!(flat.color(), image::ColorType::Rgb8);
         let px: Vec<[u8; 3]> = flat.into_rgb8().pixels().map(|p| p.0).collect();
         assert_eq!(px, vec![[255, 0, 0], [0, 0, 255], [0, 128, 127]]);
-        assert_eq!(reencode(&png(), None, PictureFormat::Png).unwrap(), None, "a transparent PNG is kept as it is");
         assert!(reencode(b"not a png", Some([0, 0, 0]), PictureFormat::Png).is_err());
     }
 
@@ -148,7 +150,7 @@ mod tests {
         let big: Vec<u8> = (0..8).flat_map(|_| RGBA.chunks(4).flat_map(|p| p.repeat(8)).collect::<Vec<_>>()).collect();
         let png = encode::png(&big, 24, 8, image::ExtendedColorType::Rgba8).unwrap();
         for (background, expected) in [(None, [255, 255, 255]), (Some([0, 0, 255]), [0, 0, 255])] {
-            let bytes = reencode(&png, background, PictureFormat::Jpeg).unwrap().unwrap();
+            let bytes = reencode(&png, background, PictureFormat::Jpeg).unwrap();
             let jpeg = image::load_from_memory_with_format(&bytes, image::ImageFormat::Jpeg).unwrap().into_rgb8();
             assert_eq!(jpeg.dimensions(), (24, 8));
             let near = |p: [u8; 3], q: [u8; 3]| p.iter().zip(q).all(|(a, b)| a.abs_diff(b) <= 8);

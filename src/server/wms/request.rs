@@ -260,14 +260,14 @@ fn asked_version(params: &Params) -> Option<(&str, Option<[u32; 3]>)> {
     Some((text, number))
 }
 
-/// A GetMap names a version served (1.0 and 1.1 read as 1.1.1), or none
-/// (1.3.0): only capabilities are negotiated.
+/// A GetMap or GetFeatureInfo names a version served (1.0 and 1.1 read as
+/// 1.1.1), or none (1.3.0): only capabilities are negotiated.
 fn check_map_version(params: &Params) -> Result<(), Exception> {
     match asked_version(params) {
         None | Some((_, Some([1, 0 | 1, _] | [1, 3, 0]))) => Ok(()),
         Some((text, _)) => Err(Exception::new(
             Code::InvalidParameterValue,
-            format!("VERSION={text}: GetMap is served in WMS 1.1.1 and 1.3.0"),
+            format!("VERSION={text}: maps are served in WMS 1.1.1 and 1.3.0"),
         )
         .locator("VERSION")),
     }
