@@ -160,14 +160,17 @@ fn the_shipped_gdal_description_reads_the_demo_heights() {
     );
 }
 
+/// GDAL's plain `WMS:` URL of the demo's relief (no service description).
+fn plain_relief_url(server: &Server) -> String {
+    let query = "SERVICE=WMS&VERSION=1.1.1&REQUEST=GetMap&LAYERS=relief&SRS=EPSG:4326&BBOX=10.0,46.3,10.25,46.45";
+    format!("WMS:{}/wms?{query}", server.base)
+}
+
 #[test]
 fn gdal_reads_the_relief_from_a_plain_wms_url_in_its_default_jpeg() {
     let dir = TempDir::new("client-gdal-jpeg");
     let server = Server::start(None, &dir.join("cache"));
-    let url = format!(
-        "WMS:{}/wms?SERVICE=WMS&VERSION=1.1.1&REQUEST=GetMap&LAYERS=relief&SRS=EPSG:4326&BBOX=10.0,46.3,10.25,46.45",
-        server.base
-    );
+    let url = plain_relief_url(&server);
     let out = dir.join("relief.png");
     run(Command::new("gdal_translate").args(["-q", "-outsize", "256", "154"]).arg(&url).arg(&out), "gdal_translate");
     let relief = image::open(&out).unwrap();
@@ -182,10 +185,7 @@ fn gdal_reads_the_relief_from_a_plain_wms_url_in_its_default_jpeg() {
 fn gdal_locationinfo_reads_the_heights_under_a_point() {
     let dir = TempDir::new("client-gdal-info");
     let server = Server::start(None, &dir.join("cache"));
-    let url = format!(
-        "WMS:{}/wms?SERVICE=WMS&VERSION=1.1.1&REQUEST=GetMap&LAYERS=relief&SRS=EPSG:4326&BBOX=10.0,46.3,10.25,46.45",
-        server.base
-    );
+    let url = plain_relief_url(&server);
     // GDAL asks GetFeatureInfo for GML and prints it per band.
     let report = run(Command::new("gdallocationinfo").args(["-wgs84", &url, "10.125", "46.375"]), "gdallocationinfo");
     let dem = report
