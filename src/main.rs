@@ -739,14 +739,15 @@ fn run(command: Command) -> Result<()> {
 }
 
 /// Logs to stderr, filtered by `RUST_LOG`: by default the server's `info`;
-/// for the other commands sylva's warnings (a tile server being retried,
-/// say) and other crates' errors, but none of the window system's (winit
-/// warns of ordinary X11 set-ups); JSON lines with `SYLVA_LOG_FORMAT=json`.
+/// for the other commands sylva's warnings only (a tile server being
+/// retried, say): the GPU and window stacks report probes that fail as a
+/// matter of course as errors (wgpu's EGL probe, winit's X11 settings); JSON
+/// lines with `SYLVA_LOG_FORMAT=json`.
 fn logs(command: &Command) {
     let default = match command {
         #[cfg(feature = "server")]
         Command::Serve { .. } => "info,tower_http=warn",
-        _ => "error,sylva=warn,winit=off",
+        _ => "sylva=warn",
     };
     let filter = tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| default.into());
     let logs = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
