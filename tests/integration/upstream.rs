@@ -143,7 +143,9 @@ fn an_upstream_that_hangs_or_fails_gives_a_timely_exception_and_the_server_stays
 fn stale_tiles_are_served_when_the_upstream_is_gone() {
     let dir = TempDir::new("up-stale");
     let upstream = Server::start(None, &dir.join("cache-up"));
-    let config = proxy_config(&dir, &wms_upstream(&upstream.base, "ttl_s = 1\ntimeout_ms = 500\nretries = 0"));
+    // The first fetch computes the upstream's tile cold (seconds in a debug
+    // build beside other tests); once it is gone, connections are refused at once.
+    let config = proxy_config(&dir, &wms_upstream(&upstream.base, "ttl_s = 1\ntimeout_ms = 10000\nretries = 0"));
     let cache = dir.join("cache-proxy");
     let fresh = {
         let proxy = Server::start(Some(&config), &cache);
