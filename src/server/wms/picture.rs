@@ -73,7 +73,7 @@ pub fn encode(
     }
 }
 
-/// A cached RGBA PNG answered in `format` on `background` (see [`encode`]).
+/// A cached RGBA PNG answered in `format` on `background` (see [`encode()`]).
 pub fn reencode(png: &[u8], background: Option<[u8; 3]>, format: PictureFormat) -> Result<Vec<u8>, EncodeError> {
     let picture =
         image::load_from_memory_with_format(png, image::ImageFormat::Png).map_err(|e| EncodeError(e.to_string()))?;
