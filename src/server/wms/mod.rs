@@ -194,8 +194,8 @@ fn paste(out: &mut Raster<f32>, bil32: &[u8], n1: i64, (x0, y0): (i64, i64)) {
 /// An exception answered as the request asked: a report (400), or an image.
 fn exception(e: &Exception, reply: Reply, state: &AppState) -> Response {
     match (reply.style, reply.image) {
-        (ExceptionStyle::InImage, Some((w, h, format @ (MapFormat::Png | MapFormat::Jpeg)))) => {
-            let picture = if format == MapFormat::Jpeg { PictureFormat::Jpeg } else { PictureFormat::Png };
+        (ExceptionStyle::InImage, Some((w, h, format))) if format.picture().is_some() => {
+            let picture = format.picture().unwrap_or(PictureFormat::Png);
             ([(header::CONTENT_TYPE, format.mime())], inimage::message(&e.to_string(), w, h, reply.background, picture))
                 .into_response()
         }
