@@ -93,7 +93,10 @@ fn cs_rays(@builtin(global_invocation_id) id: vec3<u32>) {
         if entry < 0.0 || axis_distance(dir, entry) > best * (1.0 + BOX_SLACK) {
             continue;
         }
+        let before = vec2<u32>(view_fetches, leaf_cells);
         let ray = cast_ray(dir, entry * 0.999);
+        // Counted by the draw's own index (the bins list them nearest first).
+        count_cast(tile.flags.y - 1u, p, view_fetches - before.x, leaf_cells - before.y);
         if ray.t != NO_HIT {
             let d = hit_distance(ray);
             if d < best {
@@ -112,6 +115,7 @@ fn cs_rays(@builtin(global_invocation_id) id: vec3<u32>) {
     use_tile(best_draw - 1u);
     let dir = pixel_ray(pixel);
     let out = shade_hit(Ray(tile.camera.xyz + dir * best_base, dir, best_t));
+    count_shadow(tile.flags.y - 1u, p, shadow_fetches);
     textureStore(colour_out, p, out.colour);
     textureStore(data_out, p, out.data);
 }

@@ -157,10 +157,15 @@ fn ray_fragment(in: VertexOut) -> FragmentOut {
         t_base = max(dot(in.local - tile.camera.xyz, dir) * 0.999, 0.0);
     }
     let ray = cast_ray(dir, t_base);
+    let draw = tile.flags.y - 1u;
+    let pixel = vec2<u32>(in.clip.xy);
+    count_cast(draw, pixel, view_fetches, leaf_cells);
     if ray.t == NO_HIT {
         discard;
     }
-    return shade_hit(ray);
+    let out = shade_hit(ray);
+    count_shadow(draw, pixel, shadow_fetches);
+    return out;
 }
 
 @fragment

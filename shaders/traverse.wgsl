@@ -107,6 +107,7 @@ fn traverse_exact(o: vec3<f32>, d: vec3<f32>, t0: f32, t1: f32) -> f32 {
         let t_out = min(min(exits.x, exits.y), t1);
         // A leaf's bound is the highest of its corners: read them at once.
         let h = cell_heights(w.cell.x - 1, w.cell.y - 1, &view_fetches);
+        leaf_cells += 1u;
         if has_data(h) && lowest(o, d, w.t, t_out) <= max(max(h.x, h.y), max(h.z, h.w)) {
             let p = o.xy + d.xy * w.t;
             let tau = patch_hit(h, p - vec2<f32>(w.cell - 1), d, o.z + d.z * w.t, t_out - w.t);

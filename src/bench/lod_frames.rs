@@ -27,10 +27,10 @@ use std::collections::HashMap;
 /// Within this share of the budget a frame is on budget (the issue's ±10 %).
 pub const TOLERANCE: f64 = 0.1;
 
-/// Terms of a frame's measured work: 1 (a fixed cost), tiles drawn,
-/// ray-cast pixels (thousands), view and shadow ray fetches (millions) and
-/// splats (thousands).
-const WORK: usize = 6;
+/// Terms of a frame's measured work: 1 (a fixed cost), tiles drawn, rays
+/// cast (thousands; every ray, shown or not), their view-ray fetches, leaf
+/// cells and shadow-ray fetches (millions), and splats (thousands).
+const WORK: usize = 7;
 
 /// One frame's times, ms.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -61,17 +61,15 @@ pub fn parse(csv: &str) -> Result<Vec<FrameTime>, String> {
         (column("gpu_ms")?, column("render_ms")?, column("predicted_ms")?, column("budget_ms")?);
     let bound = column("bound").ok();
     let model = column("model_ms").ok();
-    let work = ["tiles", "ray_pixels", "view_fetches_mean", "shadow_fetches_mean", "splats"].map(|c| column(c).ok());
+    let work = ["tiles", "rays_cast", "rays_view_fetches", "rays_leaf_cells", "rays_shadow_fetches", "splats"]
+        .map(|c| column(c).ok());
     let rows = lines.skip(1).enumerate().map(|(k, line)| {
         let cells: Vec<&str> = line.split(',').collect();
         let number = |i: usize| cells.get(i).and_then(|c| c.parse::<f64>().ok());
         let measured = number(gpu).or(number(render));
         let budget_bound = bound.and_then(|i| cells.get(i)).map(|b| matches!(*b, "budget" | "limit"));
-        let [tiles, pixels, view, shadow, splats] = work.map(|c| c.and_then(number));
-        let work = (|| {
-            let pixels = pixels?;
-            Some([1.0, tiles?, pixels / 1e3, view? * pixels / 1e6, shadow? * pixels / 1e6, splats? / 1e3])
-        })();
+        let [tiles, rays, view, leaf, shadow, splats] = work.map(|c| c.and_then(number));
+        let work = (|| Some([1.0, tiles?, rays? / 1e3, view? / 1e6, leaf? / 1e6, shadow? / 1e6, splats? / 1e3]))();
         match (number(predicted), measured, number(budget)) {
             (Some(predicted_ms), Some(measured_ms), Some(budget_ms)) => Ok(FrameTime {
                 predicted_ms,
@@ -249,12 +247,14 @@ mod tests {
 
     #[test]
     fn the_hindsight_fit_finds_a_linear_cost_and_shows_what_it_cannot_fit() {
-        // Frames costing 20 + 3 per tile + 2 per million view fetches.
-        let mut csv = "frame,gpu_ms,render_ms,predicted_ms,budget_ms,tiles,ray_pixels,view_fetches_mean,shadow_fetches_mean,splats\n".to_string();
+        // Frames costing 20 + 3 per tile + 2 per million view fetches + 5
+        // per million leaf cells.
+        let mut csv = "frame,gpu_ms,render_ms,predicted_ms,budget_ms,tiles,rays_cast,rays_view_fetches,rays_leaf_cells,rays_shadow_fetches,splats\n".to_string();
         for k in 0..40 {
-            let (tiles, pixels, view) = (5 + k % 7, 50_000 + 1_000 * (k % 5), 10.0 + (k % 3) as f64);
-            let ms = 20.0 + 3.0 * tiles as f64 + 2.0 * view * pixels as f64 / 1e6;
-            csv += &format!("{k},{ms},{ms},{ms},40,{tiles},{pixels},{view},9,0\n");
+            let (tiles, rays, leaf) = (5 + k % 7, 50_000 + 1_000 * (k % 5), 100_000 * (k % 4));
+            let view = rays * (10 + k % 3);
+            let ms = 20.0 + 3.0 * tiles as f64 + 2.0 * view as f64 / 1e6 + 5.0 * leaf as f64 / 1e6;
+            csv += &format!("{k},{ms},{ms},{ms},40,{tiles},{rays},{view},{leaf},9,0\n");
         }
         let frames = parse(&csv).unwrap();
         assert_eq!(hindsight_fit(&frames), Some(1.0));

@@ -21,7 +21,7 @@ use super::raycast::{Traversal, TreeBlend};
 use super::render::RayPass;
 use super::render::cache::CacheFull;
 use super::render::uniforms::FrameSettings;
-use super::render::{Draw, FrameStats, Readback, Rendered, Renderer};
+use super::render::{Draw, DrawWork, FrameStats, Readback, Rendered, Renderer};
 use super::source::TileSource;
 use super::sse::SseSelector;
 use super::store::{LoadError, TileStore};
@@ -152,6 +152,8 @@ pub struct FrameRecord {
     pub view_fetches: (f64, u32),
     /// Mean shadow and shading fetches over ray-cast pixels.
     pub shadow_fetches_mean: f64,
+    /// The work of every ray cast, shown or not, over the frame's draws.
+    pub rays: DrawWork,
     /// Bytes fetched from the source during the frame.
     pub bytes_fetched: u64,
     /// Tile bytes resident on the GPU.
@@ -579,7 +581,7 @@ fn frame(
     let predicted_ms = lod.as_deref().zip(selected).map(|(l, s)| l.expected_ms(s));
     let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
     let drawn: Vec<Choice> = draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
-    let steps = FrameSteps::measure(&out.fetches, &out.draws, &drawn);
+    let steps = FrameSteps::measure(&out.work, &drawn);
     let model_ms = lod.map(|lod| {
         lod.observe(&camera, &drawn, &trees.drawn, (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), &steps)).model_ms
     });
@@ -601,6 +603,7 @@ fn frame(
         ray_pixels: rays.len(),
         view_fetches: (steps.view.mean.unwrap_or(0.0), rays.iter().map(|f| f[0]).max().unwrap_or(0)),
         shadow_fetches_mean: mean_or_zero(rays.iter().map(|f| f64::from(f[1]))),
+        rays: out.work.iter().fold(DrawWork::default(), |a, w| a.plus(w)),
         bytes_fetched: source.bytes_fetched() - bytes_before,
         gpu_bytes: out.stats.resident_bytes,
         cpu_bytes: store.bytes(),
@@ -707,7 +710,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     let mut out = Vec::new();
     let _ = writeln!(
         out,
-        "frame,cpu_ms,gpu_ms,gpu_rays_ms,gpu_fill_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,model_ms,shadow_steps_mean,candidates,benefit_bound,bound,morphing,trees,splats,splat_fill_mpx,nodes_touched"
+        "frame,cpu_ms,gpu_ms,gpu_rays_ms,gpu_fill_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,model_ms,shadow_steps_mean,candidates,benefit_bound,bound,morphing,trees,splats,splat_fill_mpx,nodes_touched,rays_cast,rays_view_fetches,rays_leaf_cells,rays_shadow_fetches"
     );
     for r in records {
         let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
@@ -716,7 +719,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
         let (rays, fill) = (optional(r.gpu_rays_ms.map(|t| t.0)), optional(r.gpu_rays_ms.map(|t| t.1)));
         let _ = writeln!(
             out,
-            "{},{:.3},{gpu},{rays},{fill},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{},{:.2},{},{},{},{},{},{},{:.4},{}",
+            "{},{:.3},{gpu},{rays},{fill},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{},{:.2},{},{},{},{},{},{},{:.4},{},{},{},{},{}",
             r.frame,
             r.cpu_ms,
             r.render_ms,
@@ -745,7 +748,11 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             r.trees,
             r.splats,
             r.splat_fill_px / 1e6,
-            r.nodes_touched.map_or(String::new(), |n| n.to_string())
+            r.nodes_touched.map_or(String::new(), |n| n.to_string()),
+            r.rays.rays,
+            r.rays.view_fetches,
+            r.rays.leaf_cells,
+            r.rays.shadow_fetches
         );
     }
     String::from_utf8_lossy(&out).into_owned()

@@ -23,7 +23,7 @@ use sylva::client::raycast::{self, Fade, Traversal, TreeBlend};
 use sylva::client::reference::{self, Departure, Image, Lighting};
 use sylva::client::render::gpu::Gpu;
 use sylva::client::render::uniforms::{FrameSettings, needs_filler};
-use sylva::client::render::{Draw, RayPass, Readback, Rendered, Renderer};
+use sylva::client::render::{Draw, DrawWork, RayPass, Readback, Rendered, Renderer};
 use sylva::client::source::{RegionSource, TileSource};
 use sylva::client::tile::{TileData, TilePayload};
 use sylva::client::trees::{self, Splat, TreeSettings};
@@ -632,6 +632,44 @@ fn assert_no_step_at(camera: &Camera, colour: &[[u8; 4]], border: Geodetic) {
 }
 
 #[test]
+fn every_ray_cast_is_counted_by_its_draw_shown_or_not() {
+    let (_, tiles, camera, sun) = demo_scene();
+    for pass in PASSES {
+        let out = render_both_in(pass, &tiles, &camera, &settings(Traversal::Exact, sun)).gpu;
+        assert_eq!(out.work.len(), tiles.len());
+        let shown = |k: usize| out.draws.iter().filter(|&&d| d as usize == k + 1).count() as u64;
+        for (k, w) in out.work.iter().enumerate() {
+            assert!(w.rays >= shown(k) && w.leaf_cells <= w.view_fetches, "{pass:?}, draw {k}: {w:?}");
+            assert!(shown(k) == 0 || w.view_fetches > 0 && w.leaf_cells > 0, "{pass:?}, draw {k}: {w:?}");
+        }
+        let total = out.work.iter().fold(DrawWork::default(), |a, w| a.plus(w));
+        let pixels = (0..tiles.len()).map(shown).sum::<u64>();
+        let [view, shadow] = [0, 1].map(|i| out.fetches.iter().map(|f| u64::from(f[i])).sum::<u64>());
+        // A pixel's count adds the gathers that shade its hit (at most two)
+        // to the fetches of the rays it shows (in a compute pass, of every
+        // ray cast for it). Rays no pixel shows: hull fragments whose rays
+        // left their tile or that a nearer tile covered; in a compute pass,
+        // a pixel's rays through the boxes of tiles it does not show, and
+        // the rays of pixels that show the sky.
+        assert!(total.view_fetches + 2 * pixels > view, "{pass:?}: {total:?} against {view} in {pixels} pixels");
+        assert!(total.rays > pixels, "{pass:?}: {total:?} against {pixels} pixels");
+        // Shadow rays leave from a pixel's hit, and in a compute pass from
+        // its nearest hit only.
+        assert!(total.shadow_fetches >= shadow && shadow > 0, "{pass:?}: {total:?} against {shadow}");
+        assert!(pass == RayPass::Fragment || total.shadow_fetches == shadow, "{total:?} against {shadow}");
+    }
+    let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
+    let refs: Vec<&TileData> = tiles.iter().collect();
+    let linear = settings(Traversal::Linear(30), sun);
+    let out = with_renderer(samples, halo, |r| r.render(&camera, &refs, &linear, Readback::All).expect("fits"));
+    assert!(
+        out.work.iter().all(|w| w.leaf_cells == 0) && out.work.iter().any(|w| w.view_fetches > 0),
+        "{:?}",
+        out.work
+    );
+}
+
+#[test]
 fn no_sun_casts_no_shadow_rays_and_far_tiles_cast_no_rays() {
     let grid = small_grid();
     let (lon0, lat0) = (7.3, 45.1);
@@ -657,6 +695,8 @@ fn no_sun_casts_no_shadow_rays_and_far_tiles_cast_no_rays() {
     let out = render_both(&tiles, &far, &faded);
     assert_eq!(out.gpu.stats.tiles_plain, 4, "{:?}", out.gpu.stats);
     assert!(out.gpu.fetches.iter().all(|f| f[0] == 0), "no view rays on far tiles");
+    assert!(out.gpu.work.iter().all(|w| *w == DrawWork::default()), "none counted: {:?}", out.gpu.work);
+    assert!(no_sun.gpu.work.iter().all(|w| w.shadow_fetches == 0) && no_sun.gpu.work.iter().any(|w| w.rays > 0));
     assert!(out.gpu.view_z_m.iter().filter(|&&z| z > 0.0).count() > 1000, "the tiles are drawn");
 }
 

@@ -60,10 +60,12 @@ pub struct Candidate {
     pub seen_px: f64,
     /// Pixels it casts rays on: the most any camera sees, 0 if drawn plain.
     pub ray_px: f64,
-    /// View-ray steps per ray-cast pixel it is priced at ([`RaySteps::view`]).
+    /// View-ray steps per ray cast it is priced at ([`RaySteps::view`]).
     pub view_steps: f64,
-    /// Shadow-ray fetches per ray-cast pixel and shadow step it is priced
-    /// at ([`RaySteps::shadow`]).
+    /// Leaf cells per view ray it is priced at ([`RaySteps::leaf`]).
+    pub leaf_cells: f64,
+    /// Shadow-ray fetches per ray cast and shadow step it is priced at
+    /// ([`RaySteps::shadow`]).
     pub shadow_fetches: f64,
     /// Whether a camera casts its rays through a fading canopy (the far
     /// fade or the trees' blend reaches it), which the renderer draws with
@@ -242,6 +244,7 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
             seen_px: seen / k,
             ray_px: ray,
             view_steps: scope.steps.view(frame.id),
+            leaf_cells: scope.steps.leaf(frame.id),
             shadow_fetches: scope.steps.shadow(frame.id),
             faded,
         },
@@ -447,6 +450,7 @@ mod tests {
             seen_px,
             ray_px,
             view_steps: 20.0,
+            leaf_cells: 5.0,
             shadow_fetches: 1.0,
             faded: false,
         };

@@ -21,6 +21,7 @@ pub mod splats;
 pub mod targets;
 pub mod timer;
 pub mod uniforms;
+pub mod work;
 
 use super::camera::Camera;
 use super::raycast::{self, SKY, Traversal};
@@ -36,6 +37,8 @@ use std::time::Instant;
 use targets::Targets;
 use timer::PassTimer;
 use uniforms::{DrawMode, FrameSettings, FrameUniform, Placement, TILE_STRIDE, TileUniform};
+pub use work::DrawWork;
+use work::WorkCounters;
 
 /// Frames submitted and not yet done, at most, when they are pipelined
 /// ([`Renderer::pipelined`]): what a swapchain holds an interactive loop to.
@@ -88,6 +91,8 @@ pub struct Rendered {
     /// The draw whose rays a pixel shows: `k + 1` for the `k`-th of the
     /// frame's draws, 0 where no ray was cast.
     pub draws: Vec<u32>,
+    /// The work of every ray each draw cast, shown or not, by draw.
+    pub work: Vec<DrawWork>,
     /// Counts and times.
     pub stats: FrameStats,
 }
@@ -128,6 +133,7 @@ pub struct Renderer {
     cache: TileCache,
     frame_buffer: wgpu::Buffer,
     frame_group: wgpu::BindGroup,
+    work: WorkCounters,
     tile_buffer: wgpu::Buffer,
     tile_group: wgpu::BindGroup,
     splats: Option<SplatBuffers>,
@@ -177,7 +183,8 @@ impl Renderer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let frame_group = pipelines.frame_group(device, &frame_buffer, &cache);
+        let work = WorkCounters::new(device, cache.capacity());
+        let frame_group = pipelines.frame_group(device, &frame_buffer, (&cache, &work));
         let tile_buffer = tile_buffer(device, cache.capacity());
         let tile_group = pipelines.tile_group(device, &tile_buffer);
         let timer = PassTimer::new(device, &gpu.queue, gpu.timestamps);
@@ -187,6 +194,7 @@ impl Renderer {
             cache,
             frame_buffer,
             frame_group,
+            work,
             tile_buffer,
             tile_group,
             splats: None,
@@ -273,7 +281,7 @@ impl Renderer {
         stats.gpu_rays_ms = times.and_then(|t| t.rays_ms);
         stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         stats.resident_bytes = self.cache.resident_bytes();
-        Ok(self.read(readback, stats))
+        Ok(self.read(readback, stats, draws.len()))
     }
 
     /// Uploads tiles and splats, decides how each tile is drawn and writes
@@ -381,6 +389,7 @@ impl Renderer {
     fn encode_and_submit(&self, draws: &[Prepared], raster: bool) -> Option<wgpu::SubmissionIndex> {
         let targets = self.targets.as_ref()?;
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
+        self.work.clear(&mut encoder);
         let computed = self.compute.as_ref();
         let timer = self.timer.as_ref().filter(|_| !self.pipelined);
         if let Some(compute) = computed {
@@ -471,7 +480,9 @@ impl Renderer {
         }
     }
 
-    fn read(&self, readback: Readback, stats: FrameStats) -> Rendered {
+    /// The frame's images, as `readback` asks, and the work of its `draws`
+    /// draws with its pixel data.
+    fn read(&self, readback: Readback, stats: FrameStats, draws: usize) -> Rendered {
         let mut out = Rendered { stats, ..Default::default() };
         let (Some(targets), true) = (&self.targets, readback != Readback::None && !self.pipelined) else { return out };
         let (device, queue) = (&self.gpu.device, &self.gpu.queue);
@@ -482,6 +493,7 @@ impl Renderer {
             out.view_z_m = data.iter().map(|d| f32::from_bits(d[2])).collect();
             out.fetches = data.iter().map(|d| [d[0], d[1]]).collect();
             out.draws = data.iter().map(|d| d[3]).collect();
+            out.work = self.work.read(device, queue, draws);
         }
         out
     }

@@ -14,6 +14,7 @@ use super::super::trees::Splat;
 use super::cache::TileCache;
 use super::shaders;
 use super::uniforms::{FrameUniform, TILE_STRIDE, TileUniform};
+use super::work::WorkCounters;
 use std::collections::HashMap;
 
 /// Colour target format.
@@ -69,7 +70,8 @@ pub struct Pipelines {
     pub splat_light: wgpu::ComputePipeline,
     /// Group 2 of [`Self::splat_light`].
     pub splat_layout: wgpu::BindGroupLayout,
-    /// Group 0: frame uniform, tile textures, sampler, morph layers.
+    /// Group 0: frame uniform, tile textures, sampler, morph layers, work
+    /// counters.
     pub frame_layout: wgpu::BindGroupLayout,
     /// Group 1: the tile uniform at a dynamic offset.
     pub tile_layout: wgpu::BindGroupLayout,
@@ -104,6 +106,17 @@ impl Pipelines {
                     count: None,
                 },
                 texture_entry(5),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 6,
+                    // Written: no vertex stage may see it.
+                    visibility: wgpu::ShaderStages::FRAGMENT.union(wgpu::ShaderStages::COMPUTE),
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Storage { read_only: false },
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
             ],
         });
         let tile_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -184,8 +197,14 @@ impl Pipelines {
         self.rays.get(&variant)
     }
 
-    /// The frame bind group over the cache's textures.
-    pub fn frame_group(&self, device: &wgpu::Device, frame: &wgpu::Buffer, cache: &TileCache) -> wgpu::BindGroup {
+    /// The frame bind group over the cache's textures and the work
+    /// counters.
+    pub fn frame_group(
+        &self,
+        device: &wgpu::Device,
+        frame: &wgpu::Buffer,
+        (cache, work): (&TileCache, &WorkCounters),
+    ) -> wgpu::BindGroup {
         let view = |t: &wgpu::Texture| {
             t.create_view(&wgpu::TextureViewDescriptor {
                 dimension: Some(wgpu::TextureViewDimension::D2Array),
@@ -205,6 +224,7 @@ impl Pipelines {
                 wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(&mip) },
                 wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::Sampler(&sampler) },
                 wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(&morph_from) },
+                wgpu::BindGroupEntry { binding: 6, resource: work.binding() },
             ],
         })
     }
