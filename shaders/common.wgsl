@@ -92,6 +92,8 @@ override MORPHING: bool = false;
 override CANOPY_WHOLE: bool = false;
 // Rays march linearly (frame.mode.y steps) instead of traversing the mipmap.
 override LINEAR: bool = false;
+// Every ray's work is counted per draw (count_cast, count_shadow).
+override COUNT_WORK: bool = false;
 // `tile`, the tile being drawn, is declared by the entry points' part:
 // a uniform at a dynamic offset for the fragments (tile_uniform.wgsl), one
 // of an array for the compute passes (compute.wgsl).
@@ -139,6 +141,9 @@ fn work_place(draw: u32, pixel: vec2<u32>) -> u32 {
 // Counts one ray cast through draw `draw` (0-based) for `pixel`, which took
 // `fetches` and read `leaves` leaf cells.
 fn count_cast(draw: u32, pixel: vec2<u32>, fetches: u32, leaves: u32) {
+    if !COUNT_WORK {
+        return;
+    }
     let w = work_place(draw, pixel);
     atomicAdd(&work[w], 1u);
     atomicAdd(&work[w + 1u], fetches);
@@ -147,5 +152,8 @@ fn count_cast(draw: u32, pixel: vec2<u32>, fetches: u32, leaves: u32) {
 
 // Counts the fetches of a shadow ray cast from a hit on draw `draw`.
 fn count_shadow(draw: u32, pixel: vec2<u32>, fetches: u32) {
+    if !COUNT_WORK {
+        return;
+    }
     atomicAdd(&work[work_place(draw, pixel) + 3u], fetches);
 }

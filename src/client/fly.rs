@@ -152,8 +152,9 @@ pub struct FrameRecord {
     pub view_fetches: (f64, u32),
     /// Mean shadow and shading fetches over ray-cast pixels.
     pub shadow_fetches_mean: f64,
-    /// The work of every ray cast, shown or not, over the frame's draws.
-    pub rays: DrawWork,
+    /// The work of every ray cast, shown or not, over the frame's draws
+    /// (counted under a budget only).
+    pub rays: Option<DrawWork>,
     /// Bytes fetched from the source during the frame.
     pub bytes_fetched: u64,
     /// Tile bytes resident on the GPU.
@@ -473,6 +474,7 @@ impl Flight {
         readback: Readback,
     ) -> Result<Framed, FlyError> {
         let readback = if self.lod.is_some() { Readback::All } else { readback };
+        renderer.count_work(self.lod.is_some());
         frame(source, renderer, (&mut self.store, self.lod.as_mut(), self.sse.as_mut()), options, (shot, readback))
     }
 }
@@ -581,7 +583,7 @@ fn frame(
     let predicted_ms = lod.as_deref().zip(selected).map(|(l, s)| l.expected_ms(s));
     let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
     let drawn: Vec<Choice> = draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
-    let steps = FrameSteps::measure(&out.work, &drawn);
+    let steps = FrameSteps::measure(&out.fetches, &out.draws, &drawn);
     let model_ms = lod.map(|lod| {
         lod.observe(&camera, &drawn, &trees.drawn, (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), &steps)).model_ms
     });
@@ -603,7 +605,7 @@ fn frame(
         ray_pixels: rays.len(),
         view_fetches: (steps.view.mean.unwrap_or(0.0), rays.iter().map(|f| f[0]).max().unwrap_or(0)),
         shadow_fetches_mean: mean_or_zero(rays.iter().map(|f| f64::from(f[1]))),
-        rays: out.work.iter().fold(DrawWork::default(), |a, w| a.plus(w)),
+        rays: (!out.work.is_empty()).then(|| out.work.iter().fold(DrawWork::default(), |a, w| a.plus(w))),
         bytes_fetched: source.bytes_fetched() - bytes_before,
         gpu_bytes: out.stats.resident_bytes,
         cpu_bytes: store.bytes(),
@@ -717,6 +719,10 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
         let optional = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.3}"));
         let gpu = optional(r.gpu_ms);
         let (rays, fill) = (optional(r.gpu_rays_ms.map(|t| t.0)), optional(r.gpu_rays_ms.map(|t| t.1)));
+        let work: [String; 4] = r
+            .rays
+            .map(|w| [w.rays, w.view_fetches, w.leaf_cells, w.shadow_fetches].map(|n| n.to_string()))
+            .unwrap_or_default();
         let _ = writeln!(
             out,
             "{},{:.3},{gpu},{rays},{fill},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{},{:.2},{},{},{},{},{},{},{:.4},{},{},{},{},{}",
@@ -749,10 +755,10 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             r.splats,
             r.splat_fill_px / 1e6,
             r.nodes_touched.map_or(String::new(), |n| n.to_string()),
-            r.rays.rays,
-            r.rays.view_fetches,
-            r.rays.leaf_cells,
-            r.rays.shadow_fetches
+            work[0],
+            work[1],
+            work[2],
+            work[3]
         );
     }
     String::from_utf8_lossy(&out).into_owned()

@@ -260,7 +260,7 @@ mod tests {
     use super::*;
     use crate::noise::{hash2, unit};
 
-    const TRUTH: CostModel = CostModel { constants_ms: [3.0, 0.004, 2.5, 0.8, 0.03, 0.05, 0.4, 0.6, 4.0] };
+    const TRUTH: CostModel = CostModel { constants_ms: [3.0, 0.004, 2.5, 0.8, 0.03, 0.05, 0.4, 0.6] };
 
     /// A frame's features, varying like a flyover: `k` seeds the hash.
     fn frame(k: i64) -> CostFeatures {
@@ -273,7 +273,6 @@ mod tests {
             groups_h: 5.0 + 40.0 * unit(h, 3),
             splat_fill_mpx: 0.2 + 3.0 * unit(hash2(k, 13, 99), 0),
             faded_mpx_steps: 0.2 + 2.0 * unit(hash2(k, 17, 99), 0),
-            leaf_mpx: 0.1 + 0.8 * unit(hash2(k, 19, 99), 0),
         }
     }
 
@@ -294,7 +293,7 @@ mod tests {
     #[test]
     fn converges_to_the_true_constants() {
         // A GPU that does not change: a long memory (a half-life of 69
-        // frames) separates nine constants under 3 % noise.
+        // frames) separates eight constants under 3 % noise.
         let settings = CalibratorSettings { forgetting: 0.99, ..CalibratorSettings::default() };
         let mut cal = CostCalibrator::new(CostModel::default(), settings);
         assert!(relative_error(&cal.model(), &TRUTH, 10_000) > 0.3, "the prior is far off");

@@ -104,10 +104,6 @@ pub struct CostFeatures {
     pub tiles: f64,
     /// View-ray casting work: millions of pixel·steps.
     pub raycast_mpx_steps: f64,
-    /// Leaf cells the view rays read, millions of pixel·leaves: a leaf's
-    /// corners and patch test cost more than a step over the maximum
-    /// mipmap, and grazing rays read many.
-    pub leaf_mpx: f64,
     /// Shadow-ray work: millions of pixel·shadow steps, each step weighed
     /// by the fetches it takes (fewer where rays stop early, more under a
     /// fading canopy).
@@ -128,7 +124,7 @@ pub struct CostFeatures {
 
 /// Number of calibrated constants: one per feature plus a fixed per-frame
 /// cost.
-pub const FEATURES: usize = 9;
+pub const FEATURES: usize = 8;
 
 impl CostFeatures {
     /// The features as a vector, with 1 for the fixed per-frame cost first.
@@ -142,7 +138,6 @@ impl CostFeatures {
             self.groups_h,
             self.splat_fill_mpx,
             self.faded_mpx_steps,
-            self.leaf_mpx,
         ]
         .map(finite_non_negative)
     }
@@ -157,7 +152,6 @@ impl CostFeatures {
             groups_h: self.groups_h + o.groups_h,
             splat_fill_mpx: self.splat_fill_mpx + o.splat_fill_mpx,
             faded_mpx_steps: self.faded_mpx_steps + o.faded_mpx_steps,
-            leaf_mpx: self.leaf_mpx + o.leaf_mpx,
         }
     }
 }
@@ -172,19 +166,16 @@ pub struct CostModel {
     pub constants_ms: [f64; FEATURES],
 }
 
-/// What the features measure, as saved with a model: 3 since rays are
-/// counted per ray cast, hidden ones too, with their leaf cells apart (2:
-/// per ray-cast pixel shown; files without `units` are older still, their
+/// What the features measure, as saved with a model: 2 since shadow rays are
+/// priced by their measured fetches (files without `units` are older, their
 /// shadow constant per nominal shadow step).
-const UNITS: u32 = 3;
+const UNITS: u32 = 2;
 
 /// A cost model's JSON form.
 #[derive(serde::Serialize, serde::Deserialize)]
 struct ModelFile {
     units: Option<u32>,
-    /// As many as [`FEATURES`] in these units (read as a list, so that a
-    /// file in other units is told by its units, not by its length).
-    constants_ms: Vec<f64>,
+    constants_ms: [f64; FEATURES],
 }
 
 impl Default for CostModel {
@@ -192,15 +183,14 @@ impl Default for CostModel {
     /// 0.01 ms per tile, 1 ms per million pixel·steps of view or shadow
     /// rays, 0.006 ms per thousand splats, 0.01 ms per hundred groups, 20
     /// ms per million pixels of splat fill, 0.5 ms more per million
-    /// pixel·steps through a fading canopy, 2 ms per million pixel·leaves
-    /// (a leaf's patch test, beyond its fetches). The calibrator replaces them
+    /// pixel·steps through a fading canopy. The calibrator replaces them
     /// within a few frames, except where features move together (splats
     /// and their fill; rays and the fading canopy, which most of them
     /// cross): those keep the prior's proportions, so the splat, fill and
     /// fading constants are in the proportions measured on lavapipe
     /// (`docs/benchmarks.md`, "Trees priced by their fill").
     fn default() -> CostModel {
-        CostModel { constants_ms: [0.5, 0.01, 1.0, 1.0, 0.006, 0.01, 20.0, 0.5, 2.0] }
+        CostModel { constants_ms: [0.5, 0.01, 1.0, 1.0, 0.006, 0.01, 20.0, 0.5] }
     }
 }
 
@@ -216,9 +206,7 @@ impl CostModel {
                  fly once without --cost-model to calibrate a new one"
             ));
         }
-        let constants_ms = <[f64; FEATURES]>::try_from(file.constants_ms.as_slice())
-            .map_err(|_| format!("{} constants, not {FEATURES}", file.constants_ms.len()))?;
-        let model = CostModel { constants_ms };
+        let model = CostModel { constants_ms: file.constants_ms };
         match model.constants_ms.iter().position(|c| !c.is_finite() || *c < 0.0) {
             Some(i) => Err(format!("constant {i} is {}, not a finite non-negative ms", model.constants_ms[i])),
             None => Ok(model),
@@ -227,7 +215,7 @@ impl CostModel {
 
     /// The model's JSON form, which [`CostModel::from_json`] reads.
     pub fn to_json(&self) -> String {
-        let file = ModelFile { units: Some(UNITS), constants_ms: self.constants_ms.to_vec() };
+        let file = ModelFile { units: Some(UNITS), constants_ms: self.constants_ms };
         serde_json::to_string_pretty(&file).unwrap_or_default()
     }
 
@@ -254,19 +242,16 @@ mod tests {
 
     #[test]
     fn cost_models_round_trip_through_json_and_bad_ones_are_refused() {
-        let model = CostModel { constants_ms: [2.5, 0.3, 40.0, 12.0, 0.0, 1e-3, 0.5, 20.0, 3.0] };
+        let model = CostModel { constants_ms: [2.5, 0.3, 40.0, 12.0, 0.0, 1e-3, 0.5, 20.0] };
         assert_eq!(CostModel::from_json(&model.to_json()), Ok(model));
-        let short = CostModel::from_json("{\"units\": 3, \"constants_ms\": [1, 2]}").unwrap_err();
-        assert!(short.contains("2 constants, not 9"), "{short}");
-        assert!(CostModel::from_json("{\"units\": 3}").unwrap_err().contains("not a cost model"));
-        let negative = "{\"units\": 3, \"constants_ms\": [1, 2, 3, -4, 5, 6, 7, 8, 9]}";
+        assert!(
+            CostModel::from_json("{\"units\": 2, \"constants_ms\": [1, 2]}").unwrap_err().contains("not a cost model")
+        );
+        let negative = "{\"units\": 2, \"constants_ms\": [1, 2, 3, -4, 5, 6, 7, 8]}";
         assert!(CostModel::from_json(negative).unwrap_err().contains("constant 3 is -4"));
         assert!(CostModel::from_json("ms").is_err());
-        // Models of earlier versions: eight constants, in other units.
-        let per_pixel = "{\"units\": 2, \"constants_ms\": [1, 2, 3, 4, 5, 6, 7, 8]}";
-        assert!(CostModel::from_json(per_pixel).unwrap_err().contains("units 2, this sylva's are 3"));
         let older = "{\"constants_ms\": [1, 2, 3, 4, 5, 6, 7, 8]}";
-        assert!(CostModel::from_json(older).unwrap_err().contains("units none, this sylva's are 3"));
+        assert!(CostModel::from_json(older).unwrap_err().contains("units none, this sylva's are 2"));
     }
 
     #[test]
@@ -339,7 +324,6 @@ mod tests {
             groups_h: 2.0,
             splat_fill_mpx: 0.5,
             faded_mpx_steps: 0.0,
-            leaf_mpx: f64::NAN,
         };
         assert!((model.predict_ms(&junk) - (0.5 + 0.02 + 10.0)).abs() < 1e-12);
     }

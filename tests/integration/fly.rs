@@ -131,7 +131,7 @@ fn bad_flight_input_is_explained() {
     assert!(said.contains("tiles.json") && said.contains("after 3 attempts"), "{said}");
     assert!(said.contains("attempt=\"1 of 3\""), "each failed try is logged: {said}");
     let model = dir.join("model.json");
-    std::fs::write(&model, r#"{"units": 3, "constants_ms": [1, 1, 1, -1, 1, 1, 1, 1, 1]}"#).unwrap();
+    std::fs::write(&model, r#"{"units": 2, "constants_ms": [1, 1, 1, -1, 1, 1, 1, 1]}"#).unwrap();
     let e = run(&[
         "--path",
         path.to_str().unwrap(),

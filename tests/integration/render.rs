@@ -631,11 +631,25 @@ fn assert_no_step_at(camera: &Camera, colour: &[[u8; 4]], border: Geodetic) {
     }
 }
 
+/// `tiles` rendered in `pass` with every ray's work counted.
+fn counted(pass: RayPass, tiles: &[TileData], camera: &Camera, settings: &FrameSettings) -> Rendered {
+    let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
+    let refs: Vec<&TileData> = tiles.iter().collect();
+    with_renderer_in(pass, samples, halo, |r| {
+        r.count_work(true);
+        let out = r.render(camera, &refs, settings, Readback::All).expect("fits the cache");
+        r.count_work(false);
+        out
+    })
+}
+
 #[test]
 fn every_ray_cast_is_counted_by_its_draw_shown_or_not() {
     let (_, tiles, camera, sun) = demo_scene();
+    let uncounted = render_both(&tiles, &camera, &settings(Traversal::Exact, sun)).gpu;
+    assert!(uncounted.work.is_empty(), "counted only when asked");
     for pass in PASSES {
-        let out = render_both_in(pass, &tiles, &camera, &settings(Traversal::Exact, sun)).gpu;
+        let out = counted(pass, &tiles, &camera, &settings(Traversal::Exact, sun));
         assert_eq!(out.work.len(), tiles.len());
         let shown = |k: usize| out.draws.iter().filter(|&&d| d as usize == k + 1).count() as u64;
         for (k, w) in out.work.iter().enumerate() {
@@ -658,15 +672,10 @@ fn every_ray_cast_is_counted_by_its_draw_shown_or_not() {
         assert!(total.shadow_fetches >= shadow && shadow > 0, "{pass:?}: {total:?} against {shadow}");
         assert!(pass == RayPass::Fragment || total.shadow_fetches == shadow, "{total:?} against {shadow}");
     }
-    let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
-    let refs: Vec<&TileData> = tiles.iter().collect();
-    let linear = settings(Traversal::Linear(30), sun);
-    let out = with_renderer(samples, halo, |r| r.render(&camera, &refs, &linear, Readback::All).expect("fits"));
-    assert!(
-        out.work.iter().all(|w| w.leaf_cells == 0) && out.work.iter().any(|w| w.view_fetches > 0),
-        "{:?}",
-        out.work
-    );
+    let linear = counted(RayPass::Fragment, &tiles, &camera, &settings(Traversal::Linear(30), sun)).work;
+    assert!(linear.iter().all(|w| w.leaf_cells == 0) && linear.iter().any(|w| w.view_fetches > 0), "{linear:?}");
+    let dark = counted(RayPass::Fragment, &tiles, &camera, &settings(Traversal::Exact, None)).work;
+    assert!(dark.iter().all(|w| w.shadow_fetches == 0) && dark.iter().any(|w| w.rays > 0), "{dark:?}");
 }
 
 #[test]
@@ -695,8 +704,6 @@ fn no_sun_casts_no_shadow_rays_and_far_tiles_cast_no_rays() {
     let out = render_both(&tiles, &far, &faded);
     assert_eq!(out.gpu.stats.tiles_plain, 4, "{:?}", out.gpu.stats);
     assert!(out.gpu.fetches.iter().all(|f| f[0] == 0), "no view rays on far tiles");
-    assert!(out.gpu.work.iter().all(|w| *w == DrawWork::default()), "none counted: {:?}", out.gpu.work);
-    assert!(no_sun.gpu.work.iter().all(|w| w.shadow_fetches == 0) && no_sun.gpu.work.iter().any(|w| w.rays > 0));
     assert!(out.gpu.view_z_m.iter().filter(|&&z| z > 0.0).count() > 1000, "the tiles are drawn");
 }
 

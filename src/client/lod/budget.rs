@@ -187,7 +187,6 @@ pub fn features(c: &Candidate, steps: u32) -> CostFeatures {
     CostFeatures {
         tiles: 1.0,
         raycast_mpx_steps,
-        leaf_mpx: c.ray_px * c.leaf_cells / 1e6,
         faded_mpx_steps: if c.faded { raycast_mpx_steps } else { 0.0 },
         shadow_mpx_steps: c.ray_px * f64::from(steps) * c.shadow_fetches / 1e6,
         ..CostFeatures::default()
@@ -447,7 +446,7 @@ mod tests {
         candidates(&scope).tiles
     }
 
-    const MODEL: CostModel = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0] };
+    const MODEL: CostModel = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0, 0.0, 0.0] };
 
     fn budget(ms: f64, shadows: bool) -> Budget {
         Budget { budget_ms: ms, max_tiles: 256, shadows, deadline: None }
@@ -522,7 +521,7 @@ mod tests {
     #[test]
     fn tiles_under_a_fading_canopy_pay_its_pipelines_surcharge() {
         let c = demo_candidates();
-        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0, 0.0, 0.5, 0.0] };
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0, 0.0, 0.5] };
         let at = |faded: bool| {
             let priced: Vec<Candidate> = c.iter().map(|t| Candidate { faded, ..*t }).collect();
             choose(&priced, &[], &model, &budget(2.5, false))
@@ -557,7 +556,7 @@ mod tests {
     #[test]
     fn a_group_near_some_of_the_cameras_is_priced_at_that_share() {
         let c = demo_candidates();
-        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01, 0.0, 0.0, 0.0] };
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01, 0.0, 0.0] };
         let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
         let cut = |share: f64| {
             let trees = [(TreeItem { block: (0, 0), group, share, fill_px: 0.0 }, 20_000.0)];
@@ -575,7 +574,7 @@ mod tests {
     fn tree_groups_get_splats_by_their_worth_within_the_budget() {
         let c = demo_candidates();
         // A full group costs 3.1 ms: the groups compete with the terrain.
-        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01, 0.0, 0.0, 0.0] };
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01, 0.0, 0.0] };
         let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
         let item = |k: i64| TreeItem { block: (k, 0), group, share: 1.0, fill_px: 0.0 };
         let trees = [(item(0), 20_000.0), (item(1), 2_000.0), (item(2), 0.0)];
@@ -602,7 +601,7 @@ mod tests {
         let c = demo_candidates();
         // Splats free, fill 1 ms per 10,000 pixels: the group's 64 trees
         // cover 100,000 pixels from a splat each to 24 each.
-        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0, 100.0, 0.0, 0.0] };
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0, 100.0, 0.0] };
         let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
         let trees = [(TreeItem { block: (0, 0), group, share: 1.0, fill_px: 1e5 }, 20_000.0)];
         let bare = choose(&c, &[], &model, &budget(1e4, true));
@@ -623,7 +622,7 @@ mod tests {
         // Fifty groups in view at 12 ms each (a fit gone wrong): the
         // terrain still gets what the budget allows, and the cut fits.
         let c = demo_candidates();
-        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 1200.0, 0.0, 0.0, 0.0] };
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 1200.0, 0.0, 0.0] };
         let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
         let trees: Vec<_> =
             (0..50).map(|k| (TreeItem { block: (k, 0), group, share: 1.0, fill_px: 0.0 }, 2_000.0)).collect();
@@ -632,7 +631,7 @@ mod tests {
         assert!(cut.predicted_ms <= 8.0 + 1e-9, "{}", cut.predicted_ms);
         assert_eq!(cut.tiles.len(), bare.tiles.len(), "{:?}", cut.tree_budgets);
         // Affordable, a group gets its splats with the constant paid once.
-        let cheap = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 100.0, 0.0, 0.0, 0.0] };
+        let cheap = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 100.0, 0.0, 0.0] };
         let rich = choose(&c, &trees, &cheap, &budget(1e4, true));
         assert_eq!(rich.tree_budgets.len(), 50);
         assert!((rich.features.groups_h - 0.5).abs() < 1e-12 && rich.predicted_ms <= 1e4);

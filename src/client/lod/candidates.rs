@@ -60,12 +60,10 @@ pub struct Candidate {
     pub seen_px: f64,
     /// Pixels it casts rays on: the most any camera sees, 0 if drawn plain.
     pub ray_px: f64,
-    /// View-ray steps per ray cast it is priced at ([`RaySteps::view`]).
+    /// View-ray steps per ray-cast pixel it is priced at ([`RaySteps::view`]).
     pub view_steps: f64,
-    /// Leaf cells per view ray it is priced at ([`RaySteps::leaf`]).
-    pub leaf_cells: f64,
-    /// Shadow-ray fetches per ray cast and shadow step it is priced at
-    /// ([`RaySteps::shadow`]).
+    /// Shadow-ray fetches per ray-cast pixel and shadow step it is priced
+    /// at ([`RaySteps::shadow`]).
     pub shadow_fetches: f64,
     /// Whether a camera casts its rays through a fading canopy (the far
     /// fade or the trees' blend reaches it), which the renderer draws with
@@ -244,7 +242,6 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
             seen_px: seen / k,
             ray_px: ray,
             view_steps: scope.steps.view(frame.id),
-            leaf_cells: scope.steps.leaf(frame.id),
             shadow_fetches: scope.steps.shadow(frame.id),
             faded,
         },
@@ -450,7 +447,6 @@ mod tests {
             seen_px,
             ray_px,
             view_steps: 20.0,
-            leaf_cells: 5.0,
             shadow_fetches: 1.0,
             faded: false,
         };

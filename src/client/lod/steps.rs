@@ -1,6 +1,5 @@
-//! Ray work per ray cast, tile by tile, as the renderer counted it
-//! ([`crate::client::render::DrawWork`]: every ray, the hidden ones too):
-//! what a tile's rays cost depends on how they meet it. Grazing a
+//! Ray fetches per ray-cast pixel, tile by tile, as the renderer measured
+//! them: what a tile's rays cost depends on how they meet it. Grazing a
 //! coarse tile toward the horizon a view ray walks many cells near the
 //! surface; plunging into a near fine one it descends the mipmap and stops
 //! (one rmnp frame holds tiles at 8 and at 40 steps a pixel). A shadow ray
@@ -9,11 +8,7 @@
 //! tile's shadow rays fetch 0.8 times their steps, its neighbour's 1.6 or
 //! 2). Priced at one flight-wide figure, a cut that trades far coarse tiles
 //! for near fine ones looks as dear as it was, and the frame comes in under
-//! (or over) the budget. The leaf cells a view ray reads are counted apart
-//! from its fetches: a leaf's corners and patch test cost several steps
-//! over the maximum mipmap, and grazing rays walk many leaves (over the demo
-//! valley a frame's leaves were 23–67 % of its fetches, and frames of the
-//! same fetches took up to twice as long with more of them).
+//! (or over) the budget.
 //!
 //! A tile is priced with what its rays took when it was last drawn (its
 //! shadow rays: per shadow step, when it was last drawn with some); a tile
@@ -22,17 +17,12 @@
 //! frame that cast such rays.
 
 use super::budget::Choice;
-use crate::client::render::DrawWork;
 use crate::grid::TileId;
 use std::collections::HashMap;
 
-/// View-ray steps per ray cast before any is measured (the exact
+/// View-ray steps per ray-cast pixel before any is measured (the exact
 /// traversal's mean on the demo and rmnp paths is 10–30 fetches).
 pub const VIEW_STEPS: f64 = 20.0;
-
-/// Leaf cells a view ray reads before any is measured (over the demo valley
-/// 3–9 a ray).
-pub const LEAF_CELLS: f64 = 5.0;
 
 /// Shadow-ray fetches per shadow step before any is measured: one height
 /// a step, every step taken.
@@ -47,14 +37,12 @@ pub const SHADOW_FETCHES_FLOOR: f64 = 0.1;
 /// camera has moved on (a second at 30 frames/s).
 pub const MAX_AGE_FRAMES: u64 = 32;
 
-/// The rays' work the renderer measured lately, per tile.
+/// The rays' fetches the renderer measured lately, per tile.
 #[derive(Clone, Debug)]
 pub struct RaySteps {
-    /// View-ray fetches per ray cast.
+    /// View-ray fetches per ray-cast pixel.
     view: PerTile,
-    /// Leaf cells read per ray cast.
-    leaf: PerTile,
-    /// Shadow-ray fetches per ray cast and shadow step.
+    /// Shadow-ray fetches per ray-cast pixel and shadow step.
     shadow: PerTile,
     /// Frames recorded.
     frame: u64,
@@ -82,71 +70,78 @@ pub struct Means {
     pub tiles: Vec<(TileId, f64)>,
 }
 
-/// One frame's rays: view-ray fetches and leaf cells per ray cast, and
-/// shadow-ray fetches per ray cast and shadow step (of the tiles drawn with
+/// One frame's rays: view-ray fetches per ray-cast pixel, and shadow-ray
+/// fetches per ray-cast pixel and shadow step (of the tiles drawn with
 /// shadow steps).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct FrameSteps {
-    /// View rays' fetches.
+    /// View rays.
     pub view: Means,
-    /// View rays' leaf cells.
-    pub leaf: Means,
     /// Shadow rays.
     pub shadow: Means,
 }
 
+/// Per tile: view fetches, shadow fetches, ray-cast pixels.
+#[derive(Clone, Copy, Default)]
+struct Sums {
+    view: u64,
+    shadow: u64,
+    pixels: u64,
+}
+
 impl FrameSteps {
-    /// The rays of a frame whose draws did `work` (draw `k` is tile `k` of
-    /// `drawn`).
-    pub fn measure(work: &[DrawWork], drawn: &[Choice]) -> FrameSteps {
-        let tiles = || drawn.iter().zip(work);
-        let per_ray = |count: fn(&DrawWork) -> u64| Means::of(tiles().map(|(c, w)| (c.id, count(w), w.rays)).collect());
-        let shadow = tiles().map(|(c, w)| (c.id, w.shadow_fetches, w.rays * u64::from(c.shadow_steps))).collect();
-        FrameSteps { view: per_ray(|w| w.view_fetches), leaf: per_ray(|w| w.leaf_cells), shadow: Means::of(shadow) }
+    /// The rays of a frame whose pixels took `fetches` (view-ray fetches,
+    /// 0 where no ray was cast; shadow-ray fetches) on the draw `draws`
+    /// names (`k + 1` for draw `k` of `drawn`, 0 for none).
+    pub fn measure(fetches: &[[u32; 2]], draws: &[u32], drawn: &[Choice]) -> FrameSteps {
+        let mut sums = vec![Sums::default(); drawn.len()];
+        let (mut total, mut pixels) = (0u64, 0u64);
+        for (f, &d) in fetches.iter().zip(draws).filter(|(f, _)| f[0] > 0) {
+            total += u64::from(f[0]);
+            pixels += 1;
+            if let Some(s) = (d as usize).checked_sub(1).and_then(|k| sums.get_mut(k)) {
+                (s.view, s.shadow, s.pixels) = (s.view + u64::from(f[0]), s.shadow + u64::from(f[1]), s.pixels + 1);
+            }
+        }
+        let tiles = || drawn.iter().zip(&sums);
+        let view = tiles().map(|(c, s)| (c.id, s.view, s.pixels)).collect();
+        let shadow = tiles().map(|(c, s)| (c.id, s.shadow, s.pixels * u64::from(c.shadow_steps))).collect();
+        let (view, shadow) = (Means::of(view, Some((total, pixels))), Means::of(shadow, None));
+        FrameSteps { view, shadow }
     }
 }
 
 impl Means {
-    /// Each tile's sum over its count (those counted), and the mean: the
-    /// tiles' sums over their counts.
-    fn of(tiles: Vec<(TileId, u64, u64)>) -> Means {
-        let (n, d) = tiles.iter().fold((0, 0), |(n, d), t| (n + t.1, d + t.2));
+    /// Each tile's sum over its count (those counted), and the mean:
+    /// `total` over its count, or the tiles' sums over their counts.
+    fn of(tiles: Vec<(TileId, u64, u64)>, total: Option<(u64, u64)>) -> Means {
+        let summed = || tiles.iter().fold((0, 0), |(n, d), t| (n + t.1, d + t.2));
+        let (n, d) = total.unwrap_or_else(summed);
         let counted = tiles.iter().filter(|t| t.2 > 0).map(|&(id, n, d)| (id, n as f64 / d as f64));
         Means { mean: (d > 0).then(|| n as f64 / d as f64), tiles: counted.collect() }
     }
 }
 
 impl RaySteps {
-    /// Nothing measured yet: every tile's view rays at `view_prior` steps
-    /// and [`LEAF_CELLS`] leaves, its shadow rays at
-    /// [`SHADOW_FETCHES_PER_STEP`].
+    /// Nothing measured yet: every tile's view rays at `view_prior` steps,
+    /// its shadow rays at [`SHADOW_FETCHES_PER_STEP`].
     pub fn new(view_prior: f64) -> RaySteps {
-        RaySteps {
-            view: PerTile::new(view_prior),
-            leaf: PerTile::new(LEAF_CELLS),
-            shadow: PerTile::new(SHADOW_FETCHES_PER_STEP),
-            frame: 0,
-        }
+        RaySteps { view: PerTile::new(view_prior), shadow: PerTile::new(SHADOW_FETCHES_PER_STEP), frame: 0 }
     }
 
-    /// View-ray steps per ray cast of the last frame that cast rays (or the
-    /// prior).
+    /// View-ray steps per ray-cast pixel of the last frame that cast rays
+    /// (or the prior).
     pub fn view_mean(&self) -> f64 {
         self.view.mean
     }
 
-    /// View-ray steps per ray cast to price tile `id` with.
+    /// View-ray steps per ray-cast pixel to price tile `id` with.
     pub fn view(&self, id: TileId) -> f64 {
         self.view.of(id, self.frame)
     }
 
-    /// Leaf cells per view ray to price tile `id` with.
-    pub fn leaf(&self, id: TileId) -> f64 {
-        self.leaf.of(id, self.frame)
-    }
-
-    /// Shadow-ray fetches per ray cast and shadow step to price tile `id`
-    /// with (at least [`SHADOW_FETCHES_FLOOR`]).
+    /// Shadow-ray fetches per ray-cast pixel and shadow step to price tile
+    /// `id` with (at least [`SHADOW_FETCHES_FLOOR`]).
     pub fn shadow(&self, id: TileId) -> f64 {
         self.shadow.of(id, self.frame).max(SHADOW_FETCHES_FLOOR)
     }
@@ -156,7 +151,6 @@ impl RaySteps {
     pub fn record(&mut self, measured: &FrameSteps) {
         self.frame += 1;
         self.view.record(&measured.view, self.frame);
-        self.leaf.record(&measured.leaf, self.frame);
         self.shadow.record(&measured.shadow, self.frame);
     }
 }
@@ -191,35 +185,30 @@ mod tests {
 
     /// A frame of view rays only, `mean` steps over the frame.
     fn view_only(mean: f64, tiles: Vec<(TileId, f64)>) -> FrameSteps {
-        FrameSteps { view: Means { mean: Some(mean), tiles }, ..FrameSteps::default() }
-    }
-
-    /// `rays` rays that took `view` fetches and `leaf` leaves, and `shadow`
-    /// shadow fetches.
-    fn work(rays: u64, view: u64, leaf: u64, shadow: u64) -> DrawWork {
-        DrawWork { rays, view_fetches: view, leaf_cells: leaf, shadow_fetches: shadow }
+        FrameSteps { view: Means { mean: Some(mean), tiles }, shadow: Means::default() }
     }
 
     #[test]
-    fn a_frame_is_measured_per_tile_over_its_rays() {
+    fn a_frame_is_measured_per_tile_over_its_ray_cast_pixels() {
         let ids = [TileId::new(5, 1, 2), TileId::new(5, 1, 3), TileId::new(6, 0, 0)];
         let drawn = [(ids[0], 2), (ids[1], 0), (ids[2], 5)].map(|(id, shadow_steps)| Choice { id, shadow_steps });
-        // Two rays on the first tile, one on the second (drawn without
-        // shadow steps); the third tile casts none.
-        let m = FrameSteps::measure(&[work(2, 30, 6, 12), work(1, 40, 9, 0), work(0, 0, 0, 0)], &drawn);
+        // Pixels: two on the first tile, one on the second (drawn without
+        // shadow steps), one plain pixel (no fetches) and one sky pixel; the
+        // third tile casts no rays.
+        let fetches = [[10, 4], [20, 8], [40, 0], [0, 0], [0, 0]];
+        let draws = [1, 1, 2, 3, 0];
+        let m = FrameSteps::measure(&fetches, &draws, &drawn);
         assert_eq!(m.view, Means { mean: Some(70.0 / 3.0), tiles: vec![(ids[0], 15.0), (ids[1], 40.0)] });
-        assert_eq!(m.leaf, Means { mean: Some(5.0), tiles: vec![(ids[0], 3.0), (ids[1], 9.0)] });
-        // 12 shadow fetches over 2 rays of 2 steps.
+        // 12 shadow fetches over 2 pixels of 2 steps.
         assert_eq!(m.shadow, Means { mean: Some(3.0), tiles: vec![(ids[0], 3.0)] });
-        assert_eq!(FrameSteps::measure(&[DrawWork::default(); 3], &drawn), FrameSteps::default());
+        assert_eq!(FrameSteps::measure(&[[0, 0], [0, 0]], &[0, 1], &drawn), FrameSteps::default());
         // Shadow rays that all stop at once: measured, at nothing.
-        let m = FrameSteps::measure(&[DrawWork::default(), DrawWork::default(), work(1, 10, 2, 0)], &drawn);
+        let m = FrameSteps::measure(&[[10, 0]], &[3], &drawn);
         assert_eq!(m.shadow, Means { mean: Some(0.0), tiles: vec![(ids[2], 0.0)] });
         // ... and priced at the floor: given more steps they may not stop.
         let mut steps = RaySteps::new(20.0);
         steps.record(&m);
         assert_eq!(steps.shadow(ids[2]), SHADOW_FETCHES_FLOOR);
-        assert_eq!((steps.view(ids[2]), steps.leaf(ids[2]), steps.leaf(ids[0])), (10.0, 2.0, 2.0), "the frame's mean");
     }
 
     #[test]

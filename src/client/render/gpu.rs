@@ -14,7 +14,16 @@ pub enum GpuError {
     /// The adapter refused the device.
     #[error("the GPU refused a device: {0}")]
     Device(String),
+    /// The adapter lacks what the renderer needs.
+    #[error(
+        "the GPU {0} lacks {1:?}: the renderer lights splats in compute shaders and counts rays from fragment shaders"
+    )]
+    Lacks(String, wgpu::DownlevelFlags),
 }
+
+/// What the renderer needs beyond WebGPU's downlevel defaults.
+const NEEDED: wgpu::DownlevelFlags =
+    wgpu::DownlevelFlags::COMPUTE_SHADERS.union(wgpu::DownlevelFlags::FRAGMENT_WRITABLE_STORAGE);
 
 /// An opened GPU.
 pub struct Gpu {
@@ -51,6 +60,10 @@ impl Gpu {
         };
         let adapter =
             pollster::block_on(instance.request_adapter(&options)).map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        let missing = NEEDED.difference(adapter.get_downlevel_capabilities().flags);
+        if !missing.is_empty() {
+            return Err(GpuError::Lacks(adapter.get_info().name, missing));
+        }
         let wanted = wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::SHADER_EARLY_DEPTH_TEST;
         let required_features = adapter.features() & wanted;
         let timestamps = required_features.contains(wgpu::Features::TIMESTAMP_QUERY);

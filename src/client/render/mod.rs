@@ -91,7 +91,8 @@ pub struct Rendered {
     /// The draw whose rays a pixel shows: `k + 1` for the `k`-th of the
     /// frame's draws, 0 where no ray was cast.
     pub draws: Vec<u32>,
-    /// The work of every ray each draw cast, shown or not, by draw.
+    /// The work of every ray each draw cast, shown or not, by draw (where
+    /// counted: [`Renderer::count_work`]).
     pub work: Vec<DrawWork>,
     /// Counts and times.
     pub stats: FrameStats,
@@ -148,6 +149,10 @@ pub struct Renderer {
     /// Their submissions not yet waited for, oldest first.
     in_flight: std::collections::VecDeque<wgpu::SubmissionIndex>,
     frame_no: u64,
+    /// Frames read back in full count their rays' work ([`Self::count_work`]).
+    count_work: bool,
+    /// The frame being drawn counts its rays' work.
+    counting: bool,
 }
 
 impl Renderer {
@@ -205,6 +210,8 @@ impl Renderer {
             pipelined: false,
             in_flight: Default::default(),
             frame_no: 0,
+            count_work: false,
+            counting: false,
         }
     }
 
@@ -215,6 +222,13 @@ impl Renderer {
     /// waits for them.
     pub fn pipelined(&mut self, on: bool) {
         self.pipelined = on;
+    }
+
+    /// Whether frames read back in full ([`Readback::All`]) count the work
+    /// of every ray they cast, per draw ([`Rendered::work`]): off by
+    /// default, for the counters cost lavapipe 8–17 % of a frame.
+    pub fn count_work(&mut self, on: bool) {
+        self.count_work = on;
     }
 
     /// Waits until the GPU has done every frame submitted.
@@ -268,6 +282,7 @@ impl Renderer {
             self.targets = Some(Targets::new(&self.gpu.device, size));
         }
         let start = Instant::now();
+        self.counting = self.count_work && readback == Readback::All && !self.pipelined;
         let camera = &depth_camera(camera, draws);
         let mut stats = FrameStats::default();
         let draws = self.prepare(camera, draws, settings, &mut stats)?;
@@ -334,7 +349,13 @@ impl Renderer {
             let mut bytes = bytemuck::bytes_of(&block).to_vec();
             bytes.resize(TILE_STRIDE as usize, 0);
             blocks.extend(bytes);
-            let variant = RayVariant { inside: mode == DrawMode::Inside, morphing: morph.is_some(), whole, linear };
+            let variant = RayVariant {
+                inside: mode == DrawMode::Inside,
+                morphing: morph.is_some(),
+                whole,
+                linear,
+                counted: self.counting,
+            };
             if mode != DrawMode::Plain && self.compute.is_none() {
                 self.pipelines.prepare_ray(device, variant);
             }
@@ -361,6 +382,7 @@ impl Renderer {
             morphing: rays.iter().any(|(_, d)| d.variant.morphing),
             whole: rays.iter().all(|(_, d)| d.variant.whole),
             linear: rays.first().is_some_and(|(_, d)| d.variant.linear),
+            counted: self.counting,
         };
         let order: Vec<(u32, [u32; 4])> = rays.iter().map(|(k, d)| (*k as u32, d.screen)).collect();
         let bins = compute::bins((camera.width_px, camera.height_px), &order);
@@ -493,7 +515,9 @@ impl Renderer {
             out.view_z_m = data.iter().map(|d| f32::from_bits(d[2])).collect();
             out.fetches = data.iter().map(|d| [d[0], d[1]]).collect();
             out.draws = data.iter().map(|d| d[3]).collect();
-            out.work = self.work.read(device, queue, draws);
+            if self.counting {
+                out.work = self.work.read(device, queue, draws);
+            }
         }
         out
     }

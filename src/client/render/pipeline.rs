@@ -47,13 +47,22 @@ pub struct RayVariant {
     /// Rays march linearly instead of traversing the maximum mipmap
     /// (`LINEAR`).
     pub linear: bool,
+    /// Every ray's work is counted per draw (`COUNT_WORK`, [`super::work`];
+    /// [`super::Renderer::count_work`]): the counters' atomics cost
+    /// lavapipe 8–17 % of a frame, so other frames go without.
+    pub counted: bool,
 }
 
 impl RayVariant {
     /// The shaders' override constants of this variant.
-    pub fn constants(&self) -> [(&'static str, f64); 3] {
+    pub fn constants(&self) -> [(&'static str, f64); 4] {
         let flag = |on: bool| f64::from(u8::from(on));
-        [("MORPHING", flag(self.morphing)), ("CANOPY_WHOLE", flag(self.whole)), ("LINEAR", flag(self.linear))]
+        [
+            ("MORPHING", flag(self.morphing)),
+            ("CANOPY_WHOLE", flag(self.whole)),
+            ("LINEAR", flag(self.linear)),
+            ("COUNT_WORK", flag(self.counted)),
+        ]
     }
 }
 

@@ -4,9 +4,14 @@
 //! `shaders/common.wgsl`) for every ray, shown or not. The pixels' own
 //! counts ([`super::Rendered::fetches`]) keep the ray a pixel shows only:
 //! a hull fragment whose ray leaves the tile without a hit is discarded, and
-//! one a nearer tile overwrites is lost, yet both cast their rays (an rmnp
-//! frame casts a third more than its pixels show). The LOD's cost model
-//! prices tiles by this work.
+//! one a nearer tile overwrites is lost, yet both cast their rays: along
+//! the rmnp valley at 640 × 480 a frame casts 2.1–4.4 rays for each pixel
+//! that shows one, and its view rays fetch 1.2–4.8 times what its pixels
+//! count (`docs/benchmarks.md`, "Every ray counted").
+//! [`super::Renderer::count_work`] turns the counting on (for frames read
+//! back in full; its atomics cost lavapipe 8–17 % of a frame): `sylva fly`
+//! does under a frame budget, and `bench lod --flights` fits the frames'
+//! times to this work in hindsight.
 //!
 //! The counters of a draw are spread over [`SPREAD`] places, one per pixel
 //! of an 8 × 4 block, so that the invocations of one GPU wave do not
