@@ -226,7 +226,7 @@ impl Renderer {
 
     /// Whether frames read back in full ([`Readback::All`]) count the work
     /// of every ray they cast, per draw ([`Rendered::work`]): off by
-    /// default, for the counters cost lavapipe 8–17 % of a frame.
+    /// default, for the counters cost lavapipe 8–35 % of a frame.
     pub fn count_work(&mut self, on: bool) {
         self.count_work = on;
     }

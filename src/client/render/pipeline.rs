@@ -49,7 +49,7 @@ pub struct RayVariant {
     pub linear: bool,
     /// Every ray's work is counted per draw (`COUNT_WORK`, [`super::work`];
     /// [`super::Renderer::count_work`]): the counters' atomics cost
-    /// lavapipe 8–17 % of a frame, so other frames go without.
+    /// lavapipe 8–35 % of a frame, so other frames go without.
     pub counted: bool,
 }
 

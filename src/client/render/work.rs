@@ -9,7 +9,7 @@
 //! that shows one, and its view rays fetch 1.2–4.8 times what its pixels
 //! count (`docs/benchmarks.md`, "Every ray counted").
 //! [`super::Renderer::count_work`] turns the counting on (for frames read
-//! back in full; its atomics cost lavapipe 8–17 % of a frame): `sylva fly`
+//! back in full; its atomics cost lavapipe 8–35 % of a frame): `sylva fly`
 //! does under a frame budget, and `bench lod --flights` fits the frames'
 //! times to this work in hindsight.
 //!
