@@ -102,8 +102,8 @@ override COUNT_WORK: bool = false;
 // hit cell's shading), and shadow ray — the benchmark's "fetches per pixel".
 var<private> view_fetches: u32 = 0u;
 var<private> shadow_fetches: u32 = 0u;
-// Leaf cells whose corners the exact traversal read (a leaf costs more than
-// a step over the maximum mipmap).
+// Leaf cells the exact traversal visited, their corners read or memoised
+// (a leaf's patch test costs more than a step over the maximum mipmap).
 var<private> leaf_cells: u32 = 0u;
 // The last cell whose corners were read, and its faded corner heights: the
 // hit cell is shaded from it, and consecutive samples in one cell share it.

@@ -95,7 +95,8 @@ fn cs_rays(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         let before = vec2<u32>(view_fetches, leaf_cells);
         let ray = cast_ray(dir, entry * 0.999);
-        // Counted by the draw's own index (the bins list them nearest first).
+        // Counted by the draw's index among the frame's draws, as the pixel
+        // data name it (`draw` is its place in the nearest-first order).
         count_cast(tile.flags.y - 1u, p, view_fetches - before.x, leaf_cells - before.y);
         if ray.t != NO_HIT {
             let d = hit_distance(ray);

@@ -29,7 +29,10 @@ pub const TOLERANCE: f64 = 0.1;
 
 /// Terms of a frame's measured work: 1 (a fixed cost), tiles drawn, rays
 /// cast (thousands; every ray, shown or not), their view-ray fetches, leaf
-/// cells and shadow-ray fetches (millions), and splats (thousands).
+/// cells and shadow-ray fetches (millions), and splats (thousands). A
+/// flight whose rays were not counted (not held, or older) has its
+/// pixels' counts there instead: the pixels that show a ray and their
+/// fetches, no leaf cells.
 const WORK: usize = 7;
 
 /// One frame's times, ms.
@@ -61,15 +64,25 @@ pub fn parse(csv: &str) -> Result<Vec<FrameTime>, String> {
         (column("gpu_ms")?, column("render_ms")?, column("predicted_ms")?, column("budget_ms")?);
     let bound = column("bound").ok();
     let model = column("model_ms").ok();
-    let work = ["tiles", "rays_cast", "rays_view_fetches", "rays_leaf_cells", "rays_shadow_fetches", "splats"]
-        .map(|c| column(c).ok());
+    let [tiles, splats] = ["tiles", "splats"].map(|c| column(c).ok());
+    let counted = ["rays_cast", "rays_view_fetches", "rays_leaf_cells", "rays_shadow_fetches"].map(|c| column(c).ok());
+    let shown = ["ray_pixels", "view_fetches_mean", "shadow_fetches_mean"].map(|c| column(c).ok());
     let rows = lines.skip(1).enumerate().map(|(k, line)| {
         let cells: Vec<&str> = line.split(',').collect();
         let number = |i: usize| cells.get(i).and_then(|c| c.parse::<f64>().ok());
         let measured = number(gpu).or(number(render));
         let budget_bound = bound.and_then(|i| cells.get(i)).map(|b| matches!(*b, "budget" | "limit"));
-        let [tiles, rays, view, leaf, shadow, splats] = work.map(|c| c.and_then(number));
-        let work = (|| Some([1.0, tiles?, rays? / 1e3, view? / 1e6, leaf? / 1e6, shadow? / 1e6, splats? / 1e3]))();
+        let [rays, view, leaf, shadow] = counted.map(|c| c.and_then(number));
+        let [pixels, view_mean, shadow_mean] = shown.map(|c| c.and_then(number));
+        let ray_work = (|| Some([rays? / 1e3, view? / 1e6, leaf? / 1e6, shadow? / 1e6]))().or_else(|| {
+            let px = pixels?;
+            Some([px / 1e3, view_mean? * px / 1e6, 0.0, shadow_mean? * px / 1e6])
+        });
+        let [tiles, splats] = [tiles, splats].map(|c| c.and_then(number));
+        let work = (|| {
+            let [r, v, l, s] = ray_work?;
+            Some([1.0, tiles?, r, v, l, s, splats? / 1e3])
+        })();
         match (number(predicted), measured, number(budget)) {
             (Some(predicted_ms), Some(measured_ms), Some(budget_ms)) => Ok(FrameTime {
                 predicted_ms,
@@ -266,6 +279,14 @@ mod tests {
             .collect();
         assert!(hindsight_fit(&noisy).unwrap() <= 0.6, "{:?}", hindsight_fit(&noisy));
         assert_eq!(hindsight_fit(&parse(CSV).unwrap()), None, "no work columns");
+        // A flight whose rays were not counted: its pixels' counts.
+        let mut shown = "frame,gpu_ms,render_ms,predicted_ms,budget_ms,tiles,ray_pixels,view_fetches_mean,shadow_fetches_mean,splats,rays_cast,rays_view_fetches,rays_leaf_cells,rays_shadow_fetches\n".to_string();
+        for k in 0..40 {
+            let (tiles, pixels, view) = (5 + k % 7, 50_000 + 1_000 * (k % 5), 10.0 + (k % 3) as f64);
+            let ms = 20.0 + 3.0 * tiles as f64 + 2.0 * view * pixels as f64 / 1e6;
+            shown += &format!("{k},{ms},{ms},{ms},40,{tiles},{pixels},{view},9,0,,,,\n");
+        }
+        assert_eq!(hindsight_fit(&parse(&shown).unwrap()), Some(1.0));
         assert_eq!(summarize(&frames).model_fit, None, "no model_ms column");
     }
 

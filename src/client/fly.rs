@@ -153,8 +153,8 @@ pub struct FrameRecord {
     /// Mean shadow and shading fetches over ray-cast pixels.
     pub shadow_fetches_mean: f64,
     /// The work of every ray cast, shown or not, over the frame's draws
-    /// (counted under a budget only).
-    pub rays: Option<DrawWork>,
+    /// (counted in held flights under a budget only).
+    pub work: Option<DrawWork>,
     /// Bytes fetched from the source during the frame.
     pub bytes_fetched: u64,
     /// Tile bytes resident on the GPU.
@@ -474,7 +474,9 @@ impl Flight {
         readback: Readback,
     ) -> Result<Framed, FlyError> {
         let readback = if self.lod.is_some() { Readback::All } else { readback };
-        renderer.count_work(self.lod.is_some());
+        // Counted where the times come from other, uncounted renders of the
+        // frame (the counters would weigh on the times the model learns).
+        renderer.count_work(self.lod.is_some() && options.hold_ms > 0.0);
         frame(source, renderer, (&mut self.store, self.lod.as_mut(), self.sse.as_mut()), options, (shot, readback))
     }
 }
@@ -605,7 +607,7 @@ fn frame(
         ray_pixels: rays.len(),
         view_fetches: (steps.view.mean.unwrap_or(0.0), rays.iter().map(|f| f[0]).max().unwrap_or(0)),
         shadow_fetches_mean: mean_or_zero(rays.iter().map(|f| f64::from(f[1]))),
-        rays: (!out.work.is_empty()).then(|| out.work.iter().fold(DrawWork::default(), |a, w| a.plus(w))),
+        work: (!out.work.is_empty()).then(|| out.work.iter().fold(DrawWork::default(), |a, w| a.plus(w))),
         bytes_fetched: source.bytes_fetched() - bytes_before,
         gpu_bytes: out.stats.resident_bytes,
         cpu_bytes: store.bytes(),
@@ -720,7 +722,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
         let gpu = optional(r.gpu_ms);
         let (rays, fill) = (optional(r.gpu_rays_ms.map(|t| t.0)), optional(r.gpu_rays_ms.map(|t| t.1)));
         let work: [String; 4] = r
-            .rays
+            .work
             .map(|w| [w.rays, w.view_fetches, w.leaf_cells, w.shadow_fetches].map(|n| n.to_string()))
             .unwrap_or_default();
         let _ = writeln!(

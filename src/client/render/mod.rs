@@ -411,7 +411,9 @@ impl Renderer {
     fn encode_and_submit(&self, draws: &[Prepared], raster: bool) -> Option<wgpu::SubmissionIndex> {
         let targets = self.targets.as_ref()?;
         let mut encoder = self.gpu.device.create_command_encoder(&Default::default());
-        self.work.clear(&mut encoder);
+        if self.counting {
+            self.work.clear(&mut encoder);
+        }
         let computed = self.compute.as_ref();
         let timer = self.timer.as_ref().filter(|_| !self.pipelined);
         if let Some(compute) = computed {

@@ -10,8 +10,11 @@
 //! count (`docs/benchmarks.md`, "Every ray counted").
 //! [`super::Renderer::count_work`] turns the counting on (for frames read
 //! back in full; its atomics cost lavapipe 8–35 % of a frame): `sylva fly`
-//! does under a frame budget, and `bench lod --flights` fits the frames'
-//! times to this work in hindsight.
+//! does in held flights under a frame budget (the held renders, uncounted,
+//! give the times), and `bench lod --flights` fits the frames' times to
+//! this work in hindsight. On a GPU a fragment shader that writes storage
+//! may lose its early depth test, so there the counted frames may cast
+//! hidden rays that the uncounted ones are spared (not measured).
 //!
 //! The counters of a draw are spread over [`SPREAD`] places, one per pixel
 //! of an 8 × 4 block, so that the invocations of one GPU wave do not
@@ -34,8 +37,10 @@ pub struct DrawWork {
     /// Texture fetches of their traversals (the hit cell's shading left
     /// out).
     pub view_fetches: u64,
-    /// Leaf cells whose corners the exact traversal read (0 for the linear
-    /// march): dearer than a step over the maximum mipmap.
+    /// Leaf cells the exact traversal visited, their corners read or
+    /// memoised (0 for the linear march): dearer than a step over the
+    /// maximum mipmap. A place's counters wrap at 2³² (at 4K a place holds
+    /// about 260,000 pixels of a draw: thousands of fetches each).
     pub leaf_cells: u64,
     /// Fetches of the shadow rays, cast from the hits.
     pub shadow_fetches: u64,
