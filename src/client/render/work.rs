@@ -16,7 +16,7 @@
 //! may lose its early depth test, so there the counted frames may cast
 //! hidden rays that the uncounted ones are spared (not measured).
 //!
-//! The counters of a draw are spread over [`SPREAD`] places, one per pixel
+//! The counters of a draw are spread over 32 places (`SPREAD`), one per pixel
 //! of an 8 × 4 block, so that the invocations of one GPU wave do not
 //! queue on one address; reading them back sums the places.
 
