@@ -79,11 +79,6 @@ const NO_HIT: f32 = -1.0;
 @group(0) @binding(4) var gather_sampler: sampler;
 // Morphing tiles' coarser surfaces: CEM, ground per texel (tile.flags.w).
 @group(0) @binding(5) var morph_from: texture_2d_array<f32>;
-// Every ray cast's work, per draw (render/work.rs): rays, view-ray fetches,
-// leaf cells, shadow-ray fetches, each draw's counters in WORK_SPREAD places
-// (one per pixel of an 8 x 4 block) so that a wave does not queue on one.
-@group(0) @binding(6) var<storage, read_write> work: array<atomic<u32>>;
-const WORK_SPREAD: u32 = 32u;
 
 // What the ray-casting pipeline is specialised for (render/pipeline.rs,
 // RayVariant): morphing tiles (the blend is compiled only into theirs), and
@@ -92,8 +87,6 @@ override MORPHING: bool = false;
 override CANOPY_WHOLE: bool = false;
 // Rays march linearly (frame.mode.y steps) instead of traversing the mipmap.
 override LINEAR: bool = false;
-// Every ray's work is counted per draw (count_cast, count_shadow).
-override COUNT_WORK: bool = false;
 // `tile`, the tile being drawn, is declared by the entry points' part:
 // a uniform at a dynamic offset for the fragments (tile_uniform.wgsl), one
 // of an array for the compute passes (compute.wgsl).
@@ -133,27 +126,3 @@ fn mip_cells(level: i32) -> vec2<i32> {
     return vec2<i32>((cells + (1 << u32(level)) - 1) >> u32(level));
 }
 
-// The first of draw `draw`'s counters in the place of `pixel`.
-fn work_place(draw: u32, pixel: vec2<u32>) -> u32 {
-    return (draw * WORK_SPREAD + ((pixel.x & 7u) | ((pixel.y & 3u) << 3u))) * 4u;
-}
-
-// Counts one ray cast through draw `draw` (0-based) for `pixel`, which took
-// `fetches` and read `leaves` leaf cells.
-fn count_cast(draw: u32, pixel: vec2<u32>, fetches: u32, leaves: u32) {
-    if !COUNT_WORK {
-        return;
-    }
-    let w = work_place(draw, pixel);
-    atomicAdd(&work[w], 1u);
-    atomicAdd(&work[w + 1u], fetches);
-    atomicAdd(&work[w + 2u], leaves);
-}
-
-// Counts the fetches of a shadow ray cast from a hit on draw `draw`.
-fn count_shadow(draw: u32, pixel: vec2<u32>, fetches: u32) {
-    if !COUNT_WORK {
-        return;
-    }
-    atomicAdd(&work[work_place(draw, pixel) + 3u], fetches);
-}

@@ -45,7 +45,8 @@ impl std::str::FromStr for RayPass {
 /// The compute module, its layouts and pipelines, the tiles' buffer bound as
 /// an array, and the last frame's bindings.
 pub struct ComputeRays {
-    module: wgpu::ShaderModule,
+    /// The module without and with the counting of rays' work.
+    modules: [wgpu::ShaderModule; 2],
     layout: wgpu::PipelineLayout,
     /// Group 1: the tiles' blocks as one array.
     tiles: wgpu::BindGroup,
@@ -75,10 +76,13 @@ impl ComputeRays {
     /// 0 is `frame`, group 1 the `tiles` buffer (with `STORAGE` usage) as
     /// an array.
     pub fn new(device: &wgpu::Device, frame: &wgpu::BindGroupLayout, tiles: &wgpu::Buffer) -> ComputeRays {
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("compute rays"),
-            source: wgpu::ShaderSource::Wgsl(shaders::compute_source().into()),
-        });
+        let module_of = |counted| {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("compute rays"),
+                source: wgpu::ShaderSource::Wgsl(shaders::compute_source(counted).into()),
+            })
+        };
+        let modules = [module_of(false), module_of(true)];
         let tiles_layout = layout(device, "tiles", &[storage_buffer(0)]);
         let rays_layout = layout(
             device,
@@ -104,13 +108,13 @@ impl ComputeRays {
             bind_group_layouts: &[Some(frame), Some(&tiles_layout), Some(&rays_layout)],
             immediate_size: 0,
         });
-        let fill = fill_pipeline(device, &module, &[Some(frame), None, Some(&fill_layout)]);
+        let fill = fill_pipeline(device, &modules[0], &[Some(frame), None, Some(&fill_layout)]);
         let tiles = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("tiles"),
             layout: &tiles_layout,
             entries: &[wgpu::BindGroupEntry { binding: 0, resource: tiles.as_entire_binding() }],
         });
-        ComputeRays { module, layout, tiles, rays_layout, fill_layout, fill, variants: HashMap::new(), frame: None }
+        ComputeRays { modules, layout, tiles, rays_layout, fill_layout, fill, variants: HashMap::new(), frame: None }
     }
 
     /// Readies a frame: the rays' pipeline of `variant` (built if it is
@@ -144,7 +148,7 @@ impl ComputeRays {
         let built = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("cs_rays"),
             layout: Some(&self.layout),
-            module: &self.module,
+            module: &self.modules[usize::from(variant.counted)],
             entry_point: Some("cs_rays"),
             compilation_options: wgpu::PipelineCompilationOptions { constants: &constants, ..Default::default() },
             cache: None,

@@ -47,22 +47,18 @@ pub struct RayVariant {
     /// Rays march linearly instead of traversing the maximum mipmap
     /// (`LINEAR`).
     pub linear: bool,
-    /// Every ray's work is counted per draw (`COUNT_WORK`, [`super::work`];
-    /// [`super::Renderer::count_work`]): the counters' atomics cost
-    /// lavapipe 8–35 % of a frame, so other frames go without.
+    /// Every ray's work is counted per draw ([`super::work`],
+    /// [`super::Renderer::count_work`]; the module with
+    /// `work_count.wgsl`): the counters' atomics cost lavapipe 8–35 % of a
+    /// frame, so other frames go without.
     pub counted: bool,
 }
 
 impl RayVariant {
     /// The shaders' override constants of this variant.
-    pub fn constants(&self) -> [(&'static str, f64); 4] {
+    pub fn constants(&self) -> [(&'static str, f64); 3] {
         let flag = |on: bool| f64::from(u8::from(on));
-        [
-            ("MORPHING", flag(self.morphing)),
-            ("CANOPY_WHOLE", flag(self.whole)),
-            ("LINEAR", flag(self.linear)),
-            ("COUNT_WORK", flag(self.counted)),
-        ]
+        [("MORPHING", flag(self.morphing)), ("CANOPY_WHOLE", flag(self.whole)), ("LINEAR", flag(self.linear))]
     }
 }
 
@@ -85,6 +81,8 @@ pub struct Pipelines {
     /// Group 1: the tile uniform at a dynamic offset.
     pub tile_layout: wgpu::BindGroupLayout,
     module: wgpu::ShaderModule,
+    /// The module of ray-casting pipelines that count their rays' work.
+    counting: wgpu::ShaderModule,
     layout: wgpu::PipelineLayout,
     /// Hull fragments promise their depth (`fs_ray_hull`), so hidden ones
     /// can be rejected before their rays are cast; terrain meshes' and
@@ -97,9 +95,14 @@ impl Pipelines {
     /// splat fragments promise their depth if `early_depth` (the device must have
     /// `SHADER_EARLY_DEPTH_TEST`).
     pub fn new(device: &wgpu::Device, early_depth: bool) -> Pipelines {
+        let source = |counted| shaders::raycast_source(early_depth, counted);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("raycast"),
-            source: wgpu::ShaderSource::Wgsl(shaders::raycast_source(early_depth).into()),
+            source: wgpu::ShaderSource::Wgsl(source(false).into()),
+        });
+        let counting = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("raycast, counting"),
+            source: wgpu::ShaderSource::Wgsl(source(true).into()),
         });
         let frame_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("frame"),
@@ -169,6 +172,7 @@ impl Pipelines {
             frame_layout,
             tile_layout,
             module,
+            counting,
             layout,
             early_depth,
         }
@@ -193,7 +197,7 @@ impl Pipelines {
         let fragment = if self.early_depth && !variant.inside { "fs_ray_hull" } else { "fs_ray" };
         let built = pipeline(
             device,
-            (&self.layout, &self.module),
+            (&self.layout, if variant.counted { &self.counting } else { &self.module }),
             ("vs_hull", &[vertex][..]),
             fragment,
             (triangles(cull), &constants),

@@ -26,6 +26,13 @@ pub const FRAGMENT_PARTS: [(&str, &str); 2] = [
 /// promise.
 pub const EARLY_DEPTH_PART: (&str, &str) = ("early_depth.wgsl", include_str!("../../../shaders/early_depth.wgsl"));
 
+/// Counting every ray's work (`render/work.rs`), and its stand-in that
+/// counts nothing: a module holds one of them.
+pub const WORK_PARTS: [(&str, &str); 2] = [
+    ("work_count.wgsl", include_str!("../../../shaders/work_count.wgsl")),
+    ("work_none.wgsl", include_str!("../../../shaders/work_none.wgsl")),
+];
+
 /// The compute module's own part.
 pub const COMPUTE_PART: (&str, &str) = ("compute.wgsl", include_str!("../../../shaders/compute.wgsl"));
 
@@ -34,15 +41,19 @@ pub const COMPUTE_PART: (&str, &str) = ("compute.wgsl", include_str!("../../../s
 pub const PRESENT: (&str, &str) = ("present.wgsl", include_str!("../../../shaders/present.wgsl"));
 
 /// The fragment module's source, with [`EARLY_DEPTH_PART`] if
-/// `early_depth`.
-pub fn raycast_source(early_depth: bool) -> String {
+/// `early_depth`, counting its rays' work if `counted`.
+pub fn raycast_source(early_depth: bool, counted: bool) -> String {
     let extra = early_depth.then_some(&EARLY_DEPTH_PART);
-    join(SHARED_PARTS.iter().chain(&FRAGMENT_PARTS).chain(extra))
+    join(SHARED_PARTS.iter().chain(&FRAGMENT_PARTS).chain(extra).chain([work_part(counted)]))
 }
 
-/// The compute module's source.
-pub fn compute_source() -> String {
-    join(SHARED_PARTS.iter().chain([&COMPUTE_PART]))
+/// The compute module's source, counting its rays' work if `counted`.
+pub fn compute_source(counted: bool) -> String {
+    join(SHARED_PARTS.iter().chain([&COMPUTE_PART, work_part(counted)]))
+}
+
+fn work_part(counted: bool) -> &'static (&'static str, &'static str) {
+    &WORK_PARTS[usize::from(!counted)]
 }
 
 fn join<'a>(parts: impl Iterator<Item = &'a (&'a str, &'a str)>) -> String {
@@ -71,14 +82,17 @@ mod tests {
     /// the compute module, and the window's.
     #[test]
     fn shaders_validate() {
-        for early_depth in [false, true] {
-            let module = validated(&raycast_source(early_depth));
+        for (early_depth, counted) in [(false, false), (true, false), (false, true), (true, true)] {
+            let module = validated(&raycast_source(early_depth, counted));
             for name in ["fs_ray_hull", "fs_plain_early", "fs_splat_early"] {
                 assert_eq!(module.entry_points.iter().any(|e| e.name == name), early_depth, "{name}");
             }
+            assert_eq!(module.global_variables.iter().any(|(_, v)| v.name.as_deref() == Some("work")), counted);
         }
-        let module = validated(&compute_source());
-        assert!(module.entry_points.iter().any(|e| e.name == "cs_rays"));
+        for counted in [false, true] {
+            let module = validated(&compute_source(counted));
+            assert!(module.entry_points.iter().any(|e| e.name == "cs_rays"));
+        }
         let module = validated(PRESENT.1);
         assert_eq!(module.entry_points.len(), 2);
     }

@@ -117,7 +117,8 @@ mod tests {
     /// The shader reads as many words per splat as a [`Splat`] holds.
     #[test]
     fn the_shader_reads_a_splat_whole() {
-        let module = naga::front::wgsl::parse_str(&super::super::shaders::raycast_source(false)).expect("WGSL parses");
+        let module =
+            naga::front::wgsl::parse_str(&super::super::shaders::raycast_source(false, false)).expect("WGSL parses");
         let (_, words) =
             module.constants.iter().find(|(_, c)| c.name.as_deref() == Some("SPLAT_WORDS")).expect("const");
         let literal = &module.global_expressions[words.init];

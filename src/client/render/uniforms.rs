@@ -283,7 +283,7 @@ mod tests {
 
     /// Member offsets of a WGSL struct, by name, from naga's layout.
     fn wgsl_offsets(name: &str) -> (Vec<(String, u32)>, u32) {
-        wgsl_offsets_in(&super::super::shaders::raycast_source(false), name)
+        wgsl_offsets_in(&super::super::shaders::raycast_source(false, false), name)
     }
 
     fn wgsl_offsets_in(source: &str, name: &str) -> (Vec<(String, u32)>, u32) {
@@ -331,7 +331,7 @@ mod tests {
         }
         assert_eq!(size_of::<TileUniform>() as u64, TILE_STRIDE);
         // The compute pass reads the same buffer as an array of blocks.
-        let (_, slot) = wgsl_offsets_in(&super::super::shaders::compute_source(), "TileSlot");
+        let (_, slot) = wgsl_offsets_in(&super::super::shaders::compute_source(false), "TileSlot");
         assert_eq!(u64::from(slot), TILE_STRIDE);
     }
 }
