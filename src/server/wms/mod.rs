@@ -23,7 +23,6 @@ use crate::raster::{Raster, Window};
 use axum::extract::{RawQuery, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use picture::PictureFormat;
 use request::{ExceptionStyle, GetMap, Limits, MapFormat, MapLayer, Reply, Request};
 use std::sync::Arc;
 
@@ -193,13 +192,13 @@ fn paste(out: &mut Raster<f32>, bil32: &[u8], n1: i64, (x0, y0): (i64, i64)) {
 
 /// An exception answered as the request asked: a report (400), or an image.
 fn exception(e: &Exception, reply: Reply, state: &AppState) -> Response {
-    match (reply.style, reply.image) {
-        (ExceptionStyle::InImage, Some((w, h, format))) if format.picture().is_some() => {
-            let picture = format.picture().unwrap_or(PictureFormat::Png);
+    let picture = reply.image.and_then(|(_, _, format)| format.picture());
+    match (reply.style, reply.image, picture) {
+        (ExceptionStyle::InImage, Some((w, h, format)), Some(picture)) => {
             ([(header::CONTENT_TYPE, format.mime())], inimage::message(&e.to_string(), w, h, reply.background, picture))
                 .into_response()
         }
-        (ExceptionStyle::InImage | ExceptionStyle::Blank, Some((w, h, format))) => {
+        (ExceptionStyle::InImage | ExceptionStyle::Blank, Some((w, h, format)), _) => {
             let grid = crate::grid::BBox { west: 0.0, south: 0.0, east: 1.0, north: 1.0 }.area_grid(w, h);
             match grid {
                 Ok(g) => {
