@@ -1,0 +1,231 @@
+//! `sylva bench`: each benchmark's arguments, its run, and its table
+//! printed to stdout.
+
+use anyhow::Result;
+use clap::Subcommand;
+use std::path::PathBuf;
+#[cfg(feature = "client")]
+use sylva::client::render::RayPass;
+
+#[derive(Subcommand)]
+pub enum Bench {
+    /// Per-stage tile times, a whole-area build, and error against run time
+    /// for resampling, 16-bit encodings and the close.
+    Pipeline {
+        /// A real-data region with a map-based land cover (default:
+        /// config/examples/rmnp.toml, left out when its data is absent).
+        #[arg(long)]
+        rmnp: Option<PathBuf>,
+        /// Forest labels for scoring the close.
+        #[arg(long, default_value = "tests/fixtures/rmnp_forest_labels.csv")]
+        labels: PathBuf,
+        /// Side of the whole-area build.
+        #[arg(long, default_value_t = 4096)]
+        build_side: usize,
+    },
+    /// LOD selection along flyovers of the demo region and rmnp: selection
+    /// time with and without variable splitting and the deferral table,
+    /// benefit against the optimiser's upper bound.
+    Lod {
+        /// A real-data region (default: config/examples/rmnp.toml, left out
+        /// when its data is absent).
+        #[arg(long)]
+        rmnp: Option<PathBuf>,
+        /// Frames per flyover.
+        #[arg(long, default_value_t = 300)]
+        frames: usize,
+        /// Where to write the plots (lod_demo.png, lod_rmnp.png).
+        #[arg(long)]
+        plots: Option<PathBuf>,
+        /// Output directories of `sylva fly --lod budget`: their predicted
+        /// and measured frame times against the budget.
+        #[arg(long, num_args = 0..)]
+        flights: Vec<PathBuf>,
+    },
+    /// The client's screen-space error selection along the recorded
+    /// flyovers: nodes touched with the deferral table against full
+    /// re-evaluation every frame (equal selections checked).
+    Sse {
+        /// A real-data region (default: config/examples/rmnp.toml, left out
+        /// when its data is absent).
+        #[arg(long)]
+        rmnp: Option<PathBuf>,
+        /// Directory of the camera paths (`demo_*.toml`, `rmnp_*.toml`).
+        #[arg(long, default_value = "config/paths")]
+        paths: PathBuf,
+        /// Frames per second of each path's own time (a real-time flight).
+        #[arg(long, default_value_t = 60.0, conflicts_with = "frames")]
+        fps: f64,
+        /// Frames per path instead, spread over it whatever its length.
+        #[arg(long)]
+        frames: Option<usize>,
+    },
+    /// The server over loopback HTTP beside MapServer and MapProxy: GetMap,
+    /// uncached and cached tile latency and throughput, memory.
+    #[cfg(feature = "server")]
+    Serve {
+        /// Configurations of the peers' three DEMs.
+        #[arg(long, num_args = 3, default_values = ["config/examples/rmnp.toml", "config/examples/bigtujunga.toml", "config/examples/mt_hood.toml"])]
+        configs: Vec<PathBuf>,
+        /// MapServer's WMS endpoint (`shared/peers/run_mapserver.sh`).
+        #[arg(long, default_value = "http://127.0.0.1:8081/mapserv?")]
+        mapserver: String,
+        /// MapProxy's base URL (`shared/peers/run_mapproxy.sh`).
+        #[arg(long, default_value = "http://127.0.0.1:8083")]
+        mapproxy: String,
+        /// Warm requests per latency run.
+        #[arg(long, default_value_t = 50)]
+        n: usize,
+        /// Uncached tiles per level, at most.
+        #[arg(long, default_value_t = 50)]
+        uncached: usize,
+        /// Seconds of each wrk run.
+        #[arg(long, default_value_t = 10)]
+        wrk_seconds: u32,
+    },
+    /// The ray caster's error against run time: each traversal and shadow
+    /// setting on fixed views of the demo and rmnp, against the exact CPU
+    /// reference.
+    #[cfg(feature = "client")]
+    Raycast(RaycastArgs),
+    /// Seeding speed (1 and 2 workers, parents from children or not) and
+    /// memory over a ~100,000-tile job.
+    #[cfg(feature = "server")]
+    Seed {
+        /// The region.
+        #[arg(long, default_value = "config/examples/rmnp.toml")]
+        config: PathBuf,
+        /// Levels of the speed runs.
+        #[arg(long, default_value = "0-12")]
+        levels: String,
+        /// Levels of the memory run.
+        #[arg(long, default_value = "5-12")]
+        memory_levels: String,
+        /// mapproxy-seed's tiles per second in this sitting (benches/seed.sh), for the ratio.
+        #[arg(long)]
+        mapproxy_rate: Option<f64>,
+    },
+    /// Mixed load on one server for a while, printing resident memory.
+    #[cfg(feature = "server")]
+    Soak {
+        /// Region configuration (default: the embedded demo region).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// How long, minutes.
+        #[arg(long, default_value_t = 10.0)]
+        minutes: f64,
+        /// Seconds between memory readings.
+        #[arg(long, default_value_t = 30.0)]
+        every: f64,
+    },
+}
+
+/// `sylva bench raycast`.
+#[cfg(feature = "client")]
+#[derive(clap::Args)]
+pub struct RaycastArgs {
+    /// The real-data region (default: config/examples/rmnp.toml).
+    #[arg(long)]
+    rmnp: Option<PathBuf>,
+    /// Image size, WxH.
+    #[arg(long, default_value = "1280x1024")]
+    size: String,
+    /// GPU tile cache budget, MiB.
+    #[arg(long, default_value_t = 1024)]
+    gpu_budget_mib: usize,
+    /// Where to write the plot of error against time.
+    #[arg(long, default_value = "docs/raycast-error-vs-time.png")]
+    plot: PathBuf,
+    /// Run only these settings (e.g. `--only "linear 30 + 10" --only "exact + 10"`); all by default.
+    #[arg(long)]
+    only: Vec<String>,
+    /// Hull fragments without their depth promise (`@early_depth_test`),
+    /// for comparison: every hidden fragment casts its ray.
+    #[arg(long)]
+    no_early_depth: bool,
+    /// Where rays are cast: `fragment` or `compute`.
+    #[arg(long, default_value = "fragment")]
+    ray_pass: RayPass,
+}
+
+impl Bench {
+    pub fn run(self) -> Result<()> {
+        match self {
+            Bench::Pipeline { rmnp, labels, build_side } => {
+                let rmnp = real_region(rmnp)?;
+                println!("{}", sylva::bench::pipeline_report(&rmnp, &labels, build_side)?);
+            }
+            Bench::Lod { rmnp, frames, plots, flights } => {
+                let rmnp = real_region(rmnp)?;
+                println!("{}", sylva::bench::lod_report(&rmnp, frames, plots.as_deref(), &flights)?);
+            }
+            Bench::Sse { rmnp, paths, fps, frames } => {
+                let rmnp = real_region(rmnp)?;
+                use sylva::bench::lod_sse::Pace;
+                if !(fps.is_finite() && fps > 0.0) {
+                    anyhow::bail!("--fps {fps}: a positive number of frames a second");
+                }
+                let pace = frames.map_or(Pace::PerSecond(fps), Pace::Frames);
+                println!("{}", sylva::bench::lod_sse::report(&rmnp, &paths, pace).map_err(anyhow::Error::msg)?);
+            }
+            #[cfg(feature = "server")]
+            Bench::Serve { configs, mapserver, mapproxy, n, uncached, wrk_seconds } => {
+                super::serving::with_server_allocator();
+                let configs: [PathBuf; 3] =
+                    configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
+                let bench = sylva::bench::serve::ServeBench { configs, mapserver, mapproxy, n, uncached, wrk_seconds };
+                println!("{}", sylva::bench::serve::report(&bench)?);
+            }
+            #[cfg(feature = "server")]
+            Bench::Seed { config, levels, memory_levels, mapproxy_rate } => {
+                let bench = sylva::bench::seed::SeedBench { config, levels, mapproxy_rate, memory_levels };
+                println!("{}", sylva::bench::seed::report(&bench)?);
+            }
+            #[cfg(feature = "server")]
+            Bench::Soak { config, minutes, every } => {
+                super::serving::with_server_allocator();
+                println!("{}", sylva::bench::serve::soak(config.as_deref(), minutes, every)?);
+            }
+            #[cfg(feature = "client")]
+            Bench::Raycast(args) => args.run()?,
+        }
+        Ok(())
+    }
+}
+
+#[cfg(feature = "client")]
+impl RaycastArgs {
+    /// The table to stdout, the plot to its file.
+    fn run(self) -> Result<()> {
+        use sylva::bench::raycast;
+        let size = super::flight::parse_size(&self.size)?;
+        let rmnp = real_region(self.rmnp)?;
+        sylva::outputs::check(&[], &[&self.plot])?;
+        let mut gpu = sylva::client::render::gpu::Gpu::open()?;
+        gpu.early_depth &= !self.no_early_depth;
+        let early = if gpu.early_depth { "on" } else { "off" };
+        let name = format!("{}, rays in {:?} passes, early depth {early}", gpu.describe(), self.ray_pass);
+        let budget = self.gpu_budget_mib << 20;
+        let mut renderer =
+            sylva::client::render::Renderer::new(gpu, 513, 32, budget, false).with_ray_pass(self.ray_pass);
+        let views = raycast::default_views(&rmnp);
+        let rows = raycast::run(&views, size, &self.only, &mut renderer).map_err(anyhow::Error::msg)?;
+        println!("{}", raycast::report(&rows, size, &name));
+        sylva::outputs::write_all(&[(&self.plot, &raycast::plot(&rows).map_err(anyhow::Error::msg)?)])?;
+        eprintln!("plot: {}", self.plot.display());
+        Ok(())
+    }
+}
+
+/// The benchmarks' real-data region when none is named; they leave it out
+/// when its data (`../shared/data`) is absent.
+const DEFAULT_REAL_REGION: &str = "config/examples/rmnp.toml";
+
+/// The benchmarks' real-data region: a named one must load (the error names
+/// the file), where the default may be left out.
+fn real_region(named: Option<PathBuf>) -> Result<PathBuf> {
+    if let Some(path) = &named {
+        sylva::config::load(Some(path))?;
+    }
+    Ok(named.unwrap_or_else(|| PathBuf::from(DEFAULT_REAL_REGION)))
+}

@@ -1,0 +1,246 @@
+//! The commands that render flights over the tiles: `fly` (headless, a
+//! camera path to PNG frames and statistics) and `view` (in a window).
+
+use anyhow::{Context, Result, bail};
+use std::path::PathBuf;
+use sylva::client::fly::{self, FlyOptions};
+use sylva::client::render::RayPass;
+
+/// Where a flight's tiles come from.
+#[derive(clap::Args)]
+pub struct SourceArgs {
+    /// Region configuration (default: the embedded demo region).
+    #[arg(long, conflicts_with = "server")]
+    config: Option<PathBuf>,
+    /// A `sylva serve` to fetch tiles from, e.g. http://127.0.0.1:8080.
+    #[arg(long)]
+    server: Option<String>,
+}
+
+impl SourceArgs {
+    fn open(&self) -> Result<Box<dyn sylva::client::source::TileSource>> {
+        Ok(sylva::client::source::open(self.config.as_deref(), self.server.as_deref())?)
+    }
+}
+
+/// `sylva fly`.
+#[derive(clap::Args)]
+pub struct FlyArgs {
+    #[command(flatten)]
+    tiles: SourceArgs,
+    /// Camera path (TOML; see config/paths/).
+    #[arg(long)]
+    path: PathBuf,
+    /// Frames spread evenly over the path (at least 1).
+    #[arg(long, default_value_t = 60, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    frames: usize,
+    /// Output directory for frame_NNNNN.png and stats.csv.
+    #[arg(long)]
+    out: PathBuf,
+    /// Replace an earlier flight's outputs in --out (else refused).
+    #[arg(long)]
+    overwrite: bool,
+    /// Statistics only, no PNG frames.
+    #[arg(long)]
+    no_frames: bool,
+    /// Render each frame again for this long and report its median
+    /// GPU time: what a loop rendering continuously sees, where a GPU
+    /// lowers its clocks between a CPU-bound flight's frames (an H200
+    /// runs 5.7× slower then).
+    #[arg(long, default_value_t = 0.0)]
+    hold_ms: f64,
+    #[command(flatten)]
+    render: RenderArgs,
+}
+
+impl FlyArgs {
+    pub fn run(self) -> Result<()> {
+        let options = FlyOptions {
+            frames: self.frames,
+            out_dir: Some(self.out),
+            overwrite: self.overwrite,
+            write_frames: !self.no_frames,
+            hold_ms: self.hold_ms,
+            ..self.render.options()?
+        };
+        let path = sylva::client::path::CameraPath::load(&self.path)?;
+        let source = self.tiles.open()?;
+        let budget = self.render.gpu_budget_mib << 20;
+        let records = fly::run(source.as_ref(), &path, &options, budget)?;
+        println!("{}", fly::summary(&records));
+        Ok(())
+    }
+}
+
+/// `sylva view`.
+#[cfg(feature = "window")]
+#[derive(clap::Args)]
+pub struct ViewArgs {
+    #[command(flatten)]
+    tiles: SourceArgs,
+    /// Start at this camera path's first keyframe, with its sun and
+    /// field of view (default: above the middle of the region).
+    #[arg(long)]
+    path: Option<PathBuf>,
+    /// Close after this many frames.
+    #[arg(long, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    frames: Option<usize>,
+    /// Directory for stats.csv on closing (with the last frame when
+    /// --frames is given) and for frames saved with P (default: here).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Replace an earlier flight's or view's outputs in --out (else
+    /// refused).
+    #[arg(long)]
+    overwrite: bool,
+    #[command(flatten)]
+    render: RenderArgs,
+}
+
+#[cfg(feature = "window")]
+impl ViewArgs {
+    pub fn run(self) -> Result<()> {
+        use sylva::client::view;
+        if let Some(dir) = &self.out {
+            // Refused here, before the window opens; replaced on closing.
+            fly::prepare_out_dir(dir, self.overwrite)?;
+        }
+        let source = self.tiles.open()?;
+        let path = self.path.as_deref().map(sylva::client::path::CameraPath::load).transpose()?;
+        let start = match &path {
+            Some(path) => view::path_start(path),
+            None => view::default_start(source.as_ref())?,
+        };
+        let options = view::ViewOptions {
+            render: FlyOptions { overwrite: self.overwrite, ..self.render.options()? },
+            start,
+            fov_deg: path.as_ref().map_or(view::FOV_DEG, |p| p.fov_deg),
+            sun_ecef: match &path {
+                Some(path) => path.sun_ecef(),
+                None => Some(view::SUN.ecef(start.eye.lon_deg, start.eye.lat_deg)),
+            },
+            gpu_budget_bytes: self.render.gpu_budget_mib << 20,
+            exit_after: self.frames,
+            out_dir: self.out,
+        };
+        let records = view::run(source.into(), options)?;
+        println!("{}", fly::summary(&records));
+        Ok(())
+    }
+}
+
+/// How a flight's frames are rendered and their tiles chosen.
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    /// Image size, WxH.
+    #[arg(long, default_value = "640x480")]
+    size: String,
+    /// `exact` or `linear:STEPS`.
+    #[arg(long, default_value = "exact")]
+    traversal: String,
+    /// Shadow samples per hit (0: none).
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(0..=256))]
+    shadow_steps: u32,
+    /// Tile selection: `sse` (refine to --max-error-px) or `budget`
+    /// (the most benefit whose predicted frame time fits --budget-ms).
+    #[arg(long, default_value = "sse")]
+    lod: String,
+    /// Frame budget of `--lod budget`, ms.
+    #[arg(long, default_value_t = 33.0)]
+    budget_ms: f64,
+    /// Frames between selections of `--lod budget` (the selection
+    /// thread's period).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    select_every: u32,
+    /// Geomorph between tile levels over the selection period (`--lod
+    /// budget`; a morphing tile is prepared and uploaded once, with the
+    /// coarser surface the GPU blends it with).
+    #[arg(long)]
+    geomorph: bool,
+    /// The cost model `--lod budget` starts from: the `cost_model.json`
+    /// an earlier flight on this machine calibrated (default: constants
+    /// for a current GPU).
+    #[arg(long)]
+    cost_model: Option<PathBuf>,
+    /// Largest projected tile error, pixels.
+    #[arg(long, default_value_t = 2.0, value_parser = positive_px)]
+    max_error_px: f64,
+    /// Deepest tile level.
+    #[arg(long, default_value_t = 13)]
+    max_level: u32,
+    /// GPU tile cache budget, MiB.
+    #[arg(long, default_value_t = 512, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    gpu_budget_mib: usize,
+    /// Draw the canopy by ray casting alone, without trees as point
+    /// splats near the camera.
+    #[arg(long)]
+    no_trees: bool,
+    /// Hull quads this many times the tiles' 16 samples: fewer
+    /// triangles, for software rasterisers (lavapipe: 4 gives ~30 %
+    /// faster frames; rays start farther from the surface, so more
+    /// fetches, and the linear march misses more).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=32))]
+    hull_factor: u32,
+    /// Where rays are cast: `fragment` (from each tile's hull) or
+    /// `compute` (compute passes; for GPUs that shade fragments on a
+    /// small part of the chip, such as data-centre GPUs).
+    #[arg(long, default_value = "fragment")]
+    ray_pass: RayPass,
+}
+
+impl RenderArgs {
+    /// The flight options these arguments set (the rest default).
+    fn options(&self) -> Result<FlyOptions> {
+        let mode = match self.lod.as_str() {
+            "sse" if self.geomorph || self.select_every != 1 || self.cost_model.is_some() => {
+                bail!("--geomorph, --select-every and --cost-model apply to --lod budget only, not to --lod sse")
+            }
+            "sse" => fly::LodMode::Sse,
+            "budget" if self.budget_ms.is_finite() && self.budget_ms > 0.0 => fly::LodMode::Budget {
+                budget_ms: self.budget_ms,
+                select_every: self.select_every,
+                prior: self.prior()?,
+            },
+            "budget" => bail!("--budget-ms {} is not a positive number of milliseconds", self.budget_ms),
+            other => bail!("unknown --lod {other:?}; expected sse or budget"),
+        };
+        let traversal = fly::parse_traversal(&self.traversal)
+            .ok_or_else(|| anyhow::anyhow!("unknown traversal {:?}; expected exact or linear:STEPS", self.traversal))?;
+        Ok(FlyOptions {
+            size: parse_size(&self.size)?,
+            traversal,
+            shadow_steps: self.shadow_steps,
+            lod: sylva::client::quadtree::LodRule { max_error_px: self.max_error_px, max_level: self.max_level },
+            mode,
+            geomorph: self.geomorph,
+            trees: if self.no_trees { None } else { Some(Default::default()) },
+            hull_factor: self.hull_factor as usize,
+            ray_pass: self.ray_pass,
+            ..Default::default()
+        })
+    }
+
+    /// The cost model a budget flight starts from.
+    fn prior(&self) -> Result<sylva::lod::model::CostModel> {
+        let Some(file) = &self.cost_model else { return Ok(Default::default()) };
+        let text = std::fs::read_to_string(file).with_context(|| format!("{}", file.display()))?;
+        sylva::lod::model::CostModel::from_json(&text).map_err(|e| anyhow::anyhow!("{}: {e}", file.display()))
+    }
+}
+
+/// Parses `WxH`.
+pub fn parse_size(text: &str) -> Result<(u32, u32)> {
+    let parsed = text.split_once(['x', 'X']).and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)));
+    match parsed {
+        Some((w, h)) if (1..=16384).contains(&w) && (1..=16384).contains(&h) => Ok((w, h)),
+        _ => bail!("bad size {text:?}; expected WxH, each 1 to 16384, e.g. 640x480"),
+    }
+}
+
+/// A finite number of pixels above 0.
+fn positive_px(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("{text:?} is not a positive number of pixels")),
+    }
+}

@@ -1,0 +1,200 @@
+//! The commands that make files from a region: `tile`, `build`, `canopy`
+//! and `info`.
+
+use anyhow::{Result, bail};
+use std::path::{Path, PathBuf};
+use sylva::cem::Layer;
+use sylva::encode::Format;
+use sylva::grid::{BBox, TileId};
+use sylva::outputs;
+use sylva::produce::{self, Product};
+
+/// `sylva tile`.
+#[derive(clap::Args)]
+pub struct TileArgs {
+    /// Region configuration (default: the embedded demo region).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// dem, cover, canopy, cem, surface, max4 or max32.
+    #[arg(long)]
+    layer: String,
+    /// Tile level (0 = coarsest).
+    #[arg(long)]
+    level: u32,
+    /// Tile row, counted from the south pole.
+    #[arg(long)]
+    row: u64,
+    /// Tile column, counted from −180°.
+    #[arg(long)]
+    col: u64,
+    /// Extra samples per side taken from the neighbours.
+    #[arg(long, default_value_t = 0)]
+    halo: usize,
+    /// bil16, bil32, png16 or tiff.
+    #[arg(long, default_value = "tiff")]
+    format: String,
+    /// Output file.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+impl TileArgs {
+    pub fn run(self) -> Result<()> {
+        outputs::check(self.config.as_deref().as_slice(), &[&self.output])?;
+        let region = sylva::config::load(self.config.as_deref())?;
+        let id = TileId::new(self.level, self.row, self.col);
+        let product = produce::tile(&region, id, self.halo, parse_layer(&self.layer)?, parse_format(&self.format)?)?;
+        write(&self.output, &product)
+    }
+}
+
+/// `sylva build`.
+#[derive(clap::Args)]
+pub struct BuildArgs {
+    /// Region configuration (default: the embedded demo region).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// dem, cover, canopy, cem, surface, max4 or max32.
+    #[arg(long)]
+    layer: String,
+    /// W,S,E,N in degrees (default: the region's bounds).
+    #[arg(long, allow_hyphen_values = true)]
+    bbox: Option<String>,
+    /// Samples per row; the outer samples lie on the box edges.
+    #[arg(long)]
+    width: usize,
+    /// Samples per column.
+    #[arg(long)]
+    height: usize,
+    /// bil16, bil32, png16 or tiff.
+    #[arg(long, default_value = "tiff")]
+    format: String,
+    /// Output file.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+impl BuildArgs {
+    pub fn run(self) -> Result<()> {
+        outputs::check(self.config.as_deref().as_slice(), &[&self.output])?;
+        let region = sylva::config::load(self.config.as_deref())?;
+        let bbox = match &self.bbox {
+            Some(text) => BBox::parse(text)?,
+            None => region.bounds,
+        };
+        let (layer, format) = (parse_layer(&self.layer)?, parse_format(&self.format)?);
+        let product = produce::area(&region, bbox, self.width, self.height, layer, format)?;
+        write(&self.output, &product)
+    }
+}
+
+/// `sylva canopy`.
+#[derive(clap::Args)]
+pub struct CanopyArgs {
+    /// LAS or LAZ files, read as one cloud (repeat for more).
+    #[arg(long = "las", required = true)]
+    las: Vec<PathBuf>,
+    /// Cell side of the canopy height model, metres.
+    #[arg(long, default_value_t = 0.5)]
+    resolution: f64,
+    /// The proxy (a GeoTIFF atlas of Wang tiles).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Also write the canopy height model (GeoTIFF).
+    #[arg(long)]
+    chm: Option<PathBuf>,
+    /// Also write a picture of the CHM beside 3 × 3 tiles of the proxy (PNG).
+    #[arg(long)]
+    preview: Option<PathBuf>,
+    /// `EPSG:code` replacing the files' CRS.
+    #[arg(long)]
+    crs: Option<String>,
+    /// Tile side in texels, a power of two (default: about 64 m).
+    #[arg(long)]
+    tile_px: Option<usize>,
+    /// Colours per tile edge (1: one periodic tile).
+    #[arg(long, default_value_t = 2)]
+    colours: usize,
+    /// Tiles per colour combination.
+    #[arg(long, default_value_t = 2)]
+    variants: usize,
+}
+
+impl CanopyArgs {
+    /// Builds the proxy and writes it with the CHM and preview asked for,
+    /// all or none.
+    pub fn run(self) -> Result<()> {
+        let inputs: Vec<&Path> = self.las.iter().map(PathBuf::as_path).collect();
+        let targets: Vec<&Path> = [Some(&self.output), self.chm.as_ref(), self.preview.as_ref()]
+            .into_iter()
+            .flatten()
+            .map(PathBuf::as_path)
+            .collect();
+        outputs::check(&inputs, &targets)?;
+        let mut options = sylva::lidar::Options::new(self.las.clone(), self.resolution);
+        options.crs =
+            self.crs.as_deref().map(sylva::source::crs::parse_epsg).transpose().map_err(anyhow::Error::msg)?;
+        (options.tile_px, options.colours, options.variants) = (self.tile_px, self.colours, self.variants);
+        let (model, set) = sylva::lidar::build(&options)?;
+        let mut files = vec![(self.output.as_path(), model.proxy_tiff(&set)?)];
+        if let Some(path) = &self.chm {
+            files.push((path, model.chm_tiff()?));
+        }
+        if let Some(path) = &self.preview {
+            files.push((path, model.preview_png(&set, 3, 0)?));
+        }
+        outputs::write_all(&files.iter().map(|(p, b)| (*p, b.as_slice())).collect::<Vec<_>>())?;
+        println!("{}", model.report(&set));
+        Ok(())
+    }
+}
+
+/// `sylva info`.
+#[derive(clap::Args)]
+pub struct InfoArgs {
+    /// Region configuration (default: the embedded demo region).
+    #[arg(long)]
+    config: Option<PathBuf>,
+}
+
+impl InfoArgs {
+    pub fn run(self) -> Result<()> {
+        println!("{}", sylva::config::load(self.config.as_deref())?.describe());
+        Ok(())
+    }
+}
+
+fn parse_layer(text: &str) -> Result<Layer> {
+    match Layer::parse(text) {
+        Some(l) => Ok(l),
+        None => bail!("unknown layer {text:?}; expected one of dem, cover, canopy, cem, surface, max4, max32"),
+    }
+}
+
+fn parse_format(text: &str) -> Result<Format> {
+    match Format::parse(text) {
+        Some(f) => Ok(f),
+        None => bail!("unknown format {text:?}; expected bil16, bil32, png16 or tiff"),
+    }
+}
+
+/// Writes the product atomically and reports it.
+fn write(path: &Path, product: &Product) -> Result<()> {
+    outputs::write_all(&[(path, &product.encoded.bytes)])?;
+    let g = &product.grid;
+    eprintln!(
+        "{}: {}×{} samples, {} bytes, {:.1} ms",
+        path.display(),
+        g.width(),
+        g.height(),
+        product.encoded.bytes.len(),
+        product.stats.total().as_secs_f64() * 1e3
+    );
+    if let Some(q) = product.encoded.quantization {
+        eprintln!("  16-bit codes: value = {} + {} · code", q.offset, q.scale);
+    }
+    if product.encoded.clamped > 0 {
+        eprintln!("  warning: {} samples were outside the 16-bit range and were clamped", product.encoded.clamped);
+    }
+    Ok(())
+}
