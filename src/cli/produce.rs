@@ -7,17 +7,43 @@ use sylva::cem::Layer;
 use sylva::encode::Format;
 use sylva::grid::{BBox, TileId};
 use sylva::outputs;
-use sylva::produce::{self, Product};
+use sylva::produce::{self, ProduceError, Product};
+use sylva::region::Region;
 
-/// `sylva tile`.
+/// What `tile` and `build` share: the region, the layer, its encoding and
+/// the file.
 #[derive(clap::Args)]
-pub struct TileArgs {
+struct ProductArgs {
     /// Region configuration (default: the embedded demo region).
     #[arg(long)]
     config: Option<PathBuf>,
     /// dem, cover, canopy, cem, surface, max4 or max32.
     #[arg(long)]
     layer: String,
+    /// bil16, bil32, png16 or tiff.
+    #[arg(long, default_value = "tiff")]
+    format: String,
+    /// Output file.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+impl ProductArgs {
+    /// Loads the region, makes the product and writes it (refused before
+    /// any work if the output would overwrite the configuration).
+    fn make(&self, product: impl FnOnce(&Region, Layer, Format) -> Result<Product, ProduceError>) -> Result<()> {
+        outputs::check(self.config.as_deref().as_slice(), &[&self.output])?;
+        let region = sylva::config::load(self.config.as_deref())?;
+        let (layer, format) = (parse_layer(&self.layer)?, parse_format(&self.format)?);
+        write(&self.output, &product(&region, layer, format)?)
+    }
+}
+
+/// `sylva tile`.
+#[derive(clap::Args)]
+pub struct TileArgs {
+    #[command(flatten)]
+    product: ProductArgs,
     /// Tile level (0 = coarsest).
     #[arg(long)]
     level: u32,
@@ -30,33 +56,20 @@ pub struct TileArgs {
     /// Extra samples per side taken from the neighbours.
     #[arg(long, default_value_t = 0)]
     halo: usize,
-    /// bil16, bil32, png16 or tiff.
-    #[arg(long, default_value = "tiff")]
-    format: String,
-    /// Output file.
-    #[arg(short, long)]
-    output: PathBuf,
 }
 
 impl TileArgs {
     pub fn run(self) -> Result<()> {
-        outputs::check(self.config.as_deref().as_slice(), &[&self.output])?;
-        let region = sylva::config::load(self.config.as_deref())?;
         let id = TileId::new(self.level, self.row, self.col);
-        let product = produce::tile(&region, id, self.halo, parse_layer(&self.layer)?, parse_format(&self.format)?)?;
-        write(&self.output, &product)
+        self.product.make(|region, layer, format| produce::tile(region, id, self.halo, layer, format))
     }
 }
 
 /// `sylva build`.
 #[derive(clap::Args)]
 pub struct BuildArgs {
-    /// Region configuration (default: the embedded demo region).
-    #[arg(long)]
-    config: Option<PathBuf>,
-    /// dem, cover, canopy, cem, surface, max4 or max32.
-    #[arg(long)]
-    layer: String,
+    #[command(flatten)]
+    product: ProductArgs,
     /// W,S,E,N in degrees (default: the region's bounds).
     #[arg(long, allow_hyphen_values = true)]
     bbox: Option<String>,
@@ -66,25 +79,14 @@ pub struct BuildArgs {
     /// Samples per column.
     #[arg(long)]
     height: usize,
-    /// bil16, bil32, png16 or tiff.
-    #[arg(long, default_value = "tiff")]
-    format: String,
-    /// Output file.
-    #[arg(short, long)]
-    output: PathBuf,
 }
 
 impl BuildArgs {
     pub fn run(self) -> Result<()> {
-        outputs::check(self.config.as_deref().as_slice(), &[&self.output])?;
-        let region = sylva::config::load(self.config.as_deref())?;
-        let bbox = match &self.bbox {
-            Some(text) => BBox::parse(text)?,
-            None => region.bounds,
-        };
-        let (layer, format) = (parse_layer(&self.layer)?, parse_format(&self.format)?);
-        let product = produce::area(&region, bbox, self.width, self.height, layer, format)?;
-        write(&self.output, &product)
+        let bbox = self.bbox.as_deref().map(BBox::parse).transpose()?;
+        self.product.make(|region, layer, format| {
+            produce::area(region, bbox.unwrap_or(region.bounds), self.width, self.height, layer, format)
+        })
     }
 }
 
