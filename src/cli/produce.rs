@@ -30,9 +30,11 @@ struct ProductArgs {
 
 impl ProductArgs {
     /// Loads the region, makes the product and writes it (refused before
-    /// any work if the output would overwrite the configuration).
+    /// any work if the output would overwrite the configuration or a file
+    /// it names).
     fn make(&self, product: impl FnOnce(&Region, Layer, Format) -> Result<Product, ProduceError>) -> Result<()> {
-        outputs::check(self.config.as_deref().as_slice(), &[&self.output])?;
+        let inputs = sylva::config::input_files(self.config.as_deref())?;
+        outputs::check(&inputs.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &[&self.output])?;
         let region = sylva::config::load(self.config.as_deref())?;
         let (layer, format) = (parse_layer(&self.layer)?, parse_format(&self.format)?);
         write(&self.output, &product(&region, layer, format)?)

@@ -58,6 +58,15 @@ pub fn load_with_config(path: Option<&Path>) -> Result<(Config, Region), ConfigE
     Ok((config, region))
 }
 
+/// A configuration file and the files it names (none without one): the
+/// inputs of a run that loads it.
+pub fn input_files(path: Option<&Path>) -> Result<Vec<PathBuf>, ConfigError> {
+    let Some(path) = path else { return Ok(Vec::new()) };
+    let mut files = parse_file(path)?.files(path.parent().unwrap_or(Path::new(".")));
+    files.push(path.to_path_buf());
+    Ok(files)
+}
+
 /// Reads and parses a configuration file (stage one only).
 pub fn parse_file(path: &Path) -> Result<Config, ConfigError> {
     let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.into(), source })?;

@@ -8,7 +8,7 @@
 mod build;
 mod upstream;
 
-pub use build::{ConfigError, load, load_with_config, parse_file, region_from};
+pub use build::{ConfigError, input_files, load, load_with_config, parse_file, region_from};
 pub use upstream::{UpstreamConfig, UpstreamService};
 
 use crate::canopy::ProxyParams;
@@ -44,6 +44,16 @@ pub struct Config {
     pub server: ServerConfig,
     /// Where encoded tiles are cached (shared by `serve` and `seed`).
     pub tile_cache: TileCacheConfig,
+}
+
+impl Config {
+    /// The files this configuration reads, relative ones taken from `base`
+    /// (the configuration file's directory): what no output may overwrite.
+    pub fn files(&self, base: &std::path::Path) -> Vec<PathBuf> {
+        let named = [self.dem.path.as_ref(), self.landcover.as_ref().and_then(|l| l.path.as_ref())];
+        let forests = self.forest.iter().flat_map(|f| f.proxy.iter().chain(&f.lidar));
+        named.into_iter().flatten().chain(forests).map(|p| base.join(p)).collect()
+    }
 }
 
 /// Where encoded tiles are cached.

@@ -105,6 +105,33 @@ fn bad_arguments_are_explained() {
 }
 
 #[test]
+fn no_output_overwrites_a_file_the_configuration_reads() {
+    let dir = TempDir::new("cli-clobber-data");
+    let dem = dir.join("dem.tif");
+    let d = dem.to_str().unwrap();
+    let out = sylva(&["build", "--layer", "dem", "--width", "16", "--height", "16", "-o", d]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let bytes = std::fs::read(&dem).unwrap();
+    let config = dir.join("c.toml");
+    std::fs::write(&config, "[dem]\npath = \"dem.tif\"\n").unwrap();
+    let (c, cache) = (config.to_str().unwrap(), dir.join("cache"));
+    let runs: [&[&str]; 3] = [
+        &["build", "--config", c, "--layer", "dem", "--width", "8", "--height", "8", "-o", d],
+        &["tile", "--config", c, "--layer", "dem", "--level", "9", "--row", "0", "--col", "0", "-o", d],
+        &["seed", "--config", c, "--levels", "0", "--cache-dir", cache.to_str().unwrap(), "--progress-file", d],
+    ];
+    for args in runs {
+        let out = sylva(args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains("dem.tif") && err.contains("is also an input"),
+            "{args:?}: {err}"
+        );
+        assert!(std::fs::read(&dem).unwrap() == bytes, "{args:?} changed the DEM");
+    }
+}
+
+#[test]
 fn benchmarks_refuse_a_named_region_or_an_output_they_cannot_use_before_running() {
     for bench in ["pipeline", "lod", "sse"] {
         let out = sylva(&["bench", bench, "--rmnp", "/no/such/rmnp.toml"]);
