@@ -153,11 +153,11 @@ impl Bench {
         match self {
             Bench::Pipeline { rmnp, labels, build_side } => {
                 let rmnp = real_region(rmnp)?;
-                println!("{}", sylva::bench::pipeline_report(&rmnp, &labels, build_side)?);
+                super::print(sylva::bench::pipeline_report(&rmnp, &labels, build_side)?)?;
             }
             Bench::Lod { rmnp, frames, plots, flights } => {
                 let rmnp = real_region(rmnp)?;
-                println!("{}", sylva::bench::lod_report(&rmnp, frames, plots.as_deref(), &flights)?);
+                super::print(sylva::bench::lod_report(&rmnp, frames, plots.as_deref(), &flights)?)?;
             }
             Bench::Sse { rmnp, paths, fps, frames } => {
                 let rmnp = real_region(rmnp)?;
@@ -166,7 +166,7 @@ impl Bench {
                     anyhow::bail!("--fps {fps}: a positive number of frames a second");
                 }
                 let pace = frames.map_or(Pace::PerSecond(fps), Pace::Frames);
-                println!("{}", sylva::bench::lod_sse::report(&rmnp, &paths, pace).map_err(anyhow::Error::msg)?);
+                super::print(sylva::bench::lod_sse::report(&rmnp, &paths, pace).map_err(anyhow::Error::msg)?)?;
             }
             #[cfg(feature = "server")]
             Bench::Serve { configs, mapserver, mapproxy, n, uncached, wrk_seconds } => {
@@ -174,17 +174,17 @@ impl Bench {
                 let configs: [PathBuf; 3] =
                     configs.try_into().map_err(|_| anyhow::anyhow!("--configs takes three files"))?;
                 let bench = sylva::bench::serve::ServeBench { configs, mapserver, mapproxy, n, uncached, wrk_seconds };
-                println!("{}", sylva::bench::serve::report(&bench)?);
+                super::print(sylva::bench::serve::report(&bench)?)?;
             }
             #[cfg(feature = "server")]
             Bench::Seed { config, levels, memory_levels, mapproxy_rate } => {
                 let bench = sylva::bench::seed::SeedBench { config, levels, mapproxy_rate, memory_levels };
-                println!("{}", sylva::bench::seed::report(&bench)?);
+                super::print(sylva::bench::seed::report(&bench)?)?;
             }
             #[cfg(feature = "server")]
             Bench::Soak { config, minutes, every } => {
                 super::serving::with_server_allocator();
-                println!("{}", sylva::bench::serve::soak(config.as_deref(), minutes, every)?);
+                super::print(sylva::bench::serve::soak(config.as_deref(), minutes, every)?)?;
             }
             #[cfg(feature = "client")]
             Bench::Raycast(args) => args.run()?,
@@ -210,7 +210,7 @@ impl RaycastArgs {
             sylva::client::render::Renderer::new(gpu, 513, 32, budget, false).with_ray_pass(self.ray_pass);
         let views = raycast::default_views(&rmnp);
         let rows = raycast::run(&views, size, &self.only, &mut renderer).map_err(anyhow::Error::msg)?;
-        println!("{}", raycast::report(&rows, size, &name));
+        super::print(raycast::report(&rows, size, &name))?;
         sylva::outputs::write_all(&[(&self.plot, &raycast::plot(&rows).map_err(anyhow::Error::msg)?)])?;
         eprintln!("plot: {}", self.plot.display());
         Ok(())

@@ -67,7 +67,7 @@ impl FlyArgs {
         let source = self.tiles.open()?;
         let budget = self.render.gpu_budget_mib << 20;
         let records = fly::run(source.as_ref(), &path, &options, budget)?;
-        println!("{}", fly::summary(&records));
+        super::print(fly::summary(&records))?;
         Ok(())
     }
 }
@@ -124,7 +124,7 @@ impl ViewArgs {
             out_dir: self.out,
         };
         let records = view::run(source.into(), options)?;
-        println!("{}", fly::summary(&records));
+        super::print(fly::summary(&records))?;
         Ok(())
     }
 }

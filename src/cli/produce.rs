@@ -148,7 +148,7 @@ impl CanopyArgs {
             files.push((path, model.preview_png(&set, 3, 0)?));
         }
         outputs::write_all(&files.iter().map(|(p, b)| (*p, b.as_slice())).collect::<Vec<_>>())?;
-        println!("{}", model.report(&set));
+        super::print(model.report(&set))?;
         Ok(())
     }
 }
@@ -163,7 +163,7 @@ pub struct InfoArgs {
 
 impl InfoArgs {
     pub fn run(self) -> Result<()> {
-        println!("{}", sylva::config::load(self.config.as_deref())?.describe());
+        super::print(sylva::config::load(self.config.as_deref())?.describe())?;
         Ok(())
     }
 }

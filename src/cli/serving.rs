@@ -125,7 +125,7 @@ impl SeedArgs {
             display,
         };
         let report = sylva::seed::run(&options, &sylva::seed::Counters::default())?;
-        println!("{}", report.text);
+        super::print(report.text)?;
         if report.failed > 0 {
             std::process::exit(3);
         }

@@ -132,6 +132,15 @@ fn no_output_overwrites_a_file_the_configuration_reads() {
 }
 
 #[test]
+fn a_reader_gone_away_is_no_error() {
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_sylva")).arg("info").stdout(writer).output().expect("run sylva");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success() && !err.contains("panicked"), "{:?}: {err}", out.status);
+}
+
+#[test]
 fn benchmarks_refuse_a_named_region_or_an_output_they_cannot_use_before_running() {
     for bench in ["pipeline", "lod", "sse"] {
         let out = sylva(&["bench", bench, "--rmnp", "/no/such/rmnp.toml"]);
