@@ -36,6 +36,12 @@ impl Resampling {
     }
 }
 
+/// Pixels a sample may lie past a source's edge and still read it: a
+/// sample placed on the data's edge (a GetMap of the region's bounds) lands
+/// a rounding error either side of it (1e-11 pixels at rmnp's 0.002°
+/// pixels), and would otherwise be no data on one side.
+pub const EDGE_SLACK: f64 = 1e-6;
+
 /// The pixels of a source and the region of pixel coordinates that holds data
 /// (for area pixels `-0.5 ..= n - 0.5`, for point-registered samples
 /// `0 ..= n - 1`; overviews have fractional bounds).
@@ -53,13 +59,14 @@ pub struct Extent {
 
 impl Extent {
     /// A source of `width × height` pixels whose data reaches `overhang`
-    /// past its outer pixel centres.
+    /// past its outer pixel centres, and [`EDGE_SLACK`] more.
     pub fn new(width: usize, height: usize, overhang: f64) -> Extent {
+        let reach = overhang + EDGE_SLACK;
         Extent {
             width,
             height,
-            x_range: (-overhang, width as f64 - 1.0 + overhang),
-            y_range: (-overhang, height as f64 - 1.0 + overhang),
+            x_range: (-reach, width as f64 - 1.0 + reach),
+            y_range: (-reach, height as f64 - 1.0 + reach),
         }
     }
 

@@ -284,7 +284,9 @@ fn mesh_step(grid: &SampleGrid) -> i64 {
     m
 }
 
-/// The lat/lon box of a source, from its boundary densely sampled.
+/// The lat/lon box of a source, from its boundary densely sampled: the
+/// data's own extent for a geographic source, a box that contains it for a
+/// projected one.
 fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
     let (xa, xb) = (g.x0 - g.overhang * g.dx, g.x0 + (w as f64 - 1.0 + g.overhang) * g.dx);
     let (ya, yb) = (g.y0 - g.overhang * g.dy, g.y0 + (h as f64 - 1.0 + g.overhang) * g.dy);
@@ -303,8 +305,9 @@ fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
             }
         }
     }
-    // Projected edges bulge between boundary samples: pad by a pixel.
-    let pad = g.pixel_deg();
+    // Projected edges bulge between boundary samples: pad by a pixel. A
+    // geographic source's edges are its meridians and parallels, exact.
+    let pad = if g.crs.is_geographic() { 0.0 } else { g.pixel_deg() };
     Sector { min_lat: s.min_lat - pad, max_lat: s.max_lat + pad, min_lon: s.min_lon - pad, max_lon: s.max_lon + pad }
 }
 
