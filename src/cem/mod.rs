@@ -150,7 +150,6 @@ impl Products {
 /// Which stages the requested layers need.
 #[derive(Clone, Copy, Debug)]
 struct Needs {
-    ground: bool,
     cover: bool,
     canopy: bool,
     cem: bool,
@@ -166,15 +165,7 @@ impl Needs {
         let cem = near || far || has(Layer::Cem);
         let canopy = cem || has(Layer::Canopy);
         let surface = has(Layer::Surface);
-        Needs {
-            ground: cem || surface || has(Layer::Dem),
-            cover: canopy || surface || has(Layer::Cover),
-            canopy,
-            cem,
-            surface,
-            near,
-            far,
-        }
+        Needs { cover: canopy || surface || has(Layer::Cover), canopy, cem, surface, near, far }
     }
 }
 
@@ -187,7 +178,7 @@ pub fn alike_across(region: &Region, layer: Layer, fine: &SampleGrid, coarse: &S
     let need = Needs::of(&[layer]);
     let metres = |g: &SampleGrid| g.lat.step_deg() * crate::geo::METRES_PER_DEGREE;
     !(need.near || need.far)
-        && (!need.ground || region.dem.samples_alike(fine, coarse))
+        && region.dem.samples_alike(fine, coarse)
         && (!need.cover || region.landcover.as_ref().is_none_or(|l| l.samples_alike(fine, coarse)))
         && (!need.canopy || region.landcover.is_none() || region.proxy.alike_at(metres(fine), metres(coarse)))
 }
@@ -199,14 +190,11 @@ pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<P
     // The safety zones look up to 32 samples beyond the grid.
     let margin = accel::margin(need.near, need.far);
     let work = grid.grown(margin);
-    let nodata = || Raster::filled(work.width(), work.height(), f32::NAN);
 
-    // (b) Elevation data resampling.
-    let ground = match need.ground {
-        true => stats.time(Stage::Elevation, || region.dem.sample(&work, 0, region.dem_resampling))?,
-        false => nodata(),
-    };
-    let no_ground = need.ground && ground.all_nodata();
+    // (b) Elevation data resampling: every layer needs it, since the region
+    // is where the ground is (no cover or canopy without it).
+    let ground = stats.time(Stage::Elevation, || region.dem.sample(&work, 0, region.dem_resampling))?;
+    let no_ground = ground.all_nodata();
 
     // (a) Identification of arboreous regions: the cover map on the grid.
     // Forest types: the canopy reads the cover of each type (bands 2 ..).
@@ -266,13 +254,18 @@ pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<P
 
     let inner = Window::new(margin as i64, margin as i64, grid.width(), grid.height());
     let crop = |r: &Raster<f32>| r.crop(inner, f32::NAN);
-    let zeros = || Raster::filled(grid.width(), grid.height(), 0.0f32);
+    // Cover and canopy (0 where no forest was computed) have no data where
+    // the ground has none.
+    let on_ground = |r: Option<&Raster<f32>>| match r {
+        Some(r) => crop(&r.zip_map(&ground, |v, g| if g.is_nan() { f32::NAN } else { v })),
+        None => crop(&ground.map(|g| if g.is_nan() { f32::NAN } else { 0.0 })),
+    };
     let nodata_out = || Raster::filled(grid.width(), grid.height(), f32::NAN);
     let wants = |l: Layer| layers.contains(&l);
     Ok(Products {
         dem: wants(Layer::Dem).then(|| crop(&ground)),
-        cover: wants(Layer::Cover).then(|| cover.as_ref().map_or_else(zeros, crop)),
-        canopy: wants(Layer::Canopy).then(|| canopy.as_ref().map_or_else(zeros, crop)),
+        cover: wants(Layer::Cover).then(|| on_ground(cover.as_ref())),
+        canopy: wants(Layer::Canopy).then(|| on_ground(canopy.as_ref())),
         cem: cem.as_ref().filter(|_| wants(Layer::Cem)).map(crop),
         surface: wants(Layer::Surface).then(|| {
             surface.map_or_else(
@@ -302,10 +295,10 @@ mod tests {
     #[test]
     fn needs_follow_layer_dependencies() {
         let n = Needs::of(&[Layer::Max32]);
-        assert!(n.ground && n.cover && n.canopy && n.cem && n.far && !n.near && !n.surface);
+        assert!(n.cover && n.canopy && n.cem && n.far && !n.near && !n.surface);
         let d = Needs::of(&[Layer::Dem]);
-        assert!(d.ground && !d.cover && !d.canopy && !d.cem);
+        assert!(!d.cover && !d.canopy && !d.cem);
         let c = Needs::of(&[Layer::Cover]);
-        assert!(!c.ground && c.cover && !c.canopy);
+        assert!(c.cover && !c.canopy);
     }
 }

@@ -154,17 +154,21 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
     })
 }
 
+/// Which revision of Sylva's products a cached tile holds: change it with
+/// any change to the code that changes some tile's bytes, so that caches
+/// seeded before it are not served beside tiles made after it.
+const PRODUCT_REVISION: &str = "2026-12-05: cover and canopy have no data where the ground has none";
+
 /// A key that changes with anything that changes a tile's bytes: every
-/// setting, the size and time of every source file, and Sylva's version.
+/// setting, the size and time of every source file, and the products'
+/// revision.
 fn version_key(config: &Config, base: &Path) -> String {
     // Only what changes a tile's bytes: not where tiles are kept or served.
     let bytes_only = Config { server: Default::default(), tile_cache: Default::default(), ..config.clone() };
     let mut text = toml::to_string(&bytes_only).unwrap_or_default();
-    text.push_str(env!("CARGO_PKG_VERSION"));
-    let files = [config.dem.path.as_ref(), config.landcover.as_ref().and_then(|l| l.path.as_ref())];
-    let proxies = config.forest.iter().flat_map(|f| f.proxy.iter().chain(&f.lidar));
-    for path in files.into_iter().flatten().chain(proxies) {
-        let meta = std::fs::metadata(base.join(path)).ok();
+    text.push_str(PRODUCT_REVISION);
+    for path in config.files(base) {
+        let meta = std::fs::metadata(&path).ok();
         let stamp =
             meta.map(|m| (m.len(), m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())));
         text.push_str(&format!("{path:?}{stamp:?}"));

@@ -169,6 +169,28 @@ fn maps_reaching_past_the_data_keep_their_encoding_and_background() {
 }
 
 #[test]
+fn every_data_layer_has_no_data_where_the_ground_has_none() {
+    let dir = TempDir::new("srv-nodata");
+    let server = Server::start(None, &dir.join("cache"));
+    // The demo region fills the middle of this box; its edges are empty.
+    let map = "SERVICE=WMS&VERSION=1.3.0&STYLES=&CRS=CRS:84&BBOX=9.95,46.25,10.3,46.5&WIDTH=70&HEIGHT=50";
+    let nodata = |layer: &str| -> Vec<bool> {
+        let r = server.get(&format!("/wms?{map}&REQUEST=GetMap&LAYERS={layer}&FORMAT=application/bil32"));
+        bil32(&r.body).iter().map(|&v| v == -32768.0).collect()
+    };
+    let ground = nodata("dem");
+    let empty = ground.iter().filter(|&&n| n).count();
+    assert!(empty > 0 && empty < ground.len(), "the box reaches past the region");
+    for layer in ["cover", "canopy", "cem"] {
+        assert!(nodata(layer) == ground, "{layer} has data where the ground has none, or none where it has");
+    }
+    let corner = server.get(&format!(
+        "/wms?{map}&REQUEST=GetFeatureInfo&LAYERS=dem&FORMAT=image/png&QUERY_LAYERS=dem&INFO_FORMAT=text/plain&I=0&J=0"
+    ));
+    assert!(corner.text().contains("dem = no data"), "{}", corner.text());
+}
+
+#[test]
 fn pictures_are_offered_in_jpeg_on_their_background() {
     let dir = TempDir::new("srv-jpeg");
     let server = Server::start(None, &dir.join("cache"));

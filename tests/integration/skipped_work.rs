@@ -46,7 +46,7 @@ fn only_the_stages_a_layer_needs_run() {
         Stage::ALL.iter().filter(|&&st| s.runs(st) > 0).map(|st| st.name()).collect::<Vec<_>>()
     };
     assert_eq!(ran(&[Layer::Dem]), ["elevation"]);
-    assert_eq!(ran(&[Layer::Cover]), ["landcover", "cover"]);
+    assert_eq!(ran(&[Layer::Cover]), ["elevation", "landcover", "cover"]);
     assert_eq!(ran(&[Layer::Cem]), ["elevation", "landcover", "cover", "canopy", "combine"]);
     assert_eq!(ran(&[Layer::Max4]), ["elevation", "landcover", "cover", "canopy", "combine", "zones"]);
 }
