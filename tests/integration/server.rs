@@ -96,9 +96,10 @@ fn feature_info_gives_the_values_the_map_shows() {
     }
     // WMS 1.1.1 names the pixel X, Y and reads EPSG:4326 as lon,lat.
     let (i, j) = (tallest % 300, tallest / 300);
-    let old = format!("/wms?{map}&REQUEST=GetFeatureInfo&LAYERS=cem&FORMAT=image/png&QUERY_LAYERS=canopy&X={i}&Y={j}")
-        .replace("VERSION=1.3.0", "VERSION=1.1.1")
-        .replace("CRS=CRS:84", "SRS=EPSG:4326");
+    let old =
+        format!("/wms?{map}&REQUEST=GetFeatureInfo&LAYERS=relief&FORMAT=image/png&QUERY_LAYERS=canopy&X={i}&Y={j}")
+            .replace("VERSION=1.3.0", "VERSION=1.1.1")
+            .replace("CRS=CRS:84", "SRS=EPSG:4326");
     let text = server.get(&old).text();
     assert!(text.contains(&format!("canopy = {:.2} m", maps[1][tallest])), "{text}");
     // Web Mercator maps too.
@@ -116,6 +117,13 @@ fn feature_info_gives_the_values_the_map_shows() {
     let off = server
         .get(&format!("/wms?{map}&REQUEST=GetFeatureInfo&LAYERS=cem&FORMAT=image/png&QUERY_LAYERS=cem&I=300&J=0"));
     assert!(off.status == 400 && off.text().contains("InvalidPoint"), "{}", off.text());
+    // Only what the map shows may be queried; the map's format does not
+    // matter (GDAL's WMS driver asks for JPEG whatever the layer).
+    let info = |query: &str| server.get(&format!("/wms?{map}&REQUEST=GetFeatureInfo&I=5&J=5&{query}"));
+    let unshown = info("LAYERS=cem&FORMAT=image/png&QUERY_LAYERS=canopy");
+    assert!(unshown.status == 400 && unshown.text().contains("LayerNotDefined"), "{}", unshown.text());
+    let jpeg = info("LAYERS=dem&FORMAT=image/jpeg&QUERY_LAYERS=dem");
+    assert!(jpeg.status == 200 && jpeg.text().contains("dem = "), "{}", jpeg.text());
 }
 
 #[test]

@@ -72,14 +72,24 @@ impl InfoFormat {
 
 /// Parses a GetFeatureInfo's parameters.
 pub(super) fn parse(params: &Params, version: Version, limits: Limits) -> Result<FeatureInfo, Exception> {
-    let map = request::get_map(params, version, limits)?;
+    let map = request::map_part(params, version, limits)?;
     let names = params
         .get("QUERY_LAYERS")
         .filter(|v| !v.trim().is_empty())
         .ok_or_else(|| Exception::new(Code::MissingParameterValue, "QUERY_LAYERS is missing"))?;
+    let shown = shows(map.layer);
     let mut layers: Vec<Layer> = Vec::new();
-    for name in names.split(',') {
-        for layer in queried(name.trim())? {
+    for name in names.split(',').map(str::trim) {
+        let Some(queried) = MapLayer::parse(name) else {
+            let e = Exception::new(Code::LayerNotDefined, format!("layer {name:?} is not served"));
+            return Err(e.locator("QUERY_LAYERS"));
+        };
+        for layer in shows(queried) {
+            if !shown.contains(&layer) {
+                let map = map.layer.name();
+                let e = Exception::new(Code::LayerNotDefined, format!("{name} is not in the map (LAYERS={map})"));
+                return Err(e.locator("QUERY_LAYERS"));
+            }
             if !layers.contains(&layer) {
                 layers.push(layer);
             }
@@ -103,15 +113,12 @@ pub(super) fn parse(params: &Params, version: Version, limits: Limits) -> Result
     Ok(FeatureInfo { map, layers, pixel, format })
 }
 
-/// The data layers a queried layer answers with: itself, or for a picture
-/// the data it shows.
-fn queried(name: &str) -> Result<Vec<Layer>, Exception> {
-    match MapLayer::parse(name) {
-        Some(MapLayer::Data(layer)) => Ok(vec![layer]),
-        Some(_) => Ok(PICTURED.to_vec()),
-        None => {
-            Err(Exception::new(Code::LayerNotDefined, format!("layer {name:?} is not served")).locator("QUERY_LAYERS"))
-        }
+/// The data layers a map layer shows, which querying it answers with:
+/// itself, or for a picture the data it shows.
+fn shows(layer: MapLayer) -> Vec<Layer> {
+    match layer {
+        MapLayer::Data(layer) => vec![layer],
+        _ => PICTURED.to_vec(),
     }
 }
 
@@ -243,7 +250,7 @@ mod tests {
     use super::*;
 
     const LIMITS: Limits = Limits { max_side: 4096 };
-    const BASE: &str = "SERVICE=WMS&VERSION=1.3.0&REQUEST=GetFeatureInfo&LAYERS=cem&STYLES=&CRS=CRS:84&BBOX=-106,40,-105,41&WIDTH=10&HEIGHT=4&FORMAT=image/png";
+    const BASE: &str = "SERVICE=WMS&VERSION=1.3.0&REQUEST=GetFeatureInfo&LAYERS=relief&STYLES=&CRS=CRS:84&BBOX=-106,40,-105,41&WIDTH=10&HEIGHT=4&FORMAT=image/png";
 
     fn parsed(query: &str) -> Result<FeatureInfo, Exception> {
         let params = Params::new(query);
@@ -281,11 +288,18 @@ mod tests {
         assert_eq!(fraction.pixel, (9, 0), "the pixel a fraction falls in");
         assert_eq!(code("&QUERY_LAYERS=dem&I=0"), Code::MissingParameterValue);
         assert_eq!(code("&QUERY_LAYERS=dem&I=0&J=0&INFO_FORMAT=image/png"), Code::InvalidFormat);
+        // Only what the map shows: a data map shows itself alone.
+        let cem_map = |q: &str| parsed(&format!("{}{q}&I=0&J=0", BASE.replace("LAYERS=relief", "LAYERS=cem")));
+        assert_eq!(cem_map("&QUERY_LAYERS=dem").unwrap_err().code, Code::LayerNotDefined);
+        assert_eq!(cem_map("&QUERY_LAYERS=relief").unwrap_err().code, Code::LayerNotDefined);
+        assert_eq!(cem_map("&QUERY_LAYERS=cem").unwrap().layers, [Layer::Cem]);
+        assert_eq!(code("&QUERY_LAYERS=cover&I=0&J=0"), Code::LayerNotDefined, "relief does not show the cover");
     }
 
     #[test]
     fn answers_name_each_value_with_its_unit() {
-        let mut info = parsed(&format!("{BASE}&QUERY_LAYERS=dem,cover,surface,canopy&I=0&J=0")).unwrap();
+        let mut info = parsed(&format!("{BASE}&QUERY_LAYERS=dem&I=0&J=0")).unwrap();
+        info.layers = vec![Layer::Dem, Layer::Cover, Layer::Surface, Layer::Canopy];
         let values = [Some(1234.5), Some(0.25), Some(1.0), None];
         let (mime, text) = document(&info, (-105.95, 40.875), &values);
         assert_eq!(mime, "text/plain");

@@ -292,8 +292,31 @@ fn image_of(params: &Params) -> Option<(usize, usize, MapFormat)> {
     (w > 0 && h > 0 && w <= 8192 && h <= 8192).then_some((w, h, f))
 }
 
-/// The map part of a GetMap or a GetFeatureInfo.
+/// A GetMap: the map part, in a format its layer is offered in.
 pub(super) fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, Exception> {
+    let map = map_part(params, version, limits)?;
+    let (layer, format) = (map.layer, map.format);
+    if layer.is_picture() && format.picture().is_none() {
+        return Err(Exception::new(
+            Code::InvalidFormat,
+            format!("{} is a picture: ask for image/png or image/jpeg", layer.name()),
+        )
+        .locator("FORMAT"));
+    }
+    if !layer.is_picture() && format == MapFormat::Jpeg {
+        return Err(Exception::new(
+            Code::InvalidFormat,
+            format!("{} is data: JPEG is offered for the pictures (relief, colour)", layer.name()),
+        )
+        .locator("FORMAT"));
+    }
+    Ok(map)
+}
+
+/// The map part of a GetMap or a GetFeatureInfo: any format offered, since
+/// a GetFeatureInfo draws no map (GDAL's WMS driver names JPEG whatever the
+/// layer).
+pub(super) fn map_part(params: &Params, version: Version, limits: Limits) -> Result<GetMap, Exception> {
     let required = |key: &'static str| {
         params
             .get(key)
@@ -321,20 +344,6 @@ pub(super) fn get_map(params: &Params, version: Version, limits: Limits) -> Resu
     let format = MapFormat::parse(format_text).ok_or_else(|| {
         Exception::new(Code::InvalidFormat, format!("format {format_text:?} is not offered")).locator("FORMAT")
     })?;
-    if layer.is_picture() && format.picture().is_none() {
-        return Err(Exception::new(
-            Code::InvalidFormat,
-            format!("{} is a picture: ask for image/png or image/jpeg", layer.name()),
-        )
-        .locator("FORMAT"));
-    }
-    if !layer.is_picture() && format == MapFormat::Jpeg {
-        return Err(Exception::new(
-            Code::InvalidFormat,
-            format!("{} is data: JPEG is offered for the pictures (relief, colour)", layer.name()),
-        )
-        .locator("FORMAT"));
-    }
     let (width, height) = (size(required("WIDTH")?, "WIDTH", limits)?, size(required("HEIGHT")?, "HEIGHT", limits)?);
     let bbox = numbers(required("BBOX")?)?;
     let grid = grid(bbox, crs, version, width, height)?;
