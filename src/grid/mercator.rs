@@ -23,15 +23,19 @@ pub struct MercatorBox {
 }
 
 impl MercatorBox {
-    /// Validates the box: finite, west < east, south < north, within the
-    /// Mercator square (with 1 m of slack for rounding).
+    /// Validates the box: finite, west < east at most one world's width
+    /// apart (with 1 m of slack for rounding), west within three worlds'
+    /// width of the origin, south < north. Like a CRS:84 box, it may reach
+    /// past the antimeridian (longitudes wrap); past the square's north and
+    /// south edges the projection still maps it, up to the poles.
     pub fn checked(self) -> Result<MercatorBox, GridError> {
         let MercatorBox { west, south, east, north } = self;
-        let limit = HALF_WORLD_M + 1.0;
-        let ok = [west, south, east, north].iter().all(|v| v.is_finite() && v.abs() <= limit);
-        if !ok || west >= east || south >= north {
+        let finite = [west, south, east, north].iter().all(|v| v.is_finite());
+        let world = 2.0 * HALF_WORLD_M + 1.0;
+        if !finite || west >= east || east - west > world || west.abs() > 1.5 * world || south >= north {
             return Err(GridError::BadBBox(format!(
-                "EPSG:3857 box {west},{south},{east},{north}: need west < east, south < north, within ±{HALF_WORLD_M:.0} m"
+                "EPSG:3857 box {west},{south},{east},{north}: need west < east ≤ west + {:.0} m, south < north",
+                2.0 * HALF_WORLD_M
             )));
         }
         Ok(self)
@@ -87,5 +91,18 @@ mod tests {
         let back =
             MercatorBox { west: x - 1.0, south: y - 1.0, east: x + 1.0, north: y + 1.0 }.area_grid(1, 1).unwrap();
         assert!((back.lon.coord(0) + 105.7).abs() < 1e-9 && (back.lat.coord(0) - 40.35).abs() < 1e-9);
+    }
+
+    #[test]
+    fn boxes_may_reach_past_the_square_but_not_span_two_worlds() {
+        let h = HALF_WORLD_M;
+        let past = MercatorBox { west: 0.9 * h, south: 1.2 * h, east: 1.1 * h, north: 1.4 * h }.checked().unwrap();
+        let g = past.area_grid(2, 1).unwrap();
+        assert!((g.lon.coord(1) - 189.0).abs() < 1e-9, "past the antimeridian: {}", g.lon.coord(1));
+        assert!(g.lat.coord(0) > 85.06 && g.lat.coord(0) < 90.0, "past the square, short of the pole");
+        let bad =
+            |w: f64, s: f64, e: f64, n: f64| MercatorBox { west: w, south: s, east: e, north: n }.checked().is_err();
+        assert!(bad(-h, 0.0, 1.1 * h, 1.0), "wider than the world");
+        assert!(bad(0.0, 0.0, f64::NAN, 1.0) && bad(1.0, 0.0, 0.0, 1.0) && bad(0.0, 1.0, 1.0, 1.0));
     }
 }
