@@ -108,4 +108,13 @@ fn bad_configs_name_the_file_and_the_problem() {
     std::fs::write(&picture, format!("[dem]\npath = {:?}\n", common::data("rmnp/rmnp-rgb.tif"))).unwrap();
     let err = sylva::config::load(Some(&picture)).expect_err("a picture").to_string();
     assert!(err.contains("picture.toml: [dem] path: ") && err.contains("has 3 bands; a DEM has one"), "{err}");
+    // A UTM file read as degrees lies off the globe.
+    let metres = dir.join("metres.toml");
+    let utm = common::data("storm_lake/storml_elev.tif");
+    std::fs::write(&metres, format!("[dem]\npath = {utm:?}\ncrs = \"EPSG:4326\"\n")).unwrap();
+    let err = sylva::config::load(Some(&metres)).expect_err("metres as degrees").to_string();
+    assert!(
+        err.contains("metres.toml: [dem] path: ") && err.contains("EPSG:4326") && err.contains("off the globe"),
+        "{err}"
+    );
 }
