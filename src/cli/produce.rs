@@ -7,7 +7,7 @@ use sylva::cem::Layer;
 use sylva::encode::Format;
 use sylva::grid::{BBox, TileId};
 use sylva::outputs;
-use sylva::produce::{self, ProduceError, Product};
+use sylva::produce::{self, Product};
 use sylva::region::Region;
 
 /// What `tile` and `build` share: the region, the layer, its encoding and
@@ -32,7 +32,7 @@ impl ProductArgs {
     /// Loads the region, makes the product and writes it (refused before
     /// any work if the output would overwrite the configuration or a file
     /// it names).
-    fn make(&self, product: impl FnOnce(&Region, Layer, Format) -> Result<Product, ProduceError>) -> Result<()> {
+    fn make(&self, product: impl FnOnce(&Region, Layer, Format) -> Result<Product>) -> Result<()> {
         let inputs = sylva::config::input_files(self.config.as_deref())?;
         outputs::check(&inputs.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &[&self.output])?;
         let region = sylva::config::load(self.config.as_deref())?;
@@ -63,7 +63,12 @@ pub struct TileArgs {
 impl TileArgs {
     pub fn run(self) -> Result<()> {
         let id = TileId::new(self.level, self.row, self.col);
-        self.product.make(|region, layer, format| produce::tile(region, id, self.halo, layer, format))
+        self.product.make(|region, layer, format| {
+            region.tiles.check(id)?;
+            let what = format!("tile {}/{}/{}", id.level, id.row, id.col);
+            in_region(region, &region.tiles.sector(id).bbox(), &what)?;
+            Ok(produce::tile(region, id, self.halo, layer, format)?)
+        })
     }
 }
 
@@ -87,7 +92,9 @@ impl BuildArgs {
     pub fn run(self) -> Result<()> {
         let bbox = self.bbox.as_deref().map(BBox::parse).transpose()?;
         self.product.make(|region, layer, format| {
-            produce::area(region, bbox.unwrap_or(region.bounds), self.width, self.height, layer, format)
+            let bbox = bbox.unwrap_or(region.bounds);
+            in_region(region, &bbox, "--bbox")?;
+            Ok(produce::area(region, bbox, self.width, self.height, layer, format)?)
         })
     }
 }
@@ -165,6 +172,16 @@ impl InfoArgs {
     pub fn run(self) -> Result<()> {
         super::print(sylva::config::load(self.config.as_deref())?.describe())?;
         Ok(())
+    }
+}
+
+/// Refuses an area that does not meet the region: its file would hold no
+/// data (the server answers 404 there).
+fn in_region(region: &Region, area: &BBox, what: &str) -> Result<()> {
+    let r = region.bounds;
+    match area.meets(&r) {
+        true => Ok(()),
+        false => bail!("{what} does not meet the region; its bounds are {},{},{},{}", r.west, r.south, r.east, r.north),
     }
 }
 

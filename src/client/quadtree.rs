@@ -65,7 +65,7 @@ pub fn select(
     range: &dyn Fn(TileId) -> Option<(f64, f64)>,
     rule: &LodRule,
 ) -> Selection {
-    let area = Sector { min_lat: bounds.south, max_lat: bounds.north, min_lon: bounds.west, max_lon: bounds.east };
+    let area = bounds.sector();
     let (rows, cols) = grid.tiles_on_level(0);
     let mut out = Selection::default();
     let mut stack: Vec<TileId> = (0..rows).flat_map(|r| (0..cols).map(move |c| TileId::new(0, r, c))).collect();

@@ -110,7 +110,7 @@ impl TileTree {
 /// The nodes without bounds: level-0 tiles over the region, then children
 /// that overlap it, breadth first.
 fn structure(grid: &TileGrid, bounds: &BBox, max_level: u32) -> Result<Vec<TreeNode>, TooLarge> {
-    let area = Sector { min_lat: bounds.south, max_lat: bounds.north, min_lon: bounds.west, max_lon: bounds.east };
+    let area = bounds.sector();
     let (rows, cols) = grid.tiles_on_level(0);
     let node = |id, parent| TreeNode {
         id,

@@ -8,7 +8,7 @@ use crate::cem::landcover::{ForestTypes, Landcover, Rule};
 use crate::cem::surface::SurfaceType;
 use crate::demo;
 use crate::encode::Quantization;
-use crate::grid::{BBox, TileGrid};
+use crate::grid::TileGrid;
 use crate::raster::morphology::MorphOp;
 use crate::region::{Forest, Region};
 use crate::source::{
@@ -113,8 +113,7 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
                 let file = resolve(path);
                 return Err(invalid(format!("[dem] path: {} has {bands} bands; a DEM has one", file.display())));
             }
-            let s = dem.bounds();
-            let bounds = BBox { west: s.min_lon, south: s.min_lat, east: s.max_lon, north: s.max_lat };
+            let bounds = dem.bounds().bbox();
             let name = path.file_stem().map_or_else(|| "dem".into(), |s| s.to_string_lossy().into_owned());
             (dem, bounds, name)
         }

@@ -112,6 +112,11 @@ pub struct Sector {
 }
 
 impl Sector {
+    /// The same sector as a box.
+    pub fn bbox(&self) -> BBox {
+        BBox { west: self.min_lon, south: self.min_lat, east: self.max_lon, north: self.max_lat }
+    }
+
     /// True if the two sectors overlap in more than an edge.
     pub fn intersects(&self, other: &Sector) -> bool {
         self.min_lat < other.max_lat
@@ -295,6 +300,18 @@ impl BBox {
         BBox { west, south, east, north }.checked()
     }
 
+    /// The same box as a sector.
+    pub fn sector(&self) -> Sector {
+        Sector { min_lat: self.south, max_lat: self.north, min_lon: self.west, max_lon: self.east }
+    }
+
+    /// True if the two boxes share a point, this one as it is or turned a
+    /// world east or west (a box may reach past the antimeridian).
+    pub fn meets(&self, other: &BBox) -> bool {
+        let lat = self.south <= other.north && other.south <= self.north;
+        lat && [0.0, -360.0, 360.0].iter().any(|t| self.west + t <= other.east && other.west <= self.east + t)
+    }
+
     /// Validates the box: finite, west < east ≤ west + 360, −90 ≤ south < north ≤ 90.
     pub fn checked(self) -> Result<BBox, GridError> {
         let BBox { west, south, east, north } = self;
@@ -447,7 +464,7 @@ mod tests {
             let grid = TileGrid::new(36.0, 65).unwrap();
             let t = tile_on(grid, level, fr, fc);
             let s = grid.sector(t);
-            let bbox = BBox { west: s.min_lon, south: s.min_lat, east: s.max_lon, north: s.max_lat };
+            let bbox = s.bbox();
             let built = bbox.point_grid(65, 65, &grid).unwrap();
             prop_assert_eq!(built, grid.tile_samples(t, 0));
         }

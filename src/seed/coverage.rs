@@ -47,6 +47,8 @@ pub enum Coverage {
     Box(BBox),
     /// Polygons (outer ring first, then holes).
     Polygons(Vec<Vec<Ring>>),
+    /// An area's part within a box (polygons within the region's bounds).
+    Within(Box<Coverage>, BBox),
 }
 
 impl Coverage {
@@ -88,6 +90,11 @@ impl Coverage {
     pub fn relation(&self, sector: &Sector) -> Relation {
         match self {
             Coverage::Box(b) => box_relation(b, sector),
+            Coverage::Within(area, b) => match (box_relation(b, sector), area.relation(sector)) {
+                (Relation::Outside, _) | (_, Relation::Outside) => Relation::Outside,
+                (Relation::Inside, Relation::Inside) => Relation::Inside,
+                _ => Relation::Boundary,
+            },
             Coverage::Polygons(polygons) => {
                 let hits = |ring: &Ring| ring.bounds.intersects_or_touches(sector) && ring_meets(ring, sector);
                 if polygons.iter().flatten().any(hits) {
@@ -105,7 +112,7 @@ impl Coverage {
 }
 
 fn box_relation(b: &BBox, s: &Sector) -> Relation {
-    let b = Sector { min_lat: b.south, max_lat: b.north, min_lon: b.west, max_lon: b.east };
+    let b = b.sector();
     if !b.intersects(s) {
         Relation::Outside
     } else if b.min_lon <= s.min_lon && s.max_lon <= b.max_lon && b.min_lat <= s.min_lat && s.max_lat <= b.max_lat {

@@ -3,7 +3,7 @@
 //! problem, the configuration and region loaded, the coverage read.
 
 use super::SeedError;
-use super::coverage::Coverage;
+use super::coverage::{Coverage, Relation};
 use super::display::Mode;
 use super::walk::{Shard, Walk};
 use crate::cem::Layer;
@@ -178,7 +178,15 @@ fn coverage(o: &SeedOptions, region: &Region) -> Result<(Coverage, String), Seed
         }
         (None, Some(path)) => {
             let text = std::fs::read(path).unwrap_or_default();
-            Ok((Coverage::from_geojson(path)?, format!("coverage {:016x}", crate::cache::digest(&text))))
+            let polygons = Coverage::from_geojson(path)?;
+            let r = region.bounds;
+            if polygons.relation(&r.sector()) == Relation::Outside {
+                let bounds = format!("{},{},{},{}", r.west, r.south, r.east, r.north);
+                let why = format!("does not meet the region; the region's bounds are {bounds}");
+                return Err(SeedError::Usage(format!("--coverage {}: {why}", path.display())));
+            }
+            let area = Coverage::Within(Box::new(polygons), r);
+            Ok((area, format!("coverage {:016x}", crate::cache::digest(&text))))
         }
         (None, None) => Ok((Coverage::Box(region.bounds), format!("region bounds {:?}", region.bounds))),
     }

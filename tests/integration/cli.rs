@@ -141,6 +141,35 @@ fn a_reader_gone_away_is_no_error() {
 }
 
 #[test]
+fn areas_that_do_not_meet_the_region_are_refused_and_polygons_are_clipped_to_it() {
+    let dir = TempDir::new("cli-outside");
+    let (out, cache) = (dir.join("x.tif"), dir.join("cache"));
+    let (o, c) = (out.to_str().unwrap(), cache.to_str().unwrap());
+    let far = dir.join("far.geojson");
+    std::fs::write(&far, r#"{"type":"Polygon","coordinates":[[[100,6],[101,6],[101,7],[100,7],[100,6]]]}"#).unwrap();
+    let runs: [&[&str]; 3] = [
+        &["tile", "--layer", "cem", "--level", "11", "--row", "100", "--col", "100", "-o", o],
+        &["build", "--layer", "cem", "--width", "8", "--height", "8", "--bbox", "100,6,101,7", "-o", o],
+        &["seed", "--levels", "8-9", "--cache-dir", c, "--coverage", far.to_str().unwrap(), "--dry-run"],
+    ];
+    for args in runs {
+        let run = sylva(args);
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success() && err.contains("does not meet the region"), "{args:?}: {err}");
+    }
+    assert!(!out.exists());
+    // A polygon reaching past the region seeds what a box over it would.
+    let near = dir.join("near.geojson");
+    std::fs::write(&near, r#"{"type":"Polygon","coordinates":[[[9,46],[10.1,46],[10.1,47],[9,47],[9,46]]]}"#).unwrap();
+    let dry = |area: &[&str]| {
+        let run = sylva(&[&["seed", "--levels", "8-12", "--cache-dir", c, "--dry-run"], area].concat());
+        String::from_utf8_lossy(&run.stdout).lines().skip(1).collect::<Vec<_>>().join("\n")
+    };
+    let (polygon, bbox) = (dry(&["--coverage", near.to_str().unwrap()]), dry(&["--bbox", "9,46,10.1,47"]));
+    assert!(polygon.contains("all") && polygon == bbox, "{polygon}\n{bbox}");
+}
+
+#[test]
 fn benchmarks_refuse_a_named_region_or_an_output_they_cannot_use_before_running() {
     for bench in ["pipeline", "lod", "sse"] {
         let out = sylva(&["bench", bench, "--rmnp", "/no/such/rmnp.toml"]);

@@ -111,7 +111,7 @@ pub fn candidates(scope: &Scope) -> Candidates {
     let mut out = Candidates::default();
     let Some(first) = scope.cameras.first() else { return out };
     let b = &scope.bounds;
-    let area = Sector { min_lat: b.south, max_lat: b.north, min_lon: b.west, max_lon: b.east };
+    let area = b.sector();
     let (rows, cols) = scope.grid.tiles_on_level(0);
     let mut stack: Vec<(TileId, Option<u32>)> =
         (0..rows).flat_map(|r| (0..cols).map(move |c| (TileId::new(0, r, c), None))).collect();

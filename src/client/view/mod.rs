@@ -98,7 +98,7 @@ pub fn path_start(path: &CameraPath) -> Pose {
 /// highest surface the coarse tiles over the region know).
 pub fn default_start(source: &dyn TileSource) -> Result<Pose, crate::client::source::FetchError> {
     let b = source.bounds();
-    let sector = crate::grid::Sector { min_lat: b.south, max_lat: b.north, min_lon: b.west, max_lon: b.east };
+    let sector = b.sector();
     let top_m = super::envelope::HeightEnvelope::fetch(source)?.range(&sector).map_or(0.0, |(_, hi)| hi);
     let eye = Geodetic::new(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), top_m + START_ABOVE_M);
     Ok(Pose { eye, heading_deg: 0.0, pitch_deg: START_PITCH_DEG })
