@@ -109,7 +109,7 @@ impl Region {
             lines.push(format!("forest     {}: {}", f.name, f.proxy.describe()));
         }
         lines.push(format!(
-            "png16      h = {} + {} · v (v = 0 is nodata)",
+            "png16      heights h = {} + {} · v (v = 0 is nodata; cover and surface use every code)",
             self.heights_16.offset, self.heights_16.scale
         ));
         lines.join("\n")
