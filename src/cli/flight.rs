@@ -145,9 +145,9 @@ pub struct RenderArgs {
     /// (the most benefit whose predicted frame time fits --budget-ms).
     #[arg(long, default_value = "sse")]
     lod: String,
-    /// Frame budget of `--lod budget`, ms.
-    #[arg(long, default_value_t = 33.0)]
-    budget_ms: f64,
+    /// Frame budget of `--lod budget`, ms [default: 33].
+    #[arg(long)]
+    budget_ms: Option<f64>,
     /// Frames between selections of `--lod budget` (the selection
     /// thread's period).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
@@ -166,7 +166,7 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 2.0, value_parser = positive_px)]
     max_error_px: f64,
     /// Deepest tile level.
-    #[arg(long, default_value_t = 13)]
+    #[arg(long, default_value_t = 13, value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva::grid::TileGrid::MAX_LEVEL)))]
     max_level: u32,
     /// GPU tile cache budget, MiB.
     #[arg(long, default_value_t = 512, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
@@ -191,17 +191,18 @@ pub struct RenderArgs {
 impl RenderArgs {
     /// The flight options these arguments set (the rest default).
     fn options(&self) -> Result<FlyOptions> {
+        let budget_only =
+            self.budget_ms.is_some() || self.geomorph || self.select_every != 1 || self.cost_model.is_some();
+        let budget_ms = self.budget_ms.unwrap_or(33.0);
         let mode = match self.lod.as_str() {
-            "sse" if self.geomorph || self.select_every != 1 || self.cost_model.is_some() => {
-                bail!("--geomorph, --select-every and --cost-model apply to --lod budget only, not to --lod sse")
-            }
+            "sse" if budget_only => bail!(
+                "--budget-ms, --geomorph, --select-every and --cost-model apply to --lod budget only, not to --lod sse"
+            ),
             "sse" => fly::LodMode::Sse,
-            "budget" if self.budget_ms.is_finite() && self.budget_ms > 0.0 => fly::LodMode::Budget {
-                budget_ms: self.budget_ms,
-                select_every: self.select_every,
-                prior: self.prior()?,
-            },
-            "budget" => bail!("--budget-ms {} is not a positive number of milliseconds", self.budget_ms),
+            "budget" if budget_ms.is_finite() && budget_ms > 0.0 => {
+                fly::LodMode::Budget { budget_ms, select_every: self.select_every, prior: self.prior()? }
+            }
+            "budget" => bail!("--budget-ms {budget_ms} is not a positive number of milliseconds"),
             other => bail!("unknown --lod {other:?}; expected sse or budget"),
         };
         let traversal = fly::parse_traversal(&self.traversal)

@@ -215,10 +215,9 @@ pub enum FlyError {
     Output(#[from] crate::outputs::OutputError),
     /// The output directory holds an earlier run's outputs.
     #[error(
-        "{0}: holds an earlier flight's or view's outputs ({1} files: stats.csv, frames, cost model); \
-         give another --out, or --overwrite to replace them"
+        "{0}: holds an earlier flight's or view's outputs ({1}); give another --out, or --overwrite to replace them"
     )]
-    Earlier(PathBuf, usize),
+    Earlier(PathBuf, String),
     /// Writing frames or statistics failed.
     #[error("{path}: {source}")]
     Io {
@@ -286,11 +285,14 @@ pub fn fly(
 /// new run has something to write: a directory never mixes two runs, and a
 /// run that fails before its first frame leaves the earlier one whole.
 pub fn prepare_out_dir(dir: &std::path::Path, overwrite: bool) -> Result<Vec<PathBuf>, FlyError> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(io(dir, std::io::Error::new(std::io::ErrorKind::NotADirectory, "not a directory")));
+    }
     std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
     crate::outputs::check(&[], &[&dir.join(STATS_FILE), &dir.join(MODEL_FILE)])?;
     let earlier = earlier_outputs(dir).map_err(|e| io(dir, e))?;
     if !earlier.is_empty() && !overwrite {
-        return Err(FlyError::Earlier(dir.to_path_buf(), earlier.len()));
+        return Err(FlyError::Earlier(dir.to_path_buf(), describe_outputs(&earlier)));
     }
     Ok(earlier)
 }
@@ -314,6 +316,20 @@ fn earlier_outputs(dir: &std::path::Path) -> std::io::Result<Vec<PathBuf>> {
         }
     }
     Ok(found)
+}
+
+/// What an earlier run left, as "stats.csv, cost_model.json, 12 frames".
+fn describe_outputs(files: &[PathBuf]) -> String {
+    let names: Vec<&str> = files.iter().filter_map(|f| f.file_name()?.to_str()).collect();
+    let frames = names.iter().filter(|n| n.starts_with("frame_")).count();
+    let mut parts: Vec<String> = names.iter().filter(|n| !n.starts_with("frame_")).map(|n| n.to_string()).collect();
+    parts.sort();
+    match frames {
+        0 => {}
+        1 => parts.push("1 frame".into()),
+        n => parts.push(format!("{n} frames")),
+    }
+    parts.join(", ")
 }
 
 /// The mean of `values`; 0 (not the −0 an empty sum is) for none.

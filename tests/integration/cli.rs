@@ -94,6 +94,13 @@ fn bad_arguments_are_explained() {
     let out = sylva(&["info", "--config", "/no/such/sylva.toml"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/no/such/sylva.toml") && err.matches("No such file").count() == 1, "{err}");
+    let valley = common::repo().join("config/paths/demo_valley.toml");
+    let fly = |more: &[&str]| {
+        let out = sylva(&[&["fly", "--path", valley.to_str().unwrap(), "--out", "/tmp/sylva-never"], more].concat());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    assert!(fly(&["--budget-ms", "20"]).contains("apply to --lod budget only"));
+    assert!(fly(&["--max-level", "99"]).contains("99 is not in 0..=30"));
     // An output may not overwrite an input.
     let dir = TempDir::new("cli-clobber");
     let config = dir.join("c.toml");

@@ -161,7 +161,7 @@ fn a_flight_never_mixes_with_an_earlier_one_in_its_directory() {
         .unwrap();
     let err = String::from_utf8_lossy(&again.stderr);
     assert!(
-        !again.status.success() && err.contains("holds an earlier flight's") && err.contains("--overwrite"),
+        !again.status.success() && err.contains("earlier flight's or view's outputs (stats.csv, 2 frames)"),
         "{err}"
     );
     assert_eq!(stats(&out).len(), 2);
