@@ -156,8 +156,9 @@ pub fn run(views: &[View], size: (u32, u32), only: &[String], renderer: &mut Ren
         let camera = camera_at(&path, view.t_s, size);
         let options = FlyOptions::default();
         let mut store = TileStore::new(options.halo, usize::MAX, 2).map_err(|e| e.to_string())?;
-        let (tiles, _, _) = fly::visible_tiles(&source, &mut store, None, &camera, &options, renderer.cache_slots())
-            .map_err(|e| e.to_string())?;
+        let tiles = fly::visible_tiles(&source, &mut store, None, &camera, &options, renderer.cache_slots())
+            .map_err(|e| e.to_string())?
+            .tiles;
         let tiles: Vec<TileData> = tiles.iter().map(|t| t.as_ref().clone()).collect();
         let lighting = Lighting { sun_ecef: path.sun_ecef(), shadow_steps: REFERENCE_SHADOW_STEPS, fade: Fade::NONE };
         let truth = reference::render(&camera, &tiles, &lighting);

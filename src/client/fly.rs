@@ -144,8 +144,8 @@ pub struct FrameRecord {
     /// Tiles drawn without rays.
     pub tiles_plain: u32,
     /// The error threshold used (raised when the GPU cache was too small;
-    /// NaN under a budget).
-    pub error_px: f64,
+    /// sse mode).
+    pub error_px: Option<f64>,
     /// Pixels where a view ray was cast.
     pub ray_pixels: usize,
     /// Mean and largest view-ray fetches over ray-cast pixels.
@@ -504,12 +504,14 @@ struct Chosen {
     steps: Vec<u32>,
     /// Morph weight of each tile's own heights (1: not morphing).
     weights: Vec<f32>,
-    error_px: f64,
+    error_px: Option<f64>,
     selected: Option<Selected>,
     /// Tiles drawn morphing from a coarser one.
     morphing: usize,
     /// Nodes the screen-space error selection touched.
     touched: Option<usize>,
+    /// Time of the selection, ms.
+    selection_ms: f64,
 }
 
 /// The frame's tiles: by screen-space error, or under the budget.
@@ -520,9 +522,11 @@ fn choose(
     (options, slots): (&FlyOptions, u32),
 ) -> Result<Chosen, FlyError> {
     let Some(lod) = lod else {
-        let (tiles, error_px, touched) = visible_tiles(source, store, sse, camera, options, slots)?;
+        let Visible { tiles, error_px, touched, selection_ms } =
+            visible_tiles(source, store, sse, camera, options, slots)?;
         let (steps, weights) = (vec![options.shadow_steps; tiles.len()], vec![1.0; tiles.len()]);
-        return Ok(Chosen { tiles, steps, weights, error_px, selected: None, morphing: 0, touched: Some(touched) });
+        let (error_px, touched, selected) = (Some(error_px), Some(touched), None);
+        return Ok(Chosen { tiles, steps, weights, error_px, selected, morphing: 0, touched, selection_ms });
     };
     let selected = lod.frame(t_s, camera);
     let ids: Vec<_> = selected.cut.tiles.iter().map(|c| c.id).collect();
@@ -551,7 +555,17 @@ fn choose(
     let most = selected.cut.tiles.iter().map(|c| c.shadow_steps).max().unwrap_or(0);
     let steps = tiles.iter().map(|t| steps_of.get(&t.id()).copied().unwrap_or(most)).collect();
     let morphing = weights.iter().filter(|&&w| w < 1.0).count();
-    Ok(Chosen { tiles, steps, weights, error_px: f64::NAN, selected: Some(selected), morphing, touched: None })
+    let selection_ms = selected.ms;
+    Ok(Chosen {
+        tiles,
+        steps,
+        weights,
+        error_px: None,
+        selected: Some(selected),
+        morphing,
+        touched: None,
+        selection_ms,
+    })
 }
 
 fn frame(
@@ -628,7 +642,7 @@ fn frame(
         gpu_bytes: out.stats.resident_bytes,
         cpu_bytes: store.bytes(),
         rss_mib: crate::bench::rss_mib().0,
-        selection_ms: chosen.selected.as_ref().map_or(cpu_ms, |s| s.ms),
+        selection_ms: chosen.selection_ms,
         budget_ms,
         predicted_ms,
         model_ms,
@@ -669,9 +683,20 @@ fn tree_splats(
     out
 }
 
+/// The frame's tiles by screen-space error, and what choosing them took.
+pub struct Visible {
+    /// The tiles, loaded.
+    pub tiles: Vec<Arc<TileData>>,
+    /// The error threshold that made them fit the GPU cache, pixels.
+    pub error_px: f64,
+    /// Quadtree nodes the selections touched.
+    pub touched: usize,
+    /// Time of the selections alone (not the loading), ms.
+    pub selection_ms: f64,
+}
+
 /// The frame's tiles, coarsening the error threshold until they fit the
-/// GPU cache, with the threshold and the nodes the selections touched: by
-/// a flight's `sse` selector, or by the stateless walk.
+/// GPU cache: by a flight's `sse` selector, or by the stateless walk.
 pub fn visible_tiles(
     source: &dyn TileSource,
     store: &mut TileStore,
@@ -679,9 +704,9 @@ pub fn visible_tiles(
     camera: &Camera,
     options: &FlyOptions,
     slots: u32,
-) -> Result<(Vec<Arc<TileData>>, f64, usize), FlyError> {
+) -> Result<Visible, FlyError> {
     let mut rule = options.lod;
-    let mut touched = 0;
+    let (mut touched, start) = (0, Instant::now());
     loop {
         let selection = match sse.as_deref_mut() {
             Some(sse) => sse.select(camera, rule.max_error_px),
@@ -689,8 +714,10 @@ pub fn visible_tiles(
         };
         touched += selection.visited;
         if selection.tiles.len() <= slots as usize || rule.max_error_px > 1e6 {
+            let selection_ms = start.elapsed().as_secs_f64() * 1e3;
             let ids: Vec<_> = selection.tiles.iter().map(|s| s.id).collect();
-            return Ok((store.get_cut(source, &ids)?, rule.max_error_px, touched));
+            let tiles = store.get_cut(source, &ids)?;
+            return Ok(Visible { tiles, error_px: rule.max_error_px, touched, selection_ms });
         }
         rule.max_error_px *= 1.25;
     }
@@ -743,7 +770,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             .unwrap_or_default();
         let _ = writeln!(
             out,
-            "{},{:.3},{gpu},{rays},{fill},{:.3},{},{},{},{},{:.2},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{},{:.2},{},{},{},{},{},{},{:.4},{},{},{},{},{}",
+            "{},{:.3},{gpu},{rays},{fill},{:.3},{},{},{},{},{},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{},{:.2},{},{},{},{},{},{},{:.4},{},{},{},{},{}",
             r.frame,
             r.cpu_ms,
             r.render_ms,
@@ -751,7 +778,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             levels.join(" "),
             r.tiles_ray,
             r.tiles_plain,
-            r.error_px,
+            r.error_px.map_or(String::new(), |e| format!("{e:.2}")),
             r.ray_pixels,
             r.view_fetches.0,
             r.view_fetches.1,
