@@ -15,6 +15,7 @@ pub mod exception;
 pub mod metrics;
 pub mod pool;
 pub mod products;
+mod query;
 mod respond;
 mod routes;
 pub mod service;

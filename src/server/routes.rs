@@ -5,6 +5,7 @@
 //! bodies, request metrics and logs.
 
 use super::products::{Encoding, Product};
+use super::query::Params;
 use super::respond::{self, TileMeta};
 use super::service::Tile;
 use super::wms::picture::{self, PictureFormat};
@@ -19,7 +20,6 @@ use axum::http::{HeaderMap, HeaderName, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Instant;
 use tower_http::compression::CompressionLayer;
@@ -138,27 +138,30 @@ async fn tile_path(
         return Err(ServeError::NotFound);
     }
     let col: u64 = col.parse().map_err(|_| ServeError::NotFound)?;
-    let params = query_map(query.as_deref());
+    let params = query_params(query.as_deref())?;
     tile(&state, &layer, TileId::new(level, row, col), ext, halo(&params, &state)?, &headers).await
 }
 
 /// `/tiles?T={layer}&L={level}&X={col}&Y={row}` (World Wind's request form);
-/// BIL16 unless `F` names another extension.
+/// `F` (or `FORMAT`) names the extension: BIL16 and PNG pictures unless it
+/// names another.
 async fn tile_query(
     State(state): State<Arc<AppState>>,
     RawQuery(query): RawQuery,
     headers: HeaderMap,
 ) -> Result<Response, ServeError> {
-    let params = query_map(query.as_deref());
+    let params = query_params(query.as_deref())?;
     let need = |k: &str| params.get(k).ok_or_else(|| ServeError::BadRequest(format!("parameter {k} is missing")));
     let number =
         |k: &str| need(k)?.parse::<u64>().map_err(|_| ServeError::BadRequest(format!("{k} must be a whole number")));
     let id = TileId::new(u32::try_from(number("L")?).map_err(|_| ServeError::NotFound)?, number("Y")?, number("X")?);
-    let ext = params.get("F").map_or("bil", String::as_str);
-    tile(&state, need("T")?, id, ext, halo(&params, &state)?, &headers).await
+    let layer = need("T")?;
+    let picture = parse_layer(layer)?.is_picture();
+    let ext = params.get("F").or(params.get("FORMAT")).unwrap_or(if picture { "png" } else { "bil" });
+    tile(&state, layer, id, ext, halo(&params, &state)?, &headers).await
 }
 
-fn halo(params: &HashMap<String, String>, state: &AppState) -> Result<usize, ServeError> {
+fn halo(params: &Params, state: &AppState) -> Result<usize, ServeError> {
     let Some(text) = params.get("HALO") else { return Ok(0) };
     let max = state.settings.max_halo;
     text.parse::<usize>()
@@ -272,9 +275,11 @@ pub fn meta(state: &AppState, layer: MapLayer, encoding: Encoding) -> TileMeta {
     TileMeta { mime: encoding.mime(), quantization, max_age_s: state.settings.tile_max_age_s }
 }
 
-/// Query parameters with upper-cased keys.
-fn query_map(query: Option<&str>) -> HashMap<String, String> {
-    form_urlencoded::parse(query.unwrap_or("").as_bytes())
-        .map(|(k, v)| (k.to_ascii_uppercase(), v.into_owned()))
-        .collect()
+/// A tile route's query; a key given twice differently is refused.
+fn query_params(query: Option<&str>) -> Result<Params, ServeError> {
+    let params = Params::new(query.unwrap_or(""));
+    match params.conflict() {
+        Some((_, message)) => Err(ServeError::BadRequest(message)),
+        None => Ok(params),
+    }
 }

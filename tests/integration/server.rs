@@ -252,8 +252,12 @@ fn world_wind_tiles_have_n_squared_samples_and_neighbours_share_edges() {
     // The same bytes as the library computes in process, in the query form too.
     let expected = sylva::produce::tile(&common::demo(), t, 0, Layer::Cem, Format::Bil32).unwrap().encoded.bytes;
     assert!(tile(t.row, t.col, "bil32").body == expected);
-    let query = server.get(&format!("/tiles?T=cem&L={}&X={}&Y={}&F=bil32", t.level, t.col, t.row));
-    assert!(query.body == expected);
+    let query = |more: &str| server.get(&format!("/tiles?T=cem&L={}&X={}&Y={}{more}", t.level, t.col, t.row));
+    assert!(query("&F=bil32").body == expected && query("&FORMAT=bil32").body == expected);
+    let twice = query("&F=bil32&F=bil");
+    assert!(twice.status == 400 && twice.text().contains("given twice"), "{}", twice.text());
+    let relief = server.get(&format!("/tiles?T=relief&L={}&X={}&Y={}", t.level, t.col, t.row));
+    assert!(relief.status == 200 && relief.header("content-type") == Some("image/png"), "{}", relief.text());
     let halo = server.get(&format!("/tiles/cem/{}/{}/{}_{}.bil32?halo=8", t.level, t.row, t.row, t.col));
     assert_eq!(halo.body.len(), (n + 16) * (n + 16) * 4);
     // Far from the region there is nothing: 404 with no body.

@@ -6,11 +6,11 @@
 //! box as lat,lon; CRS:84, EPSG:3857 and all of WMS 1.1.1 as x,y (lon,lat).
 
 use super::super::exception::{Code, Exception};
+pub(super) use super::super::query::Params;
 use super::picture::PictureFormat;
 use crate::cem::Layer;
 use crate::grid::mercator::MercatorBox;
 use crate::grid::{BBox, SampleGrid};
-use std::collections::HashMap;
 
 /// WMS version.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -208,9 +208,8 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)>
     let version = negotiate(&params);
     let mut reply = Reply { version, style: ExceptionStyle::Xml, image: None, background: None };
     let fail = |e: Exception, reply: Reply| Err((e, reply));
-    if let Some((key, [first, second])) = &params.conflict {
-        let message = format!("{key} is given twice, as {first:?} and {second:?}: give it once");
-        return fail(Exception::new(Code::InvalidParameterValue, message).locator(key.as_str()), reply);
+    if let Some((key, message)) = params.conflict() {
+        return fail(Exception::new(Code::InvalidParameterValue, message).locator(key), reply);
     }
     if let Some(service) = params.get("SERVICE").filter(|s| !s.eq_ignore_ascii_case("WMS")) {
         return fail(
@@ -424,38 +423,6 @@ fn grid(b: [f64; 4], crs: RequestCrs, version: Version, width: usize, height: us
             .checked()
             .and_then(|g| g.area_grid(width, height))
             .map_err(bad),
-    }
-}
-
-/// Query parameters with upper-cased keys. A key given twice alike (a
-/// client adding `SERVICE=WMS` to a URL that has it) is one; given twice
-/// differently it is ambiguous, kept in `conflict` to be refused.
-pub(super) struct Params {
-    values: HashMap<String, String>,
-    /// The first key given two different values, and the two.
-    conflict: Option<(String, [String; 2])>,
-}
-
-impl Params {
-    pub(super) fn new(query: &str) -> Params {
-        let mut values: HashMap<String, String> = HashMap::new();
-        let mut conflict = None;
-        for (k, v) in form_urlencoded::parse(query.as_bytes()) {
-            if k.is_empty() {
-                continue;
-            }
-            let key = k.to_ascii_uppercase();
-            match values.get(&key) {
-                None => _ = values.insert(key, v.into_owned()),
-                Some(first) if first.trim().eq_ignore_ascii_case(v.trim()) => {}
-                Some(first) => _ = conflict.get_or_insert_with(|| (key, [first.clone(), v.into_owned()])),
-            }
-        }
-        Params { values, conflict }
-    }
-
-    pub(super) fn get(&self, key: &str) -> Option<&str> {
-        self.values.get(key).map(String::as_str)
     }
 }
 
