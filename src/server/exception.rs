@@ -81,7 +81,7 @@ impl Exception {
         let message = escape(&self.message);
         match version {
             Version::V111 => (
-                "application/vnd.ogc.se_xml",
+                "application/vnd.ogc.se_xml; charset=utf-8",
                 format!(
                     "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n\
                      <ServiceExceptionReport version=\"1.1.1\">\n  \
@@ -90,7 +90,7 @@ impl Exception {
                 ),
             ),
             Version::V130 => (
-                "text/xml",
+                "text/xml; charset=utf-8",
                 format!(
                     "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n\
                      <ServiceExceptionReport version=\"1.3.0\" xmlns=\"http://www.opengis.net/ogc\" \

@@ -28,8 +28,8 @@ pub struct Service<'a> {
 /// The capabilities document of `version`, and its MIME type.
 pub fn document(s: &Service, version: Version) -> (&'static str, String) {
     match version {
-        Version::V130 => ("text/xml", v130(s)),
-        Version::V111 => ("application/vnd.ogc.wms_xml", v111(s)),
+        Version::V130 => ("text/xml; charset=utf-8", v130(s)),
+        Version::V111 => ("application/vnd.ogc.wms_xml; charset=utf-8", v111(s)),
     }
 }
 
