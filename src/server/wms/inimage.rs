@@ -48,6 +48,29 @@ pub fn blank(
     encoded.map(|e| e.bytes).unwrap_or_default()
 }
 
+/// `text` in lines of at most `width` characters, broken at spaces where a
+/// word fits on a line, within a longer word where it does not.
+fn wrapped(text: &str, width: usize) -> Vec<Vec<char>> {
+    let mut lines: Vec<Vec<char>> = Vec::new();
+    let mut line: Vec<char> = Vec::new();
+    for word in text.split(' ').filter(|w| !w.is_empty()) {
+        let word: Vec<char> = word.chars().collect();
+        if !line.is_empty() && line.len() + 1 + word.len() > width {
+            lines.push(std::mem::take(&mut line));
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line.extend(word);
+        while line.len() > width {
+            let rest = line.split_off(width);
+            lines.push(std::mem::replace(&mut line, rest));
+        }
+    }
+    lines.push(line);
+    lines
+}
+
 /// A picture of `w × h` of `background` (transparent if none and PNG) with
 /// `message` written on it.
 pub fn message(message: &str, w: usize, h: usize, background: Option<[u8; 3]>, format: PictureFormat) -> Vec<u8> {
@@ -56,8 +79,7 @@ pub fn message(message: &str, w: usize, h: usize, background: Option<[u8; 3]>, f
         let scaled = font.as_scaled(PxScale::from(TEXT_PX));
         let advance = scaled.h_advance(font.glyph_id('M')).max(1.0);
         let per_line = ((w as f32 - 8.0) / advance).max(1.0) as usize;
-        let chars: Vec<char> = message.chars().collect();
-        for (line, text) in chars.chunks(per_line).enumerate() {
+        for (line, text) in wrapped(message, per_line).iter().enumerate() {
             let baseline = 4.0 + scaled.ascent() + line as f32 * scaled.height();
             for (i, &c) in text.iter().enumerate() {
                 let glyph = font
@@ -108,6 +130,14 @@ mod tests {
         let img = image::load_from_memory(&on_white).unwrap().into_rgba8();
         assert!(img.pixels().all(|p| p.0[3] == 255), "opaque on its background");
         assert!(img.pixels().filter(|p| p.0[1] < 128).count() > 50, "with red ink");
+    }
+
+    #[test]
+    fn messages_break_between_words() {
+        let text = |lines: Vec<Vec<char>>| lines.into_iter().map(String::from_iter).collect::<Vec<_>>();
+        assert_eq!(text(wrapped("InvalidFormat: dem is served", 16)), ["InvalidFormat:", "dem is served"]);
+        assert_eq!(text(wrapped("abcdefghij kl", 4)), ["abcd", "efgh", "ij", "kl"]);
+        assert_eq!(text(wrapped("", 4)), [""]);
     }
 
     #[test]
