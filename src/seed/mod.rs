@@ -19,6 +19,7 @@ pub mod coverage;
 pub mod decimate;
 pub mod display;
 pub mod failed;
+mod interrupt;
 pub mod options;
 pub mod progress;
 pub mod tile;
@@ -67,6 +68,9 @@ pub enum SeedError {
         /// The error.
         source: std::io::Error,
     },
+    /// Ctrl-C or SIGTERM: the tiles in hand were finished, the progress saved.
+    #[error("interrupted: the tiles in hand were finished and the progress saved in {0}; resume with --resume")]
+    Interrupted(String),
     /// More tiles failed than allowed; the progress was saved.
     #[error(
         "stopped: {failed} tile files failed (more than --max-failures {max}); they are listed in {list}; resume with --resume"
@@ -117,6 +121,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     let pool = threads.build().map_err(|e| SeedError::Usage(format!("--concurrency {}: {e}", options.concurrency)))?;
     let refresh_before = job.refresh_before.unwrap_or_else(|| progress.started() - CLOCK_SLACK);
     let started = Instant::now();
+    let interrupt = interrupt::Interrupt::register();
     let run = Run {
         job: &job,
         store: &*store,
@@ -125,6 +130,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
         failed: &failed,
         options,
         stop: AtomicBool::new(false),
+        interrupt: &interrupt,
         refresh_before,
         warned: Mutex::new(false),
         wait_notice: std::sync::Once::new(),
@@ -134,6 +140,9 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
         None => pool.install(|| run.walk(job.walk.as_ref()))?,
     }
     let n = counters.failed.load(Ordering::Relaxed);
+    if interrupt.came() {
+        return Err(SeedError::Interrupted(progress_path.display().to_string()));
+    }
     if run.stop.load(Ordering::Relaxed) {
         return Err(SeedError::TooManyFailures {
             failed: n,
@@ -170,7 +179,9 @@ struct Run<'a> {
     progress: &'a Progress,
     failed: &'a failed::Failed,
     options: &'a SeedOptions,
+    /// Too many failures.
     stop: AtomicBool,
+    interrupt: &'a interrupt::Interrupt,
     refresh_before: std::time::SystemTime,
     warned: Mutex<bool>,
     /// Whether a long wait for a lock was explained.
@@ -210,7 +221,7 @@ impl Run<'_> {
             });
         }
         display.finish(self.counters.failed.load(Ordering::Relaxed));
-        let complete = !self.stop.load(Ordering::Relaxed);
+        let complete = !self.stopped();
         let path = &self.job.files.0;
         self.progress
             .save(self.counters.total(), complete)
@@ -220,12 +231,12 @@ impl Run<'_> {
     /// Seeds a subtree (children first); the halves its parent can use.
     fn visit(&self, walk: &Walk, seeder: &Seeder, display: &display::Display, node: Node) -> Option<Halves> {
         let tile = node.0;
-        if self.stop.load(Ordering::Relaxed) || self.progress.is_done(tile) {
+        if self.stopped() || self.progress.is_done(tile) {
             return None;
         }
         let children = walk.children(node);
         let kids: Vec<Option<Halves>> = children.par_iter().map(|&c| self.visit(walk, seeder, display, c)).collect();
-        if self.stop.load(Ordering::Relaxed) {
+        if self.stopped() {
             return None;
         }
         let mut halves = None;
@@ -255,7 +266,7 @@ impl Run<'_> {
         for layer in layers {
             let seeder = self.seeder(vec![layer]);
             entries.par_iter().filter(|e| e.0 == layer).for_each(|&(_, tile)| {
-                if !self.stop.load(Ordering::Relaxed) {
+                if !self.stopped() {
                     let (_, failures) = seeder.tile(tile, None, false);
                     self.record(failures);
                     display.advance(self.job.formats.len() as u64, self.counters.failed.load(Ordering::Relaxed));
@@ -274,6 +285,11 @@ impl Run<'_> {
         if self.counters.failed.load(Ordering::Relaxed) > self.options.max_failures {
             self.stop.store(true, Ordering::Relaxed);
         }
+    }
+
+    /// True once too many tiles failed or a signal came: no more tiles.
+    fn stopped(&self) -> bool {
+        self.stop.load(Ordering::Relaxed) || self.interrupt.came()
     }
 
     fn warn_once(&self, message: &str) {

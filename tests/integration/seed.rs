@@ -1,7 +1,8 @@
 //! `sylva seed` as an operator runs it: seeded tiles are the server's cache
 //! hits, byte for byte; dry runs count what a seed writes and polygons prune
 //! it; a seeder killed with SIGKILL resumes to the same cache (and its dry
-//! run counts what is left), and a wait for a lock it left is explained; a
+//! run counts what is left), and a wait for a lock it left is explained; one
+//! stopped with Ctrl-C leaves no lock; a
 //! source that fails for some tiles gets them retried, listed and re-run
 //! from the list; uniform tiles are stored once; bad input is named.
 
@@ -272,6 +273,33 @@ fn a_seeder_killed_mid_run_resumes_to_the_same_cache() {
     assert!(resumed == expected, "the resumed cache differs from an uninterrupted run");
     let made = count(&summary, "tile files made");
     assert!(made < expected.len() as u64, "the resumed run remade everything: {summary}");
+}
+
+#[test]
+fn ctrl_c_stops_a_seed_after_its_tiles_in_hand_with_no_lock_left() {
+    let dir = TempDir::new("seed-ctrl-c");
+    let config = rmnp_config(&dir, "rmnp.toml", "[tile_cache]\nlock_ttl_s = 30");
+    let cache = dir.join("cache");
+    let owned = job_args(&config, &cache, "dem", "6-12", &["--concurrency", "1"]);
+    let job = strs(&owned);
+    let child = seed_command(&dir.0, &job).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+    let progress = dir.join("seed-progress.json");
+    let start = Instant::now();
+    while !progress.exists() {
+        assert!(start.elapsed() < Duration::from_secs(120), "no progress file");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let interrupt = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(interrupt.success());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("interrupted") && err.contains("--resume"), "{err}");
+    let locks: Vec<_> = walk(&cache).into_iter().filter(|p| p.extension().is_some_and(|e| e == "lock")).collect();
+    assert!(locks.is_empty(), "locks left: {locks:?}");
+    // Resumed at once: no lock of the interrupted run to wait for.
+    let resumed = seed(&dir.0, &[&job[..], &["--resume"]].concat());
+    ok(&resumed);
+    assert!(!String::from_utf8_lossy(&resumed.stderr).contains("waiting for"));
 }
 
 #[test]
