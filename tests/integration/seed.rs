@@ -28,6 +28,19 @@ pub fn seed_command(dir: &Path, args: &[&str]) -> Command {
     cmd
 }
 
+/// [`seed`] started, once it has saved its progress (`seed-progress.json`
+/// in `dir`) and is still running; its stderr to `stderr`.
+fn seed_until_progress(dir: &Path, args: &[&str], stderr: Stdio) -> std::process::Child {
+    let mut child = seed_command(dir, args).stdout(Stdio::null()).stderr(stderr).spawn().expect("run sylva seed");
+    let (progress, start) = (dir.join("seed-progress.json"), Instant::now());
+    while !progress.exists() {
+        assert!(child.try_wait().unwrap().is_none(), "the seed finished before it saved its progress");
+        assert!(start.elapsed() < Duration::from_secs(120), "no progress file");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    child
+}
+
 /// Asserts success and returns stdout.
 pub fn ok(out: &Output) -> String {
     assert!(
@@ -241,19 +254,9 @@ fn a_seeder_killed_mid_run_resumes_to_the_same_cache() {
     let expected = tiles(&reference);
 
     let cache = dir.join("cache");
-    let mut child = seed_command(&dir.0, &[&job[..], &["--cache-dir", cache.to_str().unwrap()]].concat())
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    // Kill it once it has saved its progress, well before the end.
-    let progress = dir.join("seed-progress.json");
-    let start = Instant::now();
-    while !progress.exists() {
-        assert!(child.try_wait().unwrap().is_none(), "the seed finished before it could be killed");
-        assert!(start.elapsed() < Duration::from_secs(120), "no progress file");
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    // Killed once it has saved its progress, well before the end.
+    let job_here = [&job[..], &["--cache-dir", cache.to_str().unwrap()]].concat();
+    let mut child = seed_until_progress(&dir.0, &job_here, Stdio::null());
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
     let partial = walk(&cache).len();
@@ -282,13 +285,7 @@ fn ctrl_c_stops_a_seed_after_its_tiles_in_hand_with_no_lock_left() {
     let cache = dir.join("cache");
     let owned = job_args(&config, &cache, "dem", "6-12", &["--concurrency", "1"]);
     let job = strs(&owned);
-    let child = seed_command(&dir.0, &job).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
-    let progress = dir.join("seed-progress.json");
-    let start = Instant::now();
-    while !progress.exists() {
-        assert!(start.elapsed() < Duration::from_secs(120), "no progress file");
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    let child = seed_until_progress(&dir.0, &job, Stdio::piped());
     let interrupt = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
     assert!(interrupt.success());
     let out = child.wait_with_output().unwrap();
