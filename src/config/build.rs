@@ -166,8 +166,10 @@ fn version_key(config: &Config, base: &Path) -> String {
     let bytes_only = Config { server: Default::default(), tile_cache: Default::default(), ..config.clone() };
     let mut text = toml::to_string(&bytes_only).unwrap_or_default();
     text.push_str(PRODUCT_REVISION);
-    for path in config.files(base) {
-        let meta = std::fs::metadata(&path).ok();
+    // Each file as the configuration names it, so that processes reading it
+    // from other working directories share one key.
+    for path in config.named_files() {
+        let meta = std::fs::metadata(base.join(path)).ok();
         let stamp =
             meta.map(|m| (m.len(), m.modified().ok().and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())));
         text.push_str(&format!("{path:?}{stamp:?}"));
@@ -413,4 +415,24 @@ fn class_table(lc: &LandcoverConfig) -> Result<HashMap<i64, (SurfaceType, f32)>,
         }
     }
     Ok(table)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_version_key_is_the_same_from_any_working_directory_and_follows_the_files() {
+        // A scratch directory named relative to the package (the working
+        // directory of unit tests) and absolutely.
+        let relative = Path::new("target/version-key-test");
+        let dir = std::env::current_dir().unwrap().join(relative);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("dem.tif"), b"one").unwrap();
+        let config: Config = toml::from_str("[dem]\npath = \"dem.tif\"\n").unwrap();
+        let key = version_key(&config, &dir);
+        assert_eq!(key, version_key(&config, relative));
+        std::fs::write(dir.join("dem.tif"), b"three").unwrap();
+        assert_ne!(key, version_key(&config, &dir), "a changed file changes the key");
+    }
 }

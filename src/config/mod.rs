@@ -47,12 +47,17 @@ pub struct Config {
 }
 
 impl Config {
+    /// The files this configuration names, as it names them.
+    pub fn named_files(&self) -> impl Iterator<Item = &PathBuf> {
+        let named = [self.dem.path.as_ref(), self.landcover.as_ref().and_then(|l| l.path.as_ref())];
+        let forests = self.forest.iter().flat_map(|f| f.proxy.iter().chain(&f.lidar));
+        named.into_iter().flatten().chain(forests)
+    }
+
     /// The files this configuration reads, relative ones taken from `base`
     /// (the configuration file's directory): what no output may overwrite.
     pub fn files(&self, base: &std::path::Path) -> Vec<PathBuf> {
-        let named = [self.dem.path.as_ref(), self.landcover.as_ref().and_then(|l| l.path.as_ref())];
-        let forests = self.forest.iter().flat_map(|f| f.proxy.iter().chain(&f.lidar));
-        named.into_iter().flatten().chain(forests).map(|p| base.join(p)).collect()
+        self.named_files().map(|p| base.join(p)).collect()
     }
 }
 
