@@ -105,6 +105,13 @@ pub(super) fn parse(params: &Params, version: Version, limits: Limits) -> Result
             .locator("INFO_FORMAT")
         })?,
     };
+    // One value per layer at a pixel: any count asked for holds it, but the
+    // count must be one.
+    if let Some(count) = params.get("FEATURE_COUNT").filter(|c| !c.trim().parse::<u32>().is_ok_and(|n| n > 0)) {
+        let e =
+            Exception::new(Code::InvalidParameterValue, format!("FEATURE_COUNT={count}: need a whole number above 0"));
+        return Err(e.locator("FEATURE_COUNT"));
+    }
     let (x_key, y_key) = if version == Version::V130 { ("I", "J") } else { ("X", "Y") };
     let pixel = (
         coordinate(params, [x_key, "I", "X"], map.grid.width())?,
@@ -288,6 +295,9 @@ mod tests {
         assert_eq!(fraction.pixel, (9, 0), "the pixel a fraction falls in");
         assert_eq!(code("&QUERY_LAYERS=dem&I=0"), Code::MissingParameterValue);
         assert_eq!(code("&QUERY_LAYERS=dem&I=0&J=0&INFO_FORMAT=image/png"), Code::InvalidFormat);
+        assert_eq!(code("&QUERY_LAYERS=dem&I=0&J=0&FEATURE_COUNT=abc"), Code::InvalidParameterValue);
+        assert_eq!(code("&QUERY_LAYERS=dem&I=0&J=0&FEATURE_COUNT=0"), Code::InvalidParameterValue);
+        assert!(parsed(&format!("{BASE}&QUERY_LAYERS=dem&I=0&J=0&FEATURE_COUNT=10")).is_ok());
         // Only what the map shows: a data map shows itself alone.
         let cem_map = |q: &str| parsed(&format!("{}{q}&I=0&J=0", BASE.replace("LAYERS=relief", "LAYERS=cem")));
         assert_eq!(cem_map("&QUERY_LAYERS=dem").unwrap_err().code, Code::LayerNotDefined);
