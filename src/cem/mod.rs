@@ -11,9 +11,10 @@
 //!   shared samples.
 //! - **Conservative.** Safety zones and the mipmap never lie below the surface
 //!   they cover ([`accel`]).
-//! - **Lazy.** Only the stages the requested layers need run; a grid without
-//!   ground data stops after the elevation stage, and a grid without forest
-//!   skips cover resampling and the canopy ([`Stats`] counts the runs).
+//! - **Lazy.** Only the stages the requested layers need run (the elevation
+//!   for every layer: no layer has data where the ground has none); a grid
+//!   without ground data stops after the elevation stage, and a grid without
+//!   forest skips cover resampling and the canopy ([`Stats`] counts the runs).
 //! - No I/O beyond the sources, no async, no GPU.
 
 pub mod accel;

@@ -94,7 +94,8 @@ pub struct SeedArgs {
 }
 
 impl SeedArgs {
-    /// Runs a seed; a run with failed tiles exits with status 3.
+    /// Runs a seed; a run with failed tiles exits with status 3, one stopped
+    /// by a signal with 128 + its number.
     pub fn run(self) -> Result<()> {
         use sylva::seed::display::Mode;
         let display = match self.progress.as_str() {
@@ -124,7 +125,14 @@ impl SeedArgs {
             from_children: !self.no_from_children,
             display,
         };
-        let report = sylva::seed::run(&options, &sylva::seed::Counters::default())?;
+        let report = match sylva::seed::run(&options, &sylva::seed::Counters::default()) {
+            // Stopped by a signal: the status a shell gives a death by it.
+            Err(e @ sylva::seed::SeedError::Interrupted { signal, .. }) => {
+                eprintln!("sylva: {e}");
+                std::process::exit(128 + signal)
+            }
+            report => report?,
+        };
         super::print(report.text)?;
         if report.failed > 0 {
             std::process::exit(3);

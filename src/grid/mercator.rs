@@ -24,17 +24,21 @@ pub struct MercatorBox {
 
 impl MercatorBox {
     /// Validates the box: finite, west < east at most one world's width
-    /// apart (with 1 m of slack for rounding), west within three worlds'
-    /// width of the origin, south < north. Like a CRS:84 box, it may reach
-    /// past the antimeridian (longitudes wrap); past the square's north and
-    /// south edges the projection still maps it, up to the poles.
+    /// apart (with 1 m of slack for rounding), south < north, each edge
+    /// within one and a half worlds' width of the origin (±540°, as a
+    /// CRS:84 box). Like a CRS:84 box it may reach past the antimeridian
+    /// (longitudes wrap); past the square's north and south edges the
+    /// projection still maps it, to within a thousandth of a degree of the
+    /// poles.
     pub fn checked(self) -> Result<MercatorBox, GridError> {
         let MercatorBox { west, south, east, north } = self;
-        let finite = [west, south, east, north].iter().all(|v| v.is_finite());
         let world = 2.0 * HALF_WORLD_M + 1.0;
-        if !finite || west >= east || east - west > world || west.abs() > 1.5 * world || south >= north {
+        let limit = 1.5 * world;
+        let within = [west, south, east, north].iter().all(|v| v.is_finite() && v.abs() <= limit);
+        if !within || west >= east || east - west > world || south >= north {
             return Err(GridError::BadBBox(format!(
-                "EPSG:3857 box {west},{south},{east},{north}: need west < east ≤ west + {:.0} m, south < north",
+                "EPSG:3857 box {west},{south},{east},{north}: need west < east ≤ west + {:.0} m, south < north, \
+                 each within ±{limit:.0} m",
                 2.0 * HALF_WORLD_M
             )));
         }
@@ -104,5 +108,7 @@ mod tests {
             |w: f64, s: f64, e: f64, n: f64| MercatorBox { west: w, south: s, east: e, north: n }.checked().is_err();
         assert!(bad(-h, 0.0, 1.1 * h, 1.0), "wider than the world");
         assert!(bad(0.0, 0.0, f64::NAN, 1.0) && bad(1.0, 0.0, 0.0, 1.0) && bad(0.0, 1.0, 1.0, 1.0));
+        assert!(bad(3.1 * h, 0.0, 3.2 * h, 1.0) && bad(0.0, 0.0, 1.0, 3.1 * h), "beyond ±540°");
+        assert!(!bad(2.9 * h, 2.9 * h, 3.0 * h, 3.0 * h));
     }
 }

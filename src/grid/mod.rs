@@ -305,11 +305,13 @@ impl BBox {
         Sector { min_lat: self.south, max_lat: self.north, min_lon: self.west, max_lon: self.east }
     }
 
-    /// True if the two boxes share a point, this one as it is or turned a
-    /// world east or west (a box may reach past the antimeridian).
+    /// True if the two boxes share a point, their longitudes taken modulo
+    /// 360° (a box may reach past the antimeridian, up to ±540°).
     pub fn meets(&self, other: &BBox) -> bool {
         let lat = self.south <= other.north && other.south <= self.north;
-        lat && [0.0, -360.0, 360.0].iter().any(|t| self.west + t <= other.east && other.west <= self.east + t)
+        // This box turned by whole worlds to start at most 360° west of the other.
+        let turn = 360.0 * ((other.west - self.west) / 360.0).floor();
+        lat && [0.0, 360.0].iter().any(|t| self.west + turn + t <= other.east && other.west <= self.east + turn + t)
     }
 
     /// Validates the box: finite, west < east ≤ west + 360, −90 ≤ south < north ≤ 90.
@@ -400,6 +402,16 @@ fn free_axis(a: f64, b: f64, len: usize, sign: f64) -> Axis {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn boxes_meet_modulo_a_world() {
+        let b = |w: f64, e: f64| BBox { west: w, south: 0.0, east: e, north: 1.0 };
+        assert!(b(530.0, 540.0).meets(&b(-180.0, -179.0)), "540° is -180°");
+        assert!(b(-10.0, 10.0).meets(&b(350.0, 355.0)) && b(350.0, 355.0).meets(&b(-10.0, 10.0)));
+        assert!(b(370.0, 371.0).meets(&b(10.5, 12.0)));
+        assert!(!b(0.0, 1.0).meets(&b(2.0, 3.0)) && !b(362.0, 363.0).meets(&b(0.0, 1.0)));
+        assert!(!b(0.0, 1.0).meets(&BBox { west: 0.0, south: 2.0, east: 1.0, north: 3.0 }));
+    }
 
     fn grids() -> impl Strategy<Value = TileGrid> {
         (prop::sample::select(vec![36.0, 20.0, 10.0, 180.0]), prop::sample::select(vec![2u32, 3, 65, 150, 513]))

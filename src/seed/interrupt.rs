@@ -1,45 +1,59 @@
 //! Ctrl-C or SIGTERM during a seed: the first signal stops it after the
-//! tiles in hand, so their locks are released and the progress is saved
-//! for `--resume`; a second signal exits at once.
+//! tiles in hand, so their locks are released and the progress is saved;
+//! a second one exits at once. Outside a seed the signals keep their
+//! default action (the process ends), also in a process that runs several
+//! seeds (`sylva bench seed`).
 
-use signal_hook::SigId;
 use signal_hook::consts::{SIGINT, SIGTERM};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use signal_hook::flag;
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-/// Exit status of a second signal (128 + SIGINT, as a shell reports it).
-const AT_ONCE: i32 = 130;
+/// True while no seed runs: a signal then takes its default action.
+static IDLE: AtomicBool = AtomicBool::new(true);
+/// True once a signal came during the running seed.
+static CAME: AtomicBool = AtomicBool::new(false);
+/// Which signal that was.
+static WHICH: AtomicUsize = AtomicUsize::new(0);
 
-/// The signals a seed heeds, registered while it lives.
-pub struct Interrupt {
-    flag: Arc<AtomicBool>,
-    ids: Vec<SigId>,
+/// The actions, installed once per process, run in this order on a signal.
+fn install() {
+    static INSTALLED: OnceLock<()> = OnceLock::new();
+    INSTALLED.get_or_init(|| {
+        for signal in [SIGINT, SIGTERM] {
+            let installed = flag::register_conditional_default(signal, &IDLE)
+                // A second signal in a seed: 128 + its number, as a shell
+                // reports a death by it.
+                .and_then(|_| flag::register_conditional_shutdown(signal, 128 + signal, &CAME))
+                .and_then(|_| flag::register_usize(signal, &WHICH, signal as usize))
+                .and_then(|_| flag::register(signal, &CAME));
+            if let Err(e) = installed {
+                tracing::warn!("Ctrl-C will end a seed at once (signal {signal} not watched: {e})");
+            }
+        }
+    });
 }
 
+/// A seed's watch for the signals, from `watch` until dropped.
+pub struct Interrupt(());
+
 impl Interrupt {
-    /// Registers for SIGINT and SIGTERM; a signal the system refuses to
-    /// register leaves its default action (the process ends, as before).
-    pub fn register() -> Interrupt {
-        let flag = Arc::new(AtomicBool::new(false));
-        let mut ids = Vec::new();
-        for signal in [SIGINT, SIGTERM] {
-            // The exit comes first: it fires only once the flag is set.
-            ids.extend(signal_hook::flag::register_conditional_shutdown(signal, AT_ONCE, flag.clone()).ok());
-            ids.extend(signal_hook::flag::register(signal, flag.clone()).ok());
-        }
-        Interrupt { flag, ids }
+    /// Starts watching (one seed at a time per process).
+    pub fn watch() -> Interrupt {
+        install();
+        CAME.store(false, Ordering::SeqCst);
+        IDLE.store(false, Ordering::SeqCst);
+        Interrupt(())
     }
 
-    /// True once a signal came.
-    pub fn came(&self) -> bool {
-        self.flag.load(Ordering::Relaxed)
+    /// The signal that came, if one did.
+    pub fn came(&self) -> Option<i32> {
+        CAME.load(Ordering::Relaxed).then(|| WHICH.load(Ordering::Relaxed) as i32)
     }
 }
 
 impl Drop for Interrupt {
     fn drop(&mut self) {
-        for &id in &self.ids {
-            signal_hook::low_level::unregister(id);
-        }
+        IDLE.store(true, Ordering::SeqCst);
     }
 }

@@ -68,9 +68,14 @@ pub enum SeedError {
         /// The error.
         source: std::io::Error,
     },
-    /// Ctrl-C or SIGTERM: the tiles in hand were finished, the progress saved.
-    #[error("interrupted: the tiles in hand were finished and the progress saved in {0}; resume with --resume")]
-    Interrupted(String),
+    /// Ctrl-C or SIGTERM: the tiles in hand were finished.
+    #[error("interrupted by signal {signal}: the tiles in hand were finished; {next}")]
+    Interrupted {
+        /// The signal.
+        signal: i32,
+        /// How to go on.
+        next: String,
+    },
     /// More tiles failed than allowed; the progress was saved.
     #[error(
         "stopped: {failed} tile files failed (more than --max-failures {max}); they are listed in {list}; resume with --resume"
@@ -121,7 +126,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     let pool = threads.build().map_err(|e| SeedError::Usage(format!("--concurrency {}: {e}", options.concurrency)))?;
     let refresh_before = job.refresh_before.unwrap_or_else(|| progress.started() - CLOCK_SLACK);
     let started = Instant::now();
-    let interrupt = interrupt::Interrupt::register();
+    let interrupt = interrupt::Interrupt::watch();
     let run = Run {
         job: &job,
         store: &*store,
@@ -140,8 +145,14 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
         None => pool.install(|| run.walk(job.walk.as_ref()))?,
     }
     let n = counters.failed.load(Ordering::Relaxed);
-    if interrupt.came() {
-        return Err(SeedError::Interrupted(progress_path.display().to_string()));
+    if let Some(signal) = interrupt.came() {
+        let next = match &options.tiles_from {
+            Some(list) => {
+                format!("run --tiles-from {} again, with --skip-existing to keep what was made", list.display())
+            }
+            None => format!("the progress is saved in {}; resume with --resume", progress_path.display()),
+        };
+        return Err(SeedError::Interrupted { signal, next });
     }
     if run.stop.load(Ordering::Relaxed) {
         return Err(SeedError::TooManyFailures {
@@ -289,7 +300,7 @@ impl Run<'_> {
 
     /// True once too many tiles failed or a signal came: no more tiles.
     fn stopped(&self) -> bool {
-        self.stop.load(Ordering::Relaxed) || self.interrupt.came()
+        self.stop.load(Ordering::Relaxed) || self.interrupt.came().is_some()
     }
 
     fn warn_once(&self, message: &str) {

@@ -78,10 +78,15 @@ impl Exception {
             c => format!(" code=\"{}\"", c.as_str()),
         };
         let locator = self.locator.as_deref().map(|l| format!(" locator=\"{}\"", escape(l))).unwrap_or_default();
-        let message = escape(&self.message);
+        // In ASCII, characters beyond it as references: clients match the
+        // MIME type exactly (no charset) and some then decode as Latin-1.
+        let message = escape(&self.message)
+            .chars()
+            .map(|c| if c.is_ascii() { c.to_string() } else { format!("&#x{:X};", u32::from(c)) })
+            .collect::<String>();
         match version {
             Version::V111 => (
-                "application/vnd.ogc.se_xml; charset=utf-8",
+                "application/vnd.ogc.se_xml",
                 format!(
                     "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n\
                      <ServiceExceptionReport version=\"1.1.1\">\n  \
@@ -90,7 +95,7 @@ impl Exception {
                 ),
             ),
             Version::V130 => (
-                "text/xml; charset=utf-8",
+                "text/xml",
                 format!(
                     "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n\
                      <ServiceExceptionReport version=\"1.3.0\" xmlns=\"http://www.opengis.net/ogc\" \
@@ -143,5 +148,10 @@ mod tests {
             assert!(mime.contains("xml"));
         }
         assert!(!Exception::new(Code::NoApplicableCode, "x").report(Version::V130).1.contains("code="));
+        // Read alike whatever charset a client assumes.
+        let (_, xml) = Exception::new(Code::InvalidParameterValue, "need 1 ≤ x").report(Version::V130);
+        assert!(xml.is_ascii() && xml.contains("1 &#x2264; x"), "{xml}");
+        let doc = roxmltree::Document::parse(&xml).unwrap();
+        assert_eq!(doc.descendants().find(|n| n.has_tag_name("ServiceException")).unwrap().text(), Some("need 1 ≤ x"));
     }
 }

@@ -143,8 +143,8 @@ async fn tile_path(
 }
 
 /// `/tiles?T={layer}&L={level}&X={col}&Y={row}` (World Wind's request form);
-/// `F` (or `FORMAT`) names the extension: BIL16 and PNG pictures unless it
-/// names another.
+/// `F` or `FORMAT` names the extension (or its MIME type): BIL16 and PNG
+/// pictures unless one names another.
 async fn tile_query(
     State(state): State<Arc<AppState>>,
     RawQuery(query): RawQuery,
@@ -157,8 +157,27 @@ async fn tile_query(
     let id = TileId::new(u32::try_from(number("L")?).map_err(|_| ServeError::NotFound)?, number("Y")?, number("X")?);
     let layer = need("T")?;
     let picture = parse_layer(layer)?.is_picture();
-    let ext = params.get("F").or(params.get("FORMAT")).unwrap_or(if picture { "png" } else { "bil" });
+    let given: Vec<&str> = [params.get("F"), params.get("FORMAT")].into_iter().flatten().map(extension_of).collect();
+    let ext = match given[..] {
+        [] if picture => "png",
+        [] => "bil",
+        [f] => f,
+        [f, g] if f.eq_ignore_ascii_case(g) => f,
+        _ => return Err(ServeError::BadRequest("F and FORMAT name two formats: give one".into())),
+    };
     tile(&state, layer, id, ext, halo(&params, &state)?, &headers).await
+}
+
+/// A tile's extension, given as one or as a MIME type (`FORMAT=image/png`).
+fn extension_of(format: &str) -> &str {
+    match format.trim().to_ascii_lowercase().as_str() {
+        "image/png" => "png",
+        "image/jpeg" => "jpg",
+        "image/tiff" => "tif",
+        "application/bil" | "application/bil16" => "bil",
+        "application/bil32" => "bil32",
+        _ => format,
+    }
 }
 
 fn halo(params: &Params, state: &AppState) -> Result<usize, ServeError> {

@@ -182,15 +182,15 @@ fn every_data_layer_has_no_data_where_the_ground_has_none() {
     let server = Server::start(None, &dir.join("cache"));
     // The demo region fills the middle of this box; its edges are empty.
     let map = "SERVICE=WMS&VERSION=1.3.0&STYLES=&CRS=CRS:84&BBOX=9.95,46.25,10.3,46.5&WIDTH=70&HEIGHT=50";
-    let nodata = |layer: &str| -> Vec<bool> {
+    let nodata = |layer: &str, code: f32| -> Vec<bool> {
         let r = server.get(&format!("/wms?{map}&REQUEST=GetMap&LAYERS={layer}&FORMAT=application/bil32"));
-        bil32(&r.body).iter().map(|&v| v == -32768.0).collect()
+        bil32(&r.body).iter().map(|&v| v == code).collect()
     };
-    let ground = nodata("dem");
+    let ground = nodata("dem", -32768.0);
     let empty = ground.iter().filter(|&&n| n).count();
     assert!(empty > 0 && empty < ground.len(), "the box reaches past the region");
-    for layer in ["cover", "canopy", "cem"] {
-        assert!(nodata(layer) == ground, "{layer} has data where the ground has none, or none where it has");
+    for (layer, code) in [("cover", -32768.0), ("canopy", -32768.0), ("cem", -32768.0), ("surface", 255.0)] {
+        assert!(nodata(layer, code) == ground, "{layer} has data where the ground has none, or none where it has");
     }
     let corner = server.get(&format!(
         "/wms?{map}&REQUEST=GetFeatureInfo&LAYERS=dem&FORMAT=image/png&QUERY_LAYERS=dem&INFO_FORMAT=text/plain&I=0&J=0"
@@ -253,7 +253,8 @@ fn world_wind_tiles_have_n_squared_samples_and_neighbours_share_edges() {
     let expected = sylva::produce::tile(&common::demo(), t, 0, Layer::Cem, Format::Bil32).unwrap().encoded.bytes;
     assert!(tile(t.row, t.col, "bil32").body == expected);
     let query = |more: &str| server.get(&format!("/tiles?T=cem&L={}&X={}&Y={}{more}", t.level, t.col, t.row));
-    assert!(query("&F=bil32").body == expected && query("&FORMAT=bil32").body == expected);
+    assert!(query("&F=bil32").body == expected && query("&FORMAT=application/bil32").body == expected);
+    assert_eq!(query("&F=bil&FORMAT=image/png").status, 400, "two formats");
     let twice = query("&F=bil32&F=bil");
     assert!(twice.status == 400 && twice.text().contains("given twice"), "{}", twice.text());
     let relief = server.get(&format!("/tiles?T=relief&L={}&X={}&Y={}", t.level, t.col, t.row));

@@ -84,12 +84,13 @@ pub(super) fn parse(params: &Params, version: Version, limits: Limits) -> Result
             let e = Exception::new(Code::LayerNotDefined, format!("layer {name:?} is not served"));
             return Err(e.locator("QUERY_LAYERS"));
         };
+        let on_map = queried == map.layer || matches!(queried, MapLayer::Data(l) if shown.contains(&l));
+        if !on_map {
+            let map = map.layer.name();
+            let e = Exception::new(Code::LayerNotDefined, format!("{name} is not in the map (LAYERS={map})"));
+            return Err(e.locator("QUERY_LAYERS"));
+        }
         for layer in shows(queried) {
-            if !shown.contains(&layer) {
-                let map = map.layer.name();
-                let e = Exception::new(Code::LayerNotDefined, format!("{name} is not in the map (LAYERS={map})"));
-                return Err(e.locator("QUERY_LAYERS"));
-            }
             if !layers.contains(&layer) {
                 layers.push(layer);
             }
@@ -304,6 +305,7 @@ mod tests {
         assert_eq!(cem_map("&QUERY_LAYERS=relief").unwrap_err().code, Code::LayerNotDefined);
         assert_eq!(cem_map("&QUERY_LAYERS=cem").unwrap().layers, [Layer::Cem]);
         assert_eq!(code("&QUERY_LAYERS=cover&I=0&J=0"), Code::LayerNotDefined, "relief does not show the cover");
+        assert_eq!(code("&QUERY_LAYERS=colour&I=0&J=0"), Code::LayerNotDefined, "another picture");
     }
 
     #[test]
