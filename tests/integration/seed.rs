@@ -293,6 +293,10 @@ fn ctrl_c_stops_a_seed_after_its_tiles_in_hand_with_no_lock_left() {
     assert!(out.status.code() == Some(130) && err.contains("interrupted") && err.contains("--resume"), "{err}");
     let locks: Vec<_> = walk(&cache).into_iter().filter(|p| p.extension().is_some_and(|e| e == "lock")).collect();
     assert!(locks.is_empty(), "locks left: {locks:?}");
+    // The progress was saved: a resumed run has less left than the job.
+    let (_, left) = dry_total(&ok(&seed(&dir.0, &[&job[..], &["--resume", "--dry-run"]].concat())));
+    let (_, all) = dry_total(&ok(&seed(&dir.0, &[&job[..], &["--dry-run"]].concat())));
+    assert!(0 < left && left < all, "{left} of {all} files left");
     // Resumed at once: no lock of the interrupted run to wait for.
     let resumed = seed(&dir.0, &[&job[..], &["--resume"]].concat());
     ok(&resumed);
