@@ -155,7 +155,7 @@ fn errors(truth: &Raster<f32>, decoded: &[f32]) -> (f64, f64) {
 /// the labels in `labels_csv` (`lon,lat,forest` rows).
 pub fn morphology(config_path: &Path, labels_csv: &Path) -> Option<String> {
     let config = crate::config::parse_file(config_path).ok()?;
-    let base = config_path.parent().unwrap_or(Path::new("."));
+    let base = crate::config::base_of(config_path);
     let text = std::fs::read_to_string(labels_csv).ok()?;
     let labels: Vec<(f64, f64, bool)> = text
         .lines()

@@ -51,7 +51,7 @@ pub fn load(path: Option<&Path>) -> Result<Region, ConfigError> {
 /// Loads a configuration file (or the defaults without one) and its region.
 pub fn load_with_config(path: Option<&Path>) -> Result<(Config, Region), ConfigError> {
     let (config, base, label) = match path {
-        Some(path) => (parse_file(path)?, path.parent().unwrap_or(Path::new(".")), path),
+        Some(path) => (parse_file(path)?, base_of(path), path),
         None => (Config::default(), Path::new("."), Path::new("<built-in defaults>")),
     };
     let region = region_from(&config, base, label)?;
@@ -62,9 +62,14 @@ pub fn load_with_config(path: Option<&Path>) -> Result<(Config, Region), ConfigE
 /// inputs of a run that loads it.
 pub fn input_files(path: Option<&Path>) -> Result<Vec<PathBuf>, ConfigError> {
     let Some(path) = path else { return Ok(Vec::new()) };
-    let mut files = parse_file(path)?.files(path.parent().unwrap_or(Path::new(".")));
+    let mut files = parse_file(path)?.files(base_of(path));
     files.push(path.to_path_buf());
     Ok(files)
+}
+
+/// The directory a configuration file's relative paths start from.
+pub fn base_of(path: &Path) -> &Path {
+    path.parent().unwrap_or(Path::new("."))
 }
 
 /// Reads and parses a configuration file (stage one only).

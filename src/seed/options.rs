@@ -149,7 +149,7 @@ impl Job {
         );
         // The failed-tiles file may be the list re-run: it is then replaced at the end.
         let list = o.tiles_from.as_deref().filter(|l| !crate::outputs::same_file(l, &files.1));
-        let named = config.files(o.config.as_deref().and_then(Path::parent).unwrap_or(Path::new(".")));
+        let named = config.files(o.config.as_deref().map_or(Path::new("."), crate::config::base_of));
         let given = [o.config.as_deref(), o.coverage.as_deref(), list].into_iter().flatten();
         let inputs: Vec<&Path> = given.chain(named.iter().map(PathBuf::as_path)).collect();
         crate::outputs::check(&inputs, &[&files.0, &files.1]).map_err(|e| SeedError::Usage(e.to_string()))?;

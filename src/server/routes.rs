@@ -9,7 +9,7 @@ use super::query::Params;
 use super::respond::{self, TileMeta};
 use super::service::Tile;
 use super::wms::picture::{self, PictureFormat};
-use super::wms::request::MapLayer;
+use super::wms::request::{MapFormat, MapLayer};
 use super::{AppState, ServeError};
 use crate::cem::Layer;
 use crate::encode::{self, Format};
@@ -168,15 +168,16 @@ async fn tile_query(
     tile(&state, layer, id, ext, halo(&params, &state)?, &headers).await
 }
 
-/// A tile's extension, given as one or as a MIME type (`FORMAT=image/png`).
+/// A tile's extension, given as one or as a MIME type (`FORMAT=image/png`,
+/// read as WMS reads it).
 fn extension_of(format: &str) -> &str {
-    match format.trim().to_ascii_lowercase().as_str() {
-        "image/png" => "png",
-        "image/jpeg" => "jpg",
-        "image/tiff" => "tif",
-        "application/bil" | "application/bil16" => "bil",
-        "application/bil32" => "bil32",
-        _ => format,
+    match format.contains('/').then(|| MapFormat::parse(format)).flatten() {
+        Some(MapFormat::Png) => "png",
+        Some(MapFormat::Jpeg) => "jpg",
+        Some(MapFormat::Tiff) => "tif",
+        Some(MapFormat::Bil16) => "bil",
+        Some(MapFormat::Bil32) => "bil32",
+        None => format,
     }
 }
 

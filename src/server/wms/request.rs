@@ -116,7 +116,8 @@ impl MapFormat {
         (MapFormat::Bil32, "application/bil32"),
     ];
 
-    fn parse(text: &str) -> Option<MapFormat> {
+    /// A `FORMAT` value (a MIME type, or a short name such as `png`).
+    pub fn parse(text: &str) -> Option<MapFormat> {
         match text.trim().to_ascii_lowercase().as_str() {
             "image/png" | "png" => Some(MapFormat::Png),
             "image/tiff" | "image/geotiff" | "tiff" => Some(MapFormat::Tiff),
