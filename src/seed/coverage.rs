@@ -111,6 +111,8 @@ impl Coverage {
     }
 }
 
+/// A sector meeting the box only along an edge is outside: its samples on
+/// that edge are the inside neighbour's too, and the client never draws it.
 fn box_relation(b: &BBox, s: &Sector) -> Relation {
     let b = b.sector();
     if !b.intersects(s) {

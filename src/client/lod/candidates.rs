@@ -118,7 +118,9 @@ pub fn candidates(scope: &Scope) -> Candidates {
     let planes: Vec<[DVec3; 4]> = scope.cameras.iter().map(Camera::side_planes).collect();
     while let Some((id, parent)) = stack.pop() {
         let sector = scope.grid.sector(id);
-        if !overlaps(&sector, &area) {
+        // Strictly: a tile whose edge lies on the area's edge holds data
+        // only along that edge, which the tile inside holds too.
+        if !sector.intersects(&area) {
             continue;
         }
         let (lo, hi) = (scope.range)(id).unwrap_or(UNKNOWN_RANGE_M);
@@ -169,12 +171,6 @@ fn bound_by_children(tiles: &mut [Candidate]) {
 /// it shows if it is drawn plain (its parent's rays would fall there).
 fn covers(t: &Candidate) -> f64 {
     if t.ray_px > 0.0 { t.ray_px } else { t.seen_px }
-}
-
-/// Point-registered edges: a tile whose edge lies on the area's edge holds
-/// data there only on that edge; it is not needed.
-fn overlaps(s: &Sector, area: &Sector) -> bool {
-    s.min_lat < area.max_lat && area.min_lat < s.max_lat && s.min_lon < area.max_lon && area.min_lon < s.max_lon
 }
 
 /// Whether the tile's box, by its bounding sphere, meets the cone and is
