@@ -31,6 +31,7 @@ use crate::raster::resample::Resampling;
 use crate::raster::{Raster, Window};
 use crate::region::Region;
 use crate::source::SourceError;
+use crate::source::georaster::Footprint;
 
 /// The layers a tile can carry.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -198,21 +199,9 @@ pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<P
     let no_ground = ground.all_nodata();
 
     // (a) Identification of arboreous regions: the cover map on the grid.
-    // Forest types: the canopy reads the cover of each type (bands 2 ..).
-    let typed = need.canopy && !region.forests.is_empty();
-    let landcover = match (need.cover && !no_ground, &region.landcover) {
-        (true, Some(lc)) => {
-            // Band 1 (classes) only for the surface layer.
-            let bands = if typed {
-                3 + region.forests.len()
-            } else if need.surface {
-                2
-            } else {
-                1
-            };
-            stats.time(Stage::Landcover, || lc.read(&work, Resampling::Bilinear, bands))?
-        }
-        _ => None,
+    let landcover = match need.cover && !no_ground {
+        true => read_landcover(region, &work, &need, &mut stats)?,
+        false => None,
     };
     let has_forest = landcover.as_ref().is_some_and(|f| f.bands[0].data().iter().any(|&c| c > 0.0));
     let cover = match &landcover {
@@ -222,10 +211,7 @@ pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<P
 
     // (c) Height map texture: canopy proxy × cover, added to the ground.
     let canopy = match (&cover, &landcover) {
-        (Some(c), Some(f)) if need.canopy => Some(stats.time(Stage::Canopy, || match typed {
-            true => combine::canopy_by_type(&region.proxies(), &work, |k| f.resample(2 + k, Resampling::Bilinear)),
-            false => combine::canopy(region.proxy.as_ref(), &work, c),
-        })),
+        (Some(c), Some(f)) if need.canopy => Some(stats.time(Stage::Canopy, || canopy(region, &work, c, f))),
         _ => None,
     };
     let cem = match (&canopy, need.cem) {
@@ -233,17 +219,8 @@ pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<P
         (None, true) => Some(ground.clone()),
         _ => None,
     };
-
-    let surface = (need.surface && !no_ground).then(|| {
-        stats.time(Stage::Surface, || {
-            let classes = landcover.as_ref().map(|f| f.resample(1, Resampling::Nearest));
-            Raster::par_from_fn(work.width(), work.height(), |x, y| {
-                let class = classes.as_ref().map_or(f32::NAN, |c| c.get(x, y));
-                let c = cover.as_ref().map_or(0.0, |c| c.get(x, y));
-                surface::classify(class, c, !ground.get(x, y).is_nan())
-            })
-        })
-    });
+    let surface = (need.surface && !no_ground)
+        .then(|| stats.time(Stage::Surface, || surface(&ground, cover.as_ref(), landcover.as_ref())));
 
     // (d) Ray casting acceleration data.
     let (near, far) = match &cem {
@@ -253,31 +230,90 @@ pub fn compute(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<P
         _ => (None, None),
     };
 
-    let inner = Window::new(margin as i64, margin as i64, grid.width(), grid.height());
-    let crop = |r: &Raster<f32>| r.crop(inner, f32::NAN);
-    // Cover and canopy (0 where no forest was computed) have no data where
-    // the ground has none.
-    let on_ground = |r: Option<&Raster<f32>>| match r {
-        Some(r) => crop(&r.zip_map(&ground, |v, g| if g.is_nan() { f32::NAN } else { v })),
-        None => crop(&ground.map(|g| if g.is_nan() { f32::NAN } else { 0.0 })),
+    let stages = Stages { ground, cover, canopy, cem, surface, near, far };
+    Ok(stages.products(grid, margin, layers, stats))
+}
+
+/// The land cover's bands on `work`: cover, then the classes (for the
+/// surface layer), then each forest type's cover (for typed canopies).
+fn read_landcover(
+    region: &Region,
+    work: &SampleGrid,
+    need: &Needs,
+    stats: &mut Stats,
+) -> Result<Option<Footprint>, SourceError> {
+    let Some(lc) = &region.landcover else { return Ok(None) };
+    let bands = if typed(region, need) {
+        3 + region.forests.len()
+    } else if need.surface {
+        2
+    } else {
+        1
     };
-    let nodata_out = || Raster::filled(grid.width(), grid.height(), f32::NAN);
-    let wants = |l: Layer| layers.contains(&l);
-    Ok(Products {
-        dem: wants(Layer::Dem).then(|| crop(&ground)),
-        cover: wants(Layer::Cover).then(|| on_ground(cover.as_ref())),
-        canopy: wants(Layer::Canopy).then(|| on_ground(canopy.as_ref())),
-        cem: cem.as_ref().filter(|_| wants(Layer::Cem)).map(crop),
-        surface: wants(Layer::Surface).then(|| {
-            surface.map_or_else(
-                || Raster::filled(grid.width(), grid.height(), surface::NODATA),
-                |s| s.crop(inner, surface::NODATA),
-            )
-        }),
-        max4: wants(Layer::Max4).then(|| near.unwrap_or_else(nodata_out)),
-        max32: wants(Layer::Max32).then(|| far.unwrap_or_else(nodata_out)),
-        stats,
+    stats.time(Stage::Landcover, || lc.read(work, Resampling::Bilinear, bands))
+}
+
+/// Whether the canopy reads the cover of each forest type (bands 2 ..).
+fn typed(region: &Region, need: &Needs) -> bool {
+    need.canopy && !region.forests.is_empty()
+}
+
+/// Canopy heights over `work`: the proxy (or each forest type's) × cover.
+fn canopy(region: &Region, work: &SampleGrid, cover: &Raster<f32>, landcover: &Footprint) -> Raster<f32> {
+    match region.forests.is_empty() {
+        true => combine::canopy(region.proxy.as_ref(), work, cover),
+        false => combine::canopy_by_type(&region.proxies(), work, |k| landcover.resample(2 + k, Resampling::Bilinear)),
+    }
+}
+
+/// Surface classes: the nearest land-cover class, forest where cover ≥ ½,
+/// none off the ground.
+fn surface(ground: &Raster<f32>, cover: Option<&Raster<f32>>, landcover: Option<&Footprint>) -> Raster<u8> {
+    let classes = landcover.map(|f| f.resample(1, Resampling::Nearest));
+    Raster::par_from_fn(ground.width(), ground.height(), |x, y| {
+        let class = classes.as_ref().map_or(f32::NAN, |c| c.get(x, y));
+        let c = cover.map_or(0.0, |c| c.get(x, y));
+        surface::classify(class, c, !ground.get(x, y).is_nan())
     })
+}
+
+/// Every stage's raster over the grown grid, `None` where it did not run.
+struct Stages {
+    ground: Raster<f32>,
+    cover: Option<Raster<f32>>,
+    canopy: Option<Raster<f32>>,
+    cem: Option<Raster<f32>>,
+    surface: Option<Raster<u8>>,
+    near: Option<Raster<f32>>,
+    far: Option<Raster<f32>>,
+}
+
+impl Stages {
+    /// The requested `layers` cropped to `grid` (the work grid less
+    /// `margin`). Cover and canopy (0 where no forest was computed) have no
+    /// data where the ground has none.
+    fn products(self, grid: &SampleGrid, margin: usize, layers: &[Layer], stats: Stats) -> Products {
+        let Stages { ground, cover, canopy, cem, surface, near, far } = self;
+        let inner = Window::new(margin as i64, margin as i64, grid.width(), grid.height());
+        let crop = |r: &Raster<f32>| r.crop(inner, f32::NAN);
+        let on_ground = |r: Option<&Raster<f32>>| match r {
+            Some(r) => crop(&r.zip_map(&ground, |v, g| if g.is_nan() { f32::NAN } else { v })),
+            None => crop(&ground.map(|g| if g.is_nan() { f32::NAN } else { 0.0 })),
+        };
+        let nodata_out = || Raster::filled(grid.width(), grid.height(), f32::NAN);
+        let no_surface = || Raster::filled(grid.width(), grid.height(), surface::NODATA);
+        let wants = |l: Layer| layers.contains(&l);
+        Products {
+            dem: wants(Layer::Dem).then(|| crop(&ground)),
+            cover: wants(Layer::Cover).then(|| on_ground(cover.as_ref())),
+            canopy: wants(Layer::Canopy).then(|| on_ground(canopy.as_ref())),
+            cem: cem.as_ref().filter(|_| wants(Layer::Cem)).map(crop),
+            surface: wants(Layer::Surface).then(|| surface.map_or_else(no_surface, |s| s.crop(inner, surface::NODATA))),
+            max4: wants(Layer::Max4).then(|| near.unwrap_or_else(nodata_out)),
+            max32: wants(Layer::Max32).then(|| far.unwrap_or_else(nodata_out)),
+            stats,
+        }
+    }
 }
 
 #[cfg(test)]
