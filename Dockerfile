@@ -21,4 +21,6 @@ EXPOSE 8080
 STOPSIGNAL SIGTERM
 ENTRYPOINT ["sylva"]
 # The embedded demo region; pass `serve --config /etc/sylva/... ` for another.
+# The example configurations name their data as ../shared/data beside the
+# repository, which is /shared/data here: mount the data there.
 CMD ["serve", "--bind", "0.0.0.0:8080", "--cache-dir", "/var/lib/sylva/cache"]

@@ -3,12 +3,15 @@
 # certificates for cargo, GDAL's command-line tools and OWSLib (the tests read
 # our GeoTIFFs and our WMS with them), Mesa's software Vulkan and OpenGL for
 # the renderer, redis-server (the tests start one for the shared Redis tile
-# cache), Xvfb (the viewer's tests open a window on it), and Rust through
-# rustup when cargo is missing.
+# cache), Xvfb and the X11 libraries winit opens (the viewer's tests open a
+# window), and Rust through rustup when cargo is missing.
 # Safe to run again: it installs only what is absent.
 set -euo pipefail
 sudo=""
-[ "$(id -u)" = 0 ] || sudo=sudo
+if [ "$(id -u)" != 0 ]; then
+  command -v sudo >/dev/null || { echo "setup.sh: run as root, or install sudo" >&2; exit 1; }
+  sudo=sudo
+fi
 need=()
 command -v cc >/dev/null || need+=(gcc libc6-dev)
 command -v curl >/dev/null || need+=(curl ca-certificates)
@@ -21,8 +24,13 @@ command -v gdalinfo >/dev/null || need+=(gdal-bin)
 ls /usr/lib/*/libEGL.so.1 >/dev/null 2>&1 || need+=(libegl1)
 ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || need+=(libgl1-mesa-dri)
 command -v redis-server >/dev/null || need+=(redis-server)
-# `sylva view`'s tests open its window on a virtual X display.
+# `sylva view`'s tests open its window on a virtual X display, through the
+# X11 libraries winit loads at run time.
 command -v Xvfb >/dev/null || need+=(xvfb)
+for lib in libxkbcommon-x11.so.0:libxkbcommon-x11-0 libXcursor.so.1:libxcursor1 libXi.so.6:libxi6 \
+  libX11-xcb.so.1:libx11-xcb1; do
+  ls /usr/lib/*/"${lib%%:*}" >/dev/null 2>&1 || need+=("${lib##*:}")
+done
 if [ ${#need[@]} -gt 0 ]; then
   $sudo apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${need[@]}"

@@ -1,6 +1,6 @@
 //! From a request to encoded bytes: a World Wind tile, or a whole-area build
-//! over a box. Shared by the command line (and, later, the server and the
-//! seeder), so every path produces the same bytes for the same request.
+//! over a box. Used by the command line and the client's in-process tile
+//! source; the server and the seeder encode through `server::products`.
 
 use crate::cem::{self, Layer, Stats};
 use crate::encode::{self, EncodeError, Encoded, Format};

@@ -14,7 +14,7 @@
 //! as they are (a crown spans at least three samples); from `1.5·cell` on
 //! single crowns would alias, and the proxy is its mean height; in between
 //! the two are blended (smoothstep). This is the
-//! "filtered to the tile's sample spacing" of DESIGN.md stage 3.
+//! "filtered to the tile's sample spacing" of `../shared/DESIGN.md` stage 3.
 //!
 //! Each crown value is computed from the sample's normalised coordinates and
 //! the tree's canonical position only, so any grid that contains a sample gives

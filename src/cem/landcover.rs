@@ -2,7 +2,7 @@
 //! land-cover classes, as one derived two-band raster (band 0: cover in
 //! [0, 1]; band 1: surface class id).
 //!
-//! Three rules (DESIGN.md stage 1):
+//! Three rules (`../shared/DESIGN.md` stage 1):
 //! - **map**: an RGB topographic map or orthophoto; each pixel takes the
 //!   nearest colour key within tolerance (L*a*b*), forest keys give a mask of
 //!   1, then a morphological close (dilations then erosions, any order and

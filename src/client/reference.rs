@@ -1,5 +1,5 @@
 //! The exact CPU ray caster: the ground truth the GPU and its accelerated
-//! variants are measured against (DESIGN.md, "Client").
+//! variants are measured against (`../shared/DESIGN.md`, "Client").
 //!
 //! Every pixel's ray is intersected in `f64` with every tile's
 //! piecewise-bilinear surface ([`super::raycast`]): a 2-D walk over 16-cell

@@ -1,6 +1,6 @@
 //! Where the client's tiles come from: the CEM pipeline in process
-//! ([`RegionSource`]), or a `sylva serve` over HTTP (`http_source`, feature
-//! `client`). Both deliver the same [`TilePayload`]: CEM, ground, surface
+//! ([`RegionSource`]), or a `sylva serve` over HTTP (`client::http::HttpSource`,
+//! feature `http`). Both deliver the same [`TilePayload`]: CEM, ground, surface
 //! classes and unshaded map colour with a halo.
 
 use super::tile::TilePayload;

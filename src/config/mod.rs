@@ -8,7 +8,7 @@
 mod build;
 mod upstream;
 
-pub use build::{ConfigError, base_of, input_files, load, load_with_config, parse_file, region_from};
+pub use build::{ConfigError, base_of, demo_keys, input_files, load, load_with_config, parse_file, region_from};
 pub use upstream::{UpstreamConfig, UpstreamService};
 
 use crate::canopy::ProxyParams;

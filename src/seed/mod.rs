@@ -1,5 +1,5 @@
 //! `sylva seed`: batch pregeneration of a region's tiles into the tile cache
-//! the servers read, so clients never wait (DESIGN.md, use 3).
+//! the servers read, so clients never wait (`../shared/DESIGN.md`, use 3).
 //!
 //! A job is layers × formats × the tiles of a level range over a box or
 //! polygons ([`coverage`]), walked depth first ([`walk`]) on a pool of

@@ -1,4 +1,5 @@
-//! Routes and middleware: `/health`, `/metrics`, World Wind tiles (path and
+//! Routes and middleware: `/health`, `/metrics`, `/tiles.json` (the grid and
+//! region a client flies over), World Wind tiles (path and
 //! `?T=&L=&X=&Y=` forms), XYZ Terrarium tiles, and `/wms`; per-request
 //! timeout (503, a ServiceExceptionReport on `/wms`), URI length limit, CORS
 //! for browser clients (read-only data: any origin may GET), gzip for BIL

@@ -4,7 +4,7 @@
 //! Coarse tiles read the overview whose pixels are just finer than their
 //! sample spacing, so a level-0 tile neither reads a whole file nor aliases
 //! ("at coarse tile levels the proxy is filtered to the tile's sample spacing",
-//! DESIGN.md; the same holds for the DEM and the cover).
+//! `../shared/DESIGN.md`; the same holds for the DEM and the cover).
 
 use super::{BLOCK, Blocks, PixelSource, SourceError};
 use crate::raster::{Raster, Window};

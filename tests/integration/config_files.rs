@@ -49,6 +49,22 @@ fn the_default_file_is_the_built_in_default() {
     assert_eq!(from_file.describe(), built_in.describe());
 }
 
+/// The colour keys `default.toml` shows, commented out, are the ones the
+/// demo uses when none are given.
+#[test]
+fn the_default_files_commented_keys_are_the_demo_palette() {
+    let text = std::fs::read_to_string(common::repo().join("config/default.toml")).expect("default.toml");
+    let lines: Vec<&str> = text.lines().skip_while(|l| !l.starts_with("# keys = [")).collect();
+    let end = lines.iter().position(|l| *l == "# ]").expect("the keys' closing bracket");
+    let block: String = lines[..=end].iter().map(|l| format!("{}\n", &l[2..])).collect();
+    #[derive(serde::Deserialize)]
+    struct Keys {
+        keys: Vec<sylva::cem::colorkey::ColorKey>,
+    }
+    let shown: Keys = toml::from_str(&block).expect("the keys parse once uncommented");
+    assert_eq!(shown.keys, sylva::config::demo_keys());
+}
+
 #[test]
 fn bad_configs_name_the_file_and_the_problem() {
     let dir = TempDir::new("bad-config");
