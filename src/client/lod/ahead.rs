@@ -5,8 +5,14 @@
 //!
 //! A selection started at `t` is drawn during `[t + τ, t + 2τ)`: one stage
 //! selects while the previous cut is drawn ([`STAGES`]).
+//!
+//! A predicted camera comes no nearer the ground than half the current
+//! camera's height above it (the lowest ground known under each): linear
+//! extrapolation of a dive passes under the ground, and a selection for a
+//! camera that sees nothing drew one coarse tile for the frames after it.
 
 use super::super::camera::Camera;
+use super::super::globe::Geodetic;
 use crate::lod::predict::{self, Cone, MotionLimits, PathPredictor, Pose};
 use glam::{DMat3, DQuat};
 
@@ -36,12 +42,25 @@ pub fn camera_at(template: &Camera, pose: &Pose) -> Camera {
     Camera { position_ecef: pose.position_m, rotation: DMat3::from_quat(pose.orientation), ..*template }
 }
 
+/// The lowest ground known at a longitude and latitude, degrees.
+pub type Ground<'a> = &'a dyn Fn(f64, f64) -> Option<f64>;
+
 /// The cameras a selection started at `t_s` from `current` is for (the
-/// current one while nothing was observed), and the conservative cone.
-pub fn ahead(predictor: &PathPredictor, current: &Camera, t_s: f64, look: &Lookahead) -> (Vec<Camera>, Cone) {
+/// current one while nothing was observed), kept above `ground`, and the
+/// conservative cone.
+pub fn ahead(
+    predictor: &PathPredictor,
+    current: &Camera,
+    t_s: f64,
+    look: &Lookahead,
+    ground: Ground,
+) -> (Vec<Camera>, Cone) {
     let (from_s, to_s) = predict::target_interval(t_s, look.tau_s, STAGES);
-    let mut cameras: Vec<Camera> =
-        predictor.samples(from_s, to_s, SAMPLES).iter().map(|p| camera_at(current, p)).collect();
+    let mut cameras: Vec<Camera> = predictor
+        .samples(from_s, to_s, SAMPLES)
+        .iter()
+        .map(|p| above_ground(camera_at(current, p), current, ground))
+        .collect();
     if cameras.is_empty() {
         cameras.push(*current);
     }
@@ -49,6 +68,21 @@ pub fn ahead(predictor: &PathPredictor, current: &Camera, t_s: f64, look: &Looka
     let fov_rad = 2.0 * (half_diagonal_px / current.focal_px()).atan();
     let cone = predict::conservative(&pose(current), fov_rad, look.tau_s, STAGES, &look.limits);
     (cameras, cone)
+}
+
+/// `camera` raised where it is nearer the ground than half of `current`'s
+/// height above it (see the module doc); as it is where the ground under
+/// either is unknown.
+fn above_ground(camera: Camera, current: &Camera, ground: Ground) -> Camera {
+    let (now, at) = (Geodetic::from_ecef(current.position_ecef), Geodetic::from_ecef(camera.position_ecef));
+    let (Some(below_now), Some(below)) = (ground(now.lon_deg, now.lat_deg), ground(at.lon_deg, at.lat_deg)) else {
+        return camera;
+    };
+    let lowest_m = below + 0.5 * (now.height_m - below_now).max(0.0);
+    match at.height_m < lowest_m {
+        true => Camera { position_ecef: Geodetic::new(at.lon_deg, at.lat_deg, lowest_m).to_ecef(), ..camera },
+        false => camera,
+    }
 }
 
 #[cfg(test)]
@@ -74,7 +108,7 @@ mod tests {
         for k in 0..4 {
             predictor.observe(f64::from(k), pose(&camera(10.1 + 0.001 * f64::from(k))));
         }
-        let (cameras, cone) = ahead(&predictor, &camera(10.103), 3.0, &LOOK);
+        let (cameras, cone) = ahead(&predictor, &camera(10.103), 3.0, &LOOK, &|_, _| Some(500.0));
         assert_eq!(cameras.len(), SAMPLES);
         // Drawn during [3.5, 4) s: the middle sample is at 3.75 s.
         let expected = camera(10.10375).position_ecef;
@@ -91,8 +125,32 @@ mod tests {
     #[test]
     fn with_nothing_observed_the_current_camera_is_used() {
         let c = camera(10.2);
-        let (cameras, _) = ahead(&PathPredictor::new(WINDOW), &c, 1.0, &LOOK);
+        let (cameras, _) = ahead(&PathPredictor::new(WINDOW), &c, 1.0, &LOOK, &|_, _| None);
         assert_eq!(cameras.len(), 1);
         assert_eq!(cameras[0].position_ecef, c.position_ecef);
+    }
+
+    #[test]
+    fn a_dive_is_predicted_no_nearer_the_ground_than_half_its_height_above_it() {
+        // Down at 3,000 m/s: 1,000 m above the ground (500 m) at 3 s, under
+        // it when drawn (3.5 to 4 s) as extrapolated.
+        let dive =
+            |t: f64| Camera::looking(Geodetic::new(10.1, 46.35, 10_500.0 - 3000.0 * t), 0.0, -60.0, 60.0, (160, 120));
+        let mut predictor = PathPredictor::new(WINDOW);
+        for k in 0..4 {
+            predictor.observe(f64::from(k), pose(&dive(f64::from(k))));
+        }
+        let height = |c: &Camera| Geodetic::from_ecef(c.position_ecef).height_m;
+        let (free, _) = ahead(&predictor, &dive(3.0), 3.0, &LOOK, &|_, _| None);
+        assert!(height(&free[1]) < 500.0, "unknown ground: as extrapolated, {}", height(&free[1]));
+        let (kept, _) = ahead(&predictor, &dive(3.0), 3.0, &LOOK, &|_, _| Some(500.0));
+        for (k, c) in kept.iter().enumerate() {
+            let h = height(c);
+            assert!(h >= 500.0 + 0.5 * 1000.0 - 1e-6, "camera {k} at {h} m");
+            assert!((c.rotation.z_axis - dive(3.0).rotation.z_axis).length() < 1e-9, "still looking the same way");
+        }
+        // A camera predicted above that is not moved.
+        let (slow, _) = ahead(&predictor, &dive(3.0), 3.0, &LOOK, &|_, _| Some(-100_000.0));
+        assert_eq!(slow[1].position_ecef, free[1].position_ecef);
     }
 }

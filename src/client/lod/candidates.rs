@@ -284,12 +284,16 @@ fn inside(sector: &Sector, b: &BBox) -> (Sector, f64) {
 }
 
 /// The height a tile's surface is measured at from `camera`: the middle
-/// of its range, but below the camera when the range allows (a tile
-/// nobody loaded spans [`UNKNOWN_RANGE_M`], whose middle is above a low
-/// camera: measured there, the ground would face away and count nothing).
+/// of the part of its range below the eye. A camera low in a valley sees
+/// the ground below it: measured just under the eye (as the middle of a
+/// range reaching above the eye, clamped, once was), the surface is seen
+/// only within metres of the camera, and a tile ahead covering the view
+/// counted nothing and was never refined. A tile nobody loaded spans
+/// [`UNKNOWN_RANGE_M`]. A tile wholly above the eye faces away and counts
+/// nothing (a flank above a low camera is drawn at its parent's cut).
 fn surface_m(camera: &Camera, lo: f64, hi: f64) -> f64 {
     let eye_m = Geodetic::from_ecef(camera.position_ecef).height_m;
-    (0.5 * (lo + hi)).min(eye_m - 1.0).max(lo)
+    0.5 * (lo + hi.min(eye_m - 1.0).max(lo))
 }
 
 #[cfg(test)]
@@ -348,6 +352,28 @@ mod tests {
         assert!(nearest_deep < 1.5, "{nearest_deep} km");
         let far_level = c.tiles.iter().filter(|t| km(t) > 8.0).map(|t| t.id.level).max().unwrap();
         assert!(far_level + 2 <= deepest, "{far_level} far, {deepest} near");
+    }
+
+    #[test]
+    fn a_camera_low_over_a_lake_sees_the_ground_ahead_of_it() {
+        // 150 m over the demo's lake (900 m), 77 m west of a level-5 tile's
+        // edge (10.125°), looking north-east and 35° down: the image is
+        // ground below the eye, most of it past that edge (the view's
+        // centre meets the lake 140 m east), though the tiles there rise to
+        // 3,100 m. Measured just under the eye, their surface was seen only
+        // within metres of the camera: the tiles past the edge counted no
+        // pixel, were never refined, and a level-5 tile filled the view.
+        let camera = Camera::looking(Geodetic::new(10.124, 46.364, 1050.0), 40.0, -35.0, 60.0, (256, 192));
+        let c = walk_over(camera, (None, None), 16, &|_| Some((900.0, 3100.0)));
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        let parents: std::collections::HashSet<u32> = c.tiles.iter().filter_map(|t| t.parent).collect();
+        let leaves = (0..c.tiles.len() as u32).filter(|k| !parents.contains(k)).map(|k| &c.tiles[k as usize]);
+        let past_edge: Vec<&Candidate> = leaves.filter(|t| grid.sector(t.id).min_lon >= 10.125).collect();
+        let seen: f64 = past_edge.iter().map(|t| t.seen_px).sum();
+        let image = 256.0 * 192.0;
+        assert!(seen > 0.3 * image, "tiles past the edge show {seen} of {image} px");
+        let coarse = past_edge.iter().filter(|t| t.seen_px > 0.01 * image).map(|t| t.id.level).min();
+        assert!(coarse.is_some_and(|level| level >= 10), "{coarse:?}: the nearest ground is refined");
     }
 
     #[test]

@@ -75,6 +75,13 @@ pub struct Selected {
 }
 
 impl Selector {
+    /// The lowest ground known at `(lon, lat)`, degrees: that of the finest
+    /// loaded tile there.
+    pub fn lowest_ground_m(&self, lon: f64, lat: f64) -> Option<f64> {
+        let deepest = self.grid.tile_containing(lon, lat, self.max_level);
+        self.knowledge.range(deepest).map(|(lo, _)| lo)
+    }
+
     /// The cut for `cameras` (the cone, if any, widens culling) and the
     /// splat budgets of tree groups `trees` under `budget` with cost
     /// `model`, tiles' rays priced at `steps`.
