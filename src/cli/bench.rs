@@ -207,7 +207,7 @@ impl RaycastArgs {
         let name = format!("{}, rays in {:?} passes, early depth {early}", gpu.describe(), self.ray_pass);
         let budget = self.gpu_budget_mib << 20;
         let mut renderer =
-            sylva::client::render::Renderer::new(gpu, 513, 32, budget, false).with_ray_pass(self.ray_pass);
+            sylva::client::render::Renderer::new(gpu, 513, 32, budget, false)?.with_ray_pass(self.ray_pass);
         let views = raycast::default_views(&rmnp);
         let rows = raycast::run(&views, size, &self.only, &mut renderer).map_err(anyhow::Error::msg)?;
         super::print(raycast::report(&rows, size, &name))?;

@@ -19,9 +19,8 @@ use super::path::CameraPath;
 use super::quadtree::{self, LodRule};
 use super::raycast::{Traversal, TreeBlend};
 use super::render::RayPass;
-use super::render::cache::CacheFull;
 use super::render::uniforms::FrameSettings;
-use super::render::{Draw, DrawWork, FrameStats, Readback, Rendered, Renderer};
+use super::render::{Draw, DrawWork, FrameStats, Readback, RenderError, Rendered, Renderer};
 use super::source::TileSource;
 use super::sse::SseSelector;
 use super::store::{LoadError, TileStore};
@@ -204,9 +203,10 @@ pub enum FlyError {
     /// A tile could not be loaded.
     #[error(transparent)]
     Load(#[from] LoadError),
-    /// The GPU cache cannot hold even the coarsest view.
+    /// The GPU cache cannot hold even the coarsest view, or the frame's
+    /// render targets cannot be allocated.
     #[error(transparent)]
-    Cache(#[from] CacheFull),
+    Render(#[from] RenderError),
     /// The LOD selection thread could not start.
     #[error("starting the LOD selection thread: {0}")]
     Thread(std::io::Error),
@@ -867,7 +867,7 @@ pub fn run(
 ) -> Result<Vec<FrameRecord>, RunError> {
     let gpu = super::render::gpu::Gpu::open()?;
     let grid = source.grid();
-    let mut renderer = Renderer::new(gpu, grid.samples(), options.halo as u32, gpu_budget_bytes, options.geomorph)
+    let mut renderer = Renderer::new(gpu, grid.samples(), options.halo as u32, gpu_budget_bytes, options.geomorph)?
         .with_hull_factor(options.hull_factor)
         .with_ray_pass(options.ray_pass);
     Ok(fly(source, path, &mut renderer, options)?)
@@ -879,6 +879,9 @@ pub enum RunError {
     /// No GPU.
     #[error(transparent)]
     Gpu(#[from] super::render::gpu::GpuError),
+    /// The GPU has not the memory for the tile cache.
+    #[error(transparent)]
+    Alloc(#[from] super::render::gpu::AllocError),
     /// The flight failed.
     #[error(transparent)]
     Fly(#[from] FlyError),
