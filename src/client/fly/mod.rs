@@ -9,6 +9,8 @@
 //! camera are drawn as splats ([`super::trees`]): at the resolution their
 //! screen size asks for, or under a budget as the selection allots.
 
+mod outputs;
+
 use super::camera::Camera;
 use super::lod::ahead::Lookahead;
 use super::lod::budget::{Budget, Choice};
@@ -28,8 +30,9 @@ use super::tile::TileData;
 use super::trees::{self, TreeSettings};
 use crate::lod::model::CostModel;
 use glam::DVec3;
+use outputs::{MODEL_FILE, io};
+pub use outputs::{STATS_FILE, prepare_out_dir, remove_outputs, to_csv, write_png, write_stats};
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
@@ -228,11 +231,6 @@ pub enum FlyError {
     },
 }
 
-/// The flight's statistics in its output directory.
-pub const STATS_FILE: &str = "stats.csv";
-/// The calibrated cost model of a budget flight, in its output directory.
-const MODEL_FILE: &str = "cost_model.json";
-
 /// Flies `path` over `source`, rendering with `renderer`.
 pub fn fly(
     source: &dyn TileSource,
@@ -279,79 +277,12 @@ pub fn fly(
     Ok(records)
 }
 
-/// Makes `dir` ready for a flight's or a view's outputs: made if missing;
-/// an earlier run's outputs there ([`STATS_FILE`], the cost model, frames)
-/// refused, or with `overwrite` returned, for [`remove_outputs`] once the
-/// new run has something to write: a directory never mixes two runs, and a
-/// run that fails before its first frame leaves the earlier one whole.
-pub fn prepare_out_dir(dir: &std::path::Path, overwrite: bool) -> Result<Vec<PathBuf>, FlyError> {
-    if dir.exists() && !dir.is_dir() {
-        return Err(io(dir, std::io::Error::new(std::io::ErrorKind::NotADirectory, "not a directory")));
-    }
-    std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
-    crate::outputs::check(&[], &[&dir.join(STATS_FILE), &dir.join(MODEL_FILE)])?;
-    let earlier = earlier_outputs(dir).map_err(|e| io(dir, e))?;
-    if !earlier.is_empty() && !overwrite {
-        return Err(FlyError::Earlier(dir.to_path_buf(), describe_outputs(&earlier)));
-    }
-    Ok(earlier)
-}
-
-/// Removes an earlier run's outputs (from [`prepare_out_dir`]).
-pub fn remove_outputs(files: &[PathBuf]) -> Result<(), FlyError> {
-    files.iter().try_for_each(|f| std::fs::remove_file(f).map_err(|e| io(f, e)))
-}
-
-/// The files in `dir` a flight or view writes: [`STATS_FILE`], the cost
-/// model and `frame_NNNNN.png` (not the view's saved `view_NNNNN.png`,
-/// which never replace a file).
-fn earlier_outputs(dir: &std::path::Path) -> std::io::Result<Vec<PathBuf>> {
-    let mut found = Vec::new();
-    for entry in std::fs::read_dir(dir)? {
-        let path = entry?.path();
-        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-        let frame = name.starts_with("frame_") && name.ends_with(".png");
-        if path.is_file() && (frame || name == STATS_FILE || name == MODEL_FILE) {
-            found.push(path);
-        }
-    }
-    Ok(found)
-}
-
-/// What an earlier run left, as "stats.csv, cost_model.json, 12 frames".
-fn describe_outputs(files: &[PathBuf]) -> String {
-    let names: Vec<&str> = files.iter().filter_map(|f| f.file_name()?.to_str()).collect();
-    let frames = names.iter().filter(|n| n.starts_with("frame_")).count();
-    let mut parts: Vec<String> = names.iter().filter(|n| !n.starts_with("frame_")).map(|n| n.to_string()).collect();
-    parts.sort();
-    match frames {
-        0 => {}
-        1 => parts.push("1 frame".into()),
-        n => parts.push(format!("{n} frames")),
-    }
-    parts.join(", ")
-}
-
 /// The mean of `values`; 0 (not the −0 an empty sum is) for none.
 fn mean_or_zero(values: impl ExactSizeIterator<Item = f64>) -> f64 {
     match values.len() {
         0 => 0.0,
         n => values.sum::<f64>() / n as f64,
     }
-}
-
-/// Writes `records` as [`STATS_FILE`] in `dir`.
-pub fn write_stats(dir: &std::path::Path, records: &[FrameRecord]) -> Result<(), FlyError> {
-    let csv = dir.join(STATS_FILE);
-    std::fs::write(&csv, to_csv(records)).map_err(|e| io(&csv, e))
-}
-
-/// Writes a frame's colour as PNG.
-pub fn write_png(file: &std::path::Path, rendered: &Rendered, size: (u32, u32)) -> Result<(), FlyError> {
-    let bytes: Vec<u8> = rendered.colour.iter().flatten().copied().collect();
-    let png = crate::encode::png(&bytes, size.0 as usize, size.1 as usize, image::ExtendedColorType::Rgba8)
-        .map_err(|e| io(file, std::io::Error::other(e.0)))?;
-    std::fs::write(file, png).map_err(|e| io(file, e))
 }
 
 /// How the camera of a flight moves: what a budget flight's selections
@@ -729,10 +660,6 @@ fn slot_estimate(source: &dyn TileSource, halo: usize) -> usize {
     side * side * 26
 }
 
-fn io(path: &std::path::Path, source: std::io::Error) -> FlyError {
-    FlyError::Io { path: path.display().to_string(), source }
-}
-
 /// The times of a frame's draws rendered again and again for `hold_ms`,
 /// of the render with the median GPU (or wall) time: what a loop rendering
 /// continuously sees, on a GPU that lowers its clocks while it waits for a
@@ -750,63 +677,6 @@ fn held(
     let ms = |s: &FrameStats| s.gpu_ms.unwrap_or(s.wall_ms);
     renders.sort_by(|a, b| ms(a).total_cmp(&ms(b)));
     Ok(renders[renders.len() / 2])
-}
-
-/// The statistics as CSV, one row per frame.
-pub fn to_csv(records: &[FrameRecord]) -> String {
-    let mut out = Vec::new();
-    let _ = writeln!(
-        out,
-        "frame,cpu_ms,gpu_ms,gpu_rays_ms,gpu_fill_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,model_ms,shadow_steps_mean,candidates,benefit_bound,bound,morphing,trees,splats,splat_fill_mpx,nodes_touched,rays_cast,rays_view_fetches,rays_leaf_cells,rays_shadow_fetches"
-    );
-    for r in records {
-        let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
-        let optional = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.3}"));
-        let gpu = optional(r.gpu_ms);
-        let (rays, fill) = (optional(r.gpu_rays_ms.map(|t| t.0)), optional(r.gpu_rays_ms.map(|t| t.1)));
-        let work: [String; 4] = r
-            .work
-            .map(|w| [w.rays, w.view_fetches, w.leaf_cells, w.shadow_fetches].map(|n| n.to_string()))
-            .unwrap_or_default();
-        let _ = writeln!(
-            out,
-            "{},{:.3},{gpu},{rays},{fill},{:.3},{},{},{},{},{},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{},{:.2},{},{},{},{},{},{},{:.4},{},{},{},{},{}",
-            r.frame,
-            r.cpu_ms,
-            r.render_ms,
-            r.tiles_ray + r.tiles_plain,
-            levels.join(" "),
-            r.tiles_ray,
-            r.tiles_plain,
-            r.error_px.map_or(String::new(), |e| format!("{e:.2}")),
-            r.ray_pixels,
-            r.view_fetches.0,
-            r.view_fetches.1,
-            r.shadow_fetches_mean,
-            r.bytes_fetched,
-            r.gpu_bytes,
-            r.cpu_bytes,
-            r.rss_mib,
-            r.selection_ms,
-            optional(r.budget_ms),
-            optional(r.predicted_ms),
-            optional(r.model_ms),
-            r.shadow_steps_mean,
-            r.candidates.map_or(String::new(), |n| n.to_string()),
-            optional(r.benefit_bound),
-            r.bound.unwrap_or_default(),
-            r.morphing,
-            r.trees,
-            r.splats,
-            r.splat_fill_px / 1e6,
-            r.nodes_touched.map_or(String::new(), |n| n.to_string()),
-            work[0],
-            work[1],
-            work[2],
-            work[3]
-        );
-    }
-    String::from_utf8_lossy(&out).into_owned()
 }
 
 /// A one-paragraph summary of a flight: frames, mean and worst times,
