@@ -66,7 +66,14 @@ impl FlyArgs {
         let path = sylva::client::path::CameraPath::load(&self.path)?;
         let source = self.tiles.open()?;
         let budget = self.render.gpu_budget_mib << 20;
-        let records = fly::run(source.as_ref(), &path, &options, budget)?;
+        let records = match fly::run(source.as_ref(), &path, &options, budget) {
+            // Stopped by a signal: the status a shell gives a death by it.
+            Err(e) if let Some(signal) = e.signal() => {
+                eprintln!("sylva: {e}");
+                std::process::exit(128 + signal)
+            }
+            records => records?,
+        };
         super::print(fly::summary(&records))?;
         Ok(())
     }

@@ -30,7 +30,7 @@ use super::tile::TileData;
 use super::trees::{self, TreeSettings};
 use crate::lod::model::CostModel;
 use glam::DVec3;
-use outputs::{MODEL_FILE, io};
+use outputs::MODEL_FILE;
 pub use outputs::{STATS_FILE, prepare_out_dir, remove_outputs, to_csv, write_png, write_stats};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -221,6 +221,20 @@ pub enum FlyError {
         "{0}: holds an earlier flight's or view's outputs ({1}); give another --out, or --overwrite to replace them"
     )]
     Earlier(PathBuf, String),
+    /// The flight stopped before its last frame; the frames it finished
+    /// and their statistics were written (`kept` says where, or why not).
+    #[error("{why}; stopped after {done} of {of} frames{kept}")]
+    Stopped {
+        /// Why it stopped.
+        why: Stop,
+        /// Frames finished.
+        done: usize,
+        /// Frames asked for.
+        of: usize,
+        /// "; their frames and stats.csv are in DIR", or why not (empty
+        /// without an output directory or a frame to keep).
+        kept: String,
+    },
     /// Writing frames or statistics failed.
     #[error("{path}: {source}")]
     Io {
@@ -231,7 +245,44 @@ pub enum FlyError {
     },
 }
 
-/// Flies `path` over `source`, rendering with `renderer`.
+impl FlyError {
+    /// The signal (Ctrl-C, SIGTERM) that stopped the flight, if one did.
+    pub fn signal(&self) -> Option<i32> {
+        match self {
+            FlyError::Stopped { why: Stop::Signal(signal), .. } => Some(*signal),
+            _ => None,
+        }
+    }
+}
+
+/// Why a flight stopped before its last frame.
+#[derive(Debug)]
+pub enum Stop {
+    /// Ctrl-C or SIGTERM: the signal's number.
+    Signal(i32),
+    /// An error.
+    Failed(Box<FlyError>),
+}
+
+impl Stop {
+    fn failed(e: FlyError) -> Stop {
+        Stop::Failed(Box::new(e))
+    }
+}
+
+impl std::fmt::Display for Stop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Stop::Signal(signal) => write!(f, "interrupted by signal {signal}"),
+            Stop::Failed(e) => e.fmt(f),
+        }
+    }
+}
+
+/// Flies `path` over `source`, rendering with `renderer`. A flight that
+/// stops early, by an error or by Ctrl-C or SIGTERM, writes the statistics
+/// of the frames it finished beside their PNGs and says so
+/// ([`FlyError::Stopped`]).
 pub fn fly(
     source: &dyn TileSource,
     path: &CameraPath,
@@ -251,30 +302,52 @@ pub fn fly(
     let motion = Motion { frame_s, limits: path.motion_limits(MOTION_STEPS), shadows: path.sun.is_some() };
     let mut flight = Flight::new(source, renderer, options, motion)?;
     let mut records = Vec::with_capacity(options.frames);
+    let stopped = fly_path(&mut flight, (source, path, renderer), options, (&mut earlier, &mut records)).err();
+    let model = flight.model();
+    match (stopped, &options.out_dir) {
+        (None, Some(dir)) => outputs::write_results(dir, &records, model.as_ref()).map(|()| records),
+        (None, None) => Ok(records),
+        // Nothing done, nothing written: an earlier run's outputs are whole.
+        (Some(Stop::Failed(e)), _) if records.is_empty() => Err(*e),
+        (Some(why), dir) => {
+            let kept = match dir.as_deref().filter(|_| !records.is_empty()) {
+                Some(dir) => outputs::keep(dir, &records, model.as_ref(), options.write_frames),
+                None => String::new(),
+            };
+            Err(FlyError::Stopped { why, done: records.len(), of: options.frames, kept })
+        }
+    }
+}
+
+/// Renders the path's frames, each one's PNG written once it is done, and
+/// keeps their records, until the last frame, an error, or Ctrl-C or
+/// SIGTERM (after the frame in hand; a second signal ends the process).
+fn fly_path(
+    flight: &mut Flight,
+    (source, path, renderer): (&dyn TileSource, &CameraPath, &mut Renderer),
+    options: &FlyOptions,
+    (earlier, records): (&mut Vec<PathBuf>, &mut Vec<FrameRecord>),
+) -> Result<(), Stop> {
+    let interrupt = crate::interrupt::Interrupt::watch();
     for k in 0..options.frames {
+        if let Some(signal) = interrupt.came() {
+            return Err(Stop::Signal(signal));
+        }
         let shot = Shot {
             index: k,
             t_s: path.time(k, options.frames),
             camera: path.camera(k, options.frames, options.size),
             sun_ecef: path.sun_ecef(),
         };
-        let framed = flight.frame(source, renderer, options, &shot, Readback::All)?;
+        let framed = flight.frame(source, renderer, options, &shot, Readback::All).map_err(Stop::failed)?;
         // The earlier run's outputs go once this one has a frame to show.
-        remove_outputs(&std::mem::take(&mut earlier))?;
+        remove_outputs(&std::mem::take(earlier)).map_err(Stop::failed)?;
         if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
-            write_png(&dir.join(format!("frame_{k:05}.png")), &framed.rendered, options.size)?;
+            write_png(&dir.join(format!("frame_{k:05}.png")), &framed.rendered, options.size).map_err(Stop::failed)?;
         }
         records.push(framed.record);
     }
-    if let Some(dir) = &options.out_dir {
-        write_stats(dir, &records)?;
-        if let Some(model) = flight.model() {
-            // The calibrated model, for `--cost-model` on the next flight.
-            let file = dir.join(MODEL_FILE);
-            std::fs::write(&file, model.to_json()).map_err(|e| io(&file, e))?;
-        }
-    }
-    Ok(records)
+    Ok(())
 }
 
 /// The mean of `values`; 0 (not the −0 an empty sum is) for none.
@@ -755,4 +828,14 @@ pub enum RunError {
     /// The flight failed.
     #[error(transparent)]
     Fly(#[from] FlyError),
+}
+
+impl RunError {
+    /// The signal (Ctrl-C, SIGTERM) that stopped the flight, if one did.
+    pub fn signal(&self) -> Option<i32> {
+        match self {
+            RunError::Fly(e) => e.signal(),
+            _ => None,
+        }
+    }
 }

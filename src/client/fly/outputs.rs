@@ -4,8 +4,9 @@
 
 use super::{FlyError, FrameRecord};
 use crate::client::render::Rendered;
+use crate::lod::model::CostModel;
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The flight's statistics in its output directory.
 pub const STATS_FILE: &str = "stats.csv";
@@ -66,17 +67,48 @@ fn describe_outputs(files: &[PathBuf]) -> String {
 }
 
 /// Writes `records` as [`STATS_FILE`] in `dir`.
-pub fn write_stats(dir: &std::path::Path, records: &[FrameRecord]) -> Result<(), FlyError> {
-    let csv = dir.join(STATS_FILE);
-    std::fs::write(&csv, to_csv(records)).map_err(|e| io(&csv, e))
+pub fn write_stats(dir: &Path, records: &[FrameRecord]) -> Result<(), FlyError> {
+    Ok(crate::outputs::write_all(&[(&dir.join(STATS_FILE), to_csv(records).as_bytes())])?)
 }
 
-/// Writes a frame's colour as PNG.
-pub fn write_png(file: &std::path::Path, rendered: &Rendered, size: (u32, u32)) -> Result<(), FlyError> {
+/// Writes a frame's colour as PNG (whole or not at all: a flight killed
+/// while writing leaves no half frame).
+pub fn write_png(file: &Path, rendered: &Rendered, size: (u32, u32)) -> Result<(), FlyError> {
     let bytes: Vec<u8> = rendered.colour.iter().flatten().copied().collect();
     let png = crate::encode::png(&bytes, size.0 as usize, size.1 as usize, image::ExtendedColorType::Rgba8)
         .map_err(|e| io(file, std::io::Error::other(e.0)))?;
-    std::fs::write(file, png).map_err(|e| io(file, e))
+    Ok(crate::outputs::write_all(&[(file, &png)])?)
+}
+
+/// Writes a flight's results in `dir`, all or none: its statistics and a
+/// budget flight's calibrated cost model (for `--cost-model` on the next
+/// flight).
+pub(super) fn write_results(dir: &Path, records: &[FrameRecord], model: Option<&CostModel>) -> Result<(), FlyError> {
+    let csv = to_csv(records);
+    let json = model.map(CostModel::to_json);
+    let (stats, model_file) = (dir.join(STATS_FILE), dir.join(MODEL_FILE));
+    let mut files: Vec<(&Path, &[u8])> = vec![(&stats, csv.as_bytes())];
+    files.extend(json.as_deref().map(|j| (model_file.as_path(), j.as_bytes())));
+    Ok(crate::outputs::write_all(&files)?)
+}
+
+/// Writes the results of a flight stopped after `records` and says what
+/// is kept: "; their frames and stats.csv are in DIR" (`frames`: PNGs
+/// were written), or why not.
+pub(super) fn keep(dir: &Path, records: &[FrameRecord], model: Option<&CostModel>, frames: bool) -> String {
+    if let Err(e) = write_results(dir, records, model) {
+        return format!("; their statistics were not written: {e}");
+    }
+    let mut names: Vec<&str> = Vec::new();
+    names.extend(frames.then_some("frames"));
+    names.push(STATS_FILE);
+    names.extend(model.map(|_| MODEL_FILE));
+    let last = names.pop().unwrap_or_default();
+    let (list, verb) = match names.len() {
+        0 => (last.to_string(), "is"),
+        _ => (format!("{} and {last}", names.join(", ")), "are"),
+    };
+    format!("; their {list} {verb} in {}", dir.display())
 }
 
 /// The statistics as CSV, one row per frame.
@@ -136,6 +168,6 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-pub(super) fn io(path: &std::path::Path, source: std::io::Error) -> FlyError {
+fn io(path: &std::path::Path, source: std::io::Error) -> FlyError {
     FlyError::Io { path: path.display().to_string(), source }
 }
