@@ -365,3 +365,22 @@ fn a_flight_whose_server_dies_keeps_its_frames_and_their_statistics() {
     assert_eq!(output.status.code(), Some(1), "{stderr}");
     assert_kept(&out, 60, &stderr);
 }
+
+#[test]
+fn a_flight_that_fails_before_writing_removes_the_directories_it_made() {
+    // Regression: a failed flight left the empty --out it had made.
+    let dir = TempDir::new("fly-made");
+    let path = common::repo().join("config/paths/demo_dive.toml");
+    let fail = |out: &std::path::Path| {
+        let args = ["--path", path.to_str().unwrap(), "--frames", "2", "--size", "32x24", "--gpu-budget-mib", "1"];
+        let output = spawn_fly(&args, out).wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+        assert!(output.status.code() == Some(1) && stderr.contains("--gpu-budget-mib"), "{stderr}");
+    };
+    fail(&dir.join("new/deeper"));
+    assert!(!dir.join("new").exists(), "both directories made went");
+    // A directory that was there stays, empty as it was.
+    std::fs::create_dir(dir.join("there")).unwrap();
+    fail(&dir.join("there"));
+    assert_eq!(std::fs::read_dir(dir.join("there")).unwrap().count(), 0);
+}

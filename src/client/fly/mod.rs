@@ -31,7 +31,7 @@ use super::trees::{self, TreeSettings};
 use crate::lod::model::CostModel;
 use glam::DVec3;
 use outputs::MODEL_FILE;
-pub use outputs::{STATS_FILE, prepare_out_dir, remove_outputs, to_csv, write_png, write_stats};
+pub use outputs::{OutDir, STATS_FILE, prepare_out_dir, remove_outputs, to_csv, write_png, write_stats};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -289,15 +289,31 @@ pub fn fly(
     renderer: &mut Renderer,
     options: &FlyOptions,
 ) -> Result<Vec<FrameRecord>, FlyError> {
-    let mut earlier = match &options.out_dir {
+    let mut out = match &options.out_dir {
         Some(dir) => prepare_out_dir(dir, options.overwrite)?,
-        None => Vec::new(),
+        None => OutDir::default(),
     };
     // A budget flight replaces the cost model at its end, whole: until
     // then it may be the model this flight started from.
     if matches!(options.mode, LodMode::Budget { .. }) {
-        earlier.retain(|f| !f.ends_with(MODEL_FILE));
+        out.earlier.retain(|f| !f.ends_with(MODEL_FILE));
     }
+    let flown = fly_in(source, path, renderer, options, std::mem::take(&mut out.earlier));
+    if flown.is_err() {
+        // Directories made for the flight and left empty go.
+        out.remove_made();
+    }
+    flown
+}
+
+/// [`fly`] in its output directory, which holds `earlier` outputs.
+fn fly_in(
+    source: &dyn TileSource,
+    path: &CameraPath,
+    renderer: &mut Renderer,
+    options: &FlyOptions,
+    mut earlier: Vec<PathBuf>,
+) -> Result<Vec<FrameRecord>, FlyError> {
     let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
     let motion = Motion { frame_s, limits: path.motion_limits(MOTION_STEPS), shadows: path.sun.is_some() };
     let mut flight = Flight::new(source, renderer, options, motion)?;

@@ -13,16 +13,43 @@ pub const STATS_FILE: &str = "stats.csv";
 /// The calibrated cost model of a budget flight, in its output directory.
 pub(super) const MODEL_FILE: &str = "cost_model.json";
 
+/// An output directory made ready for a run ([`prepare_out_dir`]).
+#[derive(Debug, Default)]
+pub struct OutDir {
+    /// An earlier run's outputs there, to go once the new run has
+    /// something to write ([`remove_outputs`]).
+    pub earlier: Vec<PathBuf>,
+    /// The directories made for the run, deepest first: a run that fails
+    /// before writing anything removes them ([`OutDir::remove_made`]).
+    made: Vec<PathBuf>,
+}
+
+impl OutDir {
+    /// Removes the directories made for the run while they are empty: a
+    /// run that failed before writing anything leaves no trace.
+    pub fn remove_made(&self) {
+        self.made.iter().take_while(|d| std::fs::remove_dir(d).is_ok()).for_each(drop);
+    }
+}
+
 /// Makes `dir` ready for a flight's or a view's outputs: made if missing;
 /// an earlier run's outputs there ([`STATS_FILE`], the cost model, frames)
 /// refused, or with `overwrite` returned, for [`remove_outputs`] once the
 /// new run has something to write: a directory never mixes two runs, and a
 /// run that fails before its first frame leaves the earlier one whole.
-pub fn prepare_out_dir(dir: &std::path::Path, overwrite: bool) -> Result<Vec<PathBuf>, FlyError> {
+pub fn prepare_out_dir(dir: &Path, overwrite: bool) -> Result<OutDir, FlyError> {
     if dir.exists() && !dir.is_dir() {
         return Err(io(dir, std::io::Error::new(std::io::ErrorKind::NotADirectory, "not a directory")));
     }
+    let made: Vec<PathBuf> =
+        dir.ancestors().take_while(|d| !d.as_os_str().is_empty() && !d.exists()).map(Path::to_path_buf).collect();
     std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
+    // A directory just made holds nothing to refuse.
+    Ok(OutDir { earlier: checked_earlier(dir, overwrite)?, made })
+}
+
+/// An earlier run's outputs in `dir`: refused without `overwrite`.
+fn checked_earlier(dir: &Path, overwrite: bool) -> Result<Vec<PathBuf>, FlyError> {
     crate::outputs::check(&[], &[&dir.join(STATS_FILE), &dir.join(MODEL_FILE)])?;
     let earlier = earlier_outputs(dir).map_err(|e| io(dir, e))?;
     if !earlier.is_empty() && !overwrite {
@@ -39,7 +66,7 @@ pub fn remove_outputs(files: &[PathBuf]) -> Result<(), FlyError> {
 /// The files in `dir` a flight or view writes: [`STATS_FILE`], the cost
 /// model and `frame_NNNNN.png` (not the view's saved `view_NNNNN.png`,
 /// which never replace a file).
-fn earlier_outputs(dir: &std::path::Path) -> std::io::Result<Vec<PathBuf>> {
+fn earlier_outputs(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut found = Vec::new();
     for entry in std::fs::read_dir(dir)? {
         let path = entry?.path();
@@ -168,6 +195,6 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-fn io(path: &std::path::Path, source: std::io::Error) -> FlyError {
+fn io(path: &Path, source: std::io::Error) -> FlyError {
     FlyError::Io { path: path.display().to_string(), source }
 }

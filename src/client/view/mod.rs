@@ -119,7 +119,7 @@ pub fn run(source: Arc<dyn TileSource>, options: ViewOptions) -> Result<Vec<Fram
     if let Some(dir) = &app.options.out_dir {
         // An earlier run's outputs go now, with `--overwrite` (checked
         // before the window opened).
-        fly::remove_outputs(&fly::prepare_out_dir(dir, app.options.render.overwrite)?)?;
+        fly::remove_outputs(&fly::prepare_out_dir(dir, app.options.render.overwrite)?.earlier)?;
         fly::write_stats(dir, &app.records)?;
     }
     Ok(app.records)
