@@ -157,6 +157,10 @@ impl Bench {
             }
             Bench::Lod { rmnp, frames, plots, flights } => {
                 let rmnp = real_region(rmnp)?;
+                if let Some(dir) = &plots {
+                    // Refused before the flyovers, not after them.
+                    sylva::outputs::check(&[], &[&dir.join("lod_demo.png")])?;
+                }
                 super::print(sylva::bench::lod_report(&rmnp, frames, plots.as_deref(), &flights)?)?;
             }
             Bench::Sse { rmnp, paths, fps, frames } => {

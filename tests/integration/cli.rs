@@ -186,6 +186,14 @@ fn benchmarks_refuse_a_named_region_or_an_output_they_cannot_use_before_running(
     let out = sylva(&["bench", "raycast", "--size", "8x8", "--plot", "/no/such/dir/plot.png"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("/no/such/dir: no such directory"), "{err}");
+    // Regression: these exited 0 with "(no plot: No such file or
+    // directory (os error 2))" and an inline note.
+    let out = sylva(&["bench", "lod", "--frames", "10", "--plots", "/no/such/plots"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.code() == Some(1) && err.contains("/no/such/plots: no such directory"), "{err}");
+    let out = sylva(&["bench", "lod", "--frames", "10", "--flights", "/no/such/flight"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.code() == Some(1) && err.contains("--flights /no/such/flight/stats.csv: No such file"), "{err}");
 }
 
 #[test]
