@@ -1,7 +1,7 @@
 //! The `sylva` command line: parses arguments, calls the library, writes
 //! files, and maps errors to messages and exit codes (1: bad input or data,
 //! 2: bad usage, from clap; 3: a seed finished with failed tiles; 128 + the
-//! signal: a seed stopped by Ctrl-C or SIGTERM). Each
+//! signal: a seed or a flight stopped by Ctrl-C or SIGTERM). Each
 //! command's arguments and run live in `cli/`.
 
 mod cli;

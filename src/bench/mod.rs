@@ -65,30 +65,51 @@ pub fn table(header: &[&str], rows: &[Vec<String>]) -> String {
 
 /// The frame-time table of `flights` and their plots
 /// (`lod_frames_<directory name>.png`).
-fn flight_report(flights: &[std::path::PathBuf], plot_dir: Option<&std::path::Path>) -> String {
+fn flight_report(flights: &[std::path::PathBuf], plot_dir: Option<&std::path::Path>) -> Result<String, LodReportError> {
     if flights.is_empty() {
-        return "(no flights under a budget given: --flights)\n".into();
+        return Ok("(no flights under a budget given: --flights)\n".into());
     }
     let read = |dir: &std::path::PathBuf| -> Result<(String, String), String> {
         let name = dir.file_name().map_or("flight".into(), |n| n.to_string_lossy().into_owned());
-        let csv = std::fs::read_to_string(dir.join("stats.csv")).map_err(|e| format!("{}: {e}", dir.display()))?;
+        // `client::fly::STATS_FILE`, in builds without the client too.
+        let file = dir.join("stats.csv");
+        let csv = std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?;
         Ok((name, csv))
     };
-    let report = flights.iter().map(read).collect::<Result<Vec<_>, _>>().and_then(|f| lod_frames::report(&f));
-    let (table, plots) = match report {
-        Ok(r) => r,
-        Err(e) => return format!("(flights: {e})\n"),
-    };
+    let flown = flights.iter().map(read).collect::<Result<Vec<_>, _>>().map_err(LodReportError::Flights)?;
+    let (table, plots) = lod_frames::report(&flown).map_err(LodReportError::Flights)?;
     let mut out = format!("### Frame time against the budget\n\n{table}\n");
-    let Some(dir) = plot_dir else { return out };
     for (name, png) in &plots {
-        let path = dir.join(format!("lod_frames_{name}.png"));
-        out += &match std::fs::write(&path, png) {
-            Ok(()) => format!("plot: {}\n", path.display()),
-            Err(e) => format!("(no plot: {e})\n"),
-        };
+        out += &write_plot(plot_dir, &format!("lod_frames_{name}.png"), png)?;
     }
-    out
+    Ok(out)
+}
+
+/// Writes a plot as `name` in `plot_dir`, if given: the line that says
+/// where it went.
+fn write_plot(plot_dir: Option<&std::path::Path>, name: &str, png: &[u8]) -> Result<String, LodReportError> {
+    let Some(dir) = plot_dir else { return Ok(String::new()) };
+    let path = dir.join(name);
+    crate::outputs::write_all(&[(&path, png)])?;
+    Ok(format!("plot: {}\n", path.display()))
+}
+
+/// Why `sylva bench lod` stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum LodReportError {
+    /// A region would not load.
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    /// A flight's statistics are missing or unusable (the message names
+    /// its file).
+    #[error("--flights {0}")]
+    Flights(String),
+    /// A plot could not be drawn.
+    #[error("plot of {0}")]
+    Plot(String),
+    /// A plot could not be written.
+    #[error(transparent)]
+    Output(#[from] crate::outputs::OutputError),
 }
 
 /// `sylva bench pipeline`: the tables for the demo and, when its data is
@@ -129,9 +150,10 @@ pub fn lod_report(
     frames: usize,
     plot_dir: Option<&std::path::Path>,
     flights: &[std::path::PathBuf],
-) -> Result<String, crate::config::ConfigError> {
+) -> Result<String, LodReportError> {
+    // The flights first: a missing one is said before the long work.
+    let mut out = vec![flight_report(flights, plot_dir)?];
     let mut scenes = vec![("demo", crate::config::load(None)?, 7.0)];
-    let mut out = vec![flight_report(flights, plot_dir)];
     match crate::config::load(Some(rmnp_config)) {
         Ok(rmnp) => scenes.push(("rmnp", rmnp, 12.0)),
         Err(e) => out.push(format!("(skipping the real-data region: {e})\n")),
@@ -155,14 +177,9 @@ pub fn lod_report(
             lod::sweep(&scene, frames / 3)
         ));
         out.push(format!("(scene built in {built_s:.1} s; trees {spacing_m} m apart at full cover)\n"));
-        if let Some(dir) = plot_dir {
-            let path = dir.join(format!("lod_{key}.png"));
-            let written = lod_plot::png(&region.name, &result)
-                .and_then(|png| std::fs::write(&path, png).map_err(|e| e.to_string()));
-            out.push(match written {
-                Ok(()) => format!("plot: {}\n", path.display()),
-                Err(e) => format!("(no plot: {e})\n"),
-            });
+        if plot_dir.is_some() {
+            let png = lod_plot::png(&region.name, &result).map_err(|e| LodReportError::Plot(format!("{key}: {e}")))?;
+            out.push(write_plot(plot_dir, &format!("lod_{key}.png"), &png)?);
         }
     }
     Ok(out.join("\n"))

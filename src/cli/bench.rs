@@ -120,6 +120,11 @@ pub enum Bench {
     },
 }
 
+/// Where `sylva bench raycast` writes its plot unless told: in the
+/// repository's docs.
+#[cfg(feature = "client")]
+const DEFAULT_RAYCAST_PLOT: &str = "docs/raycast-error-vs-time.png";
+
 /// `sylva bench raycast`.
 #[cfg(feature = "client")]
 #[derive(clap::Args)]
@@ -134,7 +139,7 @@ pub struct RaycastArgs {
     #[arg(long, default_value_t = 1024)]
     gpu_budget_mib: usize,
     /// Where to write the plot of error against time.
-    #[arg(long, default_value = "docs/raycast-error-vs-time.png")]
+    #[arg(long, default_value = DEFAULT_RAYCAST_PLOT)]
     plot: PathBuf,
     /// Run only these settings (e.g. `--only "linear 30 + 10" --only "exact + 10"`); all by default.
     #[arg(long)]
@@ -157,6 +162,10 @@ impl Bench {
             }
             Bench::Lod { rmnp, frames, plots, flights } => {
                 let rmnp = real_region(rmnp)?;
+                if let Some(dir) = &plots {
+                    // Refused before the flyovers, not after them.
+                    sylva::outputs::check(&[], &[&dir.join("lod_demo.png")])?;
+                }
                 super::print(sylva::bench::lod_report(&rmnp, frames, plots.as_deref(), &flights)?)?;
             }
             Bench::Sse { rmnp, paths, fps, frames } => {
@@ -200,15 +209,24 @@ impl RaycastArgs {
         use sylva::bench::raycast;
         let size = super::flight::parse_size(&self.size)?;
         let rmnp = real_region(self.rmnp)?;
-        sylva::outputs::check(&[], &[&self.plot])?;
+        let views = raycast::default_views(&rmnp);
+        if let Some(view) = views.iter().find(|v| !v.path.is_file()) {
+            anyhow::bail!(
+                "{}: no such file; bench raycast reads its views' camera paths from config/paths/ in the current directory: run it from the repository root",
+                view.path.display()
+            );
+        }
+        sylva::outputs::check(&[], &[&self.plot]).map_err(|e| match self.plot == std::path::Path::new(DEFAULT_RAYCAST_PLOT) {
+            true => anyhow::anyhow!("{e} (the default --plot, {DEFAULT_RAYCAST_PLOT}, is in the repository; run from its root, or give --plot FILE)"),
+            false => e.into(),
+        })?;
         let mut gpu = sylva::client::render::gpu::Gpu::open()?;
         gpu.early_depth &= !self.no_early_depth;
         let early = if gpu.early_depth { "on" } else { "off" };
         let name = format!("{}, rays in {:?} passes, early depth {early}", gpu.describe(), self.ray_pass);
         let budget = self.gpu_budget_mib << 20;
         let mut renderer =
-            sylva::client::render::Renderer::new(gpu, 513, 32, budget, false).with_ray_pass(self.ray_pass);
-        let views = raycast::default_views(&rmnp);
+            sylva::client::render::Renderer::new(gpu, 513, 32, budget, false)?.with_ray_pass(self.ray_pass);
         let rows = raycast::run(&views, size, &self.only, &mut renderer).map_err(anyhow::Error::msg)?;
         super::print(raycast::report(&rows, size, &name))?;
         sylva::outputs::write_all(&[(&self.plot, &raycast::plot(&rows).map_err(anyhow::Error::msg)?)])?;

@@ -66,7 +66,14 @@ impl FlyArgs {
         let path = sylva::client::path::CameraPath::load(&self.path)?;
         let source = self.tiles.open()?;
         let budget = self.render.gpu_budget_mib << 20;
-        let records = fly::run(source.as_ref(), &path, &options, budget)?;
+        let records = match fly::run(source.as_ref(), &path, &options, budget) {
+            // Stopped by a signal: the status a shell gives a death by it.
+            Err(e) if let Some(signal) = e.signal() => {
+                eprintln!("sylva: {e}");
+                std::process::exit(128 + signal)
+            }
+            records => records?,
+        };
         super::print(fly::summary(&records))?;
         Ok(())
     }
@@ -100,11 +107,19 @@ pub struct ViewArgs {
 #[cfg(feature = "window")]
 impl ViewArgs {
     pub fn run(self) -> Result<()> {
-        use sylva::client::view;
-        if let Some(dir) = &self.out {
-            // Refused here, before the window opens; replaced on closing.
-            fly::prepare_out_dir(dir, self.overwrite)?;
+        // Refused here, before the window opens; replaced on closing.
+        let out = self.out.as_deref().map(|dir| fly::prepare_out_dir(dir, self.overwrite)).transpose()?;
+        let viewed = self.view();
+        if let (Err(_), Some(out)) = (&viewed, out) {
+            // Directories made for the view and left empty go.
+            out.remove_made();
         }
+        viewed
+    }
+
+    /// Opens the window and views until it closes.
+    fn view(self) -> Result<()> {
+        use sylva::client::view;
         let source = self.tiles.open()?;
         let path = self.path.as_deref().map(sylva::client::path::CameraPath::load).transpose()?;
         let start = match &path {

@@ -4,7 +4,8 @@
 //! `surface` as float32 BIL, `colour` as an RGBA PNG — through a [`Link`]
 //! (timeouts, retries with backoff, a circuit breaker). A 404 is a tile
 //! without data. The tile store runs fetches on a bounded pool, which bounds
-//! the requests in flight.
+//! the requests in flight. A base that is no http:// or https:// URL is
+//! refused at once, never retried.
 
 use super::source::{FetchError, TileSource};
 use super::tile::TilePayload;
@@ -39,7 +40,7 @@ impl HttpSource {
     /// Connects to the server at `base` (e.g. `http://127.0.0.1:8080`) and
     /// reads its tileset.
     pub fn connect(base: &str) -> Result<HttpSource, super::source::OpenError> {
-        let base = base.trim_end_matches('/').to_string();
+        let base = server_base(base).map_err(super::source::OpenError::Server)?;
         let url = format!("{base}/tiles.json");
         let bad = |reason: String| super::source::OpenError::Server(format!("{url}: {reason}"));
         let body = Link::new(&CONNECT)
@@ -113,6 +114,22 @@ impl TileSource for HttpSource {
 
 /// A server's tileset and its grid, checked: a grid Sylva can tile and
 /// bounds that are a box on the globe.
+/// `base` without trailing slashes if it is an http:// or https:// URL
+/// with a host; else why not, at once (no request is retried for it).
+fn server_base(base: &str) -> Result<String, String> {
+    let refused = |why: &str| Err(format!("{base}: {why}; a server is http://HOST[:PORT] or https://HOST[:PORT]"));
+    let uri = match base.parse::<ureq::http::Uri>() {
+        Ok(uri) => uri,
+        Err(_) => return refused("not a URL"),
+    };
+    match (uri.scheme_str(), uri.host()) {
+        (Some("http" | "https"), Some(host)) if !host.is_empty() => Ok(base.trim_end_matches('/').to_string()),
+        (Some("http" | "https"), _) => refused("no host"),
+        (Some(scheme), _) => refused(&format!("the scheme {scheme}:// is not HTTP")),
+        (None, _) => refused("no scheme"),
+    }
+}
+
 fn read_tileset(body: &[u8]) -> Result<(Tileset, TileGrid), String> {
     let tileset: Tileset = serde_json::from_slice(body).map_err(|e| format!("not a tileset: {e}"))?;
     let grid = TileGrid::new(tileset.level0_delta_deg, tileset.samples).map_err(|e| e.to_string())?;
@@ -163,5 +180,24 @@ mod tests {
             assert!(e.starts_with("bounds: ") && e.contains(needle), "{bounds}: {e}");
         }
         assert!(read_tileset(b"{}").unwrap_err().contains("not a tileset"));
+    }
+
+    #[test]
+    fn a_server_that_is_no_http_url_is_refused_at_once() {
+        // Regression: these were tried three times, backing off, before
+        // "bad uri: unknown scheme".
+        for (base, why) in [
+            ("ftp://host", "the scheme ftp:// is not HTTP"),
+            ("not a url", "not a URL"),
+            ("localhost:8080", "no scheme"),
+            ("http://", "not a URL"),
+        ] {
+            let start = std::time::Instant::now();
+            let Err(e) = HttpSource::connect(base) else { panic!("{base} was taken") };
+            let said = e.to_string();
+            assert!(said.starts_with(&format!("{base}: {why}; a server is http://HOST")), "{said}");
+            assert!(start.elapsed().as_secs_f64() < 0.2, "{base}: refused after {:?}", start.elapsed());
+        }
+        assert_eq!(server_base("https://tiles.example.org:8443//").as_deref(), Ok("https://tiles.example.org:8443"));
     }
 }

@@ -19,7 +19,6 @@ pub mod coverage;
 pub mod decimate;
 pub mod display;
 pub mod failed;
-mod interrupt;
 pub mod options;
 pub mod progress;
 pub mod tile;
@@ -126,7 +125,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     let pool = threads.build().map_err(|e| SeedError::Usage(format!("--concurrency {}: {e}", options.concurrency)))?;
     let refresh_before = job.refresh_before.unwrap_or_else(|| progress.started() - CLOCK_SLACK);
     let started = Instant::now();
-    let interrupt = interrupt::Interrupt::watch();
+    let interrupt = crate::interrupt::Interrupt::watch();
     let run = Run {
         job: &job,
         store: &*store,
@@ -192,7 +191,7 @@ struct Run<'a> {
     options: &'a SeedOptions,
     /// Too many failures.
     stop: AtomicBool,
-    interrupt: &'a interrupt::Interrupt,
+    interrupt: &'a crate::interrupt::Interrupt,
     refresh_before: std::time::SystemTime,
     warned: Mutex<bool>,
     /// Whether a long wait for a lock was explained.

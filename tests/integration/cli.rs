@@ -186,6 +186,14 @@ fn benchmarks_refuse_a_named_region_or_an_output_they_cannot_use_before_running(
     let out = sylva(&["bench", "raycast", "--size", "8x8", "--plot", "/no/such/dir/plot.png"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("/no/such/dir: no such directory"), "{err}");
+    // Regression: these exited 0 with "(no plot: No such file or
+    // directory (os error 2))" and an inline note.
+    let out = sylva(&["bench", "lod", "--frames", "10", "--plots", "/no/such/plots"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.code() == Some(1) && err.contains("/no/such/plots: no such directory"), "{err}");
+    let out = sylva(&["bench", "lod", "--frames", "10", "--flights", "/no/such/flight"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.code() == Some(1) && err.contains("--flights /no/such/flight/stats.csv: No such file"), "{err}");
 }
 
 #[test]
@@ -213,4 +221,39 @@ fn geotiff_output_has_the_geotransform_gdal_reads() {
     assert!(text.contains("Origin = (10.099750000000000,46.400500000000001)"), "{text}");
     assert!(text.contains("Pixel Size = (0.000500000000000,-0.001000000000000)"), "{text}");
     assert!(text.contains("NoData Value=-32768"), "{text}");
+}
+
+#[test]
+fn bench_raycast_elsewhere_than_the_repository_root_says_where_to_run_it() {
+    // Regression: run elsewhere it said "docs: no such directory to write
+    // into", or with --plot "config/paths/demo_valley.toml: No such file".
+    let dir = TempDir::new("cli-raycast-elsewhere");
+    let raycast = |args: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_sylva"))
+            .args(["bench", "raycast", "--size", "8x8"])
+            .args(args)
+            .current_dir(&dir.0)
+            .output()
+            .expect("run sylva");
+        assert_eq!(out.status.code(), Some(1));
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    for args in [&[][..], &["--plot", "plot.png"][..]] {
+        let err = raycast(args);
+        assert!(
+            err.contains("config/paths/demo_valley.toml: no such file")
+                && err.contains("camera paths from config/paths/ in the current directory")
+                && err.contains("run it from the repository root"),
+            "{args:?}: {err}"
+        );
+    }
+    // With the paths there, the default plot's directory is missing.
+    let paths = dir.join("config/paths");
+    std::fs::create_dir_all(&paths).unwrap();
+    for entry in std::fs::read_dir(common::repo().join("config/paths")).unwrap() {
+        let file = entry.unwrap().path();
+        std::fs::copy(&file, paths.join(file.file_name().unwrap())).unwrap();
+    }
+    let err = raycast(&[]);
+    assert!(err.contains("docs: no such directory") && err.contains("give --plot FILE"), "{err}");
 }

@@ -285,3 +285,102 @@ fn a_flight_with_rays_in_a_compute_pass_keeps_its_tiles_within_the_gpu_budget() 
         assert!(number("gpu_bytes") > 0.0 && number("gpu_bytes") <= budget_mib * 1024.0 * 1024.0, "{row:?}");
     }
 }
+
+/// `sylva fly` with `args`, writing to `out`, left running.
+fn spawn_fly(args: &[&str], out: &std::path::Path) -> std::process::Child {
+    std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .arg("fly")
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run sylva fly")
+}
+
+/// Waits for `file` to appear (a minute at most).
+fn wait_for(file: &std::path::Path) {
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while !file.exists() {
+        assert!(std::time::Instant::now() < deadline, "{} never appeared", file.display());
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
+/// Checks what a flight of `of` frames stopped early left in `out` — its
+/// finished frames, stats.csv with a row for each, no partial file — and
+/// that it said so; returns how many frames it finished.
+fn assert_kept(out: &std::path::Path, of: usize, stderr: &str) -> usize {
+    let names: Vec<String> =
+        std::fs::read_dir(out).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    let frames = names.iter().filter(|n| n.starts_with("frame_") && n.ends_with(".png")).count();
+    assert!(names.iter().all(|n| !n.ends_with(".partial")), "{names:?}");
+    assert!((1..of).contains(&frames), "{frames} of {of} frames: {stderr}");
+    let rows = stats(out);
+    let listed: Vec<&str> = rows.iter().map(|r| r["frame"].as_str()).collect();
+    assert_eq!(listed, (0..frames).map(|k| k.to_string()).collect::<Vec<_>>(), "a row for each frame kept");
+    for k in 0..frames {
+        image::open(out.join(format!("frame_{k:05}.png"))).expect("a whole PNG");
+    }
+    let said = format!("stopped after {frames} of {of} frames; their frames and stats.csv are in {}", out.display());
+    assert!(stderr.contains(&said), "{stderr}");
+    frames
+}
+
+#[test]
+fn a_flight_stopped_by_a_signal_keeps_its_frames_and_their_statistics() {
+    // Regression: Ctrl-C or SIGTERM left the frames done and no stats.csv.
+    let dir = TempDir::new("fly-signal");
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    for (signal, status) in [("INT", 130), ("TERM", 143)] {
+        let out = dir.join(signal);
+        let flight = spawn_fly(&["--path", path.to_str().unwrap(), "--frames", "500", "--size", "32x24"], &out);
+        wait_for(&out.join("frame_00001.png"));
+        let sent = std::process::Command::new("kill").arg(format!("-{signal}")).arg(flight.id().to_string()).status();
+        assert!(sent.unwrap().success());
+        let output = flight.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(status), "128 + the signal: {stderr}");
+        assert!(stderr.contains("interrupted by signal"), "{stderr}");
+        assert_kept(&out, 500, &stderr);
+    }
+}
+
+#[test]
+fn a_flight_whose_server_dies_keeps_its_frames_and_their_statistics() {
+    // Regression: a flight whose `sylva serve` was killed left its first
+    // frame and no stats.csv.
+    let dir = TempDir::new("fly-server-dies");
+    let server = Server::start(None, &dir.join("cache"));
+    let path = common::repo().join("config/paths/demo_dive.toml");
+    let out = dir.join("out");
+    let args = ["--server", &server.base, "--path", path.to_str().unwrap(), "--frames", "60", "--size", "32x24"];
+    let flight = spawn_fly(&args, &out);
+    wait_for(&out.join("frame_00000.png"));
+    drop(server);
+    let output = flight.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert_kept(&out, 60, &stderr);
+}
+
+#[test]
+fn a_flight_that_fails_before_writing_removes_the_directories_it_made() {
+    // Regression: a failed flight left the empty --out it had made.
+    let dir = TempDir::new("fly-made");
+    let path = common::repo().join("config/paths/demo_dive.toml");
+    let fail = |out: &std::path::Path| {
+        let args = ["--path", path.to_str().unwrap(), "--frames", "2", "--size", "32x24", "--gpu-budget-mib", "1"];
+        let output = spawn_fly(&args, out).wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+        assert!(output.status.code() == Some(1) && stderr.contains("--gpu-budget-mib"), "{stderr}");
+    };
+    fail(&dir.join("new/deeper"));
+    assert!(!dir.join("new").exists(), "both directories made went");
+    // A directory that was there stays, empty as it was.
+    std::fs::create_dir(dir.join("there")).unwrap();
+    fail(&dir.join("there"));
+    assert_eq!(std::fs::read_dir(dir.join("there")).unwrap().count(), 0);
+}

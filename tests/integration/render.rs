@@ -48,7 +48,7 @@ fn with_renderer_in<R>(pass: RayPass, samples: u32, halo: u32, f: impl FnOnce(&m
     let mut map = RENDERERS.get_or_init(|| Mutex::new(HashMap::new())).lock().unwrap_or_else(|e| e.into_inner());
     let renderer = map.entry((samples, halo, pass)).or_insert_with(|| {
         let gpu = Gpu::open().expect("a GPU adapter (lavapipe: apt-get install mesa-vulkan-drivers)");
-        Renderer::new(gpu, samples, halo, 256 << 20, true).with_ray_pass(pass)
+        Renderer::new(gpu, samples, halo, 256 << 20, true).expect("room for the tile cache").with_ray_pass(pass)
     });
     f(renderer)
 }
@@ -215,6 +215,33 @@ fn gpu_matches_the_reference_on_real_tiles() {
 }
 
 #[test]
+fn render_targets_the_gpu_cannot_hold_are_an_error_naming_their_size() {
+    // Regression: a 16384×16384 flight on lavapipe panicked in wgpu's
+    // handler for uncaptured errors ("Out of Memory").
+    let (_, tiles, camera, sun) = demo_scene();
+    let (samples, halo) = (tiles[0].frame.samples, tiles[0].halo as u32);
+    let settings = settings(Traversal::Exact, sun);
+    let refs: Vec<&TileData> = tiles.iter().collect();
+    with_renderer(samples, halo, |r| {
+        let side = r.gpu().device.limits().max_texture_dimension_2d;
+        let wide = Camera { width_px: side + 1, height_px: 1, ..camera };
+        let err = r.render(&wide, &refs, &settings, Readback::None).err().map(|e| e.to_string());
+        let wanted =
+            format!("cannot allocate render targets of {}×1: the GPU's textures are at most {side}×{side}", side + 1);
+        assert_eq!(err.as_deref(), Some(wanted.as_str()));
+        // Beyond the GPU's memory (lavapipe's) or not, never a panic.
+        let huge = Camera { width_px: 16384, height_px: 16384, ..camera };
+        if let Err(e) = r.render(&huge, &[], &settings, Readback::None) {
+            let said = e.to_string();
+            assert!(said.starts_with("cannot allocate render targets of 16384×16384: "), "{said}");
+        }
+        // The renderer goes on at a size it can hold.
+        let rendered = r.render(&camera, &refs, &settings, Readback::All).expect("fits");
+        assert!(rendered.view_z_m.iter().any(|&z| z > 0.0), "the frame shows the tiles");
+    });
+}
+
+#[test]
 fn a_coarser_hull_keeps_the_exact_traversal_on_the_reference() {
     // Hull quads of 64 samples (for software rasterisers): rays start
     // farther from the surface, so they fetch more, and still hit the same.
@@ -222,8 +249,9 @@ fn a_coarser_hull_keeps_the_exact_traversal_on_the_reference() {
     let settings = settings(Traversal::Exact, sun);
     let fine = render_both(&tiles, &camera, &settings);
     let gpu = Gpu::open().expect("a GPU adapter");
-    let mut coarse =
-        Renderer::new(gpu, tiles[0].frame.samples, tiles[0].halo as u32, 256 << 20, false).with_hull_factor(4);
+    let mut coarse = Renderer::new(gpu, tiles[0].frame.samples, tiles[0].halo as u32, 256 << 20, false)
+        .expect("room for the tile cache")
+        .with_hull_factor(4);
     let refs: Vec<&TileData> = tiles.iter().collect();
     let rendered = coarse.render(&camera, &refs, &settings, Readback::All).expect("fits the cache");
     let departure = reference::compare(&rendered.colour, &rendered.view_z_m, &fine.cpu);

@@ -111,8 +111,11 @@ fn a_view_starts_on_a_path_and_flies_under_a_budget() {
 
 #[test]
 fn without_a_display_the_view_says_so() {
-    let output = view(None, &["--frames", "1"]);
+    let dir = TempDir::new("view-no-display");
+    let out = dir.join("new");
+    let output = view(None, &["--frames", "1", "--out", out.to_str().unwrap()]);
     assert_eq!(output.status.code(), Some(1));
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("needs a display"), "{stderr}");
+    assert!(!out.exists(), "the --out it made and left empty is gone");
 }

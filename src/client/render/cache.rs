@@ -13,6 +13,7 @@
 use super::super::hull::{self, HullVertex, QUAD_SAMPLES};
 use super::super::terrain::TerrainVertex;
 use super::super::tile::TileData;
+use super::gpu::{AllocError, allocate};
 use wgpu::util::DeviceExt;
 
 /// Texture arrays hold at most this many layers on every adapter.
@@ -114,8 +115,14 @@ pub struct TileCache {
 impl TileCache {
     /// A cache for tiles of `samples` per side with `halo`, within
     /// `budget_bytes` (at least one slot), with a pool of morph layers if
-    /// `geomorph`.
-    pub fn new(device: &wgpu::Device, samples: u32, halo: u32, budget_bytes: usize, geomorph: bool) -> TileCache {
+    /// `geomorph`; an error if the GPU has not the memory.
+    pub fn new(
+        device: &wgpu::Device,
+        samples: u32,
+        halo: u32,
+        budget_bytes: usize,
+        geomorph: bool,
+    ) -> Result<TileCache, AllocError> {
         let size = samples + 2 * halo;
         let mip_rects = atlas(samples + 1);
         let atlas_w = mip_rects.iter().map(|r| r[0] + r[2]).max().unwrap_or(1);
@@ -144,18 +151,28 @@ impl TileCache {
         };
         // Without geomorphing the pool is one texel, for the bind group.
         let pool = if geomorph { (size, size, layers) } else { (1, 1, 1) };
-        TileCache {
-            texels: array("tile texels", (size, size, count), wgpu::TextureFormat::Rgba32Float),
-            colours: array("tile colours", (size, size, count), wgpu::TextureFormat::Rgba8Unorm),
-            mip: array("tile max mipmaps", (atlas_w, atlas_h, count), wgpu::TextureFormat::R32Float),
-            morph_from: array("morph surfaces", pool, wgpu::TextureFormat::Rg32Float),
+        let mib = (count as usize * slot_bytes + layers as usize * morph_bytes(size)) >> 20;
+        let what = format!("a GPU tile cache of {count} tiles ({mib} MiB; --gpu-budget-mib sets it)");
+        let [texels, colours, mip, morph_from] = allocate(device, what, || {
+            [
+                array("tile texels", (size, size, count), wgpu::TextureFormat::Rgba32Float),
+                array("tile colours", (size, size, count), wgpu::TextureFormat::Rgba8Unorm),
+                array("tile max mipmaps", (atlas_w, atlas_h, count), wgpu::TextureFormat::R32Float),
+                array("morph surfaces", pool, wgpu::TextureFormat::Rg32Float),
+            ]
+        })?;
+        Ok(TileCache {
+            texels,
+            colours,
+            mip,
+            morph_from,
             mip_rects,
             size,
             slots: (0..count).map(|_| None).collect(),
             slot_bytes,
             morph_layers: vec![None; layers as usize],
             hull_factor: 1,
-        }
+        })
     }
 
     /// Uploads hulls with quads `factor` times as large as the tiles'

@@ -1,7 +1,9 @@
 //! The GPU: an adapter and device, headless or able to present to a
 //! window's surface, with timestamp queries when the adapter has them. `WGPU_BACKEND` (e.g.
 //! `vulkan`, `gl`) picks the backend; on a machine without a GPU Mesa's
-//! lavapipe serves Vulkan in software.
+//! lavapipe serves Vulkan in software. Large allocations go through
+//! [`allocate`]: a GPU out of memory is an error, where wgpu's default
+//! handler for uncaptured errors panics.
 
 /// Why no GPU could be opened.
 #[derive(Debug, thiserror::Error)]
@@ -19,6 +21,27 @@ pub enum GpuError {
         "the GPU {0} lacks {1:?}: the renderer lights splats in compute shaders and counts rays from fragment shaders"
     )]
     Lacks(String, wgpu::DownlevelFlags),
+}
+
+/// GPU memory that could not be had.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot allocate {what}: {why}")]
+pub struct AllocError {
+    /// What was wanted, e.g. "render targets of 640×480".
+    pub what: String,
+    /// Why not: out of GPU memory, or beyond one of the GPU's limits.
+    pub why: String,
+}
+
+/// The GPU objects `make` creates, or an [`AllocError`] for `what` if the
+/// device ran out of memory making them.
+pub fn allocate<T>(device: &wgpu::Device, what: String, make: impl FnOnce() -> T) -> Result<T, AllocError> {
+    let scope = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let made = make();
+    match pollster::block_on(scope.pop()) {
+        None => Ok(made),
+        Some(_) => Err(AllocError { what, why: "out of GPU memory".into() }),
+    }
 }
 
 /// What the renderer needs beyond WebGPU's downlevel defaults.

@@ -30,7 +30,7 @@ use super::trees::Splat;
 use cache::{CacheFull, TileCache};
 use compute::ComputeRays;
 pub use compute::RayPass;
-use gpu::Gpu;
+use gpu::{AllocError, Gpu};
 use pipeline::{Pipelines, RayVariant};
 use splats::SplatBuffers;
 use std::time::Instant;
@@ -53,6 +53,17 @@ pub enum Readback {
     Colour,
     /// Colour, depth and fetch counts.
     All,
+}
+
+/// Why a frame could not be rendered.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    /// The frame has more tiles than the GPU cache holds.
+    #[error(transparent)]
+    Cache(#[from] CacheFull),
+    /// The render targets of the frame's size could not be allocated.
+    #[error(transparent)]
+    Targets(#[from] AllocError),
 }
 
 /// Counts and times of one frame.
@@ -177,11 +188,12 @@ impl Renderer {
 
     /// A renderer for tiles of `samples` per side with `halo`, keeping at
     /// most `budget_bytes` of tiles on the GPU, and, if `geomorph`, room for
-    /// morphing tiles' coarser surfaces within that budget.
-    pub fn new(gpu: Gpu, samples: u32, halo: u32, budget_bytes: usize, geomorph: bool) -> Renderer {
+    /// morphing tiles' coarser surfaces within that budget; an error if the
+    /// GPU has not the memory for that cache.
+    pub fn new(gpu: Gpu, samples: u32, halo: u32, budget_bytes: usize, geomorph: bool) -> Result<Renderer, AllocError> {
         let device = &gpu.device;
+        let cache = TileCache::new(device, samples, halo, budget_bytes, geomorph)?;
         let pipelines = Pipelines::new(device, gpu.early_depth);
-        let cache = TileCache::new(device, samples, halo, budget_bytes, geomorph);
         let frame_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("frame"),
             size: std::mem::size_of::<FrameUniform>() as u64,
@@ -193,7 +205,7 @@ impl Renderer {
         let tile_buffer = tile_buffer(device, cache.capacity());
         let tile_group = pipelines.tile_group(device, &tile_buffer);
         let timer = PassTimer::new(device, &gpu.queue, gpu.timestamps);
-        Renderer {
+        Ok(Renderer {
             gpu,
             pipelines,
             cache,
@@ -212,7 +224,7 @@ impl Renderer {
             frame_no: 0,
             count_work: false,
             counting: false,
-        }
+        })
     }
 
     /// Whether frames are submitted without waiting for the GPU, up to
@@ -260,7 +272,7 @@ impl Renderer {
         tiles: &[&TileData],
         settings: &FrameSettings,
         readback: Readback,
-    ) -> Result<Rendered, CacheFull> {
+    ) -> Result<Rendered, RenderError> {
         let draws: Vec<Draw> = tiles
             .iter()
             .map(|&tile| Draw { tile, shadow_steps: settings.shadow_steps, splats: &[], morph_weight: 1.0 })
@@ -275,11 +287,14 @@ impl Renderer {
         draws: &[Draw],
         settings: &FrameSettings,
         readback: Readback,
-    ) -> Result<Rendered, CacheFull> {
+    ) -> Result<Rendered, RenderError> {
         self.frame_no += 1;
         let size = (camera.width_px, camera.height_px);
         if self.targets.as_ref().map(|t| t.size) != Some(size) {
-            self.targets = Some(Targets::new(&self.gpu.device, size));
+            // The old targets go first: their memory may be what the new
+            // ones need.
+            self.targets = None;
+            self.targets = Some(Targets::new(&self.gpu.device, size)?);
         }
         let start = Instant::now();
         self.counting = self.count_work && readback == Readback::All && !self.pipelined;

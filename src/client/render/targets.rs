@@ -1,7 +1,10 @@
 //! Off-screen render targets (colour, per-pixel data, depth) and reading
 //! the colour ones back: rows are copied with wgpu's 256-byte
 //! row alignment and unpadded here. Depth is never copied (GL cannot).
+//! Targets beyond the GPU's limits, or more than its memory holds, are an
+//! error naming their size.
 
+use super::gpu::{AllocError, allocate};
 use super::pipeline::{COLOUR_FORMAT, DEPTH_FORMAT, PIXEL_DATA_FORMAT};
 
 /// The three targets of one image size.
@@ -19,8 +22,17 @@ pub struct Targets {
 }
 
 impl Targets {
-    /// Targets of `size`.
-    pub fn new(device: &wgpu::Device, size: (u32, u32)) -> Targets {
+    /// Targets of `size`, if the GPU can hold them and read them back.
+    pub fn new(device: &wgpu::Device, size: (u32, u32)) -> Result<Targets, AllocError> {
+        let what = format!("render targets of {}×{}", size.0, size.1);
+        if let Some(why) = beyond_limits(&device.limits(), size) {
+            return Err(AllocError { what, why });
+        }
+        allocate(device, what, || Targets::make(device, size))
+    }
+
+    /// The textures of `size`, unchecked.
+    fn make(device: &wgpu::Device, size: (u32, u32)) -> Targets {
         // Colour and data are also written by the compute ray passes, and
         // the data read by their depth fill.
         let written = wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING;
@@ -45,14 +57,39 @@ impl Targets {
     }
 }
 
+/// Why targets of `size` are beyond the GPU's `limits`, if they are: a
+/// side longer than its textures', or a readback buffer (of the widest
+/// texels, the pixel data) larger than its buffers.
+fn beyond_limits(limits: &wgpu::Limits, (w, h): (u32, u32)) -> Option<String> {
+    let side = limits.max_texture_dimension_2d;
+    if w > side || h > side {
+        return Some(format!("the GPU's textures are at most {side}×{side}"));
+    }
+    let texel_bytes = PIXEL_DATA_FORMAT.block_copy_size(None).unwrap_or(16);
+    let readback = u64::from(padded_row(w, texel_bytes)) * u64::from(h);
+    let mib = |bytes: u64| bytes as f64 / f64::from(1 << 20);
+    (readback > limits.max_buffer_size).then(|| {
+        format!(
+            "reading them back takes a buffer of {:.0} MiB, and the GPU's buffers are at most {:.0} MiB",
+            mib(readback),
+            mib(limits.max_buffer_size)
+        )
+    })
+}
+
+/// Bytes of one row of `w` texels of `texel_bytes` in a readback buffer.
+fn padded_row(w: u32, texel_bytes: u32) -> u32 {
+    (w * texel_bytes).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
+}
+
 /// Reads one 2-D texture back, `texel_bytes` per texel, rows unpadded.
 pub fn read_texture(device: &wgpu::Device, queue: &wgpu::Queue, texture: &wgpu::Texture, texel_bytes: u32) -> Vec<u8> {
     let (w, h) = (texture.width(), texture.height());
     let row = w * texel_bytes;
-    let padded = row.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let padded = padded_row(w, texel_bytes);
     let buffer = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("readback"),
-        size: (padded * h) as u64,
+        size: u64::from(padded) * u64::from(h),
         usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
         mapped_at_creation: false,
     });

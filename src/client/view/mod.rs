@@ -69,6 +69,9 @@ pub enum ViewError {
     /// No GPU.
     #[error(transparent)]
     Gpu(#[from] GpuError),
+    /// The GPU has not the memory for the tile cache.
+    #[error(transparent)]
+    Alloc(#[from] crate::client::render::gpu::AllocError),
     /// The window could not show frames.
     #[error(transparent)]
     Present(#[from] PresentError),
@@ -116,7 +119,7 @@ pub fn run(source: Arc<dyn TileSource>, options: ViewOptions) -> Result<Vec<Fram
     if let Some(dir) = &app.options.out_dir {
         // An earlier run's outputs go now, with `--overwrite` (checked
         // before the window opened).
-        fly::remove_outputs(&fly::prepare_out_dir(dir, app.options.render.overwrite)?)?;
+        fly::remove_outputs(&fly::prepare_out_dir(dir, app.options.render.overwrite)?.earlier)?;
         fly::write_stats(dir, &app.records)?;
     }
     Ok(app.records)
@@ -243,9 +246,10 @@ impl Viewer {
         let gpu = Gpu::open_on(&instance, Some(&surface))?;
         let presenter = Presenter::new(&gpu, instance.clone(), window.clone(), surface)?;
         let r = &options.render;
-        let renderer = Renderer::new(gpu, source.grid().samples(), r.halo as u32, options.gpu_budget_bytes, r.geomorph)
-            .with_hull_factor(r.hull_factor)
-            .with_ray_pass(r.ray_pass);
+        let renderer =
+            Renderer::new(gpu, source.grid().samples(), r.halo as u32, options.gpu_budget_bytes, r.geomorph)?
+                .with_hull_factor(r.hull_factor)
+                .with_ray_pass(r.ray_pass);
         let controls = Controls::new(options.start, options.start.eye.height_m);
         let motion = Motion { frame_s: 1.0 / 60.0, limits: controls.limits(), shadows: options.sun_ecef.is_some() };
         let mut flight = fly::Flight::new(source.as_ref(), &renderer, r, motion)?;

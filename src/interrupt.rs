@@ -1,17 +1,19 @@
-//! Ctrl-C or SIGTERM during a seed: the first signal stops it after the
-//! tiles in hand, so their locks are released and the progress is saved;
-//! a second one exits at once. Outside a seed the signals keep their
+//! Ctrl-C or SIGTERM during a long run — a seed (feature `server`), a
+//! flight (feature `client`): the first signal stops it after the work in
+//! hand (a seed's tiles, so their locks are released and the progress is
+//! saved; a flight's frame, so its frames and statistics are written); a
+//! second one exits at once. Outside such a run the signals keep their
 //! default action (the process ends), also in a process that runs several
-//! seeds (`sylva bench seed`).
+//! (`sylva bench seed`).
 
 use signal_hook::consts::{SIGINT, SIGTERM};
 use signal_hook::flag;
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-/// True while no seed runs: a signal then takes its default action.
+/// True while no run is watched: a signal then takes its default action.
 static IDLE: AtomicBool = AtomicBool::new(true);
-/// True once a signal came during the running seed.
+/// True once a signal came during the watched run.
 static CAME: AtomicBool = AtomicBool::new(false);
 /// Which signal that was.
 static WHICH: AtomicUsize = AtomicUsize::new(0);
@@ -22,23 +24,23 @@ fn install() {
     INSTALLED.get_or_init(|| {
         for signal in [SIGINT, SIGTERM] {
             let installed = flag::register_conditional_default(signal, &IDLE)
-                // A second signal in a seed: 128 + its number, as a shell
+                // A second signal in a run: 128 + its number, as a shell
                 // reports a death by it.
                 .and_then(|_| flag::register_conditional_shutdown(signal, 128 + signal, &CAME))
                 .and_then(|_| flag::register_usize(signal, &WHICH, signal as usize))
                 .and_then(|_| flag::register(signal, &CAME));
             if let Err(e) = installed {
-                tracing::warn!("Ctrl-C will end a seed at once (signal {signal} not watched: {e})");
+                tracing::warn!("Ctrl-C will end the run at once (signal {signal} not watched: {e})");
             }
         }
     });
 }
 
-/// A seed's watch for the signals, from `watch` until dropped.
+/// A run's watch for the signals, from `watch` until dropped.
 pub struct Interrupt(());
 
 impl Interrupt {
-    /// Starts watching (one seed at a time per process).
+    /// Starts watching (one run at a time per process).
     pub fn watch() -> Interrupt {
         install();
         CAME.store(false, Ordering::SeqCst);

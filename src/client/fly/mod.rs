@@ -9,6 +9,8 @@
 //! camera are drawn as splats ([`super::trees`]): at the resolution their
 //! screen size asks for, or under a budget as the selection allots.
 
+mod outputs;
+
 use super::camera::Camera;
 use super::lod::ahead::Lookahead;
 use super::lod::budget::{Budget, Choice};
@@ -19,9 +21,8 @@ use super::path::CameraPath;
 use super::quadtree::{self, LodRule};
 use super::raycast::{Traversal, TreeBlend};
 use super::render::RayPass;
-use super::render::cache::CacheFull;
 use super::render::uniforms::FrameSettings;
-use super::render::{Draw, DrawWork, FrameStats, Readback, Rendered, Renderer};
+use super::render::{Draw, DrawWork, FrameStats, Readback, RenderError, Rendered, Renderer};
 use super::source::TileSource;
 use super::sse::SseSelector;
 use super::store::{LoadError, TileStore};
@@ -29,8 +30,9 @@ use super::tile::TileData;
 use super::trees::{self, TreeSettings};
 use crate::lod::model::CostModel;
 use glam::DVec3;
+use outputs::MODEL_FILE;
+pub use outputs::{OutDir, STATS_FILE, prepare_out_dir, remove_outputs, to_csv, write_png, write_stats};
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
@@ -204,9 +206,10 @@ pub enum FlyError {
     /// A tile could not be loaded.
     #[error(transparent)]
     Load(#[from] LoadError),
-    /// The GPU cache cannot hold even the coarsest view.
+    /// The GPU cache cannot hold even the coarsest view, or the frame's
+    /// render targets cannot be allocated.
     #[error(transparent)]
-    Cache(#[from] CacheFull),
+    Render(#[from] RenderError),
     /// The LOD selection thread could not start.
     #[error("starting the LOD selection thread: {0}")]
     Thread(std::io::Error),
@@ -218,6 +221,20 @@ pub enum FlyError {
         "{0}: holds an earlier flight's or view's outputs ({1}); give another --out, or --overwrite to replace them"
     )]
     Earlier(PathBuf, String),
+    /// The flight stopped before its last frame; the frames it finished
+    /// and their statistics were written (`kept` says where, or why not).
+    #[error("{why}; stopped after {done} of {of} frames{kept}")]
+    Stopped {
+        /// Why it stopped.
+        why: Stop,
+        /// Frames finished.
+        done: usize,
+        /// Frames asked for.
+        of: usize,
+        /// "; their frames and stats.csv are in DIR", or why not (empty
+        /// without an output directory or a frame to keep).
+        kept: String,
+    },
     /// Writing frames or statistics failed.
     #[error("{path}: {source}")]
     Io {
@@ -228,108 +245,125 @@ pub enum FlyError {
     },
 }
 
-/// The flight's statistics in its output directory.
-pub const STATS_FILE: &str = "stats.csv";
-/// The calibrated cost model of a budget flight, in its output directory.
-const MODEL_FILE: &str = "cost_model.json";
+impl FlyError {
+    /// The signal (Ctrl-C, SIGTERM) that stopped the flight, if one did.
+    pub fn signal(&self) -> Option<i32> {
+        match self {
+            FlyError::Stopped { why: Stop::Signal(signal), .. } => Some(*signal),
+            _ => None,
+        }
+    }
+}
 
-/// Flies `path` over `source`, rendering with `renderer`.
+/// Why a flight stopped before its last frame.
+#[derive(Debug)]
+pub enum Stop {
+    /// Ctrl-C or SIGTERM: the signal's number.
+    Signal(i32),
+    /// An error.
+    Failed(Box<FlyError>),
+}
+
+impl Stop {
+    fn failed(e: FlyError) -> Stop {
+        Stop::Failed(Box::new(e))
+    }
+}
+
+impl std::fmt::Display for Stop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Stop::Signal(signal) => write!(f, "interrupted by signal {signal}"),
+            Stop::Failed(e) => e.fmt(f),
+        }
+    }
+}
+
+/// Flies `path` over `source`, rendering with `renderer`. A flight that
+/// stops early, by an error or by Ctrl-C or SIGTERM, writes the statistics
+/// of the frames it finished beside their PNGs and says so
+/// ([`FlyError::Stopped`]).
 pub fn fly(
     source: &dyn TileSource,
     path: &CameraPath,
     renderer: &mut Renderer,
     options: &FlyOptions,
 ) -> Result<Vec<FrameRecord>, FlyError> {
-    let mut earlier = match &options.out_dir {
+    let mut out = match &options.out_dir {
         Some(dir) => prepare_out_dir(dir, options.overwrite)?,
-        None => Vec::new(),
+        None => OutDir::default(),
     };
     // A budget flight replaces the cost model at its end, whole: until
     // then it may be the model this flight started from.
     if matches!(options.mode, LodMode::Budget { .. }) {
-        earlier.retain(|f| !f.ends_with(MODEL_FILE));
+        out.earlier.retain(|f| !f.ends_with(MODEL_FILE));
     }
+    let flown = fly_in(source, path, renderer, options, std::mem::take(&mut out.earlier));
+    if flown.is_err() {
+        // Directories made for the flight and left empty go.
+        out.remove_made();
+    }
+    flown
+}
+
+/// [`fly`] in its output directory, which holds `earlier` outputs.
+fn fly_in(
+    source: &dyn TileSource,
+    path: &CameraPath,
+    renderer: &mut Renderer,
+    options: &FlyOptions,
+    mut earlier: Vec<PathBuf>,
+) -> Result<Vec<FrameRecord>, FlyError> {
     let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
     let motion = Motion { frame_s, limits: path.motion_limits(MOTION_STEPS), shadows: path.sun.is_some() };
     let mut flight = Flight::new(source, renderer, options, motion)?;
     let mut records = Vec::with_capacity(options.frames);
+    let stopped = fly_path(&mut flight, (source, path, renderer), options, (&mut earlier, &mut records)).err();
+    let model = flight.model();
+    match (stopped, &options.out_dir) {
+        (None, Some(dir)) => outputs::write_results(dir, &records, model.as_ref()).map(|()| records),
+        (None, None) => Ok(records),
+        // Nothing done, nothing written: an earlier run's outputs are whole.
+        (Some(Stop::Failed(e)), _) if records.is_empty() => Err(*e),
+        (Some(why), dir) => {
+            let kept = match dir.as_deref().filter(|_| !records.is_empty()) {
+                Some(dir) => outputs::keep(dir, &records, model.as_ref(), options.write_frames),
+                None => String::new(),
+            };
+            Err(FlyError::Stopped { why, done: records.len(), of: options.frames, kept })
+        }
+    }
+}
+
+/// Renders the path's frames, each one's PNG written once it is done, and
+/// keeps their records, until the last frame, an error, or Ctrl-C or
+/// SIGTERM (after the frame in hand; a second signal ends the process).
+fn fly_path(
+    flight: &mut Flight,
+    (source, path, renderer): (&dyn TileSource, &CameraPath, &mut Renderer),
+    options: &FlyOptions,
+    (earlier, records): (&mut Vec<PathBuf>, &mut Vec<FrameRecord>),
+) -> Result<(), Stop> {
+    let interrupt = crate::interrupt::Interrupt::watch();
     for k in 0..options.frames {
+        if let Some(signal) = interrupt.came() {
+            return Err(Stop::Signal(signal));
+        }
         let shot = Shot {
             index: k,
             t_s: path.time(k, options.frames),
             camera: path.camera(k, options.frames, options.size),
             sun_ecef: path.sun_ecef(),
         };
-        let framed = flight.frame(source, renderer, options, &shot, Readback::All)?;
+        let framed = flight.frame(source, renderer, options, &shot, Readback::All).map_err(Stop::failed)?;
         // The earlier run's outputs go once this one has a frame to show.
-        remove_outputs(&std::mem::take(&mut earlier))?;
+        remove_outputs(&std::mem::take(earlier)).map_err(Stop::failed)?;
         if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
-            write_png(&dir.join(format!("frame_{k:05}.png")), &framed.rendered, options.size)?;
+            write_png(&dir.join(format!("frame_{k:05}.png")), &framed.rendered, options.size).map_err(Stop::failed)?;
         }
         records.push(framed.record);
     }
-    if let Some(dir) = &options.out_dir {
-        write_stats(dir, &records)?;
-        if let Some(model) = flight.model() {
-            // The calibrated model, for `--cost-model` on the next flight.
-            let file = dir.join(MODEL_FILE);
-            std::fs::write(&file, model.to_json()).map_err(|e| io(&file, e))?;
-        }
-    }
-    Ok(records)
-}
-
-/// Makes `dir` ready for a flight's or a view's outputs: made if missing;
-/// an earlier run's outputs there ([`STATS_FILE`], the cost model, frames)
-/// refused, or with `overwrite` returned, for [`remove_outputs`] once the
-/// new run has something to write: a directory never mixes two runs, and a
-/// run that fails before its first frame leaves the earlier one whole.
-pub fn prepare_out_dir(dir: &std::path::Path, overwrite: bool) -> Result<Vec<PathBuf>, FlyError> {
-    if dir.exists() && !dir.is_dir() {
-        return Err(io(dir, std::io::Error::new(std::io::ErrorKind::NotADirectory, "not a directory")));
-    }
-    std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
-    crate::outputs::check(&[], &[&dir.join(STATS_FILE), &dir.join(MODEL_FILE)])?;
-    let earlier = earlier_outputs(dir).map_err(|e| io(dir, e))?;
-    if !earlier.is_empty() && !overwrite {
-        return Err(FlyError::Earlier(dir.to_path_buf(), describe_outputs(&earlier)));
-    }
-    Ok(earlier)
-}
-
-/// Removes an earlier run's outputs (from [`prepare_out_dir`]).
-pub fn remove_outputs(files: &[PathBuf]) -> Result<(), FlyError> {
-    files.iter().try_for_each(|f| std::fs::remove_file(f).map_err(|e| io(f, e)))
-}
-
-/// The files in `dir` a flight or view writes: [`STATS_FILE`], the cost
-/// model and `frame_NNNNN.png` (not the view's saved `view_NNNNN.png`,
-/// which never replace a file).
-fn earlier_outputs(dir: &std::path::Path) -> std::io::Result<Vec<PathBuf>> {
-    let mut found = Vec::new();
-    for entry in std::fs::read_dir(dir)? {
-        let path = entry?.path();
-        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-        let frame = name.starts_with("frame_") && name.ends_with(".png");
-        if path.is_file() && (frame || name == STATS_FILE || name == MODEL_FILE) {
-            found.push(path);
-        }
-    }
-    Ok(found)
-}
-
-/// What an earlier run left, as "stats.csv, cost_model.json, 12 frames".
-fn describe_outputs(files: &[PathBuf]) -> String {
-    let names: Vec<&str> = files.iter().filter_map(|f| f.file_name()?.to_str()).collect();
-    let frames = names.iter().filter(|n| n.starts_with("frame_")).count();
-    let mut parts: Vec<String> = names.iter().filter(|n| !n.starts_with("frame_")).map(|n| n.to_string()).collect();
-    parts.sort();
-    match frames {
-        0 => {}
-        1 => parts.push("1 frame".into()),
-        n => parts.push(format!("{n} frames")),
-    }
-    parts.join(", ")
+    Ok(())
 }
 
 /// The mean of `values`; 0 (not the −0 an empty sum is) for none.
@@ -338,20 +372,6 @@ fn mean_or_zero(values: impl ExactSizeIterator<Item = f64>) -> f64 {
         0 => 0.0,
         n => values.sum::<f64>() / n as f64,
     }
-}
-
-/// Writes `records` as [`STATS_FILE`] in `dir`.
-pub fn write_stats(dir: &std::path::Path, records: &[FrameRecord]) -> Result<(), FlyError> {
-    let csv = dir.join(STATS_FILE);
-    std::fs::write(&csv, to_csv(records)).map_err(|e| io(&csv, e))
-}
-
-/// Writes a frame's colour as PNG.
-pub fn write_png(file: &std::path::Path, rendered: &Rendered, size: (u32, u32)) -> Result<(), FlyError> {
-    let bytes: Vec<u8> = rendered.colour.iter().flatten().copied().collect();
-    let png = crate::encode::png(&bytes, size.0 as usize, size.1 as usize, image::ExtendedColorType::Rgba8)
-        .map_err(|e| io(file, std::io::Error::other(e.0)))?;
-    std::fs::write(file, png).map_err(|e| io(file, e))
 }
 
 /// How the camera of a flight moves: what a budget flight's selections
@@ -729,10 +749,6 @@ fn slot_estimate(source: &dyn TileSource, halo: usize) -> usize {
     side * side * 26
 }
 
-fn io(path: &std::path::Path, source: std::io::Error) -> FlyError {
-    FlyError::Io { path: path.display().to_string(), source }
-}
-
 /// The times of a frame's draws rendered again and again for `hold_ms`,
 /// of the render with the median GPU (or wall) time: what a loop rendering
 /// continuously sees, on a GPU that lowers its clocks while it waits for a
@@ -750,63 +766,6 @@ fn held(
     let ms = |s: &FrameStats| s.gpu_ms.unwrap_or(s.wall_ms);
     renders.sort_by(|a, b| ms(a).total_cmp(&ms(b)));
     Ok(renders[renders.len() / 2])
-}
-
-/// The statistics as CSV, one row per frame.
-pub fn to_csv(records: &[FrameRecord]) -> String {
-    let mut out = Vec::new();
-    let _ = writeln!(
-        out,
-        "frame,cpu_ms,gpu_ms,gpu_rays_ms,gpu_fill_ms,render_ms,tiles,levels,tiles_ray,tiles_plain,error_px,ray_pixels,view_fetches_mean,view_fetches_max,shadow_fetches_mean,bytes_fetched,gpu_bytes,cpu_bytes,rss_mib,selection_ms,budget_ms,predicted_ms,model_ms,shadow_steps_mean,candidates,benefit_bound,bound,morphing,trees,splats,splat_fill_mpx,nodes_touched,rays_cast,rays_view_fetches,rays_leaf_cells,rays_shadow_fetches"
-    );
-    for r in records {
-        let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
-        let optional = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.3}"));
-        let gpu = optional(r.gpu_ms);
-        let (rays, fill) = (optional(r.gpu_rays_ms.map(|t| t.0)), optional(r.gpu_rays_ms.map(|t| t.1)));
-        let work: [String; 4] = r
-            .work
-            .map(|w| [w.rays, w.view_fetches, w.leaf_cells, w.shadow_fetches].map(|n| n.to_string()))
-            .unwrap_or_default();
-        let _ = writeln!(
-            out,
-            "{},{:.3},{gpu},{rays},{fill},{:.3},{},{},{},{},{},{},{:.2},{},{:.2},{},{},{},{:.1},{:.3},{},{},{},{:.2},{},{},{},{},{},{},{:.4},{},{},{},{},{}",
-            r.frame,
-            r.cpu_ms,
-            r.render_ms,
-            r.tiles_ray + r.tiles_plain,
-            levels.join(" "),
-            r.tiles_ray,
-            r.tiles_plain,
-            r.error_px.map_or(String::new(), |e| format!("{e:.2}")),
-            r.ray_pixels,
-            r.view_fetches.0,
-            r.view_fetches.1,
-            r.shadow_fetches_mean,
-            r.bytes_fetched,
-            r.gpu_bytes,
-            r.cpu_bytes,
-            r.rss_mib,
-            r.selection_ms,
-            optional(r.budget_ms),
-            optional(r.predicted_ms),
-            optional(r.model_ms),
-            r.shadow_steps_mean,
-            r.candidates.map_or(String::new(), |n| n.to_string()),
-            optional(r.benefit_bound),
-            r.bound.unwrap_or_default(),
-            r.morphing,
-            r.trees,
-            r.splats,
-            r.splat_fill_px / 1e6,
-            r.nodes_touched.map_or(String::new(), |n| n.to_string()),
-            work[0],
-            work[1],
-            work[2],
-            work[3]
-        );
-    }
-    String::from_utf8_lossy(&out).into_owned()
 }
 
 /// A one-paragraph summary of a flight: frames, mean and worst times,
@@ -867,7 +826,7 @@ pub fn run(
 ) -> Result<Vec<FrameRecord>, RunError> {
     let gpu = super::render::gpu::Gpu::open()?;
     let grid = source.grid();
-    let mut renderer = Renderer::new(gpu, grid.samples(), options.halo as u32, gpu_budget_bytes, options.geomorph)
+    let mut renderer = Renderer::new(gpu, grid.samples(), options.halo as u32, gpu_budget_bytes, options.geomorph)?
         .with_hull_factor(options.hull_factor)
         .with_ray_pass(options.ray_pass);
     Ok(fly(source, path, &mut renderer, options)?)
@@ -879,7 +838,20 @@ pub enum RunError {
     /// No GPU.
     #[error(transparent)]
     Gpu(#[from] super::render::gpu::GpuError),
+    /// The GPU has not the memory for the tile cache.
+    #[error(transparent)]
+    Alloc(#[from] super::render::gpu::AllocError),
     /// The flight failed.
     #[error(transparent)]
     Fly(#[from] FlyError),
+}
+
+impl RunError {
+    /// The signal (Ctrl-C, SIGTERM) that stopped the flight, if one did.
+    pub fn signal(&self) -> Option<i32> {
+        match self {
+            RunError::Fly(e) => e.signal(),
+            _ => None,
+        }
+    }
 }
