@@ -667,7 +667,7 @@ fn frame(
         predicted_ms,
         model_ms,
         candidates: selected.map(|s| s.candidates),
-        benefit_bound: selected.map(|s| s.cut.benefit / s.cut.upper_bound),
+        benefit_bound: selected.map(|s| s.cut.share_of_bound()),
         bound: selected.map(|s| s.cut.bound()),
         morphing: chosen.morphing,
         nodes_touched: chosen.touched,

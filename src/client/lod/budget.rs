@@ -179,6 +179,15 @@ impl Cut {
             (false, None) => "none",
         }
     }
+
+    /// The cut's benefit as a share of the upper bound (1: optimal); 1 when
+    /// no cut could have any (nothing in view).
+    pub fn share_of_bound(&self) -> f64 {
+        match self.upper_bound > 0.0 {
+            true => self.benefit / self.upper_bound,
+            false => 1.0,
+        }
+    }
 }
 
 /// The features of drawing candidate `c` with `steps` shadow steps.
@@ -475,6 +484,13 @@ mod tests {
         let full = f64::from(MAX_SHADOW_STEPS) * f.raycast_mpx_steps / VIEW_STEPS;
         assert!(f.shadow_mpx_steps > 0.95 * full && f.shadow_mpx_steps <= full * (1.0 + 1e-9), "{f:?}");
         assert!(rich.tiles.len() > choose(&c, &[], &MODEL, &budget(3.0, true)).tiles.len());
+    }
+
+    #[test]
+    fn a_cut_with_nothing_to_gain_reaches_its_bound() {
+        assert_eq!(Cut::default().share_of_bound(), 1.0, "no candidate in view: no NaN");
+        let half = Cut { benefit: 1.0, upper_bound: 2.0, ..Cut::default() };
+        assert_eq!(half.share_of_bound(), 0.5);
     }
 
     #[test]
