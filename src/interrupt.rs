@@ -50,7 +50,7 @@ impl Interrupt {
 
     /// The signal that came, if one did.
     pub fn came(&self) -> Option<i32> {
-        CAME.load(Ordering::Relaxed).then(|| WHICH.load(Ordering::Relaxed) as i32)
+        CAME.load(Ordering::Acquire).then(|| WHICH.load(Ordering::Acquire) as i32)
     }
 }
 

@@ -183,8 +183,8 @@ pub struct RenderArgs {
     /// Deepest tile level.
     #[arg(long, default_value_t = 13, value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva::grid::TileGrid::MAX_LEVEL)))]
     max_level: u32,
-    /// GPU tile cache budget, MiB.
-    #[arg(long, default_value_t = 512, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    /// GPU tile cache budget, MiB (at most 1 TiB).
+    #[arg(long, default_value_t = 512, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1 << 20))]
     gpu_budget_mib: usize,
     /// Draw the canopy by ray casting alone, without trees as point
     /// splats near the camera.

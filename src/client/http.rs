@@ -112,10 +112,9 @@ impl TileSource for HttpSource {
     }
 }
 
-/// A server's tileset and its grid, checked: a grid Sylva can tile and
-/// bounds that are a box on the globe.
 /// `base` without trailing slashes if it is an http:// or https:// URL
-/// with a host; else why not, at once (no request is retried for it).
+/// with a host and no query; else why not, at once (no request is retried
+/// for it).
 fn server_base(base: &str) -> Result<String, String> {
     let refused = |why: &str| Err(format!("{base}: {why}; a server is http://HOST[:PORT] or https://HOST[:PORT]"));
     let uri = match base.parse::<ureq::http::Uri>() {
@@ -123,6 +122,7 @@ fn server_base(base: &str) -> Result<String, String> {
         Err(_) => return refused("not a URL"),
     };
     match (uri.scheme_str(), uri.host()) {
+        (Some("http" | "https"), _) if uri.query().is_some() => refused("a query has no place in it"),
         (Some("http" | "https"), Some(host)) if !host.is_empty() => Ok(base.trim_end_matches('/').to_string()),
         (Some("http" | "https"), _) => refused("no host"),
         (Some(scheme), _) => refused(&format!("the scheme {scheme}:// is not HTTP")),
@@ -130,6 +130,8 @@ fn server_base(base: &str) -> Result<String, String> {
     }
 }
 
+/// A server's tileset and its grid, checked: a grid Sylva can tile and
+/// bounds that are a box on the globe.
 fn read_tileset(body: &[u8]) -> Result<(Tileset, TileGrid), String> {
     let tileset: Tileset = serde_json::from_slice(body).map_err(|e| format!("not a tileset: {e}"))?;
     let grid = TileGrid::new(tileset.level0_delta_deg, tileset.samples).map_err(|e| e.to_string())?;
@@ -191,6 +193,7 @@ mod tests {
             ("not a url", "not a URL"),
             ("localhost:8080", "no scheme"),
             ("http://", "not a URL"),
+            ("http://h:8080?x=1", "a query has no place in it"),
         ] {
             let start = std::time::Instant::now();
             let Err(e) = HttpSource::connect(base) else { panic!("{base} was taken") };

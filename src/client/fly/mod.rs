@@ -213,7 +213,8 @@ pub enum FlyError {
     /// The LOD selection thread could not start.
     #[error("starting the LOD selection thread: {0}")]
     Thread(std::io::Error),
-    /// An output file cannot be written (found before the flight starts).
+    /// An output file cannot be written (one named as an input found
+    /// before the flight starts; a failed write during it).
     #[error(transparent)]
     Output(#[from] crate::outputs::OutputError),
     /// The output directory holds an earlier run's outputs.
@@ -318,7 +319,12 @@ fn fly_in(
     let motion = Motion { frame_s, limits: path.motion_limits(MOTION_STEPS), shadows: path.sun.is_some() };
     let mut flight = Flight::new(source, renderer, options, motion)?;
     let mut records = Vec::with_capacity(options.frames);
-    let stopped = fly_path(&mut flight, (source, path, renderer), options, (&mut earlier, &mut records)).err();
+    // Watched until the results are written: a first Ctrl-C then waits.
+    let interrupt = crate::interrupt::Interrupt::watch();
+    let flown = fly_path(&mut flight, (source, path, renderer), options, (&mut earlier, &mut records), &interrupt);
+    // A frame that failed because of the signal (a server in the same
+    // process group stopped by it) was stopped by the signal.
+    let stopped = flown.err().map(|why| interrupt.came().map_or(why, Stop::Signal));
     let model = flight.model();
     match (stopped, &options.out_dir) {
         (None, Some(dir)) => outputs::write_results(dir, &records, model.as_ref()).map(|()| records),
@@ -343,8 +349,8 @@ fn fly_path(
     (source, path, renderer): (&dyn TileSource, &CameraPath, &mut Renderer),
     options: &FlyOptions,
     (earlier, records): (&mut Vec<PathBuf>, &mut Vec<FrameRecord>),
+    interrupt: &crate::interrupt::Interrupt,
 ) -> Result<(), Stop> {
-    let interrupt = crate::interrupt::Interrupt::watch();
     for k in 0..options.frames {
         if let Some(signal) = interrupt.came() {
             return Err(Stop::Signal(signal));
@@ -356,11 +362,15 @@ fn fly_path(
             sun_ecef: path.sun_ecef(),
         };
         let framed = flight.frame(source, renderer, options, &shot, Readback::All).map_err(Stop::failed)?;
-        // The earlier run's outputs go once this one has a frame to show.
-        remove_outputs(&std::mem::take(earlier)).map_err(Stop::failed)?;
-        if let (Some(dir), true) = (&options.out_dir, options.write_frames) {
-            write_png(&dir.join(format!("frame_{k:05}.png")), &framed.rendered, options.size).map_err(Stop::failed)?;
+        let png =
+            options.out_dir.as_ref().filter(|_| options.write_frames).map(|d| d.join(format!("frame_{k:05}.png")));
+        if let Some(png) = &png {
+            write_png(png, &framed.rendered, options.size).map_err(Stop::failed)?;
         }
+        // The earlier run's outputs go once this one has a frame to show
+        // (written: its PNG replaced the earlier one of the same name).
+        earlier.retain(|f| Some(f) != png.as_ref());
+        remove_outputs(&std::mem::take(earlier)).map_err(Stop::failed)?;
         records.push(framed.record);
     }
     Ok(())

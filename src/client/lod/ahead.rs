@@ -71,14 +71,19 @@ pub fn ahead(
 }
 
 /// `camera` raised where it is nearer the ground than half of `current`'s
-/// height above it (see the module doc); as it is where the ground under
-/// either is unknown.
+/// height above it (see the module doc), never above `current`; as it is
+/// where the ground under either is unknown, or `current` is not above the
+/// lowest ground known under it (a coarse tile's lowest sample may lie
+/// above a narrow valley's floor).
 fn above_ground(camera: Camera, current: &Camera, ground: Ground) -> Camera {
     let (now, at) = (Geodetic::from_ecef(current.position_ecef), Geodetic::from_ecef(camera.position_ecef));
     let (Some(below_now), Some(below)) = (ground(now.lon_deg, now.lat_deg), ground(at.lon_deg, at.lat_deg)) else {
         return camera;
     };
-    let lowest_m = below + 0.5 * (now.height_m - below_now).max(0.0);
+    if now.height_m.partial_cmp(&below_now) != Some(std::cmp::Ordering::Greater) {
+        return camera;
+    }
+    let lowest_m = (below + 0.5 * (now.height_m - below_now)).min(now.height_m);
     match at.height_m < lowest_m {
         true => Camera { position_ecef: Geodetic::new(at.lon_deg, at.lat_deg, lowest_m).to_ecef(), ..camera },
         false => camera,
@@ -152,5 +157,25 @@ mod tests {
         // A camera predicted above that is not moved.
         let (slow, _) = ahead(&predictor, &dive(3.0), 3.0, &LOOK, &|_, _| Some(-100_000.0));
         assert_eq!(slow[1].position_ecef, free[1].position_ecef);
+        // The ground under each counts, and the floor never lifts a camera
+        // above the current one: flying east and down at 3,000 m/s from
+        // 500 m above the ground (1,000 m) to where it is 1,500 m high,
+        // the predictions are raised to the current camera's 1,500 m, not
+        // to 1,500 + 250 m.
+        let step = |lon: f64, _: f64| Some(if lon < 10.1 { 1000.0 } else { 1500.0 });
+        let at = |lon: f64, h: f64| Camera::looking(Geodetic::new(lon, 46.35, h), 90.0, -30.0, 60.0, (160, 120));
+        let mut east = PathPredictor::new(WINDOW);
+        for k in 0..4 {
+            let t = f64::from(k);
+            east.observe(t, pose(&at(10.0985 + 0.0005 * t, 10_500.0 - 3000.0 * t)));
+        }
+        let (capped, _) = ahead(&east, &at(10.0999, 1500.0), 3.0, &LOOK, &step);
+        for c in &capped {
+            let g = Geodetic::from_ecef(c.position_ecef);
+            assert!(g.lon_deg > 10.1 && (g.height_m - 1500.0).abs() < 1e-6, "{g:?}");
+        }
+        // A camera below the lowest ground known under it: left as predicted.
+        let (under, _) = ahead(&predictor, &dive(3.0), 3.0, &LOOK, &|_, _| Some(1600.0));
+        assert_eq!(under[1].position_ecef, free[1].position_ecef);
     }
 }

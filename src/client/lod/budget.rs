@@ -181,11 +181,11 @@ impl Cut {
     }
 
     /// The cut's benefit as a share of the upper bound (1: optimal); 1 when
-    /// no cut could have any (nothing in view).
+    /// no cut could have any (nothing in view; a NaN bound stays NaN).
     pub fn share_of_bound(&self) -> f64 {
-        match self.upper_bound > 0.0 {
-            true => self.benefit / self.upper_bound,
-            false => 1.0,
+        match self.upper_bound == 0.0 {
+            true => 1.0,
+            false => self.benefit / self.upper_bound,
         }
     }
 }
@@ -496,7 +496,8 @@ mod tests {
     #[test]
     fn more_steps_per_pixel_buy_fewer_tiles_within_the_budget() {
         let c = demo_candidates();
-        // A budget that binds: rays cost what the steps say, tiles the rest.
+        // A budget that binds: rays cost what the steps say, tiles the rest
+        // (above the coarsest cut at 40 steps, below everything at 10).
         let at = |view_steps: f64| {
             let priced: Vec<Candidate> = c.iter().map(|t| Candidate { view_steps, ..*t }).collect();
             choose(&priced, &[], &MODEL, &budget(2.3, false))

@@ -130,7 +130,8 @@ impl TileCache {
         let slot_bytes = (size * size * (16 + 4) + atlas_w * atlas_h * 4) as usize;
         let share = if geomorph { morph_bytes(size) / 2 } else { 0 };
         let count = array_layers(
-            ((budget_bytes / (slot_bytes + mesh_bytes(samples) + share)) as u32)
+            u32::try_from(budget_bytes / (slot_bytes + mesh_bytes(samples) + share))
+                .unwrap_or(u32::MAX)
                 .clamp(1, MAX_SLOTS.min(device.limits().max_texture_array_layers)),
         );
         let layers = if geomorph { array_layers((count / 2).max(1)) } else { 0 };

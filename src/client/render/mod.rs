@@ -311,7 +311,7 @@ impl Renderer {
         stats.gpu_rays_ms = times.and_then(|t| t.rays_ms);
         stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         stats.resident_bytes = self.cache.resident_bytes();
-        Ok(self.read(readback, stats, draws.len()))
+        Ok(self.read(readback, stats, draws.len())?)
     }
 
     /// Uploads tiles and splats, decides how each tile is drawn and writes
@@ -521,14 +521,16 @@ impl Renderer {
 
     /// The frame's images, as `readback` asks, and the work of its `draws`
     /// draws with its pixel data.
-    fn read(&self, readback: Readback, stats: FrameStats, draws: usize) -> Rendered {
+    fn read(&self, readback: Readback, stats: FrameStats, draws: usize) -> Result<Rendered, AllocError> {
         let mut out = Rendered { stats, ..Default::default() };
-        let (Some(targets), true) = (&self.targets, readback != Readback::None && !self.pipelined) else { return out };
+        let (Some(targets), true) = (&self.targets, readback != Readback::None && !self.pipelined) else {
+            return Ok(out);
+        };
         let (device, queue) = (&self.gpu.device, &self.gpu.queue);
-        out.colour = bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.colour, 4)).to_vec();
+        out.colour = bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.colour, 4)?).to_vec();
         if readback == Readback::All {
             let data: Vec<[u32; 4]> =
-                bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.pixel_data, 16)).to_vec();
+                bytemuck::cast_slice(&targets::read_texture(device, queue, &targets.pixel_data, 16)?).to_vec();
             out.view_z_m = data.iter().map(|d| f32::from_bits(d[2])).collect();
             out.fetches = data.iter().map(|d| [d[0], d[1]]).collect();
             out.draws = data.iter().map(|d| d[3]).collect();
@@ -536,7 +538,7 @@ impl Renderer {
                 out.work = self.work.read(device, queue, draws);
             }
         }
-        out
+        Ok(out)
     }
 
     /// The light the last frame's splats received through the terrain,

@@ -82,17 +82,25 @@ fn padded_row(w: u32, texel_bytes: u32) -> u32 {
     (w * texel_bytes).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT
 }
 
-/// Reads one 2-D texture back, `texel_bytes` per texel, rows unpadded.
-pub fn read_texture(device: &wgpu::Device, queue: &wgpu::Queue, texture: &wgpu::Texture, texel_bytes: u32) -> Vec<u8> {
+/// Reads one 2-D texture back, `texel_bytes` per texel, rows unpadded; an
+/// error if the GPU has not the memory for the readback buffer.
+pub fn read_texture(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    texel_bytes: u32,
+) -> Result<Vec<u8>, AllocError> {
     let (w, h) = (texture.width(), texture.height());
     let row = w * texel_bytes;
     let padded = padded_row(w, texel_bytes);
-    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("readback"),
-        size: u64::from(padded) * u64::from(h),
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
+    let buffer = allocate(device, format!("a readback buffer for {w}×{h} pixels"), || {
+        device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: u64::from(padded) * u64::from(h),
+            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+            mapped_at_creation: false,
+        })
+    })?;
     let mut encoder = device.create_command_encoder(&Default::default());
     encoder.copy_texture_to_buffer(
         wgpu::TexelCopyTextureInfo {
@@ -109,7 +117,7 @@ pub fn read_texture(device: &wgpu::Device, queue: &wgpu::Queue, texture: &wgpu::
     );
     queue.submit([encoder.finish()]);
     let bytes = map_read(device, &buffer);
-    bytes.chunks(padded as usize).flat_map(|r| r[..row as usize].to_vec()).collect()
+    Ok(bytes.chunks(padded as usize).flat_map(|r| r[..row as usize].to_vec()).collect())
 }
 
 /// Maps a buffer and copies its bytes out, waiting for the GPU.
