@@ -11,8 +11,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let region = sylva::config::load(None)?; // the embedded demo; Some(path) for a TOML file
     let source = RegionSource::new(Arc::new(region)); // or client::http::HttpSource::connect(URL)
     let path = CameraPath::load("config/paths/demo_valley.toml".as_ref())?;
-    let options =
-        fly::FlyOptions { frames: 10, size: (640, 480), out_dir: Some("frames".into()), ..Default::default() };
+    // `overwrite`: a second run replaces the first one's frames.
+    let options = fly::FlyOptions {
+        frames: 10,
+        size: (640, 480),
+        out_dir: Some("frames".into()),
+        overwrite: true,
+        ..Default::default()
+    };
     let records = fly::run(&source, &path, &options, 512 << 20)?;
     println!("{}", fly::summary(&records));
     Ok(())
