@@ -1,0 +1,428 @@
+//! One frame of a flight: the tiles chosen (by screen-space error or under
+//! the budget), loaded, given their trees and shadow steps, rendered, and
+//! the frame's statistics recorded; a [`Flight`] keeps what carries from
+//! frame to frame.
+
+use super::{FlyError, FlyOptions, FrameRecord, LodMode};
+use crate::client::camera::Camera;
+use crate::client::lod::ahead::Lookahead;
+use crate::client::lod::budget::{Budget, Choice};
+use crate::client::lod::flight::BudgetFlight;
+use crate::client::lod::steps::FrameSteps;
+use crate::client::lod::{Selected, Selector};
+use crate::client::quadtree;
+use crate::client::raycast::TreeBlend;
+use crate::client::render::uniforms::FrameSettings;
+use crate::client::render::{Draw, DrawWork, FrameStats, Readback, Rendered, Renderer};
+use crate::client::source::TileSource;
+use crate::client::sse::SseSelector;
+use crate::client::store::{LoadError, TileStore};
+use crate::client::tile::TileData;
+use crate::client::trees;
+use crate::lod::model::CostModel;
+use glam::DVec3;
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// How the camera of a flight moves: what a budget flight's selections
+/// look ahead by.
+#[derive(Clone, Copy, Debug)]
+pub struct Motion {
+    /// Seconds between frames.
+    pub frame_s: f64,
+    /// The fastest the camera moves and turns.
+    pub limits: crate::lod::predict::MotionLimits,
+    /// Whether the sun is on (shadow rays are priced).
+    pub shadows: bool,
+}
+
+/// What a budget flight's selections, made every `select_every` frames,
+/// look ahead by.
+fn lookahead(select_every: u32, motion: &Motion) -> Lookahead {
+    Lookahead { tau_s: motion.frame_s * f64::from(select_every.max(1)), limits: motion.limits }
+}
+
+/// One frame to render: its camera, its time and its sun.
+#[derive(Clone, Copy, Debug)]
+pub struct Shot {
+    /// Frame index, for its record.
+    pub index: usize,
+    /// Time, seconds of the flight.
+    pub t_s: f64,
+    /// The camera.
+    pub camera: Camera,
+    /// Unit direction to the sun (ECEF), if it is on.
+    pub sun_ecef: Option<DVec3>,
+}
+
+/// A rendered frame: its statistics, its images and the tiles it drew.
+pub struct Framed {
+    /// The statistics.
+    pub record: FrameRecord,
+    /// The images read back.
+    pub rendered: Rendered,
+    /// The tiles drawn.
+    pub tiles: Vec<Arc<TileData>>,
+}
+
+/// What a flight keeps from frame to frame: the tiles loaded on the CPU and
+/// the selection's state (the deferral table, or the budget flight with its
+/// selection thread and calibrated cost model).
+pub struct Flight {
+    store: TileStore,
+    lod: Option<BudgetFlight>,
+    sse: Option<SseSelector>,
+}
+
+impl Flight {
+    /// A flight over `source` rendered by `renderer` whose camera moves as
+    /// `motion` says.
+    pub fn new(
+        source: &dyn TileSource,
+        renderer: &Renderer,
+        options: &FlyOptions,
+        motion: Motion,
+    ) -> Result<Flight, FlyError> {
+        let budget = 2 * renderer.cache_slots() as usize * slot_estimate(source, options.halo);
+        let store = TileStore::new(options.halo, budget, options.in_flight)?;
+        let sse = match options.mode {
+            LodMode::Sse => SseSelector::for_source(source, options.lod.max_level).map_err(LoadError::from)?,
+            LodMode::Budget { .. } => None,
+        };
+        let lod = match options.mode {
+            LodMode::Sse => None,
+            LodMode::Budget { budget_ms, select_every, prior } => {
+                let selector = Selector {
+                    grid: source.grid(),
+                    bounds: source.bounds(),
+                    knowledge: store.knowledge(),
+                    fade: options.fade,
+                    trees: options.trees,
+                    max_level: options.lod.max_level,
+                };
+                let budget = Budget {
+                    budget_ms,
+                    max_tiles: renderer.cache_slots() as usize,
+                    shadows: motion.shadows,
+                    deadline: None,
+                };
+                let look = lookahead(select_every, &motion);
+                Some(BudgetFlight::new(selector, budget, look, prior, options.geomorph).map_err(FlyError::Thread)?)
+            }
+        };
+        Ok(Flight { store, lod, sse })
+    }
+
+    /// From now on loads tiles in the background: a frame draws the tiles
+    /// here, their nearest loaded ancestors standing in for the rest
+    /// ([`TileStore::load_in_background`]).
+    pub fn load_in_background(&mut self, source: Arc<dyn TileSource>) -> Result<(), FlyError> {
+        Ok(self.store.load_in_background(source)?)
+    }
+
+    /// Tiles loading in the background.
+    pub fn pending(&self) -> usize {
+        self.store.pending()
+    }
+
+    /// Tile loads that failed in the background (each is tried again).
+    pub fn failures(&self) -> usize {
+        self.store.failures()
+    }
+
+    /// The cost model a budget flight has calibrated so far.
+    pub fn model(&self) -> Option<CostModel> {
+        self.lod.as_ref().map(BudgetFlight::model)
+    }
+
+    /// The camera moves as `motion` says from now on (a budget flight's
+    /// selections look ahead by it).
+    pub fn set_motion(&mut self, options: &FlyOptions, motion: Motion) {
+        if let (Some(lod), LodMode::Budget { select_every, .. }) = (&mut self.lod, options.mode) {
+            lod.set_motion(lookahead(select_every, &motion), motion.shadows);
+        }
+    }
+
+    /// The finest tile held that contains the point `(lon, lat)`, degrees.
+    pub fn tile_at(&self, grid: &crate::grid::TileGrid, lon: f64, lat: f64) -> Option<Arc<TileData>> {
+        self.store.finest_at(grid, lon, lat)
+    }
+
+    /// Selects, loads and renders `shot`, reading back what `readback` asks
+    /// (everything under a budget, whose cost model learns from the
+    /// frame's fetches).
+    pub fn frame(
+        &mut self,
+        source: &dyn TileSource,
+        renderer: &mut Renderer,
+        options: &FlyOptions,
+        shot: &Shot,
+        readback: Readback,
+    ) -> Result<Framed, FlyError> {
+        let readback = if self.lod.is_some() { Readback::All } else { readback };
+        // Counted where the times come from other, uncounted renders of the
+        // frame (the counters would weigh on the times the model learns).
+        renderer.count_work(self.lod.is_some() && options.hold_ms > 0.0);
+        frame(source, renderer, (&mut self.store, self.lod.as_mut(), self.sse.as_mut()), options, (shot, readback))
+    }
+}
+
+/// The tiles of one frame and how they were chosen.
+struct Chosen {
+    tiles: Vec<Arc<TileData>>,
+    /// Shadow steps per tile, in the order of `tiles`.
+    steps: Vec<u32>,
+    /// Morph weight of each tile's own heights (1: not morphing).
+    weights: Vec<f32>,
+    error_px: Option<f64>,
+    selected: Option<Selected>,
+    /// Tiles drawn morphing from a coarser one.
+    morphing: usize,
+    /// Nodes the screen-space error selection touched.
+    touched: Option<usize>,
+    /// Time of the selection, ms.
+    selection_ms: f64,
+}
+
+/// The frame's tiles: by screen-space error, or under the budget.
+fn choose(
+    source: &dyn TileSource,
+    (store, lod, sse): (&mut TileStore, Option<&mut BudgetFlight>, Option<&mut SseSelector>),
+    (t_s, camera): (f64, &Camera),
+    (options, slots): (&FlyOptions, u32),
+) -> Result<Chosen, FlyError> {
+    let Some(lod) = lod else {
+        let Visible { tiles, error_px, touched, selection_ms } =
+            visible_tiles(source, store, sse, camera, options, slots)?;
+        let (steps, weights) = (vec![options.shadow_steps; tiles.len()], vec![1.0; tiles.len()]);
+        let (error_px, touched, selected) = (Some(error_px), Some(touched), None);
+        return Ok(Chosen { tiles, steps, weights, error_px, selected, morphing: 0, touched, selection_ms });
+    };
+    let selected = lod.frame(t_s, camera);
+    let ids: Vec<_> = selected.cut.tiles.iter().map(|c| c.id).collect();
+    let mut tiles = store.get_cut(source, &ids)?;
+    let drawn: Vec<_> = tiles.iter().map(|t| t.id()).collect();
+    let morphing = lod.morphs(t_s, &drawn);
+    let mut weights = vec![1.0; tiles.len()];
+    for m in &morphing {
+        let (Some(k), Some(from)) = (drawn.iter().position(|&id| id == m.tile), store.get(source, &[m.from])?.pop())
+        else {
+            continue;
+        };
+        // Kept while its morph lasts; at weight 1 the tile shows its own
+        // surface, which it draws cheaper alone (one texture read per
+        // height, its own bounds: 0.75× the view and 0.5× the shadow
+        // fetches of the pair in the demo's four-tile view).
+        let pair = lod.morph_tile(&source.grid(), &tiles[k], &from);
+        if m.weight < 1.0 {
+            tiles[k] = pair;
+            weights[k] = m.weight as f32;
+        }
+    }
+    let steps_of: std::collections::HashMap<_, _> = selected.cut.tiles.iter().map(|c| (c.id, c.shadow_steps)).collect();
+    // A loaded ancestor standing in for tiles still loading takes the most
+    // shadow steps the selection gave any tile.
+    let most = selected.cut.tiles.iter().map(|c| c.shadow_steps).max().unwrap_or(0);
+    let steps = tiles.iter().map(|t| steps_of.get(&t.id()).copied().unwrap_or(most)).collect();
+    let morphing = weights.iter().filter(|&&w| w < 1.0).count();
+    let selection_ms = selected.ms;
+    Ok(Chosen {
+        tiles,
+        steps,
+        weights,
+        error_px: None,
+        selected: Some(selected),
+        morphing,
+        touched: None,
+        selection_ms,
+    })
+}
+
+fn frame(
+    source: &dyn TileSource,
+    renderer: &mut Renderer,
+    (store, mut lod, sse): (&mut TileStore, Option<&mut BudgetFlight>, Option<&mut SseSelector>),
+    options: &FlyOptions,
+    (shot, readback): (&Shot, Readback),
+) -> Result<Framed, FlyError> {
+    let start = Instant::now();
+    let bytes_before = source.bytes_fetched();
+    let (camera, t_s) = (shot.camera, shot.t_s);
+    let mut chosen =
+        choose(source, (store, lod.as_deref_mut(), sse), (t_s, &camera), (options, renderer.cache_slots()))?;
+    if shot.sun_ecef.is_none() {
+        // No sun, no shadow rays: none drawn, none priced.
+        chosen.steps.fill(0);
+    }
+    let (tiles, error_px) = (&chosen.tiles, chosen.error_px);
+    let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
+    let fade = trees::canopy_fade(options.fade, options.trees.as_ref(), camera.focal_px());
+    let settings = FrameSettings {
+        traversal: options.traversal,
+        shadow_steps: options.shadow_steps,
+        sun_ecef: shot.sun_ecef,
+        fade,
+    };
+    let budgets = chosen.selected.as_ref().map(|s| &s.cut.tree_budgets);
+    let trees = tree_splats(options, tiles, &camera, (&fade.trees, budgets));
+    if let Some(lod) = lod.as_deref_mut().filter(|_| options.trees.is_some()) {
+        lod.set_drawn(tiles.clone());
+    }
+    let draws: Vec<Draw> = (0..tiles.len())
+        .map(|k| Draw {
+            tile: tiles[k].as_ref(),
+            shadow_steps: chosen.steps[k],
+            splats: &trees.splats[k],
+            morph_weight: chosen.weights[k],
+        })
+        .collect();
+    let mut out = renderer.render_draws(&camera, &draws, &settings, readback)?;
+    if options.hold_ms > 0.0 {
+        let held = held(renderer, (&camera, &draws, &settings), options.hold_ms)?;
+        (out.stats.gpu_ms, out.stats.gpu_rays_ms, out.stats.wall_ms) = (held.gpu_ms, held.gpu_rays_ms, held.wall_ms);
+    }
+    let selected = chosen.selected.as_ref();
+    let predicted_ms = lod.as_deref().zip(selected).map(|(l, s)| l.expected_ms(s));
+    let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
+    let drawn: Vec<Choice> = draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
+    let steps = FrameSteps::measure(&out.fetches, &out.draws, &drawn);
+    let model_ms = lod.map(|lod| {
+        lod.observe(&camera, &drawn, &trees.drawn, (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), &steps)).model_ms
+    });
+    let mut levels = BTreeMap::new();
+    for t in tiles {
+        *levels.entry(t.id().level).or_insert(0) += 1;
+    }
+    let rays: Vec<&[u32; 2]> = out.fetches.iter().filter(|f| f[0] > 0).collect();
+    let record = FrameRecord {
+        frame: shot.index,
+        cpu_ms,
+        gpu_ms: out.stats.gpu_ms,
+        gpu_rays_ms: out.stats.gpu_rays_ms,
+        render_ms: out.stats.wall_ms,
+        levels,
+        tiles_ray: out.stats.tiles_hull + out.stats.tiles_inside,
+        tiles_plain: out.stats.tiles_plain,
+        error_px,
+        ray_pixels: rays.len(),
+        view_fetches: (steps.view.mean.unwrap_or(0.0), rays.iter().map(|f| f[0]).max().unwrap_or(0)),
+        shadow_fetches_mean: mean_or_zero(rays.iter().map(|f| f64::from(f[1]))),
+        work: (!out.work.is_empty()).then(|| out.work.iter().fold(DrawWork::default(), |a, w| a.plus(w))),
+        bytes_fetched: source.bytes_fetched() - bytes_before,
+        gpu_bytes: out.stats.resident_bytes,
+        cpu_bytes: store.bytes(),
+        rss_mib: crate::bench::rss_mib().0,
+        selection_ms: chosen.selection_ms,
+        budget_ms,
+        predicted_ms,
+        model_ms,
+        candidates: selected.map(|s| s.candidates),
+        benefit_bound: selected.map(|s| s.cut.share_of_bound()),
+        bound: selected.map(|s| s.cut.bound()),
+        morphing: chosen.morphing,
+        nodes_touched: chosen.touched,
+        shadow_steps_mean: mean_or_zero(chosen.steps.iter().map(|&s| f64::from(s))),
+        trees: trees.drawn.trees,
+        splats: out.stats.splats as usize,
+        splat_fill_px: trees.drawn.fill_px,
+    };
+    Ok(Framed { record, rendered: out, tiles: chosen.tiles })
+}
+
+/// A frame's trees.
+#[derive(Default)]
+struct FrameTrees {
+    /// Splats, a list per tile.
+    splats: Vec<Vec<trees::Splat>>,
+    drawn: trees::Drawn,
+}
+
+/// The trees near the camera on `tiles`, by screen size or, under a
+/// budget, with the selection's splat budgets.
+fn tree_splats(
+    options: &FlyOptions,
+    tiles: &[Arc<TileData>],
+    camera: &Camera,
+    (blend, budgets): (&TreeBlend, Option<&trees::TreeBudgets>),
+) -> FrameTrees {
+    let mut out = FrameTrees { splats: vec![Vec::new(); tiles.len()], ..FrameTrees::default() };
+    let Some(settings) = &options.trees else { return out };
+    let refs: Vec<&TileData> = tiles.iter().map(|t| t.as_ref()).collect();
+    let groups = trees::groups_near(settings, &refs, camera, blend);
+    out.drawn = trees::splats(settings, &groups, budgets, (blend, camera.focal_px()), &mut out.splats);
+    out
+}
+
+/// The frame's tiles by screen-space error, and what choosing them took.
+pub struct Visible {
+    /// The tiles, loaded.
+    pub tiles: Vec<Arc<TileData>>,
+    /// The error threshold that made them fit the GPU cache, pixels.
+    pub error_px: f64,
+    /// Quadtree nodes the selections touched.
+    pub touched: usize,
+    /// Time of the selections alone (not the loading), ms.
+    pub selection_ms: f64,
+}
+
+/// The frame's tiles, coarsening the error threshold until they fit the
+/// GPU cache: by a flight's `sse` selector, or by the stateless walk.
+pub fn visible_tiles(
+    source: &dyn TileSource,
+    store: &mut TileStore,
+    mut sse: Option<&mut SseSelector>,
+    camera: &Camera,
+    options: &FlyOptions,
+    slots: u32,
+) -> Result<Visible, FlyError> {
+    let mut rule = options.lod;
+    let (mut touched, start) = (0, Instant::now());
+    loop {
+        let selection = match sse.as_deref_mut() {
+            Some(sse) => sse.select(camera, rule.max_error_px),
+            None => quadtree::select(&source.grid(), &source.bounds(), camera, &|id| store.range(id), &rule),
+        };
+        touched += selection.visited;
+        if selection.tiles.len() <= slots as usize || rule.max_error_px > 1e6 {
+            let selection_ms = start.elapsed().as_secs_f64() * 1e3;
+            let ids: Vec<_> = selection.tiles.iter().map(|s| s.id).collect();
+            let tiles = store.get_cut(source, &ids)?;
+            return Ok(Visible { tiles, error_px: rule.max_error_px, touched, selection_ms });
+        }
+        rule.max_error_px *= 1.25;
+    }
+}
+
+/// Bytes of one prepared tile, for the CPU store's budget.
+fn slot_estimate(source: &dyn TileSource, halo: usize) -> usize {
+    let side = source.grid().samples() as usize + 2 * halo;
+    side * side * 26
+}
+
+/// The times of a frame's draws rendered again and again for `hold_ms`,
+/// of the render with the median GPU (or wall) time: what a loop rendering
+/// continuously sees, on a GPU that lowers its clocks while it waits for a
+/// CPU-bound flight's next frame.
+fn held(
+    renderer: &mut Renderer,
+    (camera, draws, settings): (&Camera, &[Draw], &FrameSettings),
+    hold_ms: f64,
+) -> Result<FrameStats, FlyError> {
+    let start = Instant::now();
+    let mut renders = Vec::new();
+    while renders.is_empty() || start.elapsed().as_secs_f64() * 1e3 < hold_ms {
+        renders.push(renderer.render_draws(camera, draws, settings, Readback::None)?.stats);
+    }
+    let ms = |s: &FrameStats| s.gpu_ms.unwrap_or(s.wall_ms);
+    renders.sort_by(|a, b| ms(a).total_cmp(&ms(b)));
+    Ok(renders[renders.len() / 2])
+}
+
+/// The mean of `values`; 0 (not the −0 an empty sum is) for none.
+fn mean_or_zero(values: impl ExactSizeIterator<Item = f64>) -> f64 {
+    match values.len() {
+        0 => 0.0,
+        n => values.sum::<f64>() / n as f64,
+    }
+}

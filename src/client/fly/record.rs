@@ -1,0 +1,118 @@
+//! What a flight records: one [`FrameRecord`] per frame (`stats.csv`,
+//! `docs/stats-csv.md`) and the paragraph that sums a flight up.
+
+use crate::client::render::DrawWork;
+use std::collections::BTreeMap;
+
+/// One frame's statistics.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameRecord {
+    /// Frame index.
+    pub frame: usize,
+    /// Selection, loading and preparing tiles, ms.
+    pub cpu_ms: f64,
+    /// GPU pass time, if measured, ms.
+    pub gpu_ms: Option<f64>,
+    /// Of that, with rays in a compute pass: the rays' pass and the depth
+    /// fill, ms.
+    pub gpu_rays_ms: Option<(f64, f64)>,
+    /// Encode, submit and wait for the GPU, ms.
+    pub render_ms: f64,
+    /// Tiles drawn per level.
+    pub levels: BTreeMap<u32, u32>,
+    /// Tiles ray cast (from the hull or from inside), and drawn plain.
+    pub tiles_ray: u32,
+    /// Tiles drawn without rays.
+    pub tiles_plain: u32,
+    /// The error threshold used (raised when the GPU cache was too small;
+    /// sse mode).
+    pub error_px: Option<f64>,
+    /// Pixels where a view ray was cast.
+    pub ray_pixels: usize,
+    /// Mean and largest view-ray fetches over ray-cast pixels.
+    pub view_fetches: (f64, u32),
+    /// Mean shadow and shading fetches over ray-cast pixels.
+    pub shadow_fetches_mean: f64,
+    /// The work of every ray cast, shown or not, over the frame's draws
+    /// (counted in held flights under a budget only).
+    pub work: Option<DrawWork>,
+    /// Bytes fetched from the source during the frame.
+    pub bytes_fetched: u64,
+    /// Tile bytes resident on the GPU.
+    pub gpu_bytes: usize,
+    /// Tile bytes held on the CPU.
+    pub cpu_bytes: usize,
+    /// Resident memory of the process, MiB.
+    pub rss_mib: f64,
+    /// Selection time, ms.
+    pub selection_ms: f64,
+    /// The frame budget, ms (budget mode).
+    pub budget_ms: Option<f64>,
+    /// The frame time the selection predicted, ms, corrected by the
+    /// flight's aim ([`BudgetFlight::expected_ms`](crate::client::lod::flight::BudgetFlight::expected_ms); budget mode).
+    pub predicted_ms: Option<f64>,
+    /// The cost model's prediction for what the frame drew, made before the
+    /// frame corrected the model, ms (budget mode): beside `predicted_ms`,
+    /// it tells the model's error from what the selection's camera
+    /// prediction and aim add.
+    pub model_ms: Option<f64>,
+    /// Candidate tiles of the selection (budget mode).
+    pub candidates: Option<usize>,
+    /// The selection's benefit over the optimiser's upper bound (budget
+    /// mode).
+    pub benefit_bound: Option<f64>,
+    /// Mean shadow steps over the tiles drawn.
+    pub shadow_steps_mean: f64,
+    /// What bounded the selection: [`crate::client::lod::budget::Cut::bound`]
+    /// (budget mode).
+    pub bound: Option<&'static str>,
+    /// Tiles drawn morphing from a coarser one (budget mode).
+    pub morphing: usize,
+    /// Trees drawn as splats.
+    pub trees: usize,
+    /// Tree splats drawn.
+    pub splats: usize,
+    /// Pixels the splats' quads cover, overlaps counted.
+    pub splat_fill_px: f64,
+    /// Quadtree nodes the screen-space error selection touched:
+    /// refinement and visibility tests (sse mode).
+    pub nodes_touched: Option<usize>,
+}
+
+/// A one-paragraph summary of a flight: frames, mean and worst times,
+/// tiles, fetches, memory at the start and the end.
+pub fn summary(records: &[FrameRecord]) -> String {
+    let n = records.len().max(1) as f64;
+    let mean = |f: &dyn Fn(&FrameRecord) -> f64| records.iter().map(f).sum::<f64>() / n;
+    let gpu: Vec<f64> = records.iter().filter_map(|r| r.gpu_ms).collect();
+    let gpu_text = if gpu.is_empty() {
+        "no timestamps".to_string()
+    } else {
+        format!("{:.2} ms GPU", gpu.iter().sum::<f64>() / gpu.len() as f64)
+    };
+    let (first, last) = (records.first(), records.last());
+    // Fetches are counted where frames were read back (`sylva view` reads
+    // back none unless under a budget).
+    let fetches = if records.iter().any(|r| r.ray_pixels > 0) {
+        let max = records.iter().map(|r| r.view_fetches.1).max().unwrap_or(0);
+        format!("view fetches/pixel mean {:.1}, max {max}; ", mean(&|r| r.view_fetches.0))
+    } else {
+        String::new()
+    };
+    format!(
+        "{} frames: {:.2} ms CPU (select + load), {:.2} ms render, {gpu_text} per frame; {:.1} tiles ({:.1} ray cast); {fetches}{} bytes fetched; RSS {:.0} → {:.0} MiB",
+        records.len(),
+        mean(&|r| r.cpu_ms),
+        mean(&|r| r.render_ms),
+        mean(&|r| (r.tiles_ray + r.tiles_plain) as f64),
+        mean(&|r| r.tiles_ray as f64),
+        records.iter().map(|r| r.bytes_fetched).sum::<u64>(),
+        first.map_or(0.0, |r| r.rss_mib),
+        last.map_or(0.0, |r| r.rss_mib),
+    ) + if !records.is_empty() && records.iter().all(|r| r.tiles_ray + r.tiles_plain == 0) {
+        // Blank frames are no error, but rarely what was meant.
+        "\nno frame drew a tile: does the camera look at the region?"
+    } else {
+        ""
+    }
+}
