@@ -213,7 +213,7 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
     for camera in scope.cameras {
         let cam = frame.to_local(camera.position_ecef);
         let near_m = (cam.clamp(box_lo, box_hi) - cam).length();
-        let visible = coverage::visible_px(camera, sector, surface_m(camera, lo, hi));
+        let visible = seen_px(camera, sector, (lo, hi));
         let full = coverage::full_px(camera, area_m2, near_m).max(visible);
         benefit += tile_benefit_seen(visible, full, samples, Smooth::default());
         seen += visible;
@@ -283,17 +283,21 @@ fn inside(sector: &Sector, b: &BBox) -> (Sector, f64) {
     (clipped, if share.is_finite() { share.clamp(0.0, 1.0) } else { 0.0 })
 }
 
-/// The height a tile's surface is measured at from `camera`: the middle
-/// of the part of its range below the eye. A camera low in a valley sees
-/// the ground below it: measured just under the eye (as the middle of a
-/// range reaching above the eye, clamped, once was), the surface is seen
-/// only within metres of the camera, and a tile ahead covering the view
-/// counted nothing and was never refined. A tile nobody loaded spans
-/// [`UNKNOWN_RANGE_M`]. A tile wholly above the eye faces away and counts
-/// nothing (a flank above a low camera is drawn at its parent's cut).
-fn surface_m(camera: &Camera, lo: f64, hi: f64) -> f64 {
+/// Pixels of a tile's ground `camera` sees, its heights in `lo..hi`. A
+/// tile wholly above the eye (a flank above a valley) shows the
+/// silhouette of its box ([`coverage::above_px`]). Any other tile's
+/// surface is measured at one height, the middle of the part of its range
+/// below the eye. A camera low in a valley sees the ground below it:
+/// measured just under the eye (as the middle of a range reaching above
+/// the eye, clamped, once was), the surface is seen only within metres of
+/// the camera, and a tile ahead covering the view counted nothing and was
+/// never refined. A tile nobody loaded spans [`UNKNOWN_RANGE_M`].
+fn seen_px(camera: &Camera, sector: &Sector, (lo, hi): (f64, f64)) -> f64 {
     let eye_m = Geodetic::from_ecef(camera.position_ecef).height_m;
-    0.5 * (lo + hi.min(eye_m - 1.0).max(lo))
+    if lo >= eye_m {
+        return coverage::above_px(camera, sector, (lo, hi));
+    }
+    coverage::visible_px(camera, sector, 0.5 * (lo + hi.min(eye_m - 1.0).max(lo)))
 }
 
 #[cfg(test)]
@@ -374,6 +378,31 @@ mod tests {
         assert!(seen > 0.3 * image, "tiles past the edge show {seen} of {image} px");
         let coarse = past_edge.iter().filter(|t| t.seen_px > 0.01 * image).map(|t| t.id.level).min();
         assert!(coarse.is_some_and(|level| level >= 10), "{coarse:?}: the nearest ground is refined");
+    }
+
+    #[test]
+    fn a_camera_low_in_a_valley_sees_the_flank_above_it() {
+        // 100 m over a valley floor (900 m), 150 m west of a level-10
+        // tile's edge (10.125°) past which the ground rises from 1,200 to
+        // 3,000 m, looking east and 10° up: the flank fills most of the
+        // image. Measured on a plane, which faces away from below, those
+        // tiles counted nothing and stayed at their parent's cut.
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        let flank = move |id: TileId| grid.sector(id).min_lon >= 10.125;
+        let range = move |id: TileId| Some(if flank(id) { (1200.0, 3000.0) } else { (900.0, 3000.0) });
+        let lon = 10.125 - 150.0 / (111_320.0 * 46.36f64.to_radians().cos());
+        let camera = Camera::looking(Geodetic::new(lon, 46.36, 1000.0), 90.0, 10.0, 60.0, (256, 192));
+        let c = walk_over(camera, (None, None), 16, &range);
+        let parents: std::collections::HashSet<u32> = c.tiles.iter().filter_map(|t| t.parent).collect();
+        let leaves = (0..c.tiles.len() as u32).filter(|k| !parents.contains(k)).map(|k| &c.tiles[k as usize]);
+        let above: Vec<&Candidate> = leaves.filter(|t| flank(t.id)).collect();
+        let seen: f64 = above.iter().map(|t| t.seen_px).sum();
+        let image = 256.0 * 192.0;
+        assert!(seen > 0.3 * image, "the flank shows {seen} of {image} px");
+        // The flank beside the camera is refined until its samples
+        // outnumber its pixels (level 13), not left at a level-10 cut.
+        let holding = above.iter().find(|t| grid.sector(t.id).contains(10.1255, 46.36));
+        assert!(holding.is_some_and(|t| t.id.level >= 13), "{:?}", holding.map(|t| t.id));
     }
 
     #[test]

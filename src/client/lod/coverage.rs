@@ -4,7 +4,9 @@
 //! pixels the whole tile would cover at the density of its nearest point.
 //!
 //! The surface is approximated by a few lon/lat cells at one height (the
-//! middle of the tile's range); each cell is clipped against the near plane
+//! middle of the part of the tile's range below the eye), or for a tile
+//! wholly above the eye by the cells of its box's floor and walls; each
+//! cell is clipped against the near plane
 //! in camera space, projected, clipped to the image and measured with the
 //! shoelace formula. Cells facing away (the far side of a coarse tile on
 //! the globe) and cells behind the horizon count nothing. Overlap between
@@ -72,23 +74,80 @@ impl<T: Copy + Default> Polygon<T> {
 /// above the ellipsoid, seen from `camera`.
 pub fn visible_px(camera: &Camera, sector: &Sector, height_m: f64) -> f64 {
     let m = cells_per_side(sector.max_lon - sector.min_lon);
+    let lons = steps(sector.min_lon, sector.max_lon, m);
+    let rows = steps(sector.min_lat, sector.max_lat, m).map(|lat| lons.clone().map(move |lon| (lon, lat, height_m)));
+    let points = project(camera, rows.flatten());
+    finite(grid_px(camera, &points, m + 1, Winding::Up))
+}
+
+/// Pixels covered by the box of `sector` between `lo_m` and `hi_m` above
+/// the ellipsoid, seen from `camera` below it: its floor seen from
+/// underneath and the walls facing the camera, the silhouette of the
+/// ground it holds. A tile wholly above a low camera (a flank rising from
+/// a valley) faces the camera on its slopes, not on a plane at one height,
+/// which from below faces away.
+pub fn above_px(camera: &Camera, sector: &Sector, (lo_m, hi_m): (f64, f64)) -> f64 {
+    let m = cells_per_side(sector.max_lon - sector.min_lon);
+    let (lons, lats) = (steps(sector.min_lon, sector.max_lon, m), steps(sector.min_lat, sector.max_lat, m));
+    let floor = lats.clone().flat_map(|lat| lons.clone().map(move |lon| (lon, lat, lo_m)));
+    let mut px = grid_px(camera, &project(camera, floor), m + 1, Winding::Down);
+    // Each wall a strip of cells, its foot along one edge (west to east,
+    // south to north) and its top above; facing out of the box.
+    let walls = [
+        (sector.min_lat, false, Winding::Up),
+        (sector.max_lat, false, Winding::Down),
+        (sector.min_lon, true, Winding::Down),
+        (sector.max_lon, true, Winding::Up),
+    ];
+    for (at, along_lat, winding) in walls {
+        let edge = if along_lat { lats.clone() } else { lons.clone() };
+        let point = move |t: f64, h: f64| if along_lat { (at, t, h) } else { (t, at, h) };
+        let strip = [lo_m, hi_m].into_iter().flat_map(|h| edge.clone().map(move |t| point(t, h)));
+        px += grid_px(camera, &project(camera, strip), m + 1, winding);
+    }
+    finite(px)
+}
+
+/// `m + 1` values evenly from `a` to `b`.
+fn steps(a: f64, b: f64, m: usize) -> impl Iterator<Item = f64> + Clone {
+    (0..=m).map(move |k| a + (b - a) * k as f64 / m as f64)
+}
+
+/// Points (lon, lat, height) in camera space, each with whether it lies
+/// behind the horizon.
+fn project(camera: &Camera, points: impl Iterator<Item = (f64, f64, f64)>) -> Vec<(DVec3, bool)> {
     let eye = camera.position_ecef;
     let to_camera = camera.rotation.transpose();
-    let points: Vec<(DVec3, bool)> = (0..=m)
-        .flat_map(|j| (0..=m).map(move |i| (i, j)))
-        .map(|(i, j)| {
-            let lon = sector.min_lon + (sector.max_lon - sector.min_lon) * i as f64 / m as f64;
-            let lat = sector.min_lat + (sector.max_lat - sector.min_lat) * j as f64 / m as f64;
-            let to = Geodetic::new(lon, lat, height_m).to_ecef() - eye;
+    points
+        .map(|(lon, lat, h)| {
+            let to = Geodetic::new(lon, lat, h).to_ecef() - eye;
             (to_camera * to, behind_horizon(eye, to))
         })
-        .collect();
+        .collect()
+}
+
+/// Which way a grid of points faces: `Up` when its rows run along the
+/// first axis counter-clockwise seen from outside (the top of a sheet
+/// seen from above), `Down` the other side.
+#[derive(Clone, Copy)]
+enum Winding {
+    Up,
+    Down,
+}
+
+/// Pixels covered by the front-facing cells of a grid of camera-space
+/// points, `cols` per row; cells wholly behind the horizon count nothing.
+fn grid_px(camera: &Camera, points: &[(DVec3, bool)], cols: usize, winding: Winding) -> f64 {
+    let rows = points.len() / cols;
     let mut total = 0.0;
-    for j in 0..m {
-        for i in 0..m {
-            let corners = [j * (m + 1) + i, j * (m + 1) + i + 1, (j + 1) * (m + 1) + i + 1, (j + 1) * (m + 1) + i];
+    for j in 0..rows.saturating_sub(1) {
+        for i in 0..cols - 1 {
+            let mut corners = [j * cols + i, j * cols + i + 1, (j + 1) * cols + i + 1, (j + 1) * cols + i];
             if corners.iter().all(|&k| points[k].1) {
                 continue;
+            }
+            if let Winding::Down = winding {
+                corners.reverse();
             }
             let mut cell = Polygon::new();
             for k in corners {
@@ -97,7 +156,12 @@ pub fn visible_px(camera: &Camera, sector: &Sector, height_m: f64) -> f64 {
             total += projected_area(camera, &cell);
         }
     }
-    if total.is_finite() { total } else { 0.0 }
+    total
+}
+
+/// `px`, or 0 where it is not finite.
+fn finite(px: f64) -> f64 {
+    if px.is_finite() { px } else { 0.0 }
 }
 
 /// The signed image area of a camera-space polygon (counter-clockwise
@@ -161,6 +225,36 @@ mod tests {
         assert!((px - 320.0 * 240.0).abs() < 1.0, "{px}");
         // From below the surface it faces away.
         assert_eq!(visible_px(&c, &sector, 5000.0), 0.0);
+    }
+
+    #[test]
+    fn a_tile_above_the_camera_shows_its_floor_and_the_walls_facing_it() {
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        let s = grid.sector(grid.tile_containing(10.1, 46.3, 12));
+        let mid_lon = (s.min_lon + s.max_lon) / 2.0;
+        // Straight up from under the middle: the floor fills the view; a
+        // plane at one height faces away.
+        let mid = Geodetic::new(mid_lon, (s.min_lat + s.max_lat) / 2.0, 0.0);
+        let up = Camera::looking(mid, 0.0, 90.0, 60.0, (320, 240));
+        let px = above_px(&up, &s, (300.0, 400.0));
+        assert!((px - 320.0 * 240.0).abs() < 1.0, "{px}");
+        assert_eq!(visible_px(&up, &s, 300.0), 0.0);
+        // Level, 1 km south of the tile, 200 m below its floor: the south
+        // wall up to the image's top and the floor behind it, a trapezoid
+        // (the side walls face away).
+        let eye = Geodetic::new(mid_lon, s.min_lat - 1000.0 / 111_160.0, 1000.0);
+        let level = Camera::looking(eye, 0.0, 0.0, 60.0, (320, 240));
+        let at = |lon: f64, lat: f64| (Geodetic::new(lon, lat, 1000.0).to_ecef() - eye.to_ecef()).length();
+        let (near, far) = (at(mid_lon, s.min_lat), at(mid_lon, s.max_lat));
+        let half_width = 0.5
+            * (Geodetic::new(s.max_lon, s.min_lat, 0.0).to_ecef() - Geodetic::new(s.min_lon, s.min_lat, 0.0).to_ecef())
+                .length();
+        let f = level.focal_px();
+        let wall = 2.0 * half_width / near * f * (120.0 - 200.0 / near * f);
+        let floor = (200.0 / near - 200.0 / far) * f * (half_width / near + half_width / far) * f;
+        let px = above_px(&level, &s, (1200.0, 2200.0));
+        assert!((px / (wall + floor) - 1.0).abs() < 0.03, "{px} against {}", wall + floor);
+        assert_eq!(visible_px(&level, &s, 1700.0), 0.0);
     }
 
     #[test]
