@@ -47,6 +47,16 @@ impl Format {
         }
     }
 
+    /// The name [`Format::parse`] reads.
+    pub fn name(self) -> &'static str {
+        match self {
+            Format::Bil16 => "bil16",
+            Format::Bil32 => "bil32",
+            Format::Png16 => "png16",
+            Format::Tiff => "tiff",
+        }
+    }
+
     /// MIME type.
     pub fn mime(self) -> &'static str {
         match self {

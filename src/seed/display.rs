@@ -34,7 +34,7 @@ impl Display {
         let bar_wanted = mode == Mode::Auto && std::io::stderr().is_terminal();
         let target = if bar_wanted { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() };
         let bar = ProgressBar::with_draw_target(Some(total), target);
-        let style = ProgressStyle::with_template("{wide_bar} {pos}/{len} tiles {per_sec} ETA {eta} {msg}");
+        let style = ProgressStyle::with_template("{wide_bar} {pos}/{len} tile files {per_sec} ETA {eta} {msg}");
         if let Ok(style) = style {
             bar.set_style(style);
         }
@@ -60,7 +60,7 @@ impl Display {
         let (pos, len) = (self.bar.position(), self.bar.length().unwrap_or(0));
         let pct = if len > 0 { 100.0 * pos as f64 / len as f64 } else { 100.0 };
         format!(
-            "seed: {pos}/{len} tiles ({pct:.1} %), {:.1} tiles/s, ETA {}, {failed} failed",
+            "seed: {pos}/{len} tile files ({pct:.1} %), {:.1} files/s, ETA {}, {failed} failed",
             self.bar.per_sec(),
             indicatif::HumanDuration(self.bar.eta())
         )

@@ -1,17 +1,28 @@
 //! Tiles that failed after their retries: one line each,
-//! `layer/level/row/col`, then a tab and `# why`. The same format is read by
+//! `layer/level/row/col formats`, the formats whose files failed
+//! (`png16,tiff`), then a tab and `# why`. The same format is read by
 //! `--tiles-from`, so the failures of a run are re-run with
-//! `--tiles-from FILE`. Blank lines and `#` comments are ignored.
+//! `--tiles-from FILE`, each tile in the formats it lists (a line without
+//! formats takes `--formats`). Blank lines and `#` comments are ignored.
 
 use super::progress::parse_tile;
 use crate::cem::Layer;
+use crate::encode::Format;
 use crate::grid::{TileGrid, TileId};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-/// A tile of a list, with its layer.
-pub type Entry = (Layer, TileId);
+/// A tile of a list: its layer, and the formats it is listed in.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Entry {
+    /// The layer.
+    pub layer: Layer,
+    /// The tile.
+    pub tile: TileId,
+    /// Its formats (none listed: the run's `--formats`).
+    pub formats: Vec<Format>,
+}
 
 /// A tile list that cannot be read.
 #[derive(Debug, thiserror::Error)]
@@ -43,13 +54,25 @@ pub fn read(path: &Path, tiles: &TileGrid) -> Result<Vec<Entry>, ListError> {
         if entry.is_empty() {
             continue;
         }
-        let parsed = entry.split_once('/').and_then(|(layer, tile)| Some((Layer::parse(layer)?, parse_tile(tile)?)));
-        let e = parsed
-            .ok_or_else(|| fail(i + 1, format!("{entry:?}: expected layer/level/row/col, e.g. cem/12/2254/3108")))?;
-        tiles.check(e.1).map_err(|why| fail(i + 1, why.to_string()))?;
+        let e = parse_entry(entry).ok_or_else(|| {
+            fail(i + 1, format!("{entry:?}: expected layer/level/row/col [formats], e.g. cem/12/2254/3108 bil16,png16"))
+        })?;
+        tiles.check(e.tile).map_err(|why| fail(i + 1, why.to_string()))?;
         out.push(e);
     }
     Ok(out)
+}
+
+/// `layer/level/row/col`, then perhaps a comma-separated list of formats.
+fn parse_entry(entry: &str) -> Option<Entry> {
+    let mut fields = entry.split_whitespace();
+    let (layer, tile) = fields.next()?.split_once('/')?;
+    let formats = match fields.next() {
+        Some(list) => list.split(',').map(Format::parse).collect::<Option<Vec<_>>>()?,
+        None => Vec::new(),
+    };
+    let entry = Entry { layer: Layer::parse(layer)?, tile: parse_tile(tile)?, formats };
+    fields.next().is_none().then_some(entry)
 }
 
 /// The failed-tiles file of a run.
@@ -96,10 +119,11 @@ impl Failed {
     }
 
     /// Records a failed tile.
-    pub fn record(&self, (layer, tile): Entry, why: &str) -> std::io::Result<()> {
+    pub fn record(&self, entry: &Entry, why: &str) -> std::io::Result<()> {
         let why = why.replace(['\n', '\r'], " ");
+        let formats: Vec<&str> = entry.formats.iter().map(|f| f.name()).collect();
         let mut file = self.file.lock().map_err(|_| std::io::Error::other("failed-tiles file lock poisoned"))?;
-        writeln!(file, "{}/{tile}\t# {why}", layer.name())
+        writeln!(file, "{}/{} {}\t# {why}", entry.layer.name(), entry.tile, formats.join(","))
     }
 }
 
@@ -107,33 +131,46 @@ impl Failed {
 mod tests {
     use super::*;
 
+    fn entry(layer: Layer, (level, row, col): (u32, u64, u64), formats: &[Format]) -> Entry {
+        Entry { layer, tile: TileId::new(level, row, col), formats: formats.to_vec() }
+    }
+
     #[test]
     fn a_list_re_run_in_place_stays_whole_until_the_run_ends() {
         let path = std::env::temp_dir().join(format!("sylva-rerun-{}.txt", std::process::id()));
         std::fs::write(&path, "cem/12/3/4\ndem/5/1/2\n").unwrap();
         let f = Failed::replacing(&path).unwrap();
-        f.record((Layer::Dem, TileId::new(5, 1, 2)), "still failing").unwrap();
+        f.record(&entry(Layer::Dem, (5, 1, 2), &[Format::Bil16]), "still failing").unwrap();
         let grid = TileGrid::new(36.0, 513).unwrap();
         assert_eq!(read(&path, &grid).unwrap().len(), 2, "an interrupted run would leave the list whole");
         assert_eq!(f.finish().unwrap(), path);
-        assert_eq!(read(&path, &grid).unwrap(), vec![(Layer::Dem, TileId::new(5, 1, 2))]);
+        assert_eq!(read(&path, &grid).unwrap(), vec![entry(Layer::Dem, (5, 1, 2), &[Format::Bil16])]);
         std::fs::remove_file(&path).unwrap();
     }
 
     #[test]
-    fn recorded_failures_read_back_and_bad_lines_are_named() {
+    fn recorded_failures_read_back_with_their_formats_and_bad_lines_are_named() {
         let path = std::env::temp_dir().join(format!("sylva-failed-{}.txt", std::process::id()));
         let f = Failed::open(&path, false).unwrap();
-        f.record((Layer::Cem, TileId::new(12, 3, 4)), "upstream: 500\nInternal").unwrap();
-        f.record((Layer::Dem, TileId::new(5, 1, 2)), "x").unwrap();
+        let failed = [
+            entry(Layer::Cem, (12, 3, 4), &[Format::Png16, Format::Tiff]),
+            entry(Layer::Dem, (5, 1, 2), &[Format::Bil32]),
+        ];
+        f.record(&failed[0], "upstream: 500\nInternal").unwrap();
+        f.record(&failed[1], "x").unwrap();
         let grid = TileGrid::new(36.0, 513).unwrap();
-        assert_eq!(
-            read(&path, &grid).unwrap(),
-            vec![(Layer::Cem, TileId::new(12, 3, 4)), (Layer::Dem, TileId::new(5, 1, 2))]
+        assert_eq!(read(&path, &grid).unwrap(), failed);
+        assert!(
+            std::fs::read_to_string(&path).unwrap().starts_with("cem/12/3/4 png16,tiff\t# upstream: 500 Internal\n")
         );
+        // Lines without formats take the run's.
         std::fs::write(&path, "# a comment\n\ncem/1/2/3\ntrees/1/2/3\n").unwrap();
         let err = read(&path, &grid).unwrap_err().to_string();
         assert!(err.contains(":4:") && err.contains("trees/1/2/3"), "{err}");
+        for bad in ["cem/1/2/3 png17", "cem/1/2/3 png16 tiff", "cem/1/2/3 png16,"] {
+            std::fs::write(&path, format!("{bad}\n")).unwrap();
+            assert!(read(&path, &grid).unwrap_err().to_string().contains(":1:"), "{bad}");
+        }
         std::fs::write(&path, "cem/1/99/3\n").unwrap();
         assert!(read(&path, &grid).unwrap_err().to_string().contains(":1: tile 1/99/3 does not exist"));
         std::fs::remove_file(&path).unwrap();

@@ -266,20 +266,24 @@ impl Run<'_> {
         halves
     }
 
-    /// Seeds the tiles of a list, each layer with its own seeder.
+    /// Seeds the tiles of a list, each in the formats it lists (or the
+    /// job's), with a seeder per layer and formats.
     fn list(&self, entries: &[failed::Entry]) {
-        let display =
-            display::Display::new(self.options.display, entries.len() as u64 * self.job.formats.len() as u64, 0);
-        let mut layers: Vec<_> = entries.iter().map(|e| e.0).collect();
-        layers.sort_by_key(|l| l.name());
-        layers.dedup();
-        for layer in layers {
-            let seeder = self.seeder(vec![layer]);
-            entries.par_iter().filter(|e| e.0 == layer).for_each(|&(_, tile)| {
+        let formats =
+            |e: &failed::Entry| if e.formats.is_empty() { self.job.formats.clone() } else { e.formats.clone() };
+        let total = entries.iter().map(|e| formats(e).len() as u64).sum();
+        let display = display::Display::new(self.options.display, total, 0);
+        let mut kinds: Vec<_> = entries.iter().map(|e| (e.layer, formats(e))).collect();
+        kinds.sort_by_key(|(layer, formats)| (layer.name(), formats.iter().map(|f| f.name()).collect::<Vec<_>>()));
+        kinds.dedup();
+        for (layer, kind) in kinds {
+            let seeder = Seeder { formats: kind.clone(), ..self.seeder(vec![layer]) };
+            let of_kind = |e: &&failed::Entry| e.layer == layer && formats(e) == kind;
+            entries.par_iter().filter(of_kind).for_each(|e| {
                 if !self.stopped() {
-                    let (_, failures) = seeder.tile(tile, None, false);
+                    let (_, failures) = seeder.tile(e.tile, None, false);
                     self.record(failures);
-                    display.advance(self.job.formats.len() as u64, self.counters.failed.load(Ordering::Relaxed));
+                    display.advance(kind.len() as u64, self.counters.failed.load(Ordering::Relaxed));
                 }
             });
         }
@@ -288,7 +292,7 @@ impl Run<'_> {
 
     fn record(&self, failures: Vec<(failed::Entry, String)>) {
         for (entry, why) in failures {
-            if let Err(e) = self.failed.record(entry, &why) {
+            if let Err(e) = self.failed.record(&entry, &why) {
                 self.warn_once(&format!("cannot write {}: {e}", self.failed.path().display()));
             }
         }

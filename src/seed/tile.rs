@@ -90,9 +90,9 @@ impl Seeder<'_> {
                     let keep = for_parent && self.exact(tile.level.wrapping_sub(1), i);
                     halves.push(samples.filter(|_| keep).map(|s| decimate::half(&s)));
                 }
-                Err(why) => {
-                    self.counters.failed.fetch_add(self.formats.len() as u64, Ordering::Relaxed);
-                    failures.push(((self.layers[i], tile), why));
+                Err((why, formats)) => {
+                    self.counters.failed.fetch_add(formats.len() as u64, Ordering::Relaxed);
+                    failures.push((Entry { layer: self.layers[i], tile, formats }, why));
                     halves.push(None);
                 }
             }
@@ -105,31 +105,41 @@ impl Seeder<'_> {
         self.from_children.get(level as usize).and_then(|l| l.get(i)).copied().unwrap_or(false)
     }
 
-    /// Seeds one layer of a tile in every format; its samples if they were made.
-    fn layer(&self, tile: TileId, i: usize, kids: Option<&[Halves; 4]>) -> Result<Option<LayerSamples>, String> {
+    /// Seeds one layer of a tile in every format; its samples if they were
+    /// made, or why not and the formats left unmade (the one that failed
+    /// and those after it).
+    fn layer(
+        &self,
+        tile: TileId,
+        i: usize,
+        kids: Option<&[Halves; 4]>,
+    ) -> Result<Option<LayerSamples>, (String, Vec<Format>)> {
         let layer = self.layers[i];
         let grid = self.region.tiles.tile_samples(tile, 0);
         let mut samples: Option<(Option<LayerSamples>, bool)> = None;
-        for &format in &self.formats {
+        for (k, &format) in self.formats.iter().enumerate() {
             let product =
                 Product::Tile { layer: MapLayer::Data(layer), id: tile, halo: 0, encoding: Encoding::Data(format) };
-            let key = product.key(&self.region.version).ok_or("tiles have cache keys")?;
-            let made = self.file(&key, || {
-                if samples.is_none() {
-                    samples = Some(self.samples(tile, i, kids)?);
-                }
-                let (s, derived) = samples.as_ref().ok_or("samples were just made")?;
-                let c = products::encode_samples(
-                    self.region,
-                    &grid,
-                    layer,
-                    Encoding::Data(format),
-                    s.as_ref(),
-                    Stats::default(),
-                )
-                .map_err(|e| e.to_string())?;
-                Ok((c.bytes, c.uniform, *derived))
-            })?;
+            let key = product.key(&self.region.version).ok_or_else(|| "tiles have cache keys".to_string());
+            let made = key.and_then(|key| {
+                self.file(&key, || {
+                    if samples.is_none() {
+                        samples = Some(self.samples(tile, i, kids)?);
+                    }
+                    let (s, derived) = samples.as_ref().ok_or("samples were just made")?;
+                    let c = products::encode_samples(
+                        self.region,
+                        &grid,
+                        layer,
+                        Encoding::Data(format),
+                        s.as_ref(),
+                        Stats::default(),
+                    )
+                    .map_err(|e| e.to_string())?;
+                    Ok((c.bytes, c.uniform, *derived))
+                })
+            });
+            let made = made.map_err(|why| (why, self.formats[k..].to_vec()))?;
             let counter = match made {
                 Made::Computed => &self.counters.computed,
                 Made::Derived => &self.counters.derived,

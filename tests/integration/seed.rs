@@ -156,7 +156,7 @@ fn seeded_tiles_are_cache_hits_identical_to_on_demand_tiles() {
     assert!(count(&summary, "from their children") > 0, "{summary}");
     // Off a terminal, progress is plain log lines with the rate and the ETA.
     let log = String::from_utf8_lossy(&run.stderr);
-    assert!(log.lines().any(|l| l.starts_with("seed: ") && l.contains("tiles/s, ETA")), "{log}");
+    assert!(log.lines().any(|l| l.starts_with("seed: ") && l.contains("files/s, ETA")), "{log}");
     let seeded = tiles(&cache);
     assert_eq!(seeded.len() as u64, files);
     // Byte-identical to what the server computes on demand (parents built
@@ -406,6 +406,8 @@ fn failing_tiles_are_retried_listed_and_rerun_and_uniform_tiles_are_stored_once(
         "10.0,46.3,10.1,46.4",
         "--retries",
         "1",
+        "--formats",
+        "bil16,png16",
     ];
     // Too many failures stop the run.
     let stopped = seed(&dir.0, &[&job[..], &["--max-failures", "0"]].concat());
@@ -419,14 +421,17 @@ fn failing_tiles_are_retried_listed_and_rerun_and_uniform_tiles_are_stored_once(
     let out = seed(&dir.0, &job);
     assert_eq!(out.status.code(), Some(3), "{}", String::from_utf8_lossy(&out.stderr));
     let listed = std::fs::read_to_string(dir.join("seed-failed.txt")).unwrap();
-    let failed: Vec<&str> = listed.lines().map(|l| l.split('\t').next().unwrap()).collect();
+    let failed: Vec<&str> = listed.lines().map(|l| l.split(' ').next().unwrap()).collect();
     assert!(!failed.is_empty() && listed.contains("HTTP 500"), "{listed}");
+    assert!(listed.lines().all(|l| l.contains(" bil16,png16\t")), "each tile in both formats: {listed}");
     assert!(up.requests.lock().unwrap()[&up.bad] >= 2 * failed.len() as u32, "each failed tile was tried twice");
     let partial = tiles(&cache);
     for f in &failed {
         let p: Vec<&str> = f.split('/').collect();
-        let key = format!("{}/{}/{}/{}_{}.bil", p[0], p[1], p[2], p[2], p[3]);
-        assert!(!partial.keys().any(|k| k.ends_with(&key)), "{f} was stored");
+        for ext in ["bil", "png"] {
+            let key = format!("{}/{}/{}/{}_{}.{ext}", p[0], p[1], p[2], p[2], p[3]);
+            assert!(!partial.keys().any(|k| k.ends_with(&key)), "{key} was stored");
+        }
     }
     // Healed, the list is re-run: the cache is complete and equals one healthy run.
     up.healed.store(true, std::sync::atomic::Ordering::SeqCst);
@@ -439,13 +444,12 @@ fn failing_tiles_are_retried_listed_and_rerun_and_uniform_tiles_are_stored_once(
             config.to_str().unwrap(),
             "--cache-dir",
             cache.to_str().unwrap(),
-            "--formats",
-            "bil16",
             "--tiles-from",
             list.to_str().unwrap(),
         ],
     ));
-    assert_eq!(count(&rerun, "tile files made"), failed.len() as u64, "{rerun}");
+    // In the formats listed, not the default --formats bil16.
+    assert_eq!(count(&rerun, "tile files made"), 2 * failed.len() as u64, "{rerun}");
     let healthy = dir.join("healthy");
     ok(&seed(
         &dir.0,
@@ -453,9 +457,13 @@ fn failing_tiles_are_retried_listed_and_rerun_and_uniform_tiles_are_stored_once(
     ));
     let (repaired, expected) = (tiles(&cache), tiles(&healthy));
     assert!(repaired == expected, "the repaired cache differs from a healthy run");
-    // The sea tiles are one stored file and links to it.
-    let links: Vec<PathBuf> =
-        walk(&cache).into_iter().filter(|p| std::fs::symlink_metadata(p).unwrap().file_type().is_symlink()).collect();
+    // The sea tiles are one stored file per format and links to it.
+    let links: Vec<PathBuf> = walk(&cache)
+        .into_iter()
+        .filter(|p| {
+            std::fs::symlink_metadata(p).unwrap().file_type().is_symlink() && p.extension().is_some_and(|e| e == "bil")
+        })
+        .collect();
     assert!(links.len() >= 4, "{} links", links.len());
     let targets: std::collections::BTreeSet<PathBuf> =
         links.iter().map(|l| std::fs::canonicalize(l).unwrap()).collect();

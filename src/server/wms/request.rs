@@ -225,7 +225,7 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)>
         "getcapabilities" | "capabilities" => Ok(Request::GetCapabilities(version)),
         "getmap" | "map" => {
             reply.style = exception_style(params.get("EXCEPTIONS"));
-            reply.image = image_of(&params);
+            reply.image = image_of(&params, limits);
             reply.background = background(&params, reply.image.map(|(_, _, f)| f)).unwrap_or(None);
             get_map(&params, version, limits).map(Request::GetMap).map_err(|e| (e, reply))
         }
@@ -284,12 +284,15 @@ fn exception_style(value: Option<&str>) -> ExceptionStyle {
     }
 }
 
-/// Size and format of the image an in-image exception replaces, if they parse.
-fn image_of(params: &Params) -> Option<(usize, usize, MapFormat)> {
+/// Size and format of the image an in-image exception replaces, if they
+/// parse and the size is one a map may have (a larger one gets the XML
+/// report: an error costs no more than a map).
+fn image_of(params: &Params, limits: Limits) -> Option<(usize, usize, MapFormat)> {
     let w = params.get("WIDTH")?.trim().parse().ok()?;
     let h = params.get("HEIGHT")?.trim().parse().ok()?;
     let f = MapFormat::parse(params.get("FORMAT")?)?;
-    (w > 0 && h > 0 && w <= 8192 && h <= 8192).then_some((w, h, f))
+    let fits = |side: usize| (1..=limits.max_side).contains(&side);
+    (fits(w) && fits(h)).then_some((w, h, f))
 }
 
 /// A GetMap: the map part, in a format its layer is offered in.
@@ -577,6 +580,14 @@ mod tests {
                 background: Some([255, 255, 255])
             }
         );
+    }
+
+    #[test]
+    fn an_image_larger_than_a_map_may_be_is_no_in_image_reply() {
+        let q = "REQUEST=GetMap&VERSION=1.3.0&LAYERS=relief&CRS=CRS:84&BBOX=0,0,1,1&WIDTH=4097&HEIGHT=4&FORMAT=image/png&EXCEPTIONS=INIMAGE";
+        let Err((e, reply)) = parse(q, LIMITS) else { panic!() };
+        assert!(e.to_string().contains("WIDTH"), "{e}");
+        assert_eq!((reply.style, reply.image), (ExceptionStyle::InImage, None));
     }
 
     /// Queries giving each parameter a value good for it (which may not go
