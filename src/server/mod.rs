@@ -18,7 +18,9 @@ pub mod products;
 mod query;
 mod respond;
 mod routes;
+pub use routes::MAX_XYZ_ZOOM;
 pub mod service;
+mod tilejson;
 pub mod wms;
 
 use crate::cache::TileStore;
@@ -103,6 +105,22 @@ impl AppState {
     /// The region served.
     pub fn region(&self) -> &Region {
         self.tiles.region()
+    }
+
+    /// Where clients reach the server, without a trailing `/`: `[server]
+    /// public_url`, else from the request's Host header.
+    pub fn public_base(&self, headers: &axum::http::HeaderMap) -> String {
+        if let Some(url) = &self.settings.public_url {
+            return url.trim_end_matches('/').to_string();
+        }
+        let host = headers.get(axum::http::header::HOST).and_then(|h| h.to_str().ok()).filter(|h| !h.is_empty());
+        match host {
+            Some(host) => format!("http://{host}"),
+            None => {
+                let port = self.settings.bind.rsplit_once(':').map_or("80", |(_, port)| port);
+                format!("http://localhost:{port}")
+            }
+        }
     }
 }
 

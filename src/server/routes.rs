@@ -1,6 +1,7 @@
 //! Routes and middleware: `/health`, `/metrics`, `/tiles.json` (the grid and
 //! region a client flies over), World Wind tiles (path and
-//! `?T=&L=&X=&Y=` forms), XYZ Terrarium tiles, and `/wms`; per-request
+//! `?T=&L=&X=&Y=` forms), XYZ Terrarium tiles (zooms 0 to
+//! [`MAX_XYZ_ZOOM`]) with a TileJSON per layer, and `/wms`; per-request
 //! timeout (503, a ServiceExceptionReport on `/wms`), URI length limit, CORS
 //! for browser clients (read-only data: any origin may GET), gzip for BIL
 //! bodies, request metrics and logs.
@@ -27,6 +28,9 @@ use tower_http::compression::CompressionLayer;
 use tower_http::cors::{Any, CorsLayer};
 use tower_http::trace::TraceLayer;
 
+/// Deepest XYZ zoom served (2.4 cm pixels at the equator).
+pub const MAX_XYZ_ZOOM: u32 = 24;
+
 /// Longest request URI, bytes; a WMS request is a few hundred.
 const MAX_URI_BYTES: usize = 8192;
 
@@ -42,6 +46,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/tiles.json", get(tileset))
         .route("/tiles", get(tile_query))
         .route("/tiles/{layer}/{level}/{row}/{file}", get(tile_path))
+        .route("/xyz/{layer}/tiles.json", get(xyz_tilejson))
         .route("/xyz/{layer}/{z}/{x}/{file}", get(xyz))
         .layer(CompressionLayer::new().gzip(true).compress_when(bil_only))
         .layer(middleware::from_fn_with_state(state.clone(), observe))
@@ -103,7 +108,7 @@ fn route_label(path: &str) -> &'static str {
         "/metrics" => "metrics",
         "/wms" => "wms",
         "/tiles" | "/tiles/{layer}/{level}/{row}/{file}" | "/tiles.json" => "tiles",
-        "/xyz/{layer}/{z}/{x}/{file}" => "xyz",
+        "/xyz/{layer}/{z}/{x}/{file}" | "/xyz/{layer}/tiles.json" => "xyz",
         _ => "other",
     }
 }
@@ -129,18 +134,29 @@ async fn metrics(State(state): State<Arc<AppState>>) -> Response {
 /// `/tiles/{layer}/{level}/{row}/{row}_{col}.{ext}?halo=B`.
 async fn tile_path(
     State(state): State<Arc<AppState>>,
-    Path((layer, level, row, file)): Path<(String, u32, u64, String)>,
+    Path((layer, level, row, file)): Path<(String, String, String, String)>,
     RawQuery(query): RawQuery,
     headers: HeaderMap,
 ) -> Result<Response, ServeError> {
+    let (level, row) = (level_number(&level, "level")?, whole_number(&row, "row")?);
     let (stem, ext) = file.rsplit_once('.').ok_or(ServeError::NotFound)?;
     let (file_row, col) = stem.split_once('_').ok_or(ServeError::NotFound)?;
     if file_row.parse::<u64>().ok() != Some(row) {
         return Err(ServeError::NotFound);
     }
-    let col: u64 = col.parse().map_err(|_| ServeError::NotFound)?;
+    let col = whole_number(col, "column")?;
     let params = query_params(query.as_deref())?;
     tile(&state, &layer, TileId::new(level, row, col), ext, halo(&params, &state)?, &headers).await
+}
+
+/// A tile coordinate: a whole number, or the request is bad.
+fn whole_number(text: &str, what: &str) -> Result<u64, ServeError> {
+    text.parse().map_err(|_| ServeError::BadRequest(format!("{what} must be a whole number, not {text:?}")))
+}
+
+/// A level or zoom: a whole number (past any level: no such tile).
+fn level_number(text: &str, what: &str) -> Result<u32, ServeError> {
+    u32::try_from(whole_number(text, what)?).map_err(|_| ServeError::NotFound)
 }
 
 /// `/tiles?T={layer}&L={level}&X={col}&Y={row}` (World Wind's request form);
@@ -153,9 +169,8 @@ async fn tile_query(
 ) -> Result<Response, ServeError> {
     let params = query_params(query.as_deref())?;
     let need = |k: &str| params.get(k).ok_or_else(|| ServeError::BadRequest(format!("parameter {k} is missing")));
-    let number =
-        |k: &str| need(k)?.parse::<u64>().map_err(|_| ServeError::BadRequest(format!("{k} must be a whole number")));
-    let id = TileId::new(u32::try_from(number("L")?).map_err(|_| ServeError::NotFound)?, number("Y")?, number("X")?);
+    let id =
+        TileId::new(level_number(need("L")?, "L")?, whole_number(need("Y")?, "Y")?, whole_number(need("X")?, "X")?);
     let layer = need("T")?;
     let picture = parse_layer(layer)?.is_picture();
     let given: Vec<&str> = [params.get("F"), params.get("FORMAT")].into_iter().flatten().map(extension_of).collect();
@@ -225,24 +240,19 @@ async fn tile(
 /// `.jpg`).
 async fn xyz(
     State(state): State<Arc<AppState>>,
-    Path((layer, z, x, file)): Path<(String, u32, u64, String)>,
+    Path((layer, z, x, file)): Path<(String, String, String, String)>,
     headers: HeaderMap,
 ) -> Result<Response, ServeError> {
-    let layer = parse_layer(&layer)?;
-    if matches!(layer, MapLayer::Data(Layer::Cover | Layer::Surface)) {
-        return Err(ServeError::BadRequest(format!(
-            "{} is not a height: XYZ tiles carry heights or the pictures",
-            layer.name()
-        )));
-    }
+    let (z, x) = (level_number(&z, "zoom")?, whole_number(&x, "x")?);
+    let layer = xyz_layer(&layer)?;
     let (y, ext) = file.rsplit_once('.').ok_or(ServeError::NotFound)?;
     let picture = match layer.is_picture() {
         true => Some(picture_extension(layer, ext)?),
         false if ext.eq_ignore_ascii_case("png") => None,
         false => return Err(ServeError::BadRequest(format!("{} XYZ tiles are Terrarium .png", layer.name()))),
     };
-    let y: u64 = y.parse().map_err(|_| ServeError::NotFound)?;
-    if z > 24 || x >= 1 << z || y >= 1 << z {
+    let y = whole_number(y, "y")?;
+    if z > MAX_XYZ_ZOOM || x >= 1 << z || y >= 1 << z {
         return Err(ServeError::NotFound);
     }
     let t = state.tiles.get(Product::Xyz { layer, zxy: (z, x, y) }).await?;
@@ -250,6 +260,28 @@ async fn xyz(
         Some(format) => picture_tile(&state, layer, t, format, &headers).await,
         None => Ok(respond::tile(&t, &meta(&state, layer, Encoding::Terrarium), &headers)),
     }
+}
+
+/// `/xyz/{layer}/tiles.json`: the layer's XYZ tiles as TileJSON.
+async fn xyz_tilejson(
+    State(state): State<Arc<AppState>>,
+    Path(layer): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, ServeError> {
+    let doc = super::tilejson::document(state.region(), xyz_layer(&layer)?, &state.public_base(&headers));
+    Ok(([(header::CONTENT_TYPE, "application/json")], doc.to_string()).into_response())
+}
+
+/// A layer XYZ tiles are served in: heights or the pictures.
+fn xyz_layer(name: &str) -> Result<MapLayer, ServeError> {
+    let layer = parse_layer(name)?;
+    if matches!(layer, MapLayer::Data(Layer::Cover | Layer::Surface)) {
+        return Err(ServeError::BadRequest(format!(
+            "{} is not a height: XYZ tiles carry heights or the pictures",
+            layer.name()
+        )));
+    }
+    Ok(layer)
 }
 
 /// The encoding a picture tile's extension asks for.

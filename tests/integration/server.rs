@@ -360,6 +360,9 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
         ("/tiles?T=cem&L=x&X=1&Y=1", ""),
         ("/xyz/cover/3/1/1.png", ""),
         ("/xyz/dem/3/1/1.jpg", "Terrarium .png"),
+        ("/xyz/cover/tiles.json", "not a height"),
+        ("/tiles/dem/-1/0/0_0.bil", "level must be a whole number"),
+        ("/xyz/dem/12/-1/0.png", "x must be a whole number"),
         ("/tiles/relief/3/1/1_1.gif", ".png or .jpg"),
         (
             "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/jpeg",
@@ -379,7 +382,9 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
         assert!((400..500).contains(&r.status), "{path}: {} {}", r.status, r.text());
         assert!(r.text().contains(code), "{path}: {}", r.text());
     }
-    for path in ["/tiles/cem/99/1/1_1.bil", "/tiles/cem/3/1/2_1.bil", "/xyz/dem/3/99/1.png", "/nowhere"] {
+    for path in
+        ["/tiles/cem/99/1/1_1.bil", "/tiles/cem/3/1/2_1.bil", "/xyz/dem/3/99/1.png", "/xyz/dem/25/0/0.png", "/nowhere"]
+    {
         assert_eq!(server.get(path).status, 404, "{path}");
     }
     let long = server.get(&format!("/wms?x={}", "a".repeat(10_000)));
@@ -448,6 +453,13 @@ fn xyz_tiles_are_terrarium_heights() {
     let jpeg = server.get(&format!("/xyz/relief/{z}/{tx}/{ty}.jpg"));
     assert_eq!((jpeg.status, jpeg.header("content-type")), (200, Some("image/jpeg")));
     assert_eq!(image::load_from_memory(&jpeg.body).unwrap().into_rgb8().dimensions(), (256, 256));
+    // A MapLibre source finds the tiles through the layer's TileJSON.
+    let doc: serde_json::Value = serde_json::from_slice(&server.get("/xyz/dem/tiles.json").body).unwrap();
+    let template = doc["tiles"][0].as_str().unwrap();
+    assert!(template.starts_with("http://") && template.ends_with("/xyz/dem/{z}/{x}/{y}.png"), "{template}");
+    assert_eq!((doc["tilejson"].as_str(), doc["encoding"].as_str()), (Some("3.0.0"), Some("terrarium")));
+    assert!((10..=sylva::server::MAX_XYZ_ZOOM as u64).contains(&doc["maxzoom"].as_u64().unwrap()), "{doc}");
+    assert_eq!(doc["bounds"][0].as_f64(), Some(10.0));
 }
 
 #[test]

@@ -93,16 +93,7 @@ pub async fn other_method() -> Response {
 /// The absolute URL of this endpoint: configured, or from the Host header
 /// (an HTTP/1.0 request may have none: `localhost` at the port listened on).
 fn endpoint(state: &AppState, headers: &HeaderMap) -> String {
-    if let Some(url) = &state.settings.public_url {
-        return format!("{}/wms", url.trim_end_matches('/'));
-    }
-    match headers.get(header::HOST).and_then(|h| h.to_str().ok()).filter(|h| !h.is_empty()) {
-        Some(host) => format!("http://{host}/wms"),
-        None => {
-            let port = state.settings.bind.rsplit_once(':').map_or("80", |(_, port)| port);
-            format!("http://localhost:{port}/wms")
-        }
-    }
+    format!("{}/wms", state.public_base(headers))
 }
 
 async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<Response, ServeError> {
