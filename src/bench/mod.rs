@@ -110,6 +110,9 @@ pub enum LodReportError {
     /// A plot could not be written.
     #[error(transparent)]
     Output(#[from] crate::outputs::OutputError),
+    /// The report could not be written.
+    #[error("writing the report: {0}")]
+    Print(std::io::Error),
 }
 
 /// `sylva bench pipeline`: the tables for the demo and, when its data is
@@ -142,45 +145,47 @@ pub fn pipeline_report(
 
 /// `sylva bench lod`: the flyover tables for the demo region (trees
 /// `spacing_m` apart at full cover) and, when its data is there, for the
-/// region of `rmnp_config`; plots go to `plot_dir` when given. `flights`
-/// (directories of `sylva fly --lod budget`) add their frame times against
-/// the budget.
+/// region of `rmnp_config`, each written to `out` once it is done (a plot
+/// that fails later loses none); plots go to `plot_dir` when given.
+/// `flights` (directories of `sylva fly --lod budget`) add their frame
+/// times against the budget.
 pub fn lod_report(
     rmnp_config: &std::path::Path,
     frames: usize,
-    plot_dir: Option<&std::path::Path>,
-    flights: &[std::path::PathBuf],
-) -> Result<String, LodReportError> {
+    (plot_dir, flights): (Option<&std::path::Path>, &[std::path::PathBuf]),
+    out: &mut dyn std::io::Write,
+) -> Result<(), LodReportError> {
+    let mut emit = |text: &str| writeln!(out, "{text}").map_err(LodReportError::Print);
     // The flights first: a missing one is said before the long work.
-    let mut out = vec![flight_report(flights, plot_dir)?];
+    emit(&flight_report(flights, plot_dir)?)?;
     let mut scenes = vec![("demo", crate::config::load(None)?, 7.0)];
     match crate::config::load(Some(rmnp_config)) {
         Ok(rmnp) => scenes.push(("rmnp", rmnp, 12.0)),
-        Err(e) => out.push(format!("(skipping the real-data region: {e})\n")),
+        Err(e) => emit(&format!("(skipping the real-data region: {e})\n"))?,
     }
     for (key, region, spacing_m) in scenes {
         let start = std::time::Instant::now();
         let ground = match lod_scene::Ground::sample(&region, 40_960.0, 20.0) {
             Ok(g) => g,
             Err(e) => {
-                out.push(format!("({key}: {e})\n"));
+                emit(&format!("({key}: {e})\n"))?;
                 continue;
             }
         };
         let scene = lod_scene::Scene::build(&region.name, ground, 150.0, spacing_m);
         let built_s = start.elapsed().as_secs_f64();
         let result = lod::run(&scene, frames, lod::LOSS_FRACTION);
-        out.push(lod::report(&scene, &result));
-        out.push(format!(
+        emit(&lod::report(&scene, &result))?;
+        emit(&format!(
             "Splitting: error against run time ({} frames)\n\n{}\n",
             frames / 3,
             lod::sweep(&scene, frames / 3)
-        ));
-        out.push(format!("(scene built in {built_s:.1} s; trees {spacing_m} m apart at full cover)\n"));
+        ))?;
+        emit(&format!("(scene built in {built_s:.1} s; trees {spacing_m} m apart at full cover)\n"))?;
         if plot_dir.is_some() {
             let png = lod_plot::png(&region.name, &result).map_err(|e| LodReportError::Plot(format!("{key}: {e}")))?;
-            out.push(write_plot(plot_dir, &format!("lod_{key}.png"), &png)?);
+            emit(&write_plot(plot_dir, &format!("lod_{key}.png"), &png)?)?;
         }
     }
-    Ok(out.join("\n"))
+    Ok(())
 }

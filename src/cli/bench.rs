@@ -166,7 +166,12 @@ impl Bench {
                     // Refused before the flyovers, not after them.
                     sylva::outputs::check(&[], &[&dir.join("lod_demo.png")])?;
                 }
-                super::print(sylva::bench::lod_report(&rmnp, frames, plots.as_deref(), &flights)?)?;
+                let written =
+                    sylva::bench::lod_report(&rmnp, frames, (plots.as_deref(), &flights), &mut std::io::stdout());
+                match written {
+                    Err(sylva::bench::LodReportError::Print(e)) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
+                    written => written?,
+                }
             }
             Bench::Sse { rmnp, paths, fps, frames } => {
                 let rmnp = real_region(rmnp)?;

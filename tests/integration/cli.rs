@@ -197,6 +197,20 @@ fn benchmarks_refuse_a_named_region_or_an_output_they_cannot_use_before_running(
 }
 
 #[test]
+fn a_benchmark_plot_that_cannot_be_written_loses_no_table() {
+    // The real-data region's plot is written after its flyovers: a
+    // directory in its place fails only then, and the tables printed
+    // before it stay printed.
+    let dir = TempDir::new("cli-lod-plot");
+    std::fs::create_dir_all(dir.join("lod_rmnp.png")).unwrap();
+    let out = sylva(&["bench", "lod", "--frames", "3", "--plots", dir.0.to_str().unwrap()]);
+    let (text, err) = (String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+    assert!(out.status.code() == Some(1) && err.contains("lod_rmnp.png: cannot write"), "{err}");
+    assert!(text.contains("plot: ") && text.contains("lod_demo.png"), "{text}");
+    assert!(text.matches("Splitting: error against run time").count() == 2, "{text}");
+}
+
+#[test]
 fn geotiff_output_has_the_geotransform_gdal_reads() {
     let dir = TempDir::new("cli-gdal");
     let path = dir.join("t.tif");
