@@ -3,7 +3,9 @@
 //! map, so canopy and terrain both show, as an RGBA PNG.
 //!
 //! Shading is Horn's gradient with light from the north-west, 45° up; it
-//! needs one sample of margin around the image.
+//! needs one sample of margin around the image. Each row is shaded with its
+//! own ground spacing (east–west distances shrink with latitude), so images
+//! that share a row, such as north–south neighbouring tiles, shade it alike.
 
 use super::EncodeError;
 use crate::cem::surface::{NODATA, SurfaceType};
@@ -17,8 +19,9 @@ pub struct Relief<'a> {
     pub surface: &'a Raster<u8>,
     /// The map's R, G, B at the image's samples, if the region has a map.
     pub map: Option<&'a [Raster<f32>]>,
-    /// Ground distance between columns and between rows, metres.
-    pub spacing_m: (f64, f64),
+    /// Ground distance between columns and between rows at each of the
+    /// image's rows, metres (east–west distances shrink with latitude).
+    pub spacing_m: &'a [(f64, f64)],
 }
 
 /// A sample's unshaded colour (0–255): the map's where it has one, else
@@ -70,11 +73,14 @@ fn class_colour(class: u8) -> [f32; 3] {
 /// Renders the preview as an RGBA PNG; nodata is transparent.
 pub fn encode(r: &Relief) -> Result<Vec<u8>, EncodeError> {
     let (w, h) = (r.surface.width(), r.surface.height());
+    if r.spacing_m.len() != h {
+        return Err(EncodeError(format!("{} row spacings for {h} rows", r.spacing_m.len())));
+    }
     let mut rgba = Vec::with_capacity(4 * w * h);
     for y in 0..h {
         for x in 0..w {
             let class = r.surface.get(x, y);
-            let shade = shade(r.cem, x + 1, y + 1, r.spacing_m);
+            let shade = shade(r.cem, x + 1, y + 1, r.spacing_m[y]);
             if class == NODATA || shade.is_nan() {
                 rgba.extend_from_slice(&[0, 0, 0, 0]);
                 continue;
@@ -143,10 +149,25 @@ mod tests {
         assert!(shade(&rising_east, 2, 2, (10.0, 10.0)) > shade(&falling_east, 2, 2, (10.0, 10.0)));
         let mut surface = Raster::filled(3, 3, SurfaceType::Plain as u8);
         surface.set(1, 1, NODATA);
-        let png = encode(&Relief { cem: &rising_east, surface: &surface, map: None, spacing_m: (10.0, 10.0) }).unwrap();
+        let png =
+            encode(&Relief { cem: &rising_east, surface: &surface, map: None, spacing_m: &[(10.0, 10.0); 3] }).unwrap();
         let img = image::load_from_memory(&png).unwrap().into_rgba8();
         assert_eq!(img.get_pixel(1, 1).0[3], 0);
         assert_eq!(img.get_pixel(0, 0).0[3], 255);
+    }
+
+    #[test]
+    fn each_row_is_shaded_with_its_own_spacing() {
+        // The same westward slope, closer columns on row 0: steeper, so brighter.
+        let rising_east = Raster::from_fn(4, 4, |x, _| x as f32 * 10.0);
+        let surface = Raster::filled(2, 2, SurfaceType::Plain as u8);
+        let spacing_m = [(10.0, 10.0), (40.0, 10.0)];
+        let png = encode(&Relief { cem: &rising_east, surface: &surface, map: None, spacing_m: &spacing_m }).unwrap();
+        let img = image::load_from_memory(&png).unwrap().into_rgba8();
+        let (steep, gentle) = (img.get_pixel(0, 0).0, img.get_pixel(0, 1).0);
+        assert!(steep[0] > gentle[0], "{steep:?} vs {gentle:?}");
+        let short = Relief { cem: &rising_east, surface: &surface, map: None, spacing_m: &spacing_m[..1] };
+        assert!(encode(&short).is_err(), "a spacing for every row");
     }
 
     #[test]

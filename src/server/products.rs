@@ -230,12 +230,20 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
     let inner = Window::new(1, 1, grid.width(), grid.height());
     let surface = surface.crop(inner, cem::surface::NODATA);
     let start = Instant::now();
-    let (dx, dy) = (grid.lon.step_deg(), grid.lat.step_deg());
-    let mid_lat = grid.lat.coord_at((grid.height() as f64 - 1.0) / 2.0).to_radians();
-    let spacing_m = (dx * mid_lat.cos() * crate::geo::METRES_PER_DEGREE, dy * crate::geo::METRES_PER_DEGREE);
-    let bytes =
-        encode::relief::encode(&encode::relief::Relief { cem, surface: &surface, map: map.as_deref(), spacing_m })?;
+    let spacing_m = row_spacings_m(grid);
+    let relief = encode::relief::Relief { cem, surface: &surface, map: map.as_deref(), spacing_m: &spacing_m };
+    let bytes = encode::relief::encode(&relief)?;
     Ok(Computed { bytes, uniform: false, stats: products.stats, encode: start.elapsed() })
+}
+
+/// Ground distance between columns and between rows at each row of `grid`,
+/// metres. The east–west distance shrinks with the cosine of the row's own
+/// latitude, not of the grid's middle: tiles that share a row shade it with
+/// bitwise the same spacing, so north–south neighbours agree.
+fn row_spacings_m(grid: &SampleGrid) -> Vec<(f64, f64)> {
+    let (dx, dy) = (grid.lon.step_deg(), grid.lat.step_deg());
+    let m = crate::geo::METRES_PER_DEGREE;
+    (0..grid.height()).map(|y| (dx * grid.lat.coord(y).to_radians().cos() * m, dy * m)).collect()
 }
 
 /// The unshaded map colours.

@@ -17,7 +17,7 @@ mod fly; // `sylva fly` in process and against a server; tiles over HTTP equal t
 mod http; // a `sylva serve` process for tests, and an HTTP client
 mod real_data; // rmnp, mt_hood, storm_lake, nz_forest against their sources
 mod render; // the GPU ray caster against the exact CPU reference
-mod seamless; // tiles equal windows of whole-area builds; neighbours agree
+mod seamless; // tiles equal windows of whole-area builds; neighbours agree, in the data and the relief
 mod seed; // sylva seed: cache hits identical to the server's, dry runs, coverages, kill and resume, failures
 mod seed_shared; // many seeders and servers on one directory or Redis cache, shards
 mod server; // the server over HTTP: WMS, tiles, cache, concurrency, bad input, shutdown

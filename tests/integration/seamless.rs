@@ -1,12 +1,16 @@
 //! Seamlessness: a tile, with any halo, equals the same window of a whole-area
 //! build, bitwise, for every layer — through the close, the blur, the canopy
 //! and the 32-sample maximum — and neighbouring tiles agree on shared samples.
+//! The shaded relief, whose shading depends on latitude, too.
 
 use crate::common::{self, Rng, assert_same};
+use image::RgbaImage;
 use sylva::cem::{self, Layer, Products};
-use sylva::grid::{BBox, TileId};
+use sylva::grid::{BBox, SampleGrid, TileId};
 use sylva::raster::{Raster, Window};
 use sylva::region::Region;
+use sylva::server::products::{self, Encoding, Product};
+use sylva::server::wms::request::MapLayer;
 
 const FLOAT_LAYERS: [Layer; 6] = [Layer::Dem, Layer::Cover, Layer::Canopy, Layer::Cem, Layer::Max4, Layer::Max32];
 
@@ -19,6 +23,11 @@ fn float(p: &Products, layer: Layer) -> &Raster<f32> {
 
 /// The 3 × 3 block of tiles around `centre`, built in one computation.
 fn build_around(region: &Region, centre: TileId) -> Products {
+    cem::compute(region, &grid_around(region, centre), &Layer::ALL).expect("build")
+}
+
+/// The grid of the 3 × 3 block of tiles around `centre`.
+fn grid_around(region: &Region, centre: TileId) -> SampleGrid {
     let t = &region.tiles;
     let sw = t.sector(TileId::new(centre.level, centre.row - 1, centre.col - 1));
     let ne = t.sector(TileId::new(centre.level, centre.row + 1, centre.col + 1));
@@ -26,7 +35,7 @@ fn build_around(region: &Region, centre: TileId) -> Products {
     let bbox = BBox { west: sw.min_lon, south: sw.min_lat, east: ne.max_lon, north: ne.max_lat };
     let grid = bbox.point_grid(n, n, t).expect("grid");
     assert_eq!(grid.lon.first, (centre.col as i64 - 1) * (t.samples() as i64 - 1), "the build is on the tile lattice");
-    cem::compute(region, &grid, &Layer::ALL).expect("build")
+    grid
 }
 
 /// Random tiles near the region's centre on `level`, each checked against
@@ -103,4 +112,81 @@ fn neighbours_share_edge_samples_exactly() {
             layer.name(),
         );
     }
+}
+
+/// The relief picture of `product`, decoded.
+fn relief(region: &Region, product: Product) -> RgbaImage {
+    let png = products::compute(region, &product).expect("relief").bytes;
+    image::load_from_memory(&png).expect("a relief PNG").into_rgba8()
+}
+
+/// The relief of tile `id` with `halo`.
+fn relief_tile(region: &Region, id: TileId, halo: usize) -> RgbaImage {
+    relief(region, Product::Tile { layer: MapLayer::Relief, id, halo, encoding: Encoding::Rgba })
+}
+
+/// The `w × h` pixels of `img` from `(x, y)`.
+fn pixels(img: &RgbaImage, x: u32, y: u32, w: u32, h: u32) -> RgbaImage {
+    image::imageops::crop_imm(img, x, y, w, h).to_image()
+}
+
+/// Pixel-for-pixel equality; the first difference is reported.
+fn assert_same_pixels(a: &RgbaImage, b: &RgbaImage, what: &str) {
+    assert_eq!(a.dimensions(), b.dimensions(), "{what}: sizes differ");
+    if let Some(((x, y, p), q)) = a.enumerate_pixels().zip(b.pixels()).find(|((_, _, p), q)| p != q) {
+        panic!("{what}: pixel ({x}, {y}) is {:?} vs {:?}", p.0, q.0);
+    }
+}
+
+/// Tile `t`'s relief agrees with its east and north neighbours' on the
+/// shared column and row.
+fn check_relief_neighbours(region: &Region, t: TileId) {
+    let n = region.tiles.samples();
+    let (a, east, north) = (
+        relief_tile(region, t, 0),
+        relief_tile(region, TileId::new(t.level, t.row, t.col + 1), 0),
+        relief_tile(region, TileId::new(t.level, t.row + 1, t.col), 0),
+    );
+    let what = |side| format!("{} relief {t}: {side} edge", region.name);
+    assert_same_pixels(&pixels(&a, n - 1, 0, 1, n), &pixels(&east, 0, 0, 1, n), &what("east"));
+    assert_same_pixels(&pixels(&a, 0, 0, n, 1), &pixels(&north, 0, n - 1, n, 1), &what("north"));
+}
+
+#[test]
+fn relief_neighbours_share_edge_pixels_exactly() {
+    // Regression: the shading's east–west spacing was taken at each tile's
+    // middle latitude, so a row shared by north–south neighbours was shaded
+    // with two spacings and differed by 1 in a few channels.
+    let demo = common::demo();
+    let b = demo.bounds;
+    for level in [9, 11, 13] {
+        check_relief_neighbours(
+            &demo,
+            demo.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), level),
+        );
+    }
+}
+
+#[test]
+fn relief_tiles_equal_windows_of_a_relief_build() {
+    let demo = common::demo();
+    let b = demo.bounds;
+    let centre = demo.tiles.tile_containing(0.4 * b.west + 0.6 * b.east, 0.6 * b.south + 0.4 * b.north, 11);
+    let grid = grid_around(&demo, centre);
+    let build = relief(&demo, Product::Image { layer: MapLayer::Relief, grid, encoding: Encoding::Rgba });
+    let n = demo.tiles.samples();
+    // The centre with a halo, and its neighbours north and south, whose middle
+    // latitudes are not the build's.
+    for (row, halo) in [(0, 7), (1, 0), (-1, 0)] {
+        let id = TileId::new(centre.level, centre.row.wrapping_add_signed(row), centre.col);
+        let top = (1 - row) as u32 * (n - 1) - halo;
+        let window = pixels(&build, n - 1 - halo, top, n + 2 * halo, n + 2 * halo);
+        assert_same_pixels(&relief_tile(&demo, id, halo as usize), &window, &format!("relief {id} halo {halo}"));
+    }
+}
+
+#[test]
+fn rmnp_relief_neighbours_share_edge_pixels_exactly() {
+    // The tiles of the audit that found the north–south seam.
+    check_relief_neighbours(&common::region("examples/rmnp.toml"), TileId::new(12, 14830, 8452));
 }
