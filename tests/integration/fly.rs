@@ -57,6 +57,8 @@ fn a_flight_over_the_demo_writes_frames_and_statistics() {
         // The walk alone is timed, within the CPU's time of the frame.
         assert!(number("selection_ms") > 0.0 && number("selection_ms") < number("cpu_ms"), "{row:?}");
         assert!(number("error_px") >= 2.0 && row["budget_ms"].is_empty(), "{row:?}");
+        // Tens of metres over the valley floor (~900 m) and its forest.
+        assert!((10.0..500.0).contains(&number("clearance_m")), "{row:?}");
         // Low over a valley: the ground fills the lower half of the frame.
         let ground = img.pixels().skip(96 * 40).filter(|p| p.0[..3] != [158, 189, 224]).count();
         assert!(ground > 96 * 20, "frame {k} shows the ground");
@@ -200,7 +202,7 @@ fn a_flight_never_mixes_with_an_earlier_one_in_its_directory() {
 }
 
 #[test]
-fn a_flight_that_sees_no_tile_says_so() {
+fn a_flight_that_sees_no_tile_or_flies_under_the_ground_says_so() {
     let dir = TempDir::new("fly-away");
     let away = dir.join("away.toml");
     let text = std::fs::read_to_string(common::repo().join("config/paths/demo_valley.toml")).unwrap();
@@ -210,7 +212,12 @@ fn a_flight_that_sees_no_tile_says_so() {
     assert!(summary.contains("no frame drew a tile"), "{summary}");
     let home = common::repo().join("config/paths/demo_valley.toml");
     let summary = fly(&["--path", home.to_str().unwrap(), "--frames", "1", "--size", "32x24"], &dir.join("home"));
-    assert!(!summary.contains("no frame drew a tile"), "{summary}");
+    assert!(!summary.contains("no frame drew a tile") && !summary.contains("below the ground"), "{summary}");
+    // The same flight 1 km lower, under the valley floor.
+    let under = dir.join("under.toml");
+    std::fs::write(&under, text.replace("height_m = 1", "height_m = ")).unwrap();
+    let summary = fly(&["--path", under.to_str().unwrap(), "--frames", "2", "--size", "32x24"], &dir.join("under"));
+    assert!(summary.contains("the camera is below the ground in 2 frames (from frame 0"), "{summary}");
 }
 
 /// The rows of a `--lod budget` flight of `frames` 96×64 frames along the

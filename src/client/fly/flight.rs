@@ -5,6 +5,7 @@
 
 use super::{FlyError, FlyOptions, FrameRecord, LodMode};
 use crate::client::camera::Camera;
+use crate::client::globe::Geodetic;
 use crate::client::lod::ahead::Lookahead;
 use crate::client::lod::budget::{Budget, Choice};
 use crate::client::lod::flight::BudgetFlight;
@@ -12,6 +13,7 @@ use crate::client::lod::steps::FrameSteps;
 use crate::client::lod::{Selected, Selector};
 use crate::client::quadtree;
 use crate::client::raycast::TreeBlend;
+use crate::client::reference;
 use crate::client::render::uniforms::FrameSettings;
 use crate::client::render::{Draw, DrawWork, FrameStats, Readback, Rendered, Renderer};
 use crate::client::source::TileSource;
@@ -295,6 +297,7 @@ fn frame(
         *levels.entry(t.id().level).or_insert(0) += 1;
     }
     let rays: Vec<&[u32; 2]> = out.fetches.iter().filter(|f| f[0] > 0).collect();
+    let clearance_m = clearance_m(source, store, &camera, tiles)?;
     let record = FrameRecord {
         frame: shot.index,
         cpu_ms,
@@ -322,6 +325,7 @@ fn frame(
         bound: selected.map(|s| s.cut.bound()),
         morphing: chosen.morphing,
         nodes_touched: chosen.touched,
+        clearance_m,
         shadow_steps_mean: mean_or_zero(chosen.steps.iter().map(|&s| f64::from(s))),
         trees: trees.drawn.trees,
         splats: out.stats.splats as usize,
@@ -392,6 +396,28 @@ pub fn visible_tiles(
         }
         rule.max_error_px *= 1.25;
     }
+}
+
+/// The camera's height above the surface of the finest tile loaded under
+/// it, drawn or not (a camera looking ahead often has the ground under it
+/// out of view); where none is, the tile of the frame's coarsest level
+/// under it is loaded. None outside the region.
+fn clearance_m(
+    source: &dyn TileSource,
+    store: &mut TileStore,
+    camera: &Camera,
+    tiles: &[Arc<TileData>],
+) -> Result<Option<f64>, FlyError> {
+    let eye = Geodetic::from_ecef(camera.position_ecef);
+    let (grid, (lon, lat)) = (source.grid(), (eye.lon_deg, eye.lat_deg));
+    let coarsest = tiles.iter().map(|t| t.id().level).min();
+    let under = match (store.finest_at(&grid, lon, lat), coarsest) {
+        _ if !source.bounds().sector().contains(lon, lat) => None,
+        (Some(tile), _) => Some(tile),
+        (None, Some(level)) => store.get(source, &[grid.tile_containing(lon, lat, level)])?.pop(),
+        (None, None) => None,
+    };
+    Ok(under.and_then(|tile| reference::clearance_m(eye, &[tile])))
 }
 
 /// Bytes of one prepared tile, for the CPU store's budget.

@@ -77,6 +77,9 @@ pub struct FrameRecord {
     /// Quadtree nodes the screen-space error selection touched:
     /// refinement and visibility tests (sse mode).
     pub nodes_touched: Option<usize>,
+    /// The camera's height above the surface of the finest tile loaded
+    /// under it (negative below it), metres; none where none is.
+    pub clearance_m: Option<f64>,
 }
 
 /// A one-paragraph summary of a flight: frames, mean and worst times,
@@ -109,10 +112,29 @@ pub fn summary(records: &[FrameRecord]) -> String {
         records.iter().map(|r| r.bytes_fetched).sum::<u64>(),
         first.map_or(0.0, |r| r.rss_mib),
         last.map_or(0.0, |r| r.rss_mib),
-    ) + if !records.is_empty() && records.iter().all(|r| r.tiles_ray + r.tiles_plain == 0) {
-        // Blank frames are no error, but rarely what was meant.
-        "\nno frame drew a tile: does the camera look at the region?"
-    } else {
-        ""
+    ) + &warnings(records)
+}
+
+/// What a flight's frames show that was rarely meant: nothing, or the
+/// ground from below.
+fn warnings(records: &[FrameRecord]) -> String {
+    let mut text = String::new();
+    if !records.is_empty() && records.iter().all(|r| r.tiles_ray + r.tiles_plain == 0) {
+        text.push_str("\nno frame drew a tile: does the camera look at the region?");
     }
+    let below: Vec<&FrameRecord> = records.iter().filter(|r| r.clearance_m.is_some_and(|c| c < 0.0)).collect();
+    if let (Some(first), Some(deepest)) =
+        (below.first(), below.iter().filter_map(|r| r.clearance_m).min_by(f64::total_cmp))
+    {
+        text.push_str(&format!(
+            "\nthe camera is below the ground in {} (from frame {}, as deep as {:.0} m): they show the sky; heights are above the ellipsoid",
+            match below.len() {
+                1 => "1 frame".to_string(),
+                n => format!("{n} frames"),
+            },
+            first.frame,
+            -deepest
+        ));
+    }
+    text
 }

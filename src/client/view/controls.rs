@@ -3,17 +3,13 @@
 //! the heading over the ground, sideways, up and down — at a speed that
 //! grows with the height above the surface, so a valley floor and orbit
 //! are both a few seconds of flight away. Given the surface under the eye
-//! before each frame ([`clearance_m`]; the ellipsoid where no tile is
+//! before each frame ([`clearance_m`](super::super::reference::clearance_m); the ellipsoid where no tile is
 //! loaded), the eye is kept [`MIN_CLEARANCE_M`] above it.
 
 use super::super::camera::Camera;
 use super::super::globe::{self, Geodetic};
-use super::super::raycast::{Fade, TileView};
-use super::super::reference;
-use super::super::tile::TileData;
 use crate::lod::predict::MotionLimits;
 use glam::{DQuat, DVec3};
-use std::sync::Arc;
 
 /// The longest step, seconds: a longer stall moves the eye no further.
 pub const LONGEST_STEP_S: f64 = 0.5;
@@ -49,9 +45,6 @@ const PITCH_LIMIT_DEG: f64 = 89.0;
 /// Highest eye, metres above the ellipsoid (beyond geostationary orbit's
 /// half).
 const MAX_HEIGHT_M: f64 = 2.0e7;
-/// The surface under the eye is looked for from this height (or the
-/// eye's, if higher): above every summit and its canopy.
-const PROBE_FROM_M: f64 = 10_000.0;
 
 /// Where the eye is and where it looks.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -212,29 +205,12 @@ impl Controls {
     }
 }
 
-/// The height of `eye` above the surface of `tiles` under it, canopy
-/// included (negative below it), metres; `None` where no tile has surface
-/// under the eye. Exact: a ray down the ellipsoid's normal from above every
-/// summit, intersected with each tile's surface by the reference caster.
-pub fn clearance_m(eye: Geodetic, tiles: &[Arc<TileData>]) -> Option<f64> {
-    let top_m = eye.height_m.max(PROBE_FROM_M);
-    let top = Geodetic::new(eye.lon_deg, eye.lat_deg, top_m).to_ecef();
-    let down = -globe::enu_basis(eye.lon_deg, eye.lat_deg).z_axis;
-    let nearest = tiles
-        .iter()
-        .filter_map(|tile| {
-            let to_local = tile.frame.basis.transpose();
-            let view =
-                TileView { tile, camera_m: tile.frame.to_local(top), sun: None, fade: Fade::NONE, shadow_steps: 0 };
-            reference::intersect(&view, view.camera_m, to_local * down, 0.0, top_m + PROBE_FROM_M).map(|hit| hit.t_m)
-        })
-        .min_by(f64::total_cmp)?;
-    Some(eye.height_m - (top_m - nearest))
-}
-
 #[cfg(test)]
 mod tests {
+    use super::super::super::reference::clearance_m;
+    use super::super::super::tile::TileData;
     use super::*;
+    use std::sync::Arc;
 
     fn controls(height_m: f64, clearance_m: f64) -> Controls {
         let pose = Pose { eye: Geodetic::new(10.0, 46.0, height_m), heading_deg: 90.0, pitch_deg: -10.0 };
