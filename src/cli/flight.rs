@@ -138,7 +138,16 @@ impl ViewArgs {
             exit_after: self.frames,
             out_dir: self.out,
         };
-        let records = view::run(source.into(), options)?;
+        let records = match view::run(source.into(), options) {
+            // Closed by a signal: the summary, then the status a shell
+            // gives a death by it.
+            Err(view::ViewError::Interrupted { signal, kept, records }) => {
+                super::print(fly::summary(&records))?;
+                eprintln!("sylva: view closed by signal {signal}{kept}");
+                std::process::exit(128 + signal)
+            }
+            records => records?,
+        };
         super::print(fly::summary(&records))?;
         Ok(())
     }

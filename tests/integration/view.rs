@@ -76,6 +76,28 @@ fn a_scripted_view_closes_after_its_frames_with_statistics_and_the_last_frame() 
 }
 
 #[test]
+fn ctrl_c_closes_a_view_with_its_statistics() {
+    // Regression: the event loop did not watch the signal, so Ctrl-C ended
+    // the process and no stats.csv was written.
+    let display = VirtualDisplay::start();
+    let dir = TempDir::new("view-signal");
+    let out = dir.join("out");
+    let mut command = Command::new(env!("CARGO_BIN_EXE_sylva"));
+    command.args(["view", "--size", "64x48", "--out", out.to_str().unwrap()]);
+    command.env("XDG_RUNTIME_DIR", std::env::temp_dir()).env_remove("WAYLAND_DISPLAY").env("DISPLAY", &display.name);
+    let view = command.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("run sylva view");
+    std::thread::sleep(std::time::Duration::from_secs(8));
+    let sent = Command::new("kill").arg("-INT").arg(view.id().to_string()).status();
+    assert!(sent.unwrap().success());
+    let output = view.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "128 + the signal: {stderr}");
+    assert!(stderr.contains(&format!("closed by signal 2; its stats.csv is in {}", out.display())), "{stderr}");
+    let frames = rows(&out).len();
+    assert!(String::from_utf8_lossy(&output.stdout).starts_with(&format!("{frames} frames")));
+}
+
+#[test]
 fn a_view_starts_on_a_path_and_flies_under_a_budget() {
     let display = VirtualDisplay::start();
     let dir = TempDir::new("view-budget");

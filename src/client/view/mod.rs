@@ -78,6 +78,16 @@ pub enum ViewError {
     /// A frame failed.
     #[error(transparent)]
     Fly(#[from] FlyError),
+    /// Ctrl-C or SIGTERM closed the view (its statistics written).
+    #[error("closed by signal {signal}{kept}")]
+    Interrupted {
+        /// The signal's number.
+        signal: i32,
+        /// Where the statistics are, if anywhere.
+        kept: String,
+        /// Every frame's statistics.
+        records: Vec<FrameRecord>,
+    },
 }
 
 /// The eye of a view given no start: above the middle of the source's
@@ -107,11 +117,13 @@ pub fn default_start(source: &dyn TileSource) -> Result<Pose, crate::client::sou
     Ok(Pose { eye, heading_deg: 0.0, pitch_deg: START_PITCH_DEG })
 }
 
-/// Opens a window over `source` and flies until it is closed; returns
-/// every frame's statistics.
+/// Opens a window over `source` and flies until it is closed (or Ctrl-C
+/// or SIGTERM closes it: [`ViewError::Interrupted`], after the statistics
+/// are written); returns every frame's statistics.
 pub fn run(source: Arc<dyn TileSource>, options: ViewOptions) -> Result<Vec<FrameRecord>, ViewError> {
     let event_loop = EventLoop::new().map_err(|e| ViewError::Window(e.to_string()))?;
-    let mut app = App { source, options, state: None, records: Vec::new(), error: None };
+    let interrupt = crate::interrupt::Interrupt::watch();
+    let mut app = App { source, options, state: None, records: Vec::new(), error: None, interrupt };
     event_loop.run_app(&mut app).map_err(|e| ViewError::Window(e.to_string()))?;
     if let Some(error) = app.error {
         return Err(error);
@@ -122,7 +134,13 @@ pub fn run(source: Arc<dyn TileSource>, options: ViewOptions) -> Result<Vec<Fram
         fly::remove_outputs(&fly::prepare_out_dir(dir, app.options.render.overwrite)?.earlier)?;
         fly::write_stats(dir, &app.records)?;
     }
-    Ok(app.records)
+    match app.interrupt.came() {
+        Some(signal) => {
+            let kept = app.options.out_dir.map_or(String::new(), |d| format!("; its stats.csv is in {}", d.display()));
+            Err(ViewError::Interrupted { signal, kept, records: app.records })
+        }
+        None => Ok(app.records),
+    }
 }
 
 /// The event loop's handler.
@@ -133,6 +151,8 @@ struct App {
     state: Option<Viewer>,
     records: Vec<FrameRecord>,
     error: Option<ViewError>,
+    /// Ctrl-C or SIGTERM closes the window as Escape does.
+    interrupt: crate::interrupt::Interrupt,
 }
 
 /// The window and what draws into it.
@@ -216,7 +236,10 @@ impl ApplicationHandler for App {
         }
     }
 
-    fn about_to_wait(&mut self, _: &ActiveEventLoop) {
+    fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
+        if self.interrupt.came().is_some() {
+            return event_loop.exit();
+        }
         if let Some(viewer) = &self.state {
             viewer.window.request_redraw();
         }
