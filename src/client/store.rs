@@ -143,14 +143,22 @@ impl TileStore {
         })
     }
 
-    /// From now on loads tiles from `source` in the background, after
-    /// loading and keeping the coarse tiles over its region
-    /// ([`super::envelope::covering`]): [`Self::get`] returns at once with the tiles
-    /// here and asks for the rest.
-    pub fn load_in_background(&mut self, source: Arc<dyn TileSource>) -> Result<(), LoadError> {
+    /// Loads and keeps the coarse tiles over `source`'s region
+    /// ([`super::envelope::covering`]): some tile is held under every point
+    /// of the region ([`Self::finest_at`]).
+    pub fn hold_coarse(&mut self, source: &dyn TileSource) -> Result<(), LoadError> {
         let anchors = super::envelope::covering(&source.grid(), &source.bounds());
-        self.get(source.as_ref(), &anchors)?;
+        self.get(source, &anchors)?;
         self.pinned.extend(anchors);
+        Ok(())
+    }
+
+    /// From now on loads tiles from `source` in the background, after
+    /// holding the coarse tiles over its region ([`Self::hold_coarse`]):
+    /// [`Self::get`] returns at once with the tiles here and asks for the
+    /// rest.
+    pub fn load_in_background(&mut self, source: Arc<dyn TileSource>) -> Result<(), LoadError> {
+        self.hold_coarse(source.as_ref())?;
         let (sender, receiver) = channel();
         let (pending, failed) = (HashSet::new(), HashMap::new());
         self.background = Some(Background { source, pending, failed, failures: 0, sender, receiver });

@@ -87,7 +87,10 @@ impl Flight {
         motion: Motion,
     ) -> Result<Flight, FlyError> {
         let budget = 2 * renderer.cache_slots() as usize * slot_estimate(source, options.halo);
-        let store = TileStore::new(options.halo, budget, options.in_flight)?;
+        let mut store = TileStore::new(options.halo, budget, options.in_flight)?;
+        // Some tile under the camera wherever it flies over the region, for
+        // its clearance; the view's background loading holds them too.
+        store.hold_coarse(source)?;
         let sse = match options.mode {
             LodMode::Sse => SseSelector::for_source(source, options.lod.max_level).map_err(LoadError::from)?,
             LodMode::Budget { .. } => None,
@@ -297,7 +300,7 @@ fn frame(
         *levels.entry(t.id().level).or_insert(0) += 1;
     }
     let rays: Vec<&[u32; 2]> = out.fetches.iter().filter(|f| f[0] > 0).collect();
-    let clearance_m = clearance_m(source, store, &camera, tiles)?;
+    let clearance_m = clearance_m(source, store, &camera);
     let record = FrameRecord {
         frame: shot.index,
         cpu_ms,
@@ -398,26 +401,14 @@ pub fn visible_tiles(
     }
 }
 
-/// The camera's height above the surface of the finest tile loaded under
-/// it, drawn or not (a camera looking ahead often has the ground under it
-/// out of view); where none is, the tile of the frame's coarsest level
-/// under it is loaded. None outside the region.
-fn clearance_m(
-    source: &dyn TileSource,
-    store: &mut TileStore,
-    camera: &Camera,
-    tiles: &[Arc<TileData>],
-) -> Result<Option<f64>, FlyError> {
+/// The camera's height above the surface of the finest tile held under it,
+/// drawn or not (a camera looking ahead often has the ground under it out
+/// of view; the coarse tiles over the region are always held). None
+/// outside the region.
+fn clearance_m(source: &dyn TileSource, store: &TileStore, camera: &Camera) -> Option<f64> {
     let eye = Geodetic::from_ecef(camera.position_ecef);
-    let (grid, (lon, lat)) = (source.grid(), (eye.lon_deg, eye.lat_deg));
-    let coarsest = tiles.iter().map(|t| t.id().level).min();
-    let under = match (store.finest_at(&grid, lon, lat), coarsest) {
-        _ if !source.bounds().sector().contains(lon, lat) => None,
-        (Some(tile), _) => Some(tile),
-        (None, Some(level)) => store.get(source, &[grid.tile_containing(lon, lat, level)])?.pop(),
-        (None, None) => None,
-    };
-    Ok(under.and_then(|tile| reference::clearance_m(eye, &[tile])))
+    let under = store.finest_at(&source.grid(), eye.lon_deg, eye.lat_deg)?;
+    reference::clearance_m(eye, &[under])
 }
 
 /// Bytes of one prepared tile, for the CPU store's budget.

@@ -213,7 +213,7 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
     for camera in scope.cameras {
         let cam = frame.to_local(camera.position_ecef);
         let near_m = (cam.clamp(box_lo, box_hi) - cam).length();
-        let visible = seen_px(camera, sector, (lo, hi));
+        let visible = seen_px(camera, sector, (lo, hi), mesh_error_m.is_some());
         let full = coverage::full_px(camera, area_m2, near_m).max(visible);
         benefit += tile_benefit_seen(visible, full, samples, Smooth::default());
         seen += visible;
@@ -283,21 +283,36 @@ fn inside(sector: &Sector, b: &BBox) -> (Sector, f64) {
     (clipped, if share.is_finite() { share.clamp(0.0, 1.0) } else { 0.0 })
 }
 
-/// Pixels of a tile's ground `camera` sees, its heights in `lo..hi`. A
-/// tile wholly above the eye (a flank above a valley) shows the
-/// silhouette of its box ([`coverage::above_px`]). Any other tile's
-/// surface is measured at one height, the middle of the part of its range
-/// below the eye. A camera low in a valley sees the ground below it:
-/// measured just under the eye (as the middle of a range reaching above
-/// the eye, clamped, once was), the surface is seen only within metres of
-/// the camera, and a tile ahead covering the view counted nothing and was
-/// never refined. A tile nobody loaded spans [`UNKNOWN_RANGE_M`].
-fn seen_px(camera: &Camera, sector: &Sector, (lo, hi): (f64, f64)) -> f64 {
+/// Pixels of a tile's ground `camera` sees, its heights in `lo..hi` (the
+/// tile's own range if `own`, else its nearest loaded ancestor's or
+/// [`UNKNOWN_RANGE_M`]).
+///
+/// Ground below the eye is measured at one height, the middle of the part
+/// of the range below the eye: a camera low in a valley sees the ground
+/// below it, and measured just under the eye (as the middle of a range
+/// reaching above the eye, clamped, once was), the surface is seen only
+/// within metres of the camera, so a tile ahead covering the view counted
+/// nothing and was never refined.
+///
+/// Ground above the eye faces the camera on its slopes, not on a plane,
+/// which from below faces away: it shows the silhouette of its box, the
+/// floor and the walls facing the camera ([`coverage::above_px`]). A tile
+/// wholly above the eye shows that box whole; one the eye's height cuts
+/// shows the box above the eye, weighted by the share of its range there
+/// (so the pixels do not fall off a cliff as the eye rises past the tile's
+/// lowest ground), once its own range is known: an inherited range (wide,
+/// the coarser tile's) would give every tile around a low camera walls up
+/// to its ancestor's summits.
+fn seen_px(camera: &Camera, sector: &Sector, (lo, hi): (f64, f64), own: bool) -> f64 {
     let eye_m = Geodetic::from_ecef(camera.position_ecef).height_m;
     if lo >= eye_m {
         return coverage::above_px(camera, sector, (lo, hi));
     }
-    coverage::visible_px(camera, sector, 0.5 * (lo + hi.min(eye_m - 1.0).max(lo)))
+    let below = coverage::visible_px(camera, sector, 0.5 * (lo + hi.min(eye_m - 1.0).max(lo)));
+    if !own || hi <= eye_m {
+        return below;
+    }
+    below + coverage::above_px(camera, sector, (eye_m, hi)) * (hi - eye_m) / (hi - lo)
 }
 
 #[cfg(test)]
@@ -403,6 +418,24 @@ mod tests {
         // outnumber its pixels (level 13), not left at a level-10 cut.
         let holding = above.iter().find(|t| grid.sector(t.id).contains(10.1255, 46.36));
         assert!(holding.is_some_and(|t| t.id.level >= 13), "{:?}", holding.map(|t| t.id));
+    }
+
+    #[test]
+    fn a_flank_shows_no_fewer_pixels_as_the_eye_rises_past_its_lowest_ground() {
+        // A level-12 tile 1.5 km ahead rising to 3,000 m, the camera at
+        // 1,000 m looking 10° up at it: its lowest ground just under the
+        // eye or just over it, it shows about the same.
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        let s = grid.sector(grid.tile_containing(10.1, 46.3, 12));
+        let mid_lon = (s.min_lon + s.max_lon) / 2.0;
+        let eye = Geodetic::new(mid_lon, s.min_lat - 1500.0 / 111_160.0, 1000.0);
+        let camera = Camera::looking(eye, 0.0, 10.0, 60.0, (256, 192));
+        let at = |lo: f64| seen_px(&camera, &s, (lo, 3000.0), true);
+        let (under, over) = (at(999.0), at(1000.0));
+        assert!(over > 1000.0 && (under / over - 1.0).abs() < 0.01, "{under} just under, {over} at the eye");
+        assert!(at(900.0) > 0.9 * over, "{}", at(900.0));
+        // An inherited range is measured below the eye alone.
+        assert!(seen_px(&camera, &s, (999.0, 3000.0), false) < 0.01 * over);
     }
 
     #[test]
