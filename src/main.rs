@@ -61,7 +61,7 @@ fn main() {
     let cli = Cli::parse();
     logs(&cli.command);
     if let Err(e) = run(cli.command) {
-        eprintln!("sylva: {}", explain(&e));
+        sylva::outputs::say(format_args!("sylva: {}", explain(&e)));
         std::process::exit(1);
     }
 }

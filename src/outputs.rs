@@ -1,6 +1,7 @@
 //! Output files of the command line: never written over an input or over
 //! each other, and written whole or not at all (each to a `NAME.partial`
-//! sibling first, all renamed into place once every one is written).
+//! sibling first, all renamed into place once every one is written); and
+//! its messages on stderr ([`say`]).
 
 use std::path::{Path, PathBuf};
 
@@ -97,6 +98,13 @@ pub fn write_all(files: &[(&Path, &[u8])]) -> Result<(), OutputError> {
         std::fs::rename(partial(path), path).map_err(|e| fail(path, e))?;
     }
     Ok(())
+}
+
+/// Writes a line to stderr. A stderr nobody reads any more (a pipe whose
+/// reader left) is no reason to fail, nor to panic as `eprintln!` does.
+pub fn say(text: std::fmt::Arguments) {
+    use std::io::Write;
+    let _ = writeln!(std::io::stderr().lock(), "{text}");
 }
 
 #[cfg(test)]

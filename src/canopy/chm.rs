@@ -47,7 +47,7 @@ pub enum ChmError {
     )]
     NoGround,
     /// Every point was noise or outside the ground model.
-    #[error("no points are left after removing noise ({0:?})")]
+    #[error("no points are left after removing noise ({0})")]
     NoPoints(Dropped),
     /// The grid is unusable.
     #[error("{0}")]

@@ -31,6 +31,12 @@ pub struct Dropped {
     pub isolated: usize,
 }
 
+impl std::fmt::Display for Dropped {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} classified as noise, {} isolated", self.noise_class, self.isolated)
+    }
+}
+
 /// Which points to keep (`true`) by the rule above, and how many were dropped.
 pub fn keep(x: &[f64], y: &[f64], z: &[f64], class: &[u8]) -> (Vec<bool>, Dropped) {
     let mut keep: Vec<bool> = class.iter().map(|c| !NOISE_CLASSES.contains(c)).collect();

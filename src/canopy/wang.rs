@@ -79,7 +79,7 @@ impl WangParams {
 pub enum WangError {
     /// No window of the CHM is large enough.
     #[error(
-        "no {need}×{need} window of the canopy height model ({w}×{h} cells) has data everywhere; use smaller tiles or a coarser resolution"
+        "no {need}×{need} window of the canopy height model ({w}×{h} cells) has data everywhere; use smaller tiles or a finer resolution"
     )]
     TooSmall {
         /// Cells needed across.

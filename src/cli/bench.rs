@@ -235,7 +235,7 @@ impl RaycastArgs {
         let rows = raycast::run(&views, size, &self.only, &mut renderer).map_err(anyhow::Error::msg)?;
         super::print(raycast::report(&rows, size, &name))?;
         sylva::outputs::write_all(&[(&self.plot, &raycast::plot(&rows).map_err(anyhow::Error::msg)?)])?;
-        eprintln!("plot: {}", self.plot.display());
+        sylva::outputs::say(format_args!("plot: {}", self.plot.display()));
         Ok(())
     }
 }

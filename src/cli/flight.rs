@@ -69,7 +69,7 @@ impl FlyArgs {
         let records = match fly::run(source.as_ref(), &path, &options, budget) {
             // Stopped by a signal: the status a shell gives a death by it.
             Err(e) if let Some(signal) = e.signal() => {
-                eprintln!("sylva: {e}");
+                sylva::outputs::say(format_args!("sylva: {e}"));
                 std::process::exit(128 + signal)
             }
             records => records?,
@@ -143,7 +143,7 @@ impl ViewArgs {
             // gives a death by it.
             Err(view::ViewError::Interrupted { signal, kept, records }) => {
                 super::print(fly::summary(&records))?;
-                eprintln!("sylva: view closed by signal {signal}{kept}");
+                sylva::outputs::say(format_args!("sylva: view closed by signal {signal}{kept}"));
                 std::process::exit(128 + signal)
             }
             records => records?,

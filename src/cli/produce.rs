@@ -203,19 +203,22 @@ fn parse_format(text: &str) -> Result<Format> {
 fn write(path: &Path, product: &Product) -> Result<()> {
     outputs::write_all(&[(path, &product.encoded.bytes)])?;
     let g = &product.grid;
-    eprintln!(
+    sylva::outputs::say(format_args!(
         "{}: {}×{} samples, {} bytes, {:.1} ms",
         path.display(),
         g.width(),
         g.height(),
         product.encoded.bytes.len(),
         product.stats.total().as_secs_f64() * 1e3
-    );
+    ));
     if let Some(q) = product.encoded.quantization {
-        eprintln!("  16-bit codes: value = {} + {} · code", q.offset, q.scale);
+        sylva::outputs::say(format_args!("  16-bit codes: value = {} + {} · code", q.offset, q.scale));
     }
     if product.encoded.clamped > 0 {
-        eprintln!("  warning: {} samples were outside the 16-bit range and were clamped", product.encoded.clamped);
+        sylva::outputs::say(format_args!(
+            "  warning: {} samples were outside the 16-bit range and were clamped",
+            product.encoded.clamped
+        ));
     }
     Ok(())
 }

@@ -51,7 +51,8 @@ pub struct SeedArgs {
     /// GeoJSON Polygons or MultiPolygons (holes allowed) instead of a box.
     #[arg(long)]
     coverage: Option<PathBuf>,
-    /// Seed the tiles listed in FILE (layer/level/row/col per line), e.g. a failed-tiles file.
+    /// Seed the tiles listed in FILE (`layer/level/row/col [formats]` per line; a line's
+    /// formats, e.g. `png16,tiff`, replace --formats), e.g. a failed-tiles file.
     #[arg(long, conflicts_with_all = ["levels", "bbox", "coverage", "resume"])]
     tiles_from: Option<PathBuf>,
     /// Print the tiles per level and stop.
@@ -128,7 +129,7 @@ impl SeedArgs {
         let report = match sylva::seed::run(&options, &sylva::seed::Counters::default()) {
             // Stopped by a signal: the status a shell gives a death by it.
             Err(e @ sylva::seed::SeedError::Interrupted { signal, .. }) => {
-                eprintln!("sylva: {e}");
+                sylva::outputs::say(format_args!("sylva: {e}"));
                 std::process::exit(128 + signal)
             }
             report => report?,
@@ -156,5 +157,5 @@ pub fn with_server_allocator() {
     }
     let Ok(exe) = std::env::current_exe() else { return };
     let error = std::process::Command::new(exe).args(std::env::args_os().skip(1)).env(VAR, "50").exec();
-    eprintln!("sylva: running with the allocator's defaults ({VAR} not applied: {error})");
+    sylva::outputs::say(format_args!("sylva: running with the allocator's defaults ({VAR} not applied: {error})"));
 }

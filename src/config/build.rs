@@ -234,7 +234,7 @@ fn landcover(
             let d = demo::sources()?;
             (Blocks::new(d.map, cache), d.map_georef)
         }
-        (None, None) => return Err(invalid(format!("kind {:?} needs a path or an upstream", lc.kind))),
+        (None, None) => return Err(invalid(format!("kind {:?} needs a path or an upstream", lc.kind.name()))),
     };
     let bands = input.source().bands();
     if lc.kind == LandcoverKind::Map && bands < 3 {

@@ -356,6 +356,18 @@ pub enum LandcoverKind {
     CanopyHeight,
 }
 
+impl LandcoverKind {
+    /// The name a configuration gives it.
+    pub fn name(self) -> &'static str {
+        match self {
+            LandcoverKind::Map => "map",
+            LandcoverKind::Classes => "classes",
+            LandcoverKind::Percent => "percent",
+            LandcoverKind::CanopyHeight => "canopy_height",
+        }
+    }
+}
+
 /// One row of a class table: classes that share a surface and cover.
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]

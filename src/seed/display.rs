@@ -51,7 +51,7 @@ impl Display {
             self.bar.set_message(format!("{failed} failed"));
         }
         if self.plain && super::due(&self.logged, LOG_EVERY) {
-            eprintln!("{}", self.line(failed));
+            crate::outputs::say(format_args!("{}", self.line(failed)));
         }
     }
 
@@ -69,7 +69,7 @@ impl Display {
     /// Ends the bar (or logs the last line).
     pub fn finish(&self, failed: u64) {
         if self.plain {
-            eprintln!("{}", self.line(failed));
+            crate::outputs::say(format_args!("{}", self.line(failed)));
         }
         self.bar.abandon();
     }

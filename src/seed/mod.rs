@@ -308,7 +308,7 @@ impl Run<'_> {
 
     fn warn_once(&self, message: &str) {
         if self.warned.lock().is_ok_and(|mut w| !std::mem::replace(&mut *w, true)) {
-            eprintln!("sylva seed: warning: {message}");
+            crate::outputs::say(format_args!("sylva seed: warning: {message}"));
         }
     }
 

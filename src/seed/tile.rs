@@ -198,9 +198,9 @@ impl Seeder<'_> {
     fn explain_wait(&self, key: &str) {
         let ttl = self.lock_ttl.as_secs_f64();
         self.wait_notice.call_once(|| {
-            eprintln!(
+            crate::outputs::say(format_args!(
                 "sylva seed: waiting for {key}, locked by another seeder or server; an interrupted seed leaves its locks, which expire {ttl:.0} s after they were taken ([tile_cache] lock_ttl_s)"
-            );
+            ));
         });
     }
 

@@ -197,6 +197,19 @@ fn benchmarks_refuse_a_named_region_or_an_output_they_cannot_use_before_running(
 }
 
 #[test]
+fn an_error_said_to_a_stderr_nobody_reads_still_exits_1() {
+    // Regression: eprintln! panicked on the closed pipe (exit 101).
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let status = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(["info", "--config", "/no/such/config.toml"])
+        .stderr(writer)
+        .status()
+        .unwrap();
+    assert_eq!(status.code(), Some(1));
+}
+
+#[test]
 fn a_benchmark_plot_that_cannot_be_written_loses_no_table() {
     // The real-data region's plot is written after its flyovers: a
     // directory in its place fails only then, and the tables printed

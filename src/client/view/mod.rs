@@ -340,7 +340,7 @@ impl Viewer {
             let size = (shot.camera.width_px, shot.camera.height_px);
             if let Err(e) = fly::write_png(&free_name(dir, shot.index), &framed.rendered, size) {
                 // Said, and the view goes on.
-                eprintln!("sylva view: the frame was not saved: {e}");
+                crate::outputs::say(format_args!("sylva view: the frame was not saved: {e}"));
             }
         }
         self.frames += 1;
