@@ -8,7 +8,7 @@ use crate::cem::landcover::{ForestTypes, Landcover, Rule};
 use crate::cem::surface::SurfaceType;
 use crate::demo;
 use crate::encode::Quantization;
-use crate::grid::TileGrid;
+use crate::grid::{Sector, TileGrid};
 use crate::raster::morphology::MorphOp;
 use crate::region::{Forest, Region};
 use crate::source::{
@@ -132,6 +132,7 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
     let (landcover, map) = match (&config.landcover, landcover_rule, demo) {
         (Some(lc), Some(rule), _) => {
             let (l, m) = landcover(lc, (rule, types), &resolve, &cache, &|m| invalid(format!("[landcover] {m}")))?;
+            overlaps(&l, &dem).map_err(|m| invalid(format!("[landcover] {m}")))?;
             (Some(l), m)
         }
         (None, _, true) => {
@@ -237,15 +238,29 @@ fn landcover(
         (None, None) => return Err(invalid(format!("kind {:?} needs a path or an upstream", lc.kind.name()))),
     };
     let bands = input.source().bands();
+    let name = input.source().name().display();
     if lc.kind == LandcoverKind::Map && bands < 3 {
+        return Err(invalid(format!("a map needs three bands (R, G, B); {name} has {bands}")));
+    }
+    if lc.kind != LandcoverKind::Map && bands != 1 {
         return Err(invalid(format!(
-            "a map needs three bands (R, G, B); {} has {bands}",
-            input.source().name().display()
+            "kind {:?} reads one band; {name} has {bands} (an RGB map or orthophoto is kind \"map\")",
+            lc.kind.name()
         )));
     }
     let map =
         (lc.kind == LandcoverKind::Map).then(|| GeoRaster::new(input.clone(), georef.clone(), &[Reducer::Mean], cache));
     Ok((derived(input, georef, rule, types, cache), map))
+}
+
+/// Refuses land cover that covers none of the DEM (cover 0 everywhere and
+/// the CEM the bare DEM: a wrong file, or a wrong CRS).
+fn overlaps(landcover: &GeoRaster, dem: &GeoRaster) -> Result<(), String> {
+    if landcover.bounds().intersects(&dem.bounds()) {
+        return Ok(());
+    }
+    let span = |s: Sector| format!("{:.4}..{:.4}° E, {:.4}..{:.4}° N", s.min_lon, s.max_lon, s.min_lat, s.max_lat);
+    Err(format!("covers none of the DEM: it spans {}, the DEM {}", span(landcover.bounds()), span(dem.bounds())))
 }
 
 /// Cover (mean), classes (decimated), covers of forest types (mean).

@@ -124,6 +124,23 @@ fn bad_configs_name_the_file_and_the_problem() {
     std::fs::write(&picture, format!("[dem]\npath = {:?}\n", common::data("rmnp/rmnp-rgb.tif"))).unwrap();
     let err = sylva::config::load(Some(&picture)).expect_err("a picture").to_string();
     assert!(err.contains("picture.toml: [dem] path: ") && err.contains("has 3 bands; a DEM has one"), "{err}");
+    // Nor is it a percentage of cover.
+    let rgb_cover = dir.join("rgb_cover.toml");
+    let (dem, rgb) = (common::data("rmnp/rmnp-dem.tif"), common::data("rmnp/rmnp-rgb.tif"));
+    std::fs::write(&rgb_cover, format!("[dem]\npath = {dem:?}\n[landcover]\nkind = \"percent\"\npath = {rgb:?}\n"))
+        .unwrap();
+    let err = sylva::config::load(Some(&rgb_cover)).expect_err("a picture as cover").to_string();
+    assert!(
+        err.contains("rgb_cover.toml: [landcover] kind \"percent\" reads one band") && err.contains("has 3"),
+        "{err}"
+    );
+    // Cover of another place covers none of the DEM.
+    let elsewhere = dir.join("elsewhere.toml");
+    let tcc = common::data("storm_lake/storml_tcc.tif");
+    std::fs::write(&elsewhere, format!("[dem]\npath = {dem:?}\n[landcover]\nkind = \"percent\"\npath = {tcc:?}\n"))
+        .unwrap();
+    let err = sylva::config::load(Some(&elsewhere)).expect_err("cover elsewhere").to_string();
+    assert!(err.contains("elsewhere.toml: [landcover] covers none of the DEM"), "{err}");
     // A UTM file read as degrees lies off the globe.
     let metres = dir.join("metres.toml");
     let utm = common::data("storm_lake/storml_elev.tif");
