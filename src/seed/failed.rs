@@ -68,7 +68,17 @@ fn parse_entry(entry: &str) -> Option<Entry> {
     let mut fields = entry.split_whitespace();
     let (layer, tile) = fields.next()?.split_once('/')?;
     let formats = match fields.next() {
-        Some(list) => list.split(',').map(Format::parse).collect::<Option<Vec<_>>>()?,
+        Some(list) => {
+            let mut formats = Vec::new();
+            for format in list.split(',').map(Format::parse) {
+                // Each once (`png16,png16` is one file).
+                let format = format?;
+                if !formats.contains(&format) {
+                    formats.push(format);
+                }
+            }
+            formats
+        }
         None => Vec::new(),
     };
     let entry = Entry { layer: Layer::parse(layer)?, tile: parse_tile(tile)?, formats };
@@ -167,6 +177,8 @@ mod tests {
         std::fs::write(&path, "# a comment\n\ncem/1/2/3\ntrees/1/2/3\n").unwrap();
         let err = read(&path, &grid).unwrap_err().to_string();
         assert!(err.contains(":4:") && err.contains("trees/1/2/3"), "{err}");
+        std::fs::write(&path, "cem/1/2/3 png16,tiff,png16\n").unwrap();
+        assert_eq!(read(&path, &grid).unwrap(), vec![entry(Layer::Cem, (1, 2, 3), &[Format::Png16, Format::Tiff])]);
         for bad in ["cem/1/2/3 png17", "cem/1/2/3 png16 tiff", "cem/1/2/3 png16,"] {
             std::fs::write(&path, format!("{bad}\n")).unwrap();
             assert!(read(&path, &grid).unwrap_err().to_string().contains(":1:"), "{bad}");

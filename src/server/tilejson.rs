@@ -23,8 +23,9 @@ pub fn document(region: &Region, layer: MapLayer, base: &str) -> Value {
         "name": format!("{} {}", region.name, layer.name()),
         "tiles": [format!("{base}/xyz/{}/{{z}}/{{x}}/{{y}}.png", layer.name())],
         "scheme": "xyz",
-        "minzoom": 0,
-        "maxzoom": max_zoom(region),
+        "tileSize": TILE_PX,
+        "minzoom": min_zoom(region),
+        "maxzoom": max_zoom(region, layer),
         "bounds": [b.west, lat(b.south), b.east, lat(b.north)],
     });
     if !layer.is_picture() {
@@ -33,16 +34,27 @@ pub fn document(region: &Region, layer: MapLayer, base: &str) -> Value {
     doc
 }
 
+/// The side of an XYZ tile, pixels (MapLibre assumes 512 unless told).
+const TILE_PX: u32 = 256;
+
+/// The shallowest zoom at which the region spans a pixel (shallower tiles
+/// hold no data: 404).
+fn min_zoom(region: &Region) -> u32 {
+    let b = region.bounds;
+    let zoom = (360.0 / (f64::from(TILE_PX) * (b.east - b.west))).log2().ceil();
+    if zoom.is_finite() { zoom.clamp(0.0, f64::from(MAX_XYZ_ZOOM)) as u32 } else { 0 }
+}
+
 /// The shallowest zoom whose pixels, at the region's middle latitude, are
-/// no larger than its finest source's (clients draw deeper zooms from it).
-fn max_zoom(region: &Region) -> u32 {
-    let finest_m = std::iter::once(&region.dem)
-        .chain(region.landcover.as_ref())
-        .map(|r| r.georef().pixel_m())
-        .fold(f64::INFINITY, f64::min);
+/// no larger than the finest source of `layer` (the DEM's for `dem`, else
+/// also the land cover's); clients draw deeper zooms from it.
+fn max_zoom(region: &Region, layer: MapLayer) -> u32 {
+    let cover = region.landcover.as_ref().filter(|_| layer != MapLayer::Data(crate::cem::Layer::Dem));
+    let finest_m =
+        std::iter::once(&region.dem).chain(cover).map(|r| r.georef().pixel_m()).fold(f64::INFINITY, f64::min);
     let b = region.bounds;
     let mid_lat = (0.5 * (b.south + b.north)).clamp(-MERCATOR_MAX_LAT, MERCATOR_MAX_LAT);
-    let tile_px_m = EQUATOR_M * mid_lat.to_radians().cos() / 256.0;
+    let tile_px_m = EQUATOR_M * mid_lat.to_radians().cos() / f64::from(TILE_PX);
     let zoom = (tile_px_m / finest_m).log2().ceil();
     if zoom.is_finite() { zoom.clamp(0.0, f64::from(MAX_XYZ_ZOOM)) as u32 } else { MAX_XYZ_ZOOM }
 }
@@ -57,14 +69,16 @@ mod tests {
         let doc = document(&region, MapLayer::Data(crate::cem::Layer::Dem), "http://h:1");
         assert_eq!(doc["tiles"][0], "http://h:1/xyz/dem/{z}/{x}/{y}.png");
         assert_eq!(doc["encoding"], "terrarium");
+        assert_eq!(doc["tileSize"], 256);
         let zoom = doc["maxzoom"].as_u64().unwrap() as i32;
-        // A pixel of that zoom is no larger than the finest source pixel,
-        // one of the zoom before is.
-        let finest =
-            region.dem.georef().pixel_m().min(region.landcover.as_ref().map_or(f64::MAX, |l| l.georef().pixel_m()));
+        // A pixel of that zoom is no larger than the DEM's, one of the zoom
+        // before is.
+        let finest = region.dem.georef().pixel_m();
         let px = |z: i32| EQUATOR_M * 46.375f64.to_radians().cos() / 256.0 / 2f64.powi(z);
         assert!(px(zoom) <= finest * 1.001 && px(zoom - 1) > finest, "zoom {zoom}: {} m, finest {finest} m", px(zoom));
         let relief = document(&region, MapLayer::Relief, "http://h:1");
         assert!(relief.get("encoding").is_none());
+        // The demo spans 0.25°: 1.4 px at zoom 3, 0.7 at zoom 2.
+        assert_eq!(doc["minzoom"], 3);
     }
 }

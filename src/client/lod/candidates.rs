@@ -6,7 +6,9 @@
 //! (predicted) cameras or inside the conservative camera's cone, and not
 //! behind the horizon. Its benefit is the mean over the cameras of
 //! [`tile_benefit_seen`]: the pixels its part inside the region covers
-//! ([`coverage::visible_px`]) times the smoothed root of its samples per
+//! (`seen_px`: its ground below the eye at one height,
+//! [`coverage::visible_px`], and above the eye the silhouette of its box,
+//! [`coverage::above_px`]) times the smoothed root of its samples per
 //! pixel at its nearest ([`coverage::full_px`]). Samples count less where the flat frame
 //! misplaces them: a tile of spacing `s` and flat-frame error `e` is worth
 //! `(s / (s + e))²` of its samples (the screen-space error rule refines on
