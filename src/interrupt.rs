@@ -1,7 +1,8 @@
 //! Ctrl-C or SIGTERM during a long run — a seed (feature `server`), a
-//! flight (feature `client`): the first signal stops it after the work in
-//! hand (a seed's tiles, so their locks are released and the progress is
-//! saved; a flight's frame, so its frames and statistics are written); a
+//! flight (feature `client`), a build: the first signal stops it after the
+//! work in hand (a seed's tiles, so their locks are released and the
+//! progress is saved; a flight's frame, so its frames and statistics are
+//! written; a build's computation, so no output is half written); a
 //! second one exits at once. Outside such a run the signals keep their
 //! default action (the process ends), also in a process that runs several
 //! (`sylva bench seed`).

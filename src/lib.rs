@@ -26,8 +26,7 @@ pub mod demo;
 pub mod encode;
 pub mod geo;
 pub mod grid;
-#[cfg(any(feature = "server", feature = "client"))]
-pub(crate) mod interrupt;
+pub mod interrupt;
 pub mod lidar;
 pub mod lod;
 pub mod noise;

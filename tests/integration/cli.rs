@@ -197,6 +197,27 @@ fn benchmarks_refuse_a_named_region_or_an_output_they_cannot_use_before_running(
 }
 
 #[test]
+fn ctrl_c_during_a_build_writes_nothing_not_even_a_partial_file() {
+    // Regression: the signal ended the process mid-write, leaving
+    // `NAME.partial` (up to 268 MB).
+    let dir = TempDir::new("cli-build-signal");
+    let out = dir.join("big.tif");
+    let build = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(["build", "--layer", "max32", "--width", "8193", "--height", "8193", "-o", out.to_str().unwrap()])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    assert!(Command::new("kill").arg("-INT").arg(build.id().to_string()).status().unwrap().success());
+    let output = build.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("interrupted by signal 2; nothing written"), "{stderr}");
+    let left: Vec<_> = std::fs::read_dir(&dir.0).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "{left:?}");
+}
+
+#[test]
 fn an_error_said_to_a_stderr_nobody_reads_still_exits_1() {
     // Regression: eprintln! panicked on the closed pipe (exit 101).
     let (reader, writer) = std::io::pipe().unwrap();
