@@ -162,7 +162,7 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
 /// Which revision of Sylva's products a cached tile holds: change it with
 /// any change to the code that changes some tile's bytes, so that caches
 /// seeded before it are not served beside tiles made after it.
-const PRODUCT_REVISION: &str = "2026-12-06: the relief is shaded with each row's own east–west spacing";
+const PRODUCT_REVISION: &str = "2026-12-06: the relief shaded with each row's own east–west spacing; overviews of sources in feet chosen in metres";
 
 /// A key that changes with anything that changes a tile's bytes: every
 /// setting, the size and time of every source file, and the products'

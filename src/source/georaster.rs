@@ -44,15 +44,22 @@ pub struct Georef {
 }
 
 impl Georef {
-    /// Pixel size in degrees (metres converted at the sphere's scale).
+    /// Pixel size in degrees (projected units converted to metres, then at
+    /// the sphere's scale).
     pub fn pixel_deg(&self) -> f64 {
-        let size = self.dx.abs().min(self.dy.abs());
-        if self.crs.is_geographic() { size } else { size / METRES_PER_DEGREE }
+        match self.crs.metres_per_unit() {
+            None => self.dx.abs().min(self.dy.abs()),
+            Some(_) => self.pixel_m() / METRES_PER_DEGREE,
+        }
     }
 
-    /// Pixel size on the ground, metres (north–south for geographic sources).
+    /// Pixel size on the ground, metres (north–south for geographic
+    /// sources; a CRS in feet converted).
     pub fn pixel_m(&self) -> f64 {
-        if self.crs.is_geographic() { self.dy.abs() * METRES_PER_DEGREE } else { self.dx.abs().min(self.dy.abs()) }
+        match self.crs.metres_per_unit() {
+            None => self.dy.abs() * METRES_PER_DEGREE,
+            Some(metres) => self.dx.abs().min(self.dy.abs()) * metres,
+        }
     }
 }
 
@@ -316,6 +323,24 @@ mod tests {
     use super::*;
     use crate::grid::BBox;
     use crate::source::memory::MemorySource;
+
+    #[test]
+    fn pixel_sizes_are_in_metres_whatever_the_crs_unit() {
+        let georef = |code: u32, size: f64| Georef {
+            crs: Arc::new(Crs::from_epsg(code).unwrap()),
+            x0: 0.0,
+            y0: 0.0,
+            dx: size,
+            dy: -size,
+            overhang: 0.5,
+        };
+        // California zone 5 in US survey feet: 98.425 ft is 30 m.
+        let feet = georef(2229, 98.425);
+        assert!((feet.pixel_m() - 30.0).abs() < 0.01, "{}", feet.pixel_m());
+        assert!((feet.pixel_deg() * METRES_PER_DEGREE - 30.0).abs() < 0.01);
+        assert_eq!(georef(32632, 30.0).pixel_m(), 30.0);
+        assert!((georef(4326, 1.0 / 3600.0).pixel_m() - METRES_PER_DEGREE / 3600.0).abs() < 1e-9);
+    }
 
     /// 200 × 200 pixels of 30 m in UTM 32N, north-west corner near 10.0° E, 46.4° N.
     fn utm_raster() -> GeoRaster {
