@@ -1,7 +1,7 @@
 //! Stage two of the configuration: checks every value and opens every source,
 //! producing a [`Region`]. Errors name the file and the problem.
 
-use super::{Config, LandcoverConfig, LandcoverKind, UpstreamConfig};
+use super::{Config, LandcoverConfig, LandcoverKind, UpstreamConfig, default_close};
 use crate::canopy::{CanopyProxy, ProceduralProxy, TiledProxy};
 use crate::cem::colorkey::{ColorKey, LabKey};
 use crate::cem::landcover::{ForestTypes, Landcover, Rule};
@@ -312,6 +312,9 @@ fn compile(keys: &[ColorKey]) -> Result<Vec<LabKey>, String> {
 const MAX_MAP_RADIUS_PX: usize = 32;
 
 fn rule(lc: &LandcoverConfig) -> Result<Rule, String> {
+    if let Some(key) = foreign_option(lc) {
+        return Err(format!("{key} does not apply to kind {:?}", lc.kind.name()));
+    }
     match lc.kind {
         LandcoverKind::Map => {
             let keys = compile(lc.keys.as_deref().unwrap_or(&demo_keys()))?;
@@ -332,6 +335,26 @@ fn rule(lc: &LandcoverConfig) -> Result<Rule, String> {
         // Canopy height models: below 1 m is ground or shrubs; trees from 3 m.
         LandcoverKind::CanopyHeight => linear(lc, 1.0, 3.0),
     }
+}
+
+/// A `[landcover]` option given that belongs to another kind (an option
+/// with a default counts as given where it differs from it): a sign of a
+/// wrong `kind`, which would silently ignore it.
+fn foreign_option(lc: &LandcoverConfig) -> Option<&'static str> {
+    let map = [
+        ("keys", lc.keys.is_some()),
+        ("close", lc.close != default_close()),
+        ("close_radius_px", lc.close_radius_px != 1),
+        ("blur_radius_px", lc.blur_radius_px != 1),
+    ];
+    let linear = [("zero_at", lc.zero_at.is_some()), ("full_at", lc.full_at.is_some())];
+    let classes = [("[[landcover.classes]]", !lc.classes.is_empty())];
+    let foreign: &[(&'static str, bool)] = match lc.kind {
+        LandcoverKind::Map => &[&linear[..], &classes[..]].concat(),
+        LandcoverKind::Classes => &[&map[..], &linear[..]].concat(),
+        LandcoverKind::Percent | LandcoverKind::CanopyHeight => &[&map[..], &classes[..]].concat(),
+    };
+    foreign.iter().find(|(_, given)| *given).map(|(key, _)| *key)
 }
 
 /// Forest types: index 0 is forest of no named type, `k` the `k`-th

@@ -94,6 +94,16 @@ fn bad_configs_name_the_file_and_the_problem() {
             "[dem]\npath = \"x.hgt\"\n[landcover]\nkind = \"classes\"\npath = \"c.tif\"\n",
             "[[landcover.classes]]",
         ),
+        (
+            "foreign.toml",
+            "[landcover]\nkind = \"percent\"\npath = \"c.tif\"\nclose = \"DE\"\n",
+            "[landcover] close does not apply to kind \"percent\"",
+        ),
+        (
+            "foreign_linear.toml",
+            "[landcover]\nkind = \"map\"\nfull_at = 50\n",
+            "[landcover] full_at does not apply to kind \"map\"",
+        ),
         ("proxy.toml", "[[forest]]\nname = \"pine\"\nproxy = \"pine.tif\"\n", "pine.tif: cannot open"),
         ("lidar.toml", "[[forest]]\nname = \"pine\"\nlidar = [\"pine.laz\"]\n", "pine.laz: cannot open"),
         (
