@@ -269,21 +269,25 @@ impl Run<'_> {
     /// Seeds the tiles of a list, each in the formats it lists (or the
     /// job's), with a seeder per layer and formats.
     fn list(&self, entries: &[failed::Entry]) {
-        let formats =
-            |e: &failed::Entry| if e.formats.is_empty() { self.job.formats.clone() } else { e.formats.clone() };
-        let total = entries.iter().map(|e| formats(e).len() as u64).sum();
+        // The tiles of each layer and formats (those a line lists, or the
+        // job's), in the order they first appear.
+        let mut groups: Vec<(crate::cem::Layer, &[crate::encode::Format], Vec<TileId>)> = Vec::new();
+        for e in entries {
+            let formats = if e.formats.is_empty() { &self.job.formats[..] } else { &e.formats[..] };
+            match groups.iter_mut().find(|(layer, f, _)| *layer == e.layer && *f == formats) {
+                Some(group) => group.2.push(e.tile),
+                None => groups.push((e.layer, formats, vec![e.tile])),
+            }
+        }
+        let total = groups.iter().map(|(_, formats, tiles)| (formats.len() * tiles.len()) as u64).sum();
         let display = display::Display::new(self.options.display, total, 0);
-        let mut kinds: Vec<_> = entries.iter().map(|e| (e.layer, formats(e))).collect();
-        kinds.sort_by_key(|(layer, formats)| (layer.name(), formats.iter().map(|f| f.name()).collect::<Vec<_>>()));
-        kinds.dedup();
-        for (layer, kind) in kinds {
-            let seeder = Seeder { formats: kind.clone(), ..self.seeder(vec![layer]) };
-            let of_kind = |e: &&failed::Entry| e.layer == layer && formats(e) == kind;
-            entries.par_iter().filter(of_kind).for_each(|e| {
+        for (layer, formats, tiles) in groups {
+            let seeder = Seeder { formats: formats.to_vec(), ..self.seeder(vec![layer]) };
+            tiles.par_iter().for_each(|&tile| {
                 if !self.stopped() {
-                    let (_, failures) = seeder.tile(e.tile, None, false);
+                    let (_, failures) = seeder.tile(tile, None, false);
                     self.record(failures);
-                    display.advance(kind.len() as u64, self.counters.failed.load(Ordering::Relaxed));
+                    display.advance(formats.len() as u64, self.counters.failed.load(Ordering::Relaxed));
                 }
             });
         }

@@ -73,11 +73,16 @@ impl<T: Copy + Default> Polygon<T> {
 /// Pixels covered by the front-facing surface of `sector` at `height_m`
 /// above the ellipsoid, seen from `camera`.
 pub fn visible_px(camera: &Camera, sector: &Sector, height_m: f64) -> f64 {
+    finite(sheet_px(camera, sector, height_m, Winding::Up))
+}
+
+/// Pixels covered by the side of `sector` at `height_m` that `winding`
+/// names (its top, or its underside), where it faces the camera.
+fn sheet_px(camera: &Camera, sector: &Sector, height_m: f64, winding: Winding) -> f64 {
     let m = cells_per_side(sector.max_lon - sector.min_lon);
     let lons = steps(sector.min_lon, sector.max_lon, m);
     let rows = steps(sector.min_lat, sector.max_lat, m).map(|lat| lons.clone().map(move |lon| (lon, lat, height_m)));
-    let points = project(camera, rows.flatten());
-    finite(grid_px(camera, &points, m + 1, Winding::Up))
+    grid_px(camera, &project(camera, rows.flatten()), m + 1, winding)
 }
 
 /// Pixels covered by the box of `sector` between `lo_m` and `hi_m` above
@@ -89,8 +94,7 @@ pub fn visible_px(camera: &Camera, sector: &Sector, height_m: f64) -> f64 {
 pub fn above_px(camera: &Camera, sector: &Sector, (lo_m, hi_m): (f64, f64)) -> f64 {
     let m = cells_per_side(sector.max_lon - sector.min_lon);
     let (lons, lats) = (steps(sector.min_lon, sector.max_lon, m), steps(sector.min_lat, sector.max_lat, m));
-    let floor = lats.clone().flat_map(|lat| lons.clone().map(move |lon| (lon, lat, lo_m)));
-    let mut px = grid_px(camera, &project(camera, floor), m + 1, Winding::Down);
+    let mut px = sheet_px(camera, sector, lo_m, Winding::Down);
     // Each wall a strip of cells, its foot along one edge (west to east,
     // south to north) and its top above; facing out of the box.
     let walls = [
