@@ -37,6 +37,10 @@ pub struct Options {
     pub variants: usize,
 }
 
+/// The canopy height model's cell side unless one is given, metres (6.3.2:
+/// "an elevation map with 0.5m resolution").
+pub const DEFAULT_CELL_M: f64 = 0.5;
+
 impl Options {
     /// Defaults for these files at this resolution.
     pub fn new(files: Vec<PathBuf>, cell_m: f64) -> Options {

@@ -169,7 +169,7 @@ pub fn morphology(config_path: &Path, labels_csv: &Path) -> Option<String> {
     let mut name = String::new();
     for seq in ["", "DE", "DDEE", "DEDE", "DDDEEE"] {
         let mut variant = config.clone();
-        variant.landcover.as_mut()?.close = seq.to_string();
+        variant.landcover.as_mut()?.close = Some(seq.to_string());
         let region = crate::config::region_from(&variant, base, config_path).ok()?;
         name.clone_from(&region.name);
         let lc = region.landcover.as_ref()?;

@@ -34,7 +34,7 @@ impl Default for ChmOptions {
         // 0.5 m as the dissertation's proxy; voids up to 5 m from data are
         // gaps between returns (a 0.5 pt/m² cloud leaves 1.4 m between them),
         // farther ones are outside the scan.
-        ChmOptions { cell_m: 0.5, fill_max_m: 5.0 }
+        ChmOptions { cell_m: crate::lidar::DEFAULT_CELL_M, fill_max_m: 5.0 }
     }
 }
 

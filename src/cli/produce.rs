@@ -110,7 +110,7 @@ pub struct CanopyArgs {
     #[arg(long = "las", required = true)]
     las: Vec<PathBuf>,
     /// Cell side of the canopy height model, metres.
-    #[arg(long, default_value_t = 0.5)]
+    #[arg(long, default_value_t = sylva::lidar::DEFAULT_CELL_M)]
     resolution: f64,
     /// The proxy (a GeoTIFF atlas of Wang tiles).
     #[arg(short, long)]

@@ -1,7 +1,7 @@
 //! Stage two of the configuration: checks every value and opens every source,
 //! producing a [`Region`]. Errors name the file and the problem.
 
-use super::{Config, LandcoverConfig, LandcoverKind, UpstreamConfig, default_close};
+use super::{Config, LandcoverConfig, LandcoverKind, UpstreamConfig};
 use crate::canopy::{CanopyProxy, ProceduralProxy, TiledProxy};
 use crate::cem::colorkey::{ColorKey, LabKey};
 use crate::cem::landcover::{ForestTypes, Landcover, Rule};
@@ -162,7 +162,7 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
 /// Which revision of Sylva's products a cached tile holds: change it with
 /// any change to the code that changes some tile's bytes, so that caches
 /// seeded before it are not served beside tiles made after it.
-const PRODUCT_REVISION: &str = "2026-12-06: the relief shaded with each row's own east–west spacing; overviews of sources in feet chosen in metres";
+const PRODUCT_REVISION: &str = "2026-12-07: the relief shaded with each row's own spacings (Web Mercator rows too); overviews of sources in feet chosen in metres";
 
 /// A key that changes with anything that changes a tile's bytes: every
 /// setting, the size and time of every source file, and the products'
@@ -321,14 +321,17 @@ fn rule(lc: &LandcoverConfig) -> Result<Rule, String> {
             if !keys.iter().any(|k| k.surface == SurfaceType::Forest) {
                 return Err("no colour key marks forest".into());
             }
-            let ops = MorphOp::parse_sequence(&lc.close)
-                .ok_or_else(|| format!("close {:?} must be a sequence of D and E", lc.close))?;
-            for (key, px) in [("close_radius_px", lc.close_radius_px), ("blur_radius_px", lc.blur_radius_px)] {
+            // Figure 6.3: "2 passes of 3x3 filter kernels were used for the dilate and erode stages".
+            let close = lc.close.as_deref().unwrap_or("DDEE");
+            let ops = MorphOp::parse_sequence(close)
+                .ok_or_else(|| format!("close {close:?} must be a sequence of D and E"))?;
+            let (radius_px, blur_px) = (lc.close_radius_px.unwrap_or(1), lc.blur_radius_px.unwrap_or(1));
+            for (key, px) in [("close_radius_px", radius_px), ("blur_radius_px", blur_px)] {
                 if px > MAX_MAP_RADIUS_PX {
                     return Err(format!("{key} = {px}: at most {MAX_MAP_RADIUS_PX} pixels"));
                 }
             }
-            Ok(Rule::Map { keys, ops, radius_px: lc.close_radius_px, blur_px: lc.blur_radius_px })
+            Ok(Rule::Map { keys, ops, radius_px, blur_px })
         }
         LandcoverKind::Classes => class_table(lc).map(Rule::Classes),
         LandcoverKind::Percent => linear(lc, 0.0, 100.0),
@@ -337,15 +340,14 @@ fn rule(lc: &LandcoverConfig) -> Result<Rule, String> {
     }
 }
 
-/// A `[landcover]` option given that belongs to another kind (an option
-/// with a default counts as given where it differs from it): a sign of a
+/// A `[landcover]` option given that belongs to another kind: a sign of a
 /// wrong `kind`, which would silently ignore it.
 fn foreign_option(lc: &LandcoverConfig) -> Option<&'static str> {
     let map = [
         ("keys", lc.keys.is_some()),
-        ("close", lc.close != default_close()),
-        ("close_radius_px", lc.close_radius_px != 1),
-        ("blur_radius_px", lc.blur_radius_px != 1),
+        ("close", lc.close.is_some()),
+        ("close_radius_px", lc.close_radius_px.is_some()),
+        ("blur_radius_px", lc.blur_radius_px.is_some()),
     ];
     let linear = [("zero_at", lc.zero_at.is_some()), ("full_at", lc.full_at.is_some())];
     let classes = [("[[landcover.classes]]", !lc.classes.is_empty())];
@@ -409,6 +411,12 @@ fn forests(
         .map(|f| {
             // Each type its own arrangement of tiles.
             let seed = crate::cache::digest(f.name.as_bytes());
+            if f.lidar.is_empty() && f.resolution_m.is_some() {
+                return Err(invalid(format!(
+                    "[[forest]] {:?}: resolution_m applies to lidar files, and none are given",
+                    f.name
+                )));
+            }
             let proxy: Arc<dyn CanopyProxy> = match (&f.proxy, f.lidar.is_empty()) {
                 (Some(_), false) => {
                     return Err(invalid(format!("[[forest]] {:?}: give a proxy or lidar files, not both", f.name)));
@@ -421,8 +429,11 @@ fn forests(
                 }
                 (None, false) => {
                     let files = f.lidar.iter().map(resolve).collect();
-                    let proxy = crate::lidar::proxy(&crate::lidar::Options::new(files, f.resolution_m), seed)
-                        .map_err(|e| invalid(format!("[[forest]] {:?} lidar: {e}", f.name)))?;
+                    let proxy = crate::lidar::proxy(
+                        &crate::lidar::Options::new(files, f.resolution_m.unwrap_or(crate::lidar::DEFAULT_CELL_M)),
+                        seed,
+                    )
+                    .map_err(|e| invalid(format!("[[forest]] {:?} lidar: {e}", f.name)))?;
                     Arc::new(proxy)
                 }
                 (None, true) => fallback.clone(),

@@ -135,13 +135,10 @@ pub struct ForestConfig {
     /// Or LAS/LAZ files to build the proxy from when the region loads.
     #[serde(default)]
     pub lidar: Vec<PathBuf>,
-    /// Cell side of the canopy height model built from `lidar`, metres.
-    #[serde(default = "half_metre")]
-    pub resolution_m: f64,
-}
-
-fn half_metre() -> f64 {
-    0.5
+    /// Cell side of the canopy height model built from `lidar`, metres
+    /// (default 0.5).
+    #[serde(default)]
+    pub resolution_m: Option<f64>,
 }
 
 /// `sylva serve`.
@@ -310,15 +307,16 @@ pub struct LandcoverConfig {
     /// map: colour keys (default: the demo map's palette).
     #[serde(default)]
     pub keys: Option<Vec<ColorKey>>,
-    /// map: the close, as a sequence of D (dilate) and E (erode) passes.
-    #[serde(default = "default_close")]
-    pub close: String,
-    /// map: kernel radius of each pass, pixels (1 = 3×3).
-    #[serde(default = "one")]
-    pub close_radius_px: usize,
-    /// map: Gaussian blur radius after the close, pixels (0 = none).
-    #[serde(default = "one")]
-    pub blur_radius_px: usize,
+    /// map: the close, as a sequence of D (dilate) and E (erode) passes
+    /// (default "DDEE").
+    #[serde(default)]
+    pub close: Option<String>,
+    /// map: kernel radius of each pass, pixels (1 = 3×3, the default).
+    #[serde(default)]
+    pub close_radius_px: Option<usize>,
+    /// map: Gaussian blur radius after the close, pixels (0 = none; default 1).
+    #[serde(default)]
+    pub blur_radius_px: Option<usize>,
     /// classes: the class table.
     #[serde(default)]
     pub classes: Vec<ClassEntry>,
@@ -331,15 +329,6 @@ pub struct LandcoverConfig {
     /// The forest type (a `[[forest]]` name) of forest that names none.
     #[serde(default)]
     pub forest: Option<String>,
-}
-
-fn default_close() -> String {
-    // Figure 6.3: "2 passes of 3x3 filter kernels were used for the dilate and erode stages".
-    "DDEE".into()
-}
-
-fn one() -> usize {
-    1
 }
 
 /// Land-cover raster kinds.

@@ -82,6 +82,16 @@ impl Axis {
         }
     }
 
+    /// Degrees between the midpoints around sample `i`: the local spacing,
+    /// the same (bitwise) for a sample's global index in any grid on this
+    /// axis.
+    pub fn step_deg_at(&self, i: usize) -> f64 {
+        match self.mapping {
+            Mapping::Degrees => self.step.abs(),
+            _ => (self.coord_at(i as f64 + 0.5) - self.coord_at(i as f64 - 0.5)).abs(),
+        }
+    }
+
     /// The axis grown by `margin` samples at both ends.
     pub fn grown(&self, margin: usize) -> Axis {
         Axis { first: self.first - margin as i64, len: self.len + 2 * margin, ..*self }

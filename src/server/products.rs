@@ -237,13 +237,14 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
 }
 
 /// Ground distance between columns and between rows at each row of `grid`,
-/// metres. The east–west distance shrinks with the cosine of the row's own
-/// latitude, not of the grid's middle: tiles that share a row shade it with
-/// bitwise the same spacing, so north–south neighbours agree.
+/// metres. Both are the row's own, not the grid's middle's (the east–west
+/// distance shrinks with the cosine of the row's latitude; a Web Mercator
+/// row's height in degrees shrinks with it too): tiles that share a row
+/// shade it with bitwise the same spacing, so north–south neighbours agree.
 fn row_spacings_m(grid: &SampleGrid) -> Vec<(f64, f64)> {
-    let (dx, dy) = (grid.lon.step_deg(), grid.lat.step_deg());
+    let dx = grid.lon.step_deg();
     let m = crate::geo::METRES_PER_DEGREE;
-    (0..grid.height()).map(|y| (dx * grid.lat.coord(y).to_radians().cos() * m, dy * m)).collect()
+    (0..grid.height()).map(|y| (dx * grid.lat.coord(y).to_radians().cos() * m, grid.lat.step_deg_at(y) * m)).collect()
 }
 
 /// The unshaded map colours.

@@ -149,9 +149,13 @@ async fn tile_path(
     tile(&state, &layer, TileId::new(level, row, col), ext, halo(&params, &state)?, &headers).await
 }
 
-/// A tile coordinate: a whole number, or the request is bad.
+/// A tile coordinate: a whole number (past any tile where too large to
+/// hold: no such tile), or the request is bad.
 fn whole_number(text: &str, what: &str) -> Result<u64, ServeError> {
-    text.parse().map_err(|_| ServeError::BadRequest(format!("{what} must be a whole number, not {text:?}")))
+    text.parse().map_err(|_| match !text.is_empty() && text.bytes().all(|b| b.is_ascii_digit()) {
+        true => ServeError::NotFound,
+        false => ServeError::BadRequest(format!("{what} must be a whole number, not {text:?}")),
+    })
 }
 
 /// A level or zoom: a whole number (past any level: no such tile).

@@ -100,12 +100,22 @@ fn bad_configs_name_the_file_and_the_problem() {
             "[landcover] close does not apply to kind \"percent\"",
         ),
         (
+            "foreign_default.toml",
+            "[landcover]\nkind = \"percent\"\npath = \"c.tif\"\nblur_radius_px = 1\n",
+            "[landcover] blur_radius_px does not apply to kind \"percent\"",
+        ),
+        (
             "foreign_linear.toml",
             "[landcover]\nkind = \"map\"\nfull_at = 50\n",
             "[landcover] full_at does not apply to kind \"map\"",
         ),
         ("proxy.toml", "[[forest]]\nname = \"pine\"\nproxy = \"pine.tif\"\n", "pine.tif: cannot open"),
         ("lidar.toml", "[[forest]]\nname = \"pine\"\nlidar = [\"pine.laz\"]\n", "pine.laz: cannot open"),
+        (
+            "resolution.toml",
+            "[[forest]]\nname = \"pine\"\nproxy = \"p.tif\"\nresolution_m = 0.25\n",
+            "resolution_m applies to lidar files, and none are given",
+        ),
         (
             "both.toml",
             "[[forest]]\nname = \"pine\"\nproxy = \"p.tif\"\nlidar = [\"p.laz\"]\n",

@@ -190,3 +190,24 @@ fn rmnp_relief_neighbours_share_edge_pixels_exactly() {
     // The tiles of the audit that found the north–south seam.
     check_relief_neighbours(&common::region("examples/rmnp.toml"), TileId::new(12, 14830, 8452));
 }
+
+#[test]
+fn xyz_relief_tiles_equal_windows_of_a_mercator_build() {
+    // Regression: a Web Mercator grid's rows were shaded with the north–south
+    // spacing of the grid's middle; the build below has its middle at the
+    // tile's southern edge, up to a few degrees from the tile's own (at zoom
+    // 6 a channel differed by 2).
+    use sylva::grid::mercator::{HALF_WORLD_M, MercatorBox, to_mercator};
+    let demo = common::demo();
+    let b = demo.bounds;
+    let (mx, my) = to_mercator(0.5 * (b.west + b.east), 0.5 * (b.south + b.north));
+    for z in [5, 6, 7, 8] {
+        let size = 2.0 * HALF_WORLD_M / f64::from(1u32 << z);
+        let (x, y) = (((mx + HALF_WORLD_M) / size) as u64, ((HALF_WORLD_M - my) / size) as u64);
+        let tile_box = MercatorBox::of_tile(z, x, y).expect("tile");
+        let grid = MercatorBox { south: tile_box.south - size, ..tile_box }.area_grid(256, 512).expect("grid");
+        let build = relief(&demo, Product::Image { layer: MapLayer::Relief, grid, encoding: Encoding::Rgba });
+        let tile = relief(&demo, Product::Xyz { layer: MapLayer::Relief, zxy: (z, x, y) });
+        assert_same_pixels(&tile, &pixels(&build, 0, 0, 256, 256), &format!("xyz relief {z}/{x}/{y}"));
+    }
+}

@@ -382,9 +382,16 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
         assert!((400..500).contains(&r.status), "{path}: {} {}", r.status, r.text());
         assert!(r.text().contains(code), "{path}: {}", r.text());
     }
-    for path in
-        ["/tiles/cem/99/1/1_1.bil", "/tiles/cem/3/1/2_1.bil", "/xyz/dem/3/99/1.png", "/xyz/dem/25/0/0.png", "/nowhere"]
-    {
+    let past_any_tile = [
+        "/tiles/cem/99/1/1_1.bil",
+        "/tiles/cem/3/1/2_1.bil",
+        "/xyz/dem/3/99/1.png",
+        "/xyz/dem/25/0/0.png",
+        "/tiles/cem/3/99999999999999999999/1_1.bil",
+        "/xyz/dem/3/1/99999999999999999999.png",
+        "/nowhere",
+    ];
+    for path in past_any_tile {
         assert_eq!(server.get(path).status, 404, "{path}");
     }
     let long = server.get(&format!("/wms?x={}", "a".repeat(10_000)));
