@@ -1,16 +1,17 @@
-//! Ctrl-C or SIGTERM during a long run — a seed (feature `server`), a
-//! flight (feature `client`), a build: the first signal stops it after the
-//! work in hand (a seed's tiles, so their locks are released and the
-//! progress is saved; a flight's frame, so its frames and statistics are
-//! written; a build's computation, so no output is half written); a
-//! second one exits at once. Outside such a run the signals keep their
-//! default action (the process ends), also in a process that runs several
-//! (`sylva bench seed`).
+//! Ctrl-C or SIGTERM during a long run. A seed (feature `server`) or a
+//! flight (feature `client`) is [`Interrupt`]ed: the first signal stops it
+//! after the work in hand (a seed's tiles, so their locks are released and
+//! the progress is saved; a flight's frame, so its frames and statistics
+//! are written); a second one exits at once. Outside such a run the signals
+//! keep their default action (the process ends), also in a process that
+//! runs several (`sylva bench seed`). A build, whose work is worth nothing
+//! until its outputs are written whole, is [`Abandon`]ed: the process ends
+//! at once unless it is writing them, which it finishes first.
 
 use signal_hook::consts::{SIGINT, SIGTERM};
 use signal_hook::flag;
-use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
 
 /// True while no run is watched: a signal then takes its default action.
 static IDLE: AtomicBool = AtomicBool::new(true);
@@ -58,5 +59,44 @@ impl Interrupt {
 impl Drop for Interrupt {
     fn drop(&mut self) {
         IDLE.store(true, Ordering::SeqCst);
+    }
+}
+
+/// A process that ends at once on the first signal, saying whether its
+/// outputs were written, except while [`Abandon::writing`] runs: the signal
+/// then waits for the writing to end.
+pub struct Abandon {
+    /// Held while writing; true once the outputs are written.
+    written: Arc<Mutex<bool>>,
+}
+
+impl Abandon {
+    /// Starts watching, for the rest of the process.
+    pub fn watch() -> Abandon {
+        let written = Arc::new(Mutex::new(false));
+        let watched = written.clone();
+        let signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM]);
+        let started = signals.and_then(|mut signals| {
+            std::thread::Builder::new().name("signals".into()).spawn(move || {
+                let Some(signal) = signals.forever().next() else { return };
+                let written = *watched.lock().unwrap_or_else(|e| e.into_inner());
+                let what = if written { " after the outputs were written" } else { "; nothing written" };
+                crate::outputs::say(format_args!("sylva: interrupted by signal {signal}{what}"));
+                std::process::exit(128 + signal);
+            })
+        });
+        if let Err(e) = started {
+            tracing::warn!("Ctrl-C may leave a half-written output (signals not watched: {e})");
+        }
+        Abandon { written }
+    }
+
+    /// Runs `write`, which a signal does not interrupt; its success marks
+    /// the outputs written.
+    pub fn writing<T, E>(&self, write: impl FnOnce() -> Result<T, E>) -> Result<T, E> {
+        let mut written = self.written.lock().unwrap_or_else(|e| e.into_inner());
+        let result = write();
+        *written = result.is_ok();
+        result
     }
 }

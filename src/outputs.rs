@@ -1,7 +1,8 @@
-//! Output files of the command line: never written over an input or over
-//! each other, and written whole or not at all (each to a `NAME.partial`
-//! sibling first, all renamed into place once every one is written); and
-//! its messages on stderr ([`say`]).
+//! Output files of the command line: never written over an input, over
+//! each other or over anything but a regular file (a link is written
+//! through), and written whole or not at all (each to a new file of a unique
+//! name beside it first, all renamed into place once every one is written);
+//! and its messages on stderr ([`say`]).
 
 use std::path::{Path, PathBuf};
 
@@ -18,6 +19,9 @@ pub enum OutputError {
     /// An output names an existing directory.
     #[error("{0}: is a directory")]
     Directory(PathBuf),
+    /// An output names a device, a pipe, a socket or a link to nothing.
+    #[error("{0}: is not a regular file; refusing to replace it")]
+    NotRegular(PathBuf),
     /// An output's directory does not exist.
     #[error("{0}: no such directory to write into")]
     NoDirectory(PathBuf),
@@ -31,15 +35,14 @@ pub enum OutputError {
     },
 }
 
-/// Checks that no output is an input, a directory, another output or in a
-/// directory that does not exist: before the work, not after it.
+/// Checks that no output is an input, a directory, something other than a
+/// regular file, another output or in a directory that does not exist:
+/// before the work, not after it.
 pub fn check(inputs: &[&Path], outputs: &[&Path]) -> Result<(), OutputError> {
     let inputs: Vec<PathBuf> = inputs.iter().filter_map(|p| std::fs::canonicalize(p).ok()).collect();
     let mut seen = Vec::new();
     for &out in outputs {
-        if out.is_dir() {
-            return Err(OutputError::Directory(out.to_path_buf()));
-        }
+        destination(out)?;
         let dir = directory_of(out);
         if !dir.is_dir() {
             return Err(OutputError::NoDirectory(dir.to_path_buf()));
@@ -78,24 +81,61 @@ fn resolve(path: &Path) -> PathBuf {
     }
 }
 
-/// Writes every `(path, bytes)`: all to `.partial` siblings, then each
-/// renamed into place; on a failure the partial files are removed and no
-/// output is touched.
-pub fn write_all(files: &[(&Path, &[u8])]) -> Result<(), OutputError> {
-    let partial = |p: &Path| {
-        let mut name = p.as_os_str().to_owned();
-        name.push(".partial");
-        PathBuf::from(name)
+/// The file an output replaces: the path itself, or where its link leads
+/// (so the link stays); an error for a directory, a device, a pipe, a socket
+/// or a link to nothing.
+fn destination(path: &Path) -> Result<PathBuf, OutputError> {
+    let meta = match std::fs::symlink_metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(path.to_path_buf()),
+        Err(source) => return Err(OutputError::Write { path: path.to_path_buf(), source }),
+        Ok(meta) => meta,
     };
-    let fail = |path: &Path, source| OutputError::Write { path: path.to_path_buf(), source };
-    for (i, &(path, bytes)) in files.iter().enumerate() {
-        if let Err(e) = std::fs::write(partial(path), bytes) {
-            files[..=i].iter().for_each(|(p, _)| drop(std::fs::remove_file(partial(p))));
-            return Err(fail(path, e));
+    let target = match meta.is_symlink() {
+        true => std::fs::canonicalize(path).map_err(|_| OutputError::NotRegular(path.to_path_buf()))?,
+        false => path.to_path_buf(),
+    };
+    match std::fs::metadata(&target) {
+        Ok(m) if m.is_dir() => Err(OutputError::Directory(path.to_path_buf())),
+        Ok(m) if m.is_file() => Ok(target),
+        _ => Err(OutputError::NotRegular(path.to_path_buf())),
+    }
+}
+
+/// A new file beside `path` that no other file has the name of (created
+/// here, so nothing existing is written over), open for writing.
+fn scratch_beside(path: &Path) -> std::io::Result<(PathBuf, std::fs::File)> {
+    static COUNT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
+    loop {
+        let n = COUNT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let scratch = path.with_file_name(format!(".{name}.{}.{n}.partial", std::process::id()));
+        match std::fs::OpenOptions::new().write(true).create_new(true).open(&scratch) {
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            opened => return opened.map(|file| (scratch, file)),
         }
     }
-    for &(path, _) in files {
-        std::fs::rename(partial(path), path).map_err(|e| fail(path, e))?;
+}
+
+/// Writes every `(path, bytes)`: all to new files beside them, then each
+/// renamed into place; on a failure the new files are removed and no
+/// output is touched.
+pub fn write_all(files: &[(&Path, &[u8])]) -> Result<(), OutputError> {
+    use std::io::Write;
+    let mut written: Vec<(PathBuf, PathBuf)> = Vec::new();
+    let mut write_one = |path: &Path, bytes: &[u8]| -> Result<(), OutputError> {
+        let target = destination(path)?;
+        let fail = |source| OutputError::Write { path: path.to_path_buf(), source };
+        let (scratch, mut file) = scratch_beside(&target).map_err(fail)?;
+        written.push((scratch, target));
+        file.write_all(bytes).and_then(|()| file.sync_all()).map_err(fail)
+    };
+    let result = files.iter().try_for_each(|&(path, bytes)| write_one(path, bytes));
+    if result.is_err() {
+        written.iter().for_each(|(scratch, _)| drop(std::fs::remove_file(scratch)));
+        return result;
+    }
+    for ((scratch, target), &(path, _)) in written.iter().zip(files) {
+        std::fs::rename(scratch, target).map_err(|source| OutputError::Write { path: path.to_path_buf(), source })?;
     }
     Ok(())
 }
@@ -110,6 +150,7 @@ pub fn say(text: std::fmt::Arguments) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::os::unix::fs::FileTypeExt;
 
     fn scratch(name: &str) -> PathBuf {
         let dir = std::env::temp_dir().join(format!("sylva-outputs-{name}-{}", std::process::id()));
@@ -144,9 +185,44 @@ mod tests {
         let err = write_all(&[(&a, b"new"), (&missing, b"c")]).unwrap_err().to_string();
         assert!(err.contains("no/such/dir/c.png") && err.contains("cannot write"), "{err}");
         assert_eq!(std::fs::read(&a).unwrap(), b"old", "the earlier output is untouched");
-        assert!(!dir.join("a.tif.partial").exists(), "no partial file is left");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "no partial file is left");
         write_all(&[(&a, b"new"), (&b, b"png")]).unwrap();
         assert_eq!((std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap()), (b"new".to_vec(), b"png".to_vec()));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_file_named_like_a_partial_output_is_left_alone() {
+        // Regression: outputs went to `NAME.partial`, which destroyed a file
+        // of that name, even the run's own configuration.
+        let dir = scratch("partial");
+        let (out, precious) = (dir.join("out.tif"), dir.join("out.tif.partial"));
+        std::fs::write(&precious, b"precious").unwrap();
+        write_all(&[(&out, b"tif")]).unwrap();
+        assert_eq!(std::fs::read(&precious).unwrap(), b"precious");
+        assert_eq!(std::fs::read(&out).unwrap(), b"tif");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn links_are_written_through_and_special_files_refused() {
+        let dir = scratch("special");
+        let (target, link) = (dir.join("real.tif"), dir.join("link.tif"));
+        std::fs::write(&target, b"old").unwrap();
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        check(&[], &[&link]).unwrap();
+        write_all(&[(&link, b"new")]).unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().is_symlink(), "the link stays a link");
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        let dangling = dir.join("dangling.tif");
+        std::os::unix::fs::symlink(dir.join("nothing"), &dangling).unwrap();
+        let null = Path::new("/dev/null");
+        for special in [null, &dangling] {
+            let err = check(&[], &[special]).unwrap_err().to_string();
+            assert!(err.contains("not a regular file"), "{err}");
+            assert!(matches!(write_all(&[(special, b"x")]), Err(OutputError::NotRegular(_))));
+        }
+        assert!(std::fs::metadata(null).unwrap().file_type().is_char_device(), "/dev/null untouched");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -35,6 +35,8 @@ pub struct Product {
     pub grid: SampleGrid,
     /// Stage runs and times.
     pub stats: Stats,
+    /// True when no sample holds data (the area misses the sources' data).
+    pub no_data: bool,
 }
 
 /// One tile of `layer` with `halo` extra samples per side.
@@ -68,8 +70,9 @@ pub fn grid_product(region: &Region, grid: &SampleGrid, layer: Layer, format: Fo
     let products = cem::compute(region, grid, &[layer])?;
     let samples =
         products.samples(layer).ok_or_else(|| EncodeError(format!("layer {} was not computed", layer.name())))?;
+    let no_data = samples.all_nodata();
     let encoded = encode::encode(layer, samples, grid, format, region.heights_16)?;
-    Ok(Product { encoded, grid: *grid, stats: products.stats })
+    Ok(Product { encoded, grid: *grid, stats: products.stats, no_data })
 }
 
 /// The region's map colours (R, G, B, 0–255) at the grid's samples, read and

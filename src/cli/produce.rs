@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use sylva::cem::Layer;
 use sylva::encode::Format;
 use sylva::grid::{BBox, TileId};
-use sylva::interrupt::Interrupt;
+use sylva::interrupt::Abandon;
 use sylva::outputs;
 use sylva::produce::{self, Product};
 use sylva::region::Region;
@@ -36,12 +36,11 @@ impl ProductArgs {
     fn make(&self, product: impl FnOnce(&Region, Layer, Format) -> Result<Product>) -> Result<()> {
         let inputs = sylva::config::input_files(self.config.as_deref())?;
         outputs::check(&inputs.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &[&self.output])?;
-        let interrupt = Interrupt::watch();
+        let abandon = Abandon::watch();
         let region = sylva::config::load(self.config.as_deref())?;
         let (layer, format) = (parse_layer(&self.layer)?, parse_format(&self.format)?);
         let product = product(&region, layer, format)?;
-        unless_interrupted(&interrupt);
-        write(&self.output, &product)
+        abandon.writing(|| write(&self.output, &product))
     }
 }
 
@@ -146,7 +145,7 @@ impl CanopyArgs {
             .map(PathBuf::as_path)
             .collect();
         outputs::check(&inputs, &targets)?;
-        let interrupt = Interrupt::watch();
+        let abandon = Abandon::watch();
         let mut options = sylva::lidar::Options::new(self.las.clone(), self.resolution);
         options.crs =
             self.crs.as_deref().map(sylva::source::crs::parse_epsg).transpose().map_err(anyhow::Error::msg)?;
@@ -159,8 +158,7 @@ impl CanopyArgs {
         if let Some(path) = &self.preview {
             files.push((path, model.preview_png(&set, 3, 0)?));
         }
-        unless_interrupted(&interrupt);
-        outputs::write_all(&files.iter().map(|(p, b)| (*p, b.as_slice())).collect::<Vec<_>>())?;
+        abandon.writing(|| outputs::write_all(&files.iter().map(|(p, b)| (*p, b.as_slice())).collect::<Vec<_>>()))?;
         super::print(model.report(&set))?;
         Ok(())
     }
@@ -178,17 +176,6 @@ impl InfoArgs {
     pub fn run(self) -> Result<()> {
         super::print(sylva::config::load(self.config.as_deref())?.describe())?;
         Ok(())
-    }
-}
-
-/// Ends the process, writing nothing, if Ctrl-C or SIGTERM came while the
-/// output was computed (it is then written whole or not at all: a signal
-/// in the middle of writing would leave a `.partial` file), with the status
-/// a shell gives a death by the signal.
-fn unless_interrupted(interrupt: &Interrupt) {
-    if let Some(signal) = interrupt.came() {
-        outputs::say(format_args!("sylva: interrupted by signal {signal}; nothing written"));
-        std::process::exit(128 + signal);
     }
 }
 
@@ -235,6 +222,11 @@ fn write(path: &Path, product: &Product) -> Result<()> {
         sylva::outputs::say(format_args!(
             "  warning: {} samples were outside the 16-bit range and were clamped",
             product.encoded.clamped
+        ));
+    }
+    if product.no_data {
+        sylva::outputs::say(format_args!(
+            "  warning: every sample is nodata (the area holds none of the sources' data)"
         ));
     }
     Ok(())

@@ -125,6 +125,14 @@ pub enum Samples<'a> {
 }
 
 impl Samples<'_> {
+    /// True when no sample holds data.
+    pub fn all_nodata(&self) -> bool {
+        match self {
+            Samples::Float(r) => r.all_nodata(),
+            Samples::Class(r) => r.data().iter().all(|&c| c == crate::cem::surface::NODATA),
+        }
+    }
+
     fn width(&self) -> usize {
         match self {
             Samples::Float(r) => r.width(),

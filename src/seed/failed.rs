@@ -54,8 +54,11 @@ pub fn read(path: &Path, tiles: &TileGrid) -> Result<Vec<Entry>, ListError> {
         if entry.is_empty() {
             continue;
         }
-        let e = parse_entry(entry).ok_or_else(|| {
-            fail(i + 1, format!("{entry:?}: expected layer/level/row/col [formats], e.g. cem/12/2254/3108 bil16,png16"))
+        let e = parse_entry(entry).map_err(|why| {
+            fail(
+                i + 1,
+                format!("{entry:?}: {why}; expected layer/level/row/col [formats], e.g. cem/12/2254/3108 bil16,png16"),
+            )
         })?;
         tiles.check(e.tile).map_err(|why| fail(i + 1, why.to_string()))?;
         out.push(e);
@@ -63,26 +66,25 @@ pub fn read(path: &Path, tiles: &TileGrid) -> Result<Vec<Entry>, ListError> {
     Ok(out)
 }
 
-/// `layer/level/row/col`, then perhaps a comma-separated list of formats.
-fn parse_entry(entry: &str) -> Option<Entry> {
+/// `layer/level/row/col`, then perhaps a comma-separated list of formats;
+/// an error names the part that is wrong.
+fn parse_entry(entry: &str) -> Result<Entry, String> {
     let mut fields = entry.split_whitespace();
-    let (layer, tile) = fields.next()?.split_once('/')?;
-    let formats = match fields.next() {
-        Some(list) => {
-            let mut formats = Vec::new();
-            for format in list.split(',').map(Format::parse) {
-                // Each once (`png16,png16` is one file).
-                let format = format?;
-                if !formats.contains(&format) {
-                    formats.push(format);
-                }
-            }
-            formats
+    let (layer, tile) = fields.next().and_then(|f| f.split_once('/')).ok_or("no layer/ before the tile")?;
+    let layer = Layer::parse(layer).ok_or_else(|| format!("unknown layer {layer:?}"))?;
+    let tile = parse_tile(tile).ok_or_else(|| format!("{tile:?} is not level/row/col"))?;
+    let mut formats = Vec::new();
+    for name in fields.next().into_iter().flat_map(|list| list.split(',')) {
+        let format = Format::parse(name).ok_or_else(|| format!("unknown format {name:?}"))?;
+        // Each once (`png16,png16` is one file).
+        if !formats.contains(&format) {
+            formats.push(format);
         }
-        None => Vec::new(),
-    };
-    let entry = Entry { layer: Layer::parse(layer)?, tile: parse_tile(tile)?, formats };
-    fields.next().is_none().then_some(entry)
+    }
+    match fields.next() {
+        Some(extra) => Err(format!("{extra:?} follows the formats")),
+        None => Ok(Entry { layer, tile, formats }),
+    }
 }
 
 /// The failed-tiles file of a run.
@@ -176,12 +178,18 @@ mod tests {
         // Lines without formats take the run's.
         std::fs::write(&path, "# a comment\n\ncem/1/2/3\ntrees/1/2/3\n").unwrap();
         let err = read(&path, &grid).unwrap_err().to_string();
-        assert!(err.contains(":4:") && err.contains("trees/1/2/3"), "{err}");
+        assert!(err.contains(":4:") && err.contains("unknown layer \"trees\""), "{err}");
         std::fs::write(&path, "cem/1/2/3 png16,tiff,png16\n").unwrap();
         assert_eq!(read(&path, &grid).unwrap(), vec![entry(Layer::Cem, (1, 2, 3), &[Format::Png16, Format::Tiff])]);
-        for bad in ["cem/1/2/3 png17", "cem/1/2/3 png16 tiff", "cem/1/2/3 png16,"] {
+        for (bad, why) in [
+            ("cem/1/2/3 png17", "unknown format \"png17\""),
+            ("cem/1/2/3 png16 tiff", "\"tiff\" follows the formats"),
+            ("cem/1/2/3 png16,", "unknown format \"\""),
+            ("cem/1/2", "\"1/2\" is not level/row/col"),
+        ] {
             std::fs::write(&path, format!("{bad}\n")).unwrap();
-            assert!(read(&path, &grid).unwrap_err().to_string().contains(":1:"), "{bad}");
+            let err = read(&path, &grid).unwrap_err().to_string();
+            assert!(err.contains(":1:") && err.contains(why), "{bad}: {err}");
         }
         std::fs::write(&path, "cem/1/99/3\n").unwrap();
         assert!(read(&path, &grid).unwrap_err().to_string().contains(":1: tile 1/99/3 does not exist"));

@@ -184,7 +184,7 @@ pub fn encode_samples(
     samples: Option<&LayerSamples>,
     stats: Stats,
 ) -> Result<Computed, ProduceError> {
-    let Some(samples) = samples.map(LayerSamples::view).filter(|s| !no_data(s)) else {
+    let Some(samples) = samples.map(LayerSamples::view).filter(|s| !s.all_nodata()) else {
         return Ok(Computed::absent(stats));
     };
     let start = Instant::now();
@@ -196,13 +196,6 @@ pub fn encode_samples(
     // GeoTIFFs carry their position; the other encodings only the samples.
     let uniform = encoding != Encoding::Data(Format::Tiff) && uniform(&samples);
     Ok(Computed { bytes, uniform, stats, encode: start.elapsed() })
-}
-
-fn no_data(samples: &Samples) -> bool {
-    match samples {
-        Samples::Float(r) => r.all_nodata(),
-        Samples::Class(r) => r.data().iter().all(|&c| c == cem::surface::NODATA),
-    }
 }
 
 /// Every sample the same (bitwise).

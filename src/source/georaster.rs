@@ -53,6 +53,25 @@ impl Georef {
         }
     }
 
+    /// A geographic georeference whose longitudes lie wholly past ±180°
+    /// (a file of 180.5…181.5°E) turned by 360° onto −180…180, so that its
+    /// bounds and the grids that read it meet; others as they are (one
+    /// across the antimeridian keeps its numbers, and grids reach it by
+    /// longitudes taken modulo 360°).
+    fn turned_onto_the_globe(self, width: usize) -> Georef {
+        if !self.crs.is_geographic() {
+            return self;
+        }
+        let edges = [self.x0 - self.overhang * self.dx, self.x0 + (width as f64 - 1.0 + self.overhang) * self.dx];
+        let (west, east) = (edges[0].min(edges[1]), edges[0].max(edges[1]));
+        let turn = match () {
+            _ if west >= 180.0 => -360.0 * ((west + 180.0) / 360.0).floor(),
+            _ if east <= -180.0 => 360.0 * ((180.0 - east) / 360.0).floor(),
+            _ => 0.0,
+        };
+        Georef { x0: self.x0 + turn, ..self }
+    }
+
     /// Pixel size on the ground, metres (north–south for geographic
     /// sources; a CRS in feet converted).
     pub fn pixel_m(&self) -> f64 {
@@ -75,6 +94,7 @@ impl GeoRaster {
     /// Wraps `base` with its georeferencing; overviews reduce band `b` with
     /// `reducers[b]` (the last entry for further bands).
     pub fn new(base: Blocks, georef: Georef, reducers: &[Reducer], cache: &Arc<BlockCache>) -> GeoRaster {
+        let georef = georef.turned_onto_the_globe(base.size().0);
         let bounds = lon_lat_bounds(&georef, base.size());
         GeoRaster { levels: pyramid::build(base, reducers, cache), georef, bounds }
     }
@@ -83,6 +103,7 @@ impl GeoRaster {
     /// `k − 1`), such as an upstream server's zoom levels.
     pub fn from_levels(levels: Vec<Blocks>, georef: Georef) -> GeoRaster {
         let size = levels.first().map_or((0, 0), Blocks::size);
+        let georef = georef.turned_onto_the_globe(size.0);
         let bounds = lon_lat_bounds(&georef, size);
         GeoRaster { levels, georef, bounds }
     }
@@ -156,16 +177,18 @@ impl GeoRaster {
         Ok(Some(Footprint { bands, window, extent, coords }))
     }
 
-    /// True unless the grid certainly misses the data (a cheap test on boxes;
-    /// grids that wrap past ±180° or a pole are never rejected).
+    /// True unless the grid certainly misses the data (a cheap test on boxes,
+    /// longitudes taken modulo 360° as the samples are; grids that wrap past
+    /// a pole are never rejected).
     pub fn may_cover(&self, grid: &SampleGrid) -> bool {
         let (w0, w1) = (grid.lon.coord(0), grid.lon.coord(grid.width() - 1));
         let (n0, s0) = (grid.lat.coord(0), grid.lat.coord(grid.height() - 1));
-        let wraps = w0 < -180.0 || w1 > 180.0 || n0 > 90.0 || s0 < -90.0;
+        let past_a_pole = n0 > 90.0 || s0 < -90.0;
         let (pad_lon, pad_lat) = (grid.lon.step_deg(), grid.lat.step_deg());
         let sector =
             Sector { min_lat: s0 - pad_lat, max_lat: n0 + pad_lat, min_lon: w0 - pad_lon, max_lon: w1 + pad_lon };
-        wraps || sector.intersects(&self.bounds)
+        let turned = |turn: f64| Sector { min_lon: sector.min_lon + turn, max_lon: sector.max_lon + turn, ..sector };
+        past_a_pole || [0.0, 360.0, -360.0].into_iter().any(|turn| turned(turn).intersects(&self.bounds))
     }
 
     fn extent(&self, level: usize) -> Extent {
@@ -293,7 +316,8 @@ fn mesh_step(grid: &SampleGrid) -> i64 {
 
 /// The lat/lon box of a source, from its boundary densely sampled: the
 /// data's own extent for a geographic source, a box that contains it for a
-/// projected one.
+/// projected one (to the pole, over every longitude, where the source holds
+/// a pole: its boundary does not pass there).
 fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
     let (xa, xb) = (g.x0 - g.overhang * g.dx, g.x0 + (w as f64 - 1.0 + g.overhang) * g.dx);
     let (ya, yb) = (g.y0 - g.overhang * g.dy, g.y0 + (h as f64 - 1.0 + g.overhang) * g.dy);
@@ -315,7 +339,23 @@ fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
     // Projected edges bulge between boundary samples: pad by a pixel. A
     // geographic source's edges are its meridians and parallels, exact.
     let pad = if g.crs.is_geographic() { 0.0 } else { g.pixel_deg() };
-    Sector { min_lat: s.min_lat - pad, max_lat: s.max_lat + pad, min_lon: s.min_lon - pad, max_lon: s.max_lon + pad }
+    let s = Sector {
+        min_lat: s.min_lat - pad,
+        max_lat: s.max_lat + pad,
+        min_lon: s.min_lon - pad,
+        max_lon: s.max_lon + pad,
+    };
+    let inside = |(x, y): (f64, f64)| (xa.min(xb)..=xa.max(xb)).contains(&x) && (ya.min(yb)..=ya.max(yb)).contains(&y);
+    let holds = |pole: f64| !g.crs.is_geographic() && g.crs.from_lon_lat(0.0, pole).is_some_and(inside);
+    match (holds(90.0), holds(-90.0)) {
+        (false, false) => s,
+        (north, south) => Sector {
+            min_lat: if south { -90.0 } else { s.min_lat },
+            max_lat: if north { 90.0 } else { s.max_lat },
+            min_lon: -180.0,
+            max_lon: 180.0,
+        },
+    }
 }
 
 #[cfg(test)]
@@ -378,5 +418,46 @@ mod tests {
                 assert!((x - (e - g.x0) / g.dx).abs() < 0.01 && (y - (n - g.y0) / g.dy).abs() < 0.01, "sample {i}");
             }
         }
+    }
+
+    /// `w × h` pixels of 1 in `crs`, with the first pixel's centre at `(x0, y0)`.
+    fn ones(code: u32, (x0, y0): (f64, f64), (w, h): (usize, usize), size: f64) -> GeoRaster {
+        let cache = BlockCache::new(1 << 20);
+        let blocks =
+            Blocks::new(Arc::new(MemorySource::new("<ones>", vec![Raster::filled(w, h, 1.0f32)]).unwrap()), &cache);
+        let crs = Arc::new(Crs::from_epsg(code).unwrap());
+        let georef = Georef { crs, x0, y0, dx: size, dy: -size, overhang: 0.5 };
+        GeoRaster::new(blocks, georef, &[Reducer::Mean], &cache)
+    }
+
+    /// The share of `bbox`'s `w × h` samples with data.
+    fn covered(raster: &GeoRaster, bbox: &str, (w, h): (usize, usize)) -> f64 {
+        let grid = BBox::parse(bbox).unwrap().area_grid(w, h).unwrap();
+        let r = raster.sample(&grid, 0, Resampling::Bilinear).unwrap();
+        r.data().iter().filter(|v| !v.is_nan()).count() as f64 / r.data().len() as f64
+    }
+
+    #[test]
+    fn a_projected_source_around_a_pole_reaches_it_at_every_longitude() {
+        // Regression: 100 km of polar stereographic centred on the South
+        // Pole had bounds from its boundary alone, S −89.55°, and read
+        // nothing closer to the pole.
+        let raster = ones(3031, (-49_500.0, 49_500.0), (100, 100), 1000.0);
+        let b = raster.bounds();
+        assert_eq!((b.min_lat, b.min_lon, b.max_lon), (-90.0, -180.0, 180.0));
+        assert!(b.max_lat < -89.3, "the corners, 71 km from the pole: {b:?}");
+        assert_eq!(covered(&raster, "-180,-90,180,-89.7", (36, 8)), 1.0);
+    }
+
+    #[test]
+    fn geographic_sources_past_the_antimeridian_are_read_across_it() {
+        // Regression: a file of 180.5…181.5° E had bounds there and no grid
+        // met it; one of 179.5…180.5° E was not read west of 180°.
+        let east = ones(4326, (180.505, -16.005), (100, 100), 0.01);
+        assert!((east.bounds().min_lon + 179.5).abs() < 1e-9, "{:?}", east.bounds());
+        assert_eq!(covered(&east, "-179.4,-16.9,-178.6,-16.1", (8, 8)), 1.0);
+        let across = ones(4326, (179.505, -16.005), (100, 100), 0.01);
+        assert_eq!(covered(&across, "-179.9,-16.9,-179.6,-16.1", (8, 8)), 1.0);
+        assert_eq!(covered(&across, "179.6,-16.9,179.9,-16.1", (8, 8)), 1.0);
     }
 }

@@ -88,6 +88,7 @@ fn bad_configs_name_the_file_and_the_problem() {
         ("queue.toml", "[server]\nqueue = 9223372036854775807\n", "queue = 9223372036854775807: must be at most"),
         ("bind.toml", "[server]\nbind = \"nonsense\"\n", "[server] bind = \"nonsense\": must be HOST:PORT"),
         ("size.toml", "[server]\nmax_size = 0\n", "max_size = 0: must be 1 to 16384"),
+        ("memory.toml", "[cache]\nmemory_mb = 0\n", "[cache] memory_mb = 0: must be 16 to 1048576"),
         ("url.toml", "[server]\npublic_url = \"example.org\"\n", "public_url = \"example.org\": must start with"),
         (
             "classes.toml",

@@ -182,19 +182,24 @@ fn a_flight_never_mixes_with_an_earlier_one_in_its_directory() {
     let err = String::from_utf8_lossy(&failed.stderr);
     assert!(!failed.status.success() && err.contains("--gpu-budget-mib"), "{err}");
     assert_eq!(stats(&out).len(), 2);
-    // So does one whose first frame cannot be written (a directory in the
-    // way of its PNG's partial file).
-    let blocker = out.join("frame_00000.png.partial");
+    // So does one whose first frame cannot be written (its name a link to a
+    // directory).
+    let (first, blocker) = (out.join("frame_00000.png"), out.join("blocker"));
     std::fs::create_dir(&blocker).unwrap();
+    std::fs::rename(&first, out.join("kept.png")).unwrap();
+    std::os::unix::fs::symlink(&blocker, &first).unwrap();
     let unwritable = std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))
         .args(["fly", "--path", dive.to_str().unwrap(), "--frames", "1", "--size", "32x24", "--overwrite", "--out"])
         .arg(&out)
         .output()
         .unwrap();
     assert!(!unwritable.status.success(), "{}", String::from_utf8_lossy(&unwritable.stderr));
+    assert!(String::from_utf8_lossy(&unwritable.stderr).contains("frame_00000.png: is a directory"));
     assert_eq!(stats(&out).len(), 2);
-    assert!(out.join("frame_00000.png").exists() && out.join("frame_00001.png").exists());
+    assert!(out.join("frame_00001.png").exists());
+    std::fs::remove_file(&first).unwrap();
     std::fs::remove_dir(&blocker).unwrap();
+    std::fs::rename(out.join("kept.png"), &first).unwrap();
     // Replaced whole with --overwrite: no frame of the earlier flight is left.
     fly(&["--path", dive.to_str().unwrap(), "--frames", "1", "--size", "32x24", "--overwrite"], &out);
     assert_eq!(stats(&out).len(), 1);

@@ -182,8 +182,8 @@ struct Chosen {
     weights: Vec<f32>,
     error_px: Option<f64>,
     selected: Option<Selected>,
-    /// Tiles drawn morphing from a coarser one.
-    morphing: usize,
+    /// Tiles drawn morphing from a coarser one (budget mode).
+    morphing: Option<usize>,
     /// Nodes the screen-space error selection touched.
     touched: Option<usize>,
     /// Time of the selection, ms.
@@ -202,7 +202,7 @@ fn choose(
             visible_tiles(source, store, sse, camera, options, slots)?;
         let (steps, weights) = (vec![options.shadow_steps; tiles.len()], vec![1.0; tiles.len()]);
         let (error_px, touched, selected) = (Some(error_px), Some(touched), None);
-        return Ok(Chosen { tiles, steps, weights, error_px, selected, morphing: 0, touched, selection_ms });
+        return Ok(Chosen { tiles, steps, weights, error_px, selected, morphing: None, touched, selection_ms });
     };
     let selected = lod.frame(t_s, camera);
     let ids: Vec<_> = selected.cut.tiles.iter().map(|c| c.id).collect();
@@ -230,7 +230,7 @@ fn choose(
     // shadow steps the selection gave any tile.
     let most = selected.cut.tiles.iter().map(|c| c.shadow_steps).max().unwrap_or(0);
     let steps = tiles.iter().map(|t| steps_of.get(&t.id()).copied().unwrap_or(most)).collect();
-    let morphing = weights.iter().filter(|&&w| w < 1.0).count();
+    let morphing = Some(weights.iter().filter(|&&w| w < 1.0).count());
     let selection_ms = selected.ms;
     Ok(Chosen {
         tiles,

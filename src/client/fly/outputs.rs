@@ -148,6 +148,7 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
     for r in records {
         let levels: Vec<String> = r.levels.iter().map(|(l, n)| format!("{l}:{n}")).collect();
         let optional = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.3}"));
+        let count = |n: Option<usize>| n.map_or(String::new(), |n| n.to_string());
         let gpu = optional(r.gpu_ms);
         let (rays, fill) = (optional(r.gpu_rays_ms.map(|t| t.0)), optional(r.gpu_rays_ms.map(|t| t.1)));
         let work: [String; 4] = r
@@ -178,14 +179,14 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
             optional(r.predicted_ms),
             optional(r.model_ms),
             r.shadow_steps_mean,
-            r.candidates.map_or(String::new(), |n| n.to_string()),
+            count(r.candidates),
             optional(r.benefit_bound),
             r.bound.unwrap_or_default(),
-            r.morphing,
+            count(r.morphing),
             r.trees,
             r.splats,
             r.splat_fill_px / 1e6,
-            r.nodes_touched.map_or(String::new(), |n| n.to_string()),
+            count(r.nodes_touched),
             work[0],
             work[1],
             work[2],

@@ -67,7 +67,7 @@ pub struct FrameRecord {
     /// (budget mode).
     pub bound: Option<&'static str>,
     /// Tiles drawn morphing from a coarser one (budget mode).
-    pub morphing: usize,
+    pub morphing: Option<usize>,
     /// Trees drawn as splats.
     pub trees: usize,
     /// Tree splats drawn.
