@@ -22,6 +22,9 @@ pub enum OutputError {
     /// An output names a device, a pipe, a socket or a link to nothing.
     #[error("{0}: is not a regular file; refusing to replace it")]
     NotRegular(PathBuf),
+    /// An output's directory is a file.
+    #[error("{0}: is not a directory to write into")]
+    NotDirectory(PathBuf),
     /// An output's directory does not exist.
     #[error("{0}: no such directory to write into")]
     NoDirectory(PathBuf),
@@ -36,8 +39,8 @@ pub enum OutputError {
 }
 
 /// Checks that no output is an input, a directory, something other than a
-/// regular file, another output or in a directory that does not exist:
-/// before the work, not after it.
+/// regular file, another output, or in a directory that does not exist or
+/// cannot be written: before the work, not after it.
 pub fn check(inputs: &[&Path], outputs: &[&Path]) -> Result<(), OutputError> {
     let inputs: Vec<PathBuf> = inputs.iter().filter_map(|p| std::fs::canonicalize(p).ok()).collect();
     let mut seen = Vec::new();
@@ -45,9 +48,16 @@ pub fn check(inputs: &[&Path], outputs: &[&Path]) -> Result<(), OutputError> {
         destination(out)?;
         let dir = directory_of(out);
         if !dir.is_dir() {
-            return Err(OutputError::NoDirectory(dir.to_path_buf()));
+            return Err(match dir.exists() {
+                true => OutputError::NotDirectory(dir.to_path_buf()),
+                false => OutputError::NoDirectory(dir.to_path_buf()),
+            });
         }
         let resolved = resolve(out);
+        // Writable now (a read-only file system fails here, not after the work).
+        let (scratch, _) =
+            scratch_beside(&resolved).map_err(|source| OutputError::Write { path: out.into(), source })?;
+        let _ = std::fs::remove_file(scratch);
         if inputs.contains(&resolved) {
             return Err(OutputError::IsInput(out.to_path_buf()));
         }
@@ -86,7 +96,10 @@ fn resolve(path: &Path) -> PathBuf {
 /// or a link to nothing.
 fn destination(path: &Path) -> Result<PathBuf, OutputError> {
     let meta = match std::fs::symlink_metadata(path) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(path.to_path_buf()),
+        // No such file yet (whether its directory is one is checked apart).
+        Err(e) if matches!(e.kind(), std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory) => {
+            return Ok(path.to_path_buf());
+        }
         Err(source) => return Err(OutputError::Write { path: path.to_path_buf(), source }),
         Ok(meta) => meta,
     };
@@ -172,6 +185,9 @@ mod tests {
         assert!(matches!(check(&[], &[&dir]), Err(OutputError::Directory(_))));
         let err = check(&[], &[&dir.join("no/such/c.png")]).unwrap_err().to_string();
         assert!(err.contains("no/such") && err.contains("no such directory"), "{err}");
+        let err = check(&[], &[&input.join("c.png")]).unwrap_err().to_string();
+        assert!(err.contains("in.laz: is not a directory"), "{err}");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 2, "no scratch file is left beside in.laz and sub/");
         assert!(same_file(&input, &via_dots) && !same_file(&a, &b));
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -95,7 +95,11 @@ pub fn parse(csv: &str) -> Result<Vec<FrameTime>, String> {
             _ => Err(format!("frame {}: not a flight under a budget", k + 1)),
         }
     });
-    rows.collect()
+    let frames: Vec<FrameTime> = rows.collect::<Result<_, _>>()?;
+    match frames.is_empty() {
+        true => Err("no frame after the first (a flight of 2 frames or more is compared)".into()),
+        false => Ok(frames),
+    }
 }
 
 /// What a flight's frames show.

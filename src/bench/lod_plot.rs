@@ -64,5 +64,5 @@ fn panel<T>(area: &Area<'_>, caption: &str, unit: &str, frames: &[T], series: &S
             .label(name)
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], color));
     }
-    plot::legend(&mut chart)
+    plot::legend(&mut chart, SeriesLabelPosition::UpperRight)
 }

@@ -23,12 +23,15 @@ pub fn png(size: (u32, u32), draw: impl FnOnce(&Area<'_>) -> Result<(), String>)
         .map_err(|e| e.to_string())
 }
 
-/// Draws the legend of `chart`'s labelled series, boxed on a light ground.
+/// Draws the legend of `chart`'s labelled series at `at`, boxed on a light
+/// ground.
 pub fn legend<'a, CT: plotters::coord::CoordTranslate>(
     chart: &mut ChartContext<'a, BitMapBackend<'a>, CT>,
+    at: SeriesLabelPosition,
 ) -> Result<(), String> {
     chart
         .configure_series_labels()
+        .position(at)
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .draw()

@@ -378,11 +378,18 @@ pub fn plot(rows: &[Row]) -> Result<Vec<u8>, String> {
     let psnr = |r: &Row| if r.psnr_db.is_finite() { r.psnr_db.min(90.0) } else { 90.0 };
     super::plot::png((1000, 900), |root| {
         let panels = root.split_evenly((2, 1));
-        let metrics: [(&str, f64, &Metric); 2] = [
-            ("colour PSNR against the exact reference, dB (∞ drawn at 90)", 95.0, &psnr),
-            ("pixels missed, %", 0.6, &|r: &Row| r.missed_pct),
+        // Legends clear of the points: the time axis starts at 0, far left of
+        // any frame's time; PSNR lies high, misses low.
+        let metrics: [(&str, f64, &Metric, SeriesLabelPosition); 2] = [
+            (
+                "colour PSNR against the exact reference, dB (∞ drawn at 90)",
+                95.0,
+                &psnr,
+                SeriesLabelPosition::LowerLeft,
+            ),
+            ("pixels missed, %", 0.6, &|r: &Row| r.missed_pct, SeriesLabelPosition::UpperLeft),
         ];
-        for (area, (caption, top, metric)) in panels.iter().zip(metrics) {
+        for (area, (caption, top, metric, corner)) in panels.iter().zip(metrics) {
             let top = timed.iter().map(|r| metric(r)).fold(top, f64::max);
             let mut chart = ChartBuilder::on(area)
                 .caption(caption, ("sans-serif", 18))
@@ -398,30 +405,40 @@ pub fn plot(rows: &[Row]) -> Result<Vec<u8>, String> {
                     .filter(|r| r.setting.starts_with(kind))
                     .map(|r| (r.ms, metric(r), views.iter().position(|v| *v == r.view).unwrap_or(0)))
                     .collect();
+                if points.is_empty() {
+                    continue;
+                }
                 chart
                     .draw_series(points.iter().map(|&(x, y, view)| marker((x, y), view, colour)))
                     .map_err(|e| e.to_string())?
                     .label(*kind)
                     .legend(move |(x, y)| Circle::new((x, y), 4, colour.filled()));
             }
-            super::plot::legend(&mut chart)?;
+            for (k, view) in views.iter().enumerate() {
+                chart
+                    .draw_series(std::iter::empty::<Circle<(f64, f64), i32>>())
+                    .map_err(|e| e.to_string())?
+                    .label(*view)
+                    .legend(move |at| marker(at, k, BLACK));
+            }
+            super::plot::legend(&mut chart, corner)?;
         }
         Ok(())
     })
 }
 
-/// A marker per view: circle, cross, triangle, square.
-fn marker<DB: plotters::prelude::DrawingBackend>(
-    at: (f64, f64),
+/// A marker per view: disc, cross, triangle, ring.
+fn marker<DB: plotters::prelude::DrawingBackend, C: Clone + 'static>(
+    at: C,
     view: usize,
     colour: plotters::style::RGBColor,
-) -> plotters::element::DynElement<'static, DB, (f64, f64)> {
+) -> plotters::element::DynElement<'static, DB, C> {
     use plotters::prelude::*;
     match view % 4 {
         0 => Circle::new(at, 4, colour.filled()).into_dyn(),
         1 => Cross::new(at, 5, colour.stroke_width(2)).into_dyn(),
         2 => TriangleMarker::new(at, 5, colour.filled()).into_dyn(),
-        _ => Rectangle::new([at, at], colour.stroke_width(6)).into_dyn(),
+        _ => Circle::new(at, 5, colour.stroke_width(2)).into_dyn(),
     }
 }
 

@@ -31,10 +31,11 @@ pub enum Bench {
         /// when its data is absent).
         #[arg(long)]
         rmnp: Option<PathBuf>,
-        /// Frames per flyover.
-        #[arg(long, default_value_t = 300)]
-        frames: usize,
-        /// Where to write the plots (lod_demo.png, lod_rmnp.png).
+        /// Frames per flyover (3 or more: a third of them are swept).
+        #[arg(long, default_value_t = 300, value_parser = clap::value_parser!(u32).range(3..))]
+        frames: u32,
+        /// Where to write the plots (lod_demo.png, lod_rmnp.png, and
+        /// lod_frames_NAME.png of each --flights directory).
         #[arg(long)]
         plots: Option<PathBuf>,
         /// Output directories of `sylva fly --lod budget`: their predicted
@@ -166,8 +167,12 @@ impl Bench {
                     // Refused before the flyovers, not after them.
                     sylva::outputs::check(&[], &[&dir.join("lod_demo.png")])?;
                 }
-                let written =
-                    sylva::bench::lod_report(&rmnp, frames, (plots.as_deref(), &flights), &mut std::io::stdout());
+                let written = sylva::bench::lod_report(
+                    &rmnp,
+                    frames as usize,
+                    (plots.as_deref(), &flights),
+                    &mut std::io::stdout(),
+                );
                 match written {
                     Err(sylva::bench::LodReportError::Print(e)) if e.kind() == std::io::ErrorKind::BrokenPipe => {}
                     written => written?,

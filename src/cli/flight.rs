@@ -47,7 +47,7 @@ pub struct FlyArgs {
     /// GPU time: what a loop rendering continuously sees, where a GPU
     /// lowers its clocks between a CPU-bound flight's frames (an H200
     /// runs 5.7× slower then).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = hold_ms)]
     hold_ms: f64,
     #[command(flatten)]
     render: RenderArgs,
@@ -79,6 +79,17 @@ impl FlyArgs {
     }
 }
 
+/// Most `--hold-ms`: a frame held a minute measures nothing more.
+const MAX_HOLD_MS: f64 = 60_000.0;
+
+/// `--hold-ms`: 0 to [`MAX_HOLD_MS`].
+fn hold_ms(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(ms) if (0.0..=MAX_HOLD_MS).contains(&ms) => Ok(ms),
+        _ => Err(format!("{text:?} is not 0 to {MAX_HOLD_MS} milliseconds")),
+    }
+}
+
 /// `sylva view`.
 #[cfg(feature = "window")]
 #[derive(clap::Args)]
@@ -107,18 +118,27 @@ pub struct ViewArgs {
 #[cfg(feature = "window")]
 impl ViewArgs {
     pub fn run(self) -> Result<()> {
+        // Watched from before the directory is made: a signal while the
+        // view starts closes it as one while it runs does.
+        let interrupt = sylva::interrupt::Interrupt::watch();
         // Refused here, before the window opens; replaced on closing.
-        let out = self.out.as_deref().map(|dir| fly::prepare_out_dir(dir, self.overwrite)).transpose()?;
-        let viewed = self.view();
-        if let (Err(_), Some(out)) = (&viewed, out) {
+        let mut out = self.out.as_deref().map(|dir| fly::prepare_out_dir(dir, self.overwrite)).transpose()?;
+        let earlier = out.as_mut().map(|o| std::mem::take(&mut o.earlier)).unwrap_or_default();
+        let viewed = self.view(interrupt, earlier);
+        if let (Err(_) | Ok(Some(_)), Some(out)) = (&viewed, out) {
             // Directories made for the view and left empty go.
             out.remove_made();
         }
-        viewed
+        match viewed? {
+            // Closed by a signal: the status a shell gives a death by it.
+            Some(signal) => std::process::exit(128 + signal),
+            None => Ok(()),
+        }
     }
 
-    /// Opens the window and views until it closes.
-    fn view(self) -> Result<()> {
+    /// Opens the window and views until it closes; the signal that closed
+    /// it, if one did.
+    fn view(self, interrupt: sylva::interrupt::Interrupt, earlier: Vec<PathBuf>) -> Result<Option<i32>> {
         use sylva::client::view;
         let source = self.tiles.open()?;
         let path = self.path.as_deref().map(sylva::client::path::CameraPath::load).transpose()?;
@@ -137,19 +157,16 @@ impl ViewArgs {
             gpu_budget_bytes: self.render.gpu_budget_mib << 20,
             exit_after: self.frames,
             out_dir: self.out,
+            earlier,
         };
-        let records = match view::run(source.into(), options) {
-            // Closed by a signal: the summary, then the status a shell
-            // gives a death by it.
+        match view::run(source.into(), options, interrupt) {
             Err(view::ViewError::Interrupted { signal, kept, records }) => {
                 super::print(fly::summary(&records))?;
                 sylva::outputs::say(format_args!("sylva: view closed by signal {signal}{kept}"));
-                std::process::exit(128 + signal)
+                Ok(Some(signal))
             }
-            records => records?,
-        };
-        super::print(fly::summary(&records))?;
-        Ok(())
+            records => super::print(fly::summary(&records?)).map(|()| None),
+        }
     }
 }
 
@@ -229,8 +246,13 @@ impl RenderArgs {
             "budget" => bail!("--budget-ms {budget_ms} is not a positive number of milliseconds"),
             other => bail!("unknown --lod {other:?}; expected sse or budget"),
         };
-        let traversal = fly::parse_traversal(&self.traversal)
-            .ok_or_else(|| anyhow::anyhow!("unknown traversal {:?}; expected exact or linear:STEPS", self.traversal))?;
+        let traversal = fly::parse_traversal(&self.traversal).ok_or_else(|| {
+            anyhow::anyhow!(
+                "bad --traversal {:?}; expected exact or linear:STEPS, STEPS 1 to {}",
+                self.traversal,
+                fly::MAX_LINEAR_STEPS
+            )
+        })?;
         Ok(FlyOptions {
             size: parse_size(&self.size)?,
             traversal,

@@ -334,3 +334,17 @@ fn a_build_with_no_data_says_so() {
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success() && err.contains("warning: every sample is nodata"), "{err}");
 }
+
+#[test]
+fn flight_options_out_of_range_are_refused_before_any_work() {
+    // Regression: `--hold-ms inf` held the first frame for ever.
+    for (args, why) in [
+        (&["--hold-ms", "inf"][..], "is not 0 to 60000 milliseconds"),
+        (&["--hold-ms=-1"][..], "is not 0 to 60000 milliseconds"),
+        (&["--traversal", "linear:0"][..], "STEPS 1 to 4096"),
+    ] {
+        let out = sylva(&[&["fly", "--path", "nowhere.toml", "--out", "/nonexistent/out"][..], args].concat());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(why), "{args:?}: {err}");
+    }
+}

@@ -409,3 +409,40 @@ fn a_flight_that_fails_before_writing_removes_the_directories_it_made() {
     fail(&dir.join("there"));
     assert_eq!(std::fs::read_dir(dir.join("there")).unwrap().count(), 0);
 }
+
+#[test]
+fn a_flight_stopped_while_it_starts_leaves_no_directory() {
+    // Regression: a signal after the output directory was made and before
+    // the first frame killed the flight outright, leaving the directory
+    // empty. Whenever the signal comes, nothing is left.
+    let dir = TempDir::new("fly-signal-start");
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    for after_ms in [100, 400, 800] {
+        let (made, out) = (dir.join(&format!("made{after_ms}")), dir.join(&format!("made{after_ms}/out")));
+        let flight = spawn_fly(&["--path", path.to_str().unwrap(), "--frames", "500", "--size", "32x24"], &out);
+        std::thread::sleep(std::time::Duration::from_millis(after_ms));
+        let sent = std::process::Command::new("kill").arg("-INT").arg(flight.id().to_string()).status();
+        assert!(sent.unwrap().success());
+        let output = flight.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        // Ended by the signal before the watch, or 130 after it.
+        assert!(matches!(output.status.code(), None | Some(130)), "{:?}: {stderr}", output.status);
+        let frames_written = out.join("frame_00000.png").exists();
+        assert!(frames_written || !made.exists(), "{after_ms} ms: an empty directory is left: {stderr}");
+    }
+}
+
+#[test]
+fn a_views_saved_frames_are_an_earlier_run_too() {
+    // Regression: a view's `view_NNNNN.png` stayed beside the next run's
+    // outputs, mixing two runs.
+    let dir = TempDir::new("fly-view-frames");
+    std::fs::write(dir.join("view_00004.png"), b"png").unwrap();
+    let path = common::repo().join("config/paths/demo_dive.toml");
+    let args = ["fly", "--path", path.to_str().unwrap(), "--frames", "1", "--size", "32x24", "--out"];
+    let refused = std::process::Command::new(env!("CARGO_BIN_EXE_sylva")).args(args).arg(&dir.0).output().unwrap();
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && err.contains("1 frame"), "{err}");
+    fly(&["--path", path.to_str().unwrap(), "--frames", "1", "--size", "32x24", "--overwrite"], &dir.0);
+    assert!(!dir.join("view_00004.png").exists() && dir.join("frame_00000.png").exists());
+}

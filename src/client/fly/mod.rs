@@ -20,7 +20,7 @@ use super::source::TileSource;
 use super::store::LoadError;
 pub use flight::{Flight, Framed, Motion, Shot, Visible, visible_tiles};
 use options::MOTION_STEPS;
-pub use options::{FlyOptions, LodMode, parse_traversal};
+pub use options::{FlyOptions, LodMode, MAX_LINEAR_STEPS, parse_traversal};
 use outputs::MODEL_FILE;
 pub use outputs::{OutDir, STATS_FILE, prepare_out_dir, remove_outputs, to_csv, write_png, write_stats};
 pub use record::{FrameRecord, summary};
@@ -116,6 +116,9 @@ pub fn fly(
     renderer: &mut Renderer,
     options: &FlyOptions,
 ) -> Result<Vec<FrameRecord>, FlyError> {
+    // Watched from before the directory is made until the results are
+    // written: a first Ctrl-C then waits for the start or the frame in hand.
+    let interrupt = crate::interrupt::Interrupt::watch();
     let mut out = match &options.out_dir {
         Some(dir) => prepare_out_dir(dir, options.overwrite)?,
         None => OutDir::default(),
@@ -125,7 +128,7 @@ pub fn fly(
     if matches!(options.mode, LodMode::Budget { .. }) {
         out.earlier.retain(|f| !f.ends_with(MODEL_FILE));
     }
-    let flown = fly_in(source, path, renderer, options, std::mem::take(&mut out.earlier));
+    let flown = fly_in(source, path, renderer, options, std::mem::take(&mut out.earlier), &interrupt);
     if flown.is_err() {
         // Directories made for the flight and left empty go.
         out.remove_made();
@@ -140,14 +143,13 @@ fn fly_in(
     renderer: &mut Renderer,
     options: &FlyOptions,
     mut earlier: Vec<PathBuf>,
+    interrupt: &crate::interrupt::Interrupt,
 ) -> Result<Vec<FrameRecord>, FlyError> {
     let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
     let motion = Motion { frame_s, limits: path.motion_limits(MOTION_STEPS), shadows: path.sun.is_some() };
     let mut flight = Flight::new(source, renderer, options, motion)?;
     let mut records = Vec::with_capacity(options.frames);
-    // Watched until the results are written: a first Ctrl-C then waits.
-    let interrupt = crate::interrupt::Interrupt::watch();
-    let flown = fly_path(&mut flight, (source, path, renderer), options, (&mut earlier, &mut records), &interrupt);
+    let flown = fly_path(&mut flight, (source, path, renderer), options, (&mut earlier, &mut records), interrupt);
     // A frame that failed because of the signal (a server in the same
     // process group stopped by it) was stopped by the signal.
     let stopped = flown.err().map(|why| interrupt.came().map_or(why, Stop::Signal));

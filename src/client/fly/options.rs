@@ -95,12 +95,15 @@ impl Default for FlyOptions {
     }
 }
 
-/// Parses `exact` or `linear:STEPS`.
+/// Most steps of the linear march (a ray of more would stall the frame).
+pub const MAX_LINEAR_STEPS: u32 = 4096;
+
+/// Parses `exact` or `linear:STEPS` (1 to [`MAX_LINEAR_STEPS`]).
 pub fn parse_traversal(text: &str) -> Option<Traversal> {
     match text.split_once(':') {
         None if text.eq_ignore_ascii_case("exact") => Some(Traversal::Exact),
         Some((kind, steps)) if kind.eq_ignore_ascii_case("linear") => {
-            steps.parse().ok().filter(|&s| s > 0).map(Traversal::Linear)
+            steps.parse().ok().filter(|s| (1..=MAX_LINEAR_STEPS).contains(s)).map(Traversal::Linear)
         }
         _ => None,
     }

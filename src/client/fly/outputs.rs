@@ -1,4 +1,5 @@
-//! A flight's or a view's outputs in its directory: `frame_NNNNN.png`,
+//! A flight's or a view's outputs in its directory: `frame_NNNNN.png` (a
+//! view's `view_NNNNN.png`),
 //! [`STATS_FILE`] (`docs/stats-csv.md`) and a budget flight's cost model;
 //! an earlier run's outputs there refused, or replaced whole.
 
@@ -64,14 +65,13 @@ pub fn remove_outputs(files: &[PathBuf]) -> Result<(), FlyError> {
 }
 
 /// The files in `dir` a flight or view writes: [`STATS_FILE`], the cost
-/// model and `frame_NNNNN.png` (not the view's saved `view_NNNNN.png`,
-/// which never replace a file).
+/// model, a flight's `frame_NNNNN.png` and a view's `view_NNNNN.png`.
 fn earlier_outputs(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     let mut found = Vec::new();
     for entry in std::fs::read_dir(dir)? {
         let path = entry?.path();
         let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-        let frame = name.starts_with("frame_") && name.ends_with(".png");
+        let frame = is_frame(name);
         if path.is_file() && (frame || name == STATS_FILE || name == MODEL_FILE) {
             found.push(path);
         }
@@ -79,11 +79,16 @@ fn earlier_outputs(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     Ok(found)
 }
 
+/// A flight's or a view's frame: `frame_NNNNN.png`, `view_NNNNN.png`.
+fn is_frame(name: &str) -> bool {
+    (name.starts_with("frame_") || name.starts_with("view_")) && name.ends_with(".png")
+}
+
 /// What an earlier run left, as "stats.csv, cost_model.json, 12 frames".
 fn describe_outputs(files: &[PathBuf]) -> String {
     let names: Vec<&str> = files.iter().filter_map(|f| f.file_name()?.to_str()).collect();
-    let frames = names.iter().filter(|n| n.starts_with("frame_")).count();
-    let mut parts: Vec<String> = names.iter().filter(|n| !n.starts_with("frame_")).map(|n| n.to_string()).collect();
+    let frames = names.iter().filter(|n| is_frame(n)).count();
+    let mut parts: Vec<String> = names.iter().filter(|n| !is_frame(n)).map(|n| n.to_string()).collect();
     parts.sort();
     match frames {
         0 => {}

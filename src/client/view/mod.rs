@@ -58,6 +58,9 @@ pub struct ViewOptions {
     /// last frame of a scripted run, and where `P` saves frames (default:
     /// the current directory).
     pub out_dir: Option<PathBuf>,
+    /// An earlier run's outputs in `out_dir` (found before the view
+    /// opened, with `--overwrite`), removed on closing.
+    pub earlier: Vec<PathBuf>,
 }
 
 /// Why the viewer stopped.
@@ -118,25 +121,31 @@ pub fn default_start(source: &dyn TileSource) -> Result<Pose, crate::client::sou
 }
 
 /// Opens a window over `source` and flies until it is closed (or Ctrl-C
-/// or SIGTERM closes it: [`ViewError::Interrupted`], after the statistics
-/// are written); returns every frame's statistics.
-pub fn run(source: Arc<dyn TileSource>, options: ViewOptions) -> Result<Vec<FrameRecord>, ViewError> {
+/// or SIGTERM, watched by `interrupt` since before the view was set up,
+/// closes it: [`ViewError::Interrupted`], after the statistics are
+/// written); returns every frame's statistics.
+pub fn run(
+    source: Arc<dyn TileSource>,
+    options: ViewOptions,
+    interrupt: crate::interrupt::Interrupt,
+) -> Result<Vec<FrameRecord>, ViewError> {
     let event_loop = EventLoop::new().map_err(|e| ViewError::Window(e.to_string()))?;
-    let interrupt = crate::interrupt::Interrupt::watch();
     let mut app = App { source, options, state: None, records: Vec::new(), error: None, interrupt };
     event_loop.run_app(&mut app).map_err(|e| ViewError::Window(e.to_string()))?;
     if let Some(error) = app.error {
         return Err(error);
     }
-    if let Some(dir) = &app.options.out_dir {
-        // An earlier run's outputs go now, with `--overwrite` (checked
-        // before the window opened).
-        fly::remove_outputs(&fly::prepare_out_dir(dir, app.options.render.overwrite)?.earlier)?;
+    // Closed by a signal before its first frame: nothing to write, and an
+    // earlier run's outputs stay.
+    let out_dir = app.options.out_dir.filter(|_| !(app.records.is_empty() && app.interrupt.came().is_some()));
+    if let Some(dir) = &out_dir {
+        // An earlier run's outputs go now (not frames this run saved).
+        fly::remove_outputs(&app.options.earlier)?;
         fly::write_stats(dir, &app.records)?;
     }
     match app.interrupt.came() {
         Some(signal) => {
-            let kept = app.options.out_dir.map_or(String::new(), |d| format!("; its stats.csv is in {}", d.display()));
+            let kept = out_dir.map_or(String::new(), |d| format!("; its stats.csv is in {}", d.display()));
             Err(ViewError::Interrupted { signal, kept, records: app.records })
         }
         None => Ok(app.records),
