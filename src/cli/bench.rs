@@ -136,8 +136,8 @@ pub struct RaycastArgs {
     /// Image size, WxH.
     #[arg(long, default_value = "1280x1024")]
     size: String,
-    /// GPU tile cache budget, MiB.
-    #[arg(long, default_value_t = 1024)]
+    /// GPU tile cache budget, MiB (at most 1 TiB).
+    #[arg(long, default_value_t = 1024, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1 << 20))]
     gpu_budget_mib: usize,
     /// Where to write the plot of error against time.
     #[arg(long, default_value = DEFAULT_RAYCAST_PLOT)]

@@ -446,3 +446,16 @@ fn a_views_saved_frames_are_an_earlier_run_too() {
     fly(&["--path", path.to_str().unwrap(), "--frames", "1", "--size", "32x24", "--overwrite"], &dir.0);
     assert!(!dir.join("view_00004.png").exists() && dir.join("frame_00000.png").exists());
 }
+
+#[test]
+fn an_sse_flight_under_a_tiny_gpu_budget_draws_what_fits() {
+    // Regression: with 64 MiB (9 tile slots) the coarsest cut did not fit
+    // and the flight stopped; it now draws the cut's nearest tiles.
+    let dir = TempDir::new("fly-tiny-gpu");
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    fly(&["--path", path.to_str().unwrap(), "--frames", "2", "--size", "64x48", "--gpu-budget-mib", "16"], &dir.0);
+    for row in stats(&dir.0) {
+        let tiles: usize = row["tiles"].parse().unwrap();
+        assert!((1..=2).contains(&tiles), "16 MiB holds 2 tiles: {row:?}");
+    }
+}

@@ -47,6 +47,14 @@ fn view(display: Option<&str>, args: &[&str]) -> Output {
     command.output().expect("run sylva view")
 }
 
+/// An open-ended `sylva view` on `display` writing into `out`.
+fn spawn_view(display: &VirtualDisplay, out: &Path) -> Child {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_sylva"));
+    command.args(["view", "--size", "64x48", "--out", out.to_str().unwrap()]);
+    command.env("XDG_RUNTIME_DIR", std::env::temp_dir()).env_remove("WAYLAND_DISPLAY").env("DISPLAY", &display.name);
+    command.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("run sylva view")
+}
+
 /// The rows of a `stats.csv`, without its header.
 fn rows(out: &Path) -> Vec<String> {
     let text = std::fs::read_to_string(out.join("stats.csv")).expect("stats.csv");
@@ -82,10 +90,7 @@ fn ctrl_c_closes_a_view_with_its_statistics() {
     let display = VirtualDisplay::start();
     let dir = TempDir::new("view-signal");
     let out = dir.join("out");
-    let mut command = Command::new(env!("CARGO_BIN_EXE_sylva"));
-    command.args(["view", "--size", "64x48", "--out", out.to_str().unwrap()]);
-    command.env("XDG_RUNTIME_DIR", std::env::temp_dir()).env_remove("WAYLAND_DISPLAY").env("DISPLAY", &display.name);
-    let view = command.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("run sylva view");
+    let view = spawn_view(&display, &out);
     std::thread::sleep(std::time::Duration::from_secs(8));
     let sent = Command::new("kill").arg("-INT").arg(view.id().to_string()).status();
     assert!(sent.unwrap().success());
@@ -95,6 +100,25 @@ fn ctrl_c_closes_a_view_with_its_statistics() {
     assert!(stderr.contains(&format!("closed by signal 2; its stats.csv is in {}", out.display())), "{stderr}");
     let frames = rows(&out).len();
     assert!(String::from_utf8_lossy(&output.stdout).starts_with(&format!("{frames} frames")));
+}
+
+#[test]
+fn a_display_that_goes_away_ends_the_view_with_an_error_and_its_statistics() {
+    // Regression: winit panicked on the lost X connection (exit 101, no
+    // stats.csv).
+    let display = VirtualDisplay::start();
+    let dir = TempDir::new("view-lost");
+    let out = dir.join("out");
+    let view = spawn_view(&display, &out);
+    std::thread::sleep(std::time::Duration::from_secs(8));
+    drop(display);
+    let output = view.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("the window system failed") && !stderr.contains("panicked"), "{stderr}");
+    if stderr.contains("its stats.csv is in") {
+        assert!(!rows(&out).is_empty());
+    }
 }
 
 #[test]

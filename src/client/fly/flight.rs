@@ -374,7 +374,8 @@ pub struct Visible {
 }
 
 /// The frame's tiles, coarsening the error threshold until they fit the
-/// GPU cache: by a flight's `sse` selector, or by the stateless walk.
+/// GPU cache (where even the coarsest cut does not, its nearest tiles): by
+/// a flight's `sse` selector, or by the stateless walk.
 pub fn visible_tiles(
     source: &dyn TileSource,
     store: &mut TileStore,
@@ -393,7 +394,12 @@ pub fn visible_tiles(
         touched += selection.visited;
         if selection.tiles.len() <= slots as usize || rule.max_error_px > 1e6 {
             let selection_ms = start.elapsed().as_secs_f64() * 1e3;
-            let ids: Vec<_> = selection.tiles.iter().map(|s| s.id).collect();
+            // Even the coarsest cut is too many: its nearest tiles, which
+            // fill most of the screen, are drawn.
+            let mut chosen = selection.tiles;
+            chosen.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m));
+            chosen.truncate(slots as usize);
+            let ids: Vec<_> = chosen.iter().map(|s| s.id).collect();
             let tiles = store.get_cut(source, &ids)?;
             return Ok(Visible { tiles, error_px: rule.max_error_px, touched, selection_ms });
         }

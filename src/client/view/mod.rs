@@ -81,6 +81,14 @@ pub enum ViewError {
     /// A frame failed.
     #[error(transparent)]
     Fly(#[from] FlyError),
+    /// The window system failed while the view ran (an X server gone).
+    #[error("the window system failed ({why}){kept}")]
+    Lost {
+        /// What it said.
+        why: String,
+        /// Where the statistics are, if anywhere.
+        kept: String,
+    },
     /// Ctrl-C or SIGTERM closed the view (its statistics written).
     #[error("closed by signal {signal}{kept}")]
     Interrupted {
@@ -129,26 +137,73 @@ pub fn run(
     options: ViewOptions,
     interrupt: crate::interrupt::Interrupt,
 ) -> Result<Vec<FrameRecord>, ViewError> {
-    let event_loop = EventLoop::new().map_err(|e| ViewError::Window(e.to_string()))?;
+    let event_loop = EventLoop::new().map_err(window_error)?;
     let mut app = App { source, options, state: None, records: Vec::new(), error: None, interrupt };
-    event_loop.run_app(&mut app).map_err(|e| ViewError::Window(e.to_string()))?;
+    if let Err(why) = run_loop(event_loop, &mut app) {
+        let kept = match app.records.is_empty() {
+            true => String::new(),
+            false => write_outputs(&app)?,
+        };
+        return Err(ViewError::Lost { why, kept });
+    }
     if let Some(error) = app.error {
         return Err(error);
     }
     // Closed by a signal before its first frame: nothing to write, and an
     // earlier run's outputs stay.
-    let out_dir = app.options.out_dir.filter(|_| !(app.records.is_empty() && app.interrupt.came().is_some()));
-    if let Some(dir) = &out_dir {
-        // An earlier run's outputs go now (not frames this run saved).
-        fly::remove_outputs(&app.options.earlier)?;
-        fly::write_stats(dir, &app.records)?;
-    }
+    let kept = match app.records.is_empty() && app.interrupt.came().is_some() {
+        true => String::new(),
+        false => write_outputs(&app)?,
+    };
     match app.interrupt.came() {
-        Some(signal) => {
-            let kept = out_dir.map_or(String::new(), |d| format!("; its stats.csv is in {}", d.display()));
-            Err(ViewError::Interrupted { signal, kept, records: app.records })
-        }
+        Some(signal) => Err(ViewError::Interrupted { signal, kept, records: app.records }),
         None => Ok(app.records),
+    }
+}
+
+/// Replaces an earlier run's outputs (not frames this run saved) with the
+/// statistics: "; its stats.csv is in DIR", or nothing without a directory.
+fn write_outputs(app: &App) -> Result<String, ViewError> {
+    let Some(dir) = &app.options.out_dir else { return Ok(String::new()) };
+    fly::remove_outputs(&app.options.earlier)?;
+    fly::write_stats(dir, &app.records)?;
+    Ok(format!("; its stats.csv is in {}", dir.display()))
+}
+
+/// Runs the event loop. The window system's library panics where the
+/// display goes away (winit on a lost X connection): that panic, on this
+/// thread, is an error here, said once, not a crash.
+fn run_loop(event_loop: EventLoop<()>, app: &mut App) -> Result<(), String> {
+    let this = std::thread::current().id();
+    let others: Arc<dyn Fn(&std::panic::PanicHookInfo) + Send + Sync> = Arc::from(std::panic::take_hook());
+    let chained = others.clone();
+    std::panic::set_hook(Box::new(move |info| {
+        if std::thread::current().id() != this {
+            chained(info)
+        }
+    }));
+    let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| event_loop.run_app(app)));
+    std::panic::set_hook(Box::new(move |info| others(info)));
+    match ran {
+        Ok(result) => result.map_err(|e| without_location(&e.to_string()).to_string()),
+        Err(panic) => Err(panic
+            .downcast_ref::<String>()
+            .cloned()
+            .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+            .unwrap_or_else(|| "a panic".into())),
+    }
+}
+
+/// A window-system error, said without the library's source location.
+fn window_error(e: impl std::fmt::Display) -> ViewError {
+    ViewError::Window(without_location(&e.to_string()).to_string())
+}
+
+/// What winit's "os error at FILE:LINE: what" says.
+fn without_location(text: &str) -> &str {
+    match text.strip_prefix("os error at ") {
+        Some(rest) => rest.split_once(": ").map_or(rest, |(_, what)| what),
+        None => text,
     }
 }
 
@@ -271,10 +326,10 @@ impl Viewer {
         let (w, h) = options.render.size;
         let attributes =
             Window::default_attributes().with_title("Sylva").with_inner_size(winit::dpi::PhysicalSize::new(w, h));
-        let window = Arc::new(event_loop.create_window(attributes).map_err(|e| ViewError::Window(e.to_string()))?);
+        let window = Arc::new(event_loop.create_window(attributes).map_err(window_error)?);
         let display = Box::new(event_loop.owned_display_handle());
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_with_display_handle_from_env(display));
-        let surface = instance.create_surface(window.clone()).map_err(|e| ViewError::Window(e.to_string()))?;
+        let surface = instance.create_surface(window.clone()).map_err(window_error)?;
         let gpu = Gpu::open_on(&instance, Some(&surface))?;
         let presenter = Presenter::new(&gpu, instance.clone(), window.clone(), surface)?;
         let r = &options.render;
@@ -415,4 +470,16 @@ fn free_name(dir: &std::path::Path, index: usize) -> PathBuf {
         k => dir.join(format!("view_{index:05}-{k}.png")),
     };
     (0..).map(name).find(|p| !p.exists()).unwrap_or_else(|| name(0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn window_errors_are_said_without_the_librarys_source_location() {
+        let os = "os error at /root/.cargo/registry/src/winit-0.30.13/src/platform_impl/linux/mod.rs:765: XOpenDisplay failed";
+        assert_eq!(without_location(os), "XOpenDisplay failed");
+        assert_eq!(without_location("no display"), "no display");
+    }
 }
