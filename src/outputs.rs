@@ -104,7 +104,10 @@ fn destination(path: &Path) -> Result<PathBuf, OutputError> {
         Ok(meta) => meta,
     };
     let target = match meta.is_symlink() {
-        true => std::fs::canonicalize(path).map_err(|_| OutputError::NotRegular(path.to_path_buf()))?,
+        true => match std::fs::canonicalize(path) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(OutputError::NotRegular(path.into())),
+            resolved => resolved.map_err(|source| OutputError::Write { path: path.into(), source })?,
+        },
         false => path.to_path_buf(),
     };
     match std::fs::metadata(&target) {
@@ -130,8 +133,9 @@ fn scratch_beside(path: &Path) -> std::io::Result<(PathBuf, std::fs::File)> {
 }
 
 /// Writes every `(path, bytes)`: all to new files beside them, then each
-/// renamed into place; on a failure the new files are removed and no
-/// output is touched.
+/// renamed into place; on a failure to write, the new files are removed and
+/// no output is touched (a rename that fails, rare on one file system,
+/// leaves those before it renamed).
 pub fn write_all(files: &[(&Path, &[u8])]) -> Result<(), OutputError> {
     use std::io::Write;
     let mut written: Vec<(PathBuf, PathBuf)> = Vec::new();
@@ -140,15 +144,19 @@ pub fn write_all(files: &[(&Path, &[u8])]) -> Result<(), OutputError> {
         let fail = |source| OutputError::Write { path: path.to_path_buf(), source };
         let (scratch, mut file) = scratch_beside(&target).map_err(fail)?;
         written.push((scratch, target));
-        file.write_all(bytes).and_then(|()| file.sync_all()).map_err(fail)
+        file.write_all(bytes).map_err(fail)
     };
     let result = files.iter().try_for_each(|&(path, bytes)| write_one(path, bytes));
     if result.is_err() {
         written.iter().for_each(|(scratch, _)| drop(std::fs::remove_file(scratch)));
         return result;
     }
-    for ((scratch, target), &(path, _)) in written.iter().zip(files) {
-        std::fs::rename(scratch, target).map_err(|source| OutputError::Write { path: path.to_path_buf(), source })?;
+    for (k, ((scratch, target), &(path, _))) in written.iter().zip(files).enumerate() {
+        if let Err(source) = std::fs::rename(scratch, target) {
+            // Those renamed stay; the rest go with their scratch files.
+            written[k..].iter().for_each(|(scratch, _)| drop(std::fs::remove_file(scratch)));
+            return Err(OutputError::Write { path: path.to_path_buf(), source });
+        }
     }
     Ok(())
 }

@@ -137,7 +137,7 @@ pub struct RaycastArgs {
     #[arg(long, default_value = "1280x1024")]
     size: String,
     /// GPU tile cache budget, MiB (at most 1 TiB).
-    #[arg(long, default_value_t = 1024, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1 << 20))]
+    #[arg(long, default_value_t = 1024, value_parser = super::flight::gpu_budget_mib())]
     gpu_budget_mib: usize,
     /// Where to write the plot of error against time.
     #[arg(long, default_value = DEFAULT_RAYCAST_PLOT)]

@@ -79,6 +79,11 @@ impl FlyArgs {
     }
 }
 
+/// `--gpu-budget-mib`: 1 MiB to 1 TiB.
+pub fn gpu_budget_mib() -> clap::builder::RangedU64ValueParser<usize> {
+    clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1 << 20)
+}
+
 /// Most `--hold-ms`: a frame held a minute measures nothing more.
 const MAX_HOLD_MS: f64 = 60_000.0;
 
@@ -210,7 +215,7 @@ pub struct RenderArgs {
     #[arg(long, default_value_t = 13, value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva::grid::TileGrid::MAX_LEVEL)))]
     max_level: u32,
     /// GPU tile cache budget, MiB (at most 1 TiB).
-    #[arg(long, default_value_t = 512, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1 << 20))]
+    #[arg(long, default_value_t = 512, value_parser = gpu_budget_mib())]
     gpu_budget_mib: usize,
     /// Draw the canopy by ray casting alone, without trees as point
     /// splats near the camera.

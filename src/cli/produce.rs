@@ -34,9 +34,9 @@ impl ProductArgs {
     /// any work if the output would overwrite the configuration or a file
     /// it names).
     fn make(&self, product: impl FnOnce(&Region, Layer, Format) -> Result<Product>) -> Result<()> {
+        let abandon = Abandon::watch();
         let inputs = sylva::config::input_files(self.config.as_deref())?;
         outputs::check(&inputs.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &[&self.output])?;
-        let abandon = Abandon::watch();
         let region = sylva::config::load(self.config.as_deref())?;
         let (layer, format) = (parse_layer(&self.layer)?, parse_format(&self.format)?);
         let product = product(&region, layer, format)?;
@@ -144,8 +144,8 @@ impl CanopyArgs {
             .flatten()
             .map(PathBuf::as_path)
             .collect();
-        outputs::check(&inputs, &targets)?;
         let abandon = Abandon::watch();
+        outputs::check(&inputs, &targets)?;
         let mut options = sylva::lidar::Options::new(self.las.clone(), self.resolution);
         options.crs =
             self.crs.as_deref().map(sylva::source::crs::parse_epsg).transpose().map_err(anyhow::Error::msg)?;

@@ -121,8 +121,14 @@ fn server_base(base: &str) -> Result<String, String> {
         Ok(uri) => uri,
         Err(_) => return refused("not a URL"),
     };
+    // The port as written (`Uri::port` drops one past 65535).
+    let authority = uri.authority().map_or("", |a| a.as_str());
+    let port = authority.rsplit_once(':').map(|(_, p)| p).filter(|p| p.bytes().all(|b| b.is_ascii_digit()));
     match (uri.scheme_str(), uri.host()) {
         (Some("http" | "https"), _) if uri.query().is_some() => refused("a query has no place in it"),
+        (Some("http" | "https"), _) if port.as_ref().is_some_and(|p| p.parse::<u16>().is_err()) => {
+            refused(&format!("port {} is not 0 to 65535", port.unwrap_or_default()))
+        }
         (Some("http" | "https"), Some(host)) if !host.is_empty() => Ok(base.trim_end_matches('/').to_string()),
         (Some("http" | "https"), _) => refused("no host"),
         (Some(scheme), _) => refused(&format!("the scheme {scheme}:// is not HTTP")),
@@ -194,6 +200,7 @@ mod tests {
             ("localhost:8080", "no scheme"),
             ("http://", "not a URL"),
             ("http://h:8080?x=1", "a query has no place in it"),
+            ("http://127.0.0.1:99999", "port 99999 is not 0 to 65535"),
         ] {
             let start = std::time::Instant::now();
             let Err(e) = HttpSource::connect(base) else { panic!("{base} was taken") };

@@ -216,22 +216,28 @@ pub const LOWEST_M: f64 = -1_000.0;
 /// Highest, metres (beyond the geostationary orbit).
 pub const HIGHEST_M: f64 = 100_000_000.0;
 
+/// Largest key time, seconds (about 30 years).
+const MAX_T_S: f64 = 1e9;
+/// Largest key heading, degrees (a path may turn many times).
+const MAX_HEADING_DEG: f64 = 1e6;
+
 impl Key {
     /// Checks each value: the message names the field, what it must be and
     /// what it is.
     fn check(&self) -> Result<(), String> {
+        // Times and headings bounded so that differences and the spline's
+        // sums of them stay finite.
         let fields = [
-            ("t", self.t, f64::MIN, f64::MAX),
+            ("t", self.t, -MAX_T_S, MAX_T_S),
             ("lon", self.lon, -180.0, 180.0),
             ("lat", self.lat, -90.0, 90.0),
             ("height_m", self.height_m, LOWEST_M, HIGHEST_M),
-            ("heading_deg", self.heading_deg, f64::MIN, f64::MAX),
+            ("heading_deg", self.heading_deg, -MAX_HEADING_DEG, MAX_HEADING_DEG),
             ("pitch_deg", self.pitch_deg, -90.0, 90.0),
         ];
         for (name, value, lo, hi) in fields {
             if !(value.is_finite() && (lo..=hi).contains(&value)) {
-                let range = if lo == f64::MIN { "a finite number".into() } else { format!("within {lo}..{hi}") };
-                return Err(format!("{name} = {value}: must be {range}"));
+                return Err(format!("{name} = {value}: must be within {lo}..{hi}"));
             }
         }
         Ok(())
@@ -304,7 +310,9 @@ pitch_deg = -30.0
             ("lat = 46.0", "lat = 95.0", "key 1: lat = 95: must be within -90..90"),
             ("lon = 10.2", "lon = 500.0", "key 2: lon = 500: must be within -180..180"),
             ("height_m = 1000.0", "height_m = -5000.0", "key 1: height_m = -5000: must be within -1000..100000000"),
-            ("t = 0.0", "t = inf", "key 1: t = inf: must be a finite number"),
+            ("t = 0.0", "t = inf", "key 1: t = inf: must be within -1000000000..1000000000"),
+            // Regression: keys at ±1.7e308 s made the time step overflow.
+            ("t = 0.0", "t = -1.7e308", "key 1: t = -170000000000000000"),
         ] {
             let e = CameraPath::parse(&PATH.replace(from, to)).unwrap_err();
             assert!(e.contains(needle), "{e}");

@@ -266,7 +266,7 @@ fn landcover(
 /// Refuses land cover that covers none of the DEM (cover 0 everywhere and
 /// the CEM the bare DEM: a wrong file, or a wrong CRS).
 fn overlaps(landcover: &GeoRaster, dem: &GeoRaster) -> Result<(), String> {
-    if landcover.bounds().intersects(&dem.bounds()) {
+    if landcover.bounds().meets_on_globe(&dem.bounds()) {
         return Ok(());
     }
     let span = |s: Sector| format!("{:.4}..{:.4}° E, {:.4}..{:.4}° N", s.min_lon, s.max_lon, s.min_lat, s.max_lat);

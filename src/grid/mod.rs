@@ -125,6 +125,13 @@ impl Sector {
             && other.min_lon < self.max_lon
     }
 
+    /// True if the two sectors overlap in more than an edge, longitudes
+    /// taken modulo 360° (either may reach past ±180°).
+    pub fn meets_on_globe(&self, other: &Sector) -> bool {
+        let turned = |turn: f64| Sector { min_lon: self.min_lon + turn, max_lon: self.max_lon + turn, ..*self };
+        [0.0, 360.0, -360.0].into_iter().any(|turn| turned(turn).intersects(other))
+    }
+
     /// True if the point lies in the sector, edges included.
     pub fn contains(&self, lon: f64, lat: f64) -> bool {
         (self.min_lat..=self.max_lat).contains(&lat) && (self.min_lon..=self.max_lon).contains(&lon)

@@ -64,10 +64,12 @@ impl Georef {
         }
         let edges = [self.x0 - self.overhang * self.dx, self.x0 + (width as f64 - 1.0 + self.overhang) * self.dx];
         let (west, east) = (edges[0].min(edges[1]), edges[0].max(edges[1]));
-        let turn = match () {
-            _ if west >= 180.0 => -360.0 * ((west + 180.0) / 360.0).floor(),
-            _ if east <= -180.0 => 360.0 * ((180.0 - east) / 360.0).floor(),
-            _ => 0.0,
+        let turn = if west >= 180.0 {
+            -360.0 * ((west + 180.0) / 360.0).floor()
+        } else if east <= -180.0 {
+            360.0 * ((180.0 - east) / 360.0).floor()
+        } else {
+            0.0
         };
         Georef { x0: self.x0 + turn, ..self }
     }
@@ -187,8 +189,7 @@ impl GeoRaster {
         let (pad_lon, pad_lat) = (grid.lon.step_deg(), grid.lat.step_deg());
         let sector =
             Sector { min_lat: s0 - pad_lat, max_lat: n0 + pad_lat, min_lon: w0 - pad_lon, max_lon: w1 + pad_lon };
-        let turned = |turn: f64| Sector { min_lon: sector.min_lon + turn, max_lon: sector.max_lon + turn, ..sector };
-        past_a_pole || [0.0, 360.0, -360.0].into_iter().any(|turn| turned(turn).intersects(&self.bounds))
+        past_a_pole || sector.meets_on_globe(&self.bounds)
     }
 
     fn extent(&self, level: usize) -> Extent {
@@ -345,6 +346,12 @@ fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
         min_lon: s.min_lon - pad,
         max_lon: s.max_lon + pad,
     };
+    to_the_poles(s, g, ((xa, xb), (ya, yb)))
+}
+
+/// `s` reaching each pole that the projected source's box of `(x, y)`
+/// ranges holds, over every longitude.
+fn to_the_poles(s: Sector, g: &Georef, ((xa, xb), (ya, yb)): ((f64, f64), (f64, f64))) -> Sector {
     let inside = |(x, y): (f64, f64)| (xa.min(xb)..=xa.max(xb)).contains(&x) && (ya.min(yb)..=ya.max(yb)).contains(&y);
     let holds = |pole: f64| !g.crs.is_geographic() && g.crs.from_lon_lat(0.0, pole).is_some_and(inside);
     match (holds(90.0), holds(-90.0)) {

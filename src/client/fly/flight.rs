@@ -395,10 +395,11 @@ pub fn visible_tiles(
         if selection.tiles.len() <= slots as usize || rule.max_error_px > 1e6 {
             let selection_ms = start.elapsed().as_secs_f64() * 1e3;
             // Even the coarsest cut is too many: its nearest tiles, which
-            // fill most of the screen, are drawn.
+            // fill most of the screen, are drawn (a cache of no slot at all
+            // is an error: the loading says so).
             let mut chosen = selection.tiles;
             chosen.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m));
-            chosen.truncate(slots as usize);
+            chosen.truncate((slots as usize).max(1));
             let ids: Vec<_> = chosen.iter().map(|s| s.id).collect();
             let tiles = store.get_cut(source, &ids)?;
             return Ok(Visible { tiles, error_px: rule.max_error_px, touched, selection_ms });

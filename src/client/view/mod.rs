@@ -171,28 +171,36 @@ fn write_outputs(app: &App) -> Result<String, ViewError> {
 }
 
 /// Runs the event loop. The window system's library panics where the
-/// display goes away (winit on a lost X connection): that panic, on this
-/// thread, is an error here, said once, not a crash.
+/// display goes away (winit on a lost X connection): such a panic, on this
+/// thread and from inside that library, is an error here, said once, not a
+/// crash; any other panic stays one.
 fn run_loop(event_loop: EventLoop<()>, app: &mut App) -> Result<(), String> {
     let this = std::thread::current().id();
+    let lost = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let others: Arc<dyn Fn(&std::panic::PanicHookInfo) + Send + Sync> = Arc::from(std::panic::take_hook());
-    let chained = others.clone();
+    let (chained, seen) = (others.clone(), lost.clone());
     std::panic::set_hook(Box::new(move |info| {
-        if std::thread::current().id() != this {
-            chained(info)
+        let file = info.location().map_or("", |l| l.file());
+        match std::thread::current().id() == this && WINDOW_SYSTEM.iter().any(|lib| file.contains(lib)) {
+            true => seen.store(true, std::sync::atomic::Ordering::SeqCst),
+            false => chained(info),
         }
     }));
     let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| event_loop.run_app(app)));
     std::panic::set_hook(Box::new(move |info| others(info)));
     match ran {
         Ok(result) => result.map_err(|e| without_location(&e.to_string()).to_string()),
-        Err(panic) => Err(panic
+        Err(panic) if lost.load(std::sync::atomic::Ordering::SeqCst) => Err(panic
             .downcast_ref::<String>()
             .cloned()
             .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
             .unwrap_or_else(|| "a panic".into())),
+        Err(panic) => std::panic::resume_unwind(panic),
     }
 }
+
+/// Where the window system's libraries live (their panics' source files).
+const WINDOW_SYSTEM: [&str; 4] = ["/winit-", "/x11rb-", "/x11-dl-", "/wayland-"];
 
 /// A window-system error, said without the library's source location.
 fn window_error(e: impl std::fmt::Display) -> ViewError {
