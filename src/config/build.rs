@@ -317,6 +317,14 @@ fn compile(keys: &[ColorKey]) -> Result<Vec<LabKey>, String> {
     keys.iter().map(ColorKey::compile).collect()
 }
 
+/// A map's close unless one is given (Figure 6.3: "2 passes of 3x3 filter
+/// kernels were used for the dilate and erode stages").
+const DEFAULT_CLOSE: &str = "DDEE";
+/// A map's close kernel radius unless one is given, pixels (3 × 3).
+const DEFAULT_CLOSE_RADIUS_PX: usize = 1;
+/// A map's blur radius unless one is given, pixels.
+const DEFAULT_BLUR_RADIUS_PX: usize = 1;
+
 /// Largest close and blur radius on a map, pixels (a map's symbols are a
 /// few pixels wide; the kernels grow with the square of the radius).
 const MAX_MAP_RADIUS_PX: usize = 32;
@@ -331,11 +339,11 @@ fn rule(lc: &LandcoverConfig) -> Result<Rule, String> {
             if !keys.iter().any(|k| k.surface == SurfaceType::Forest) {
                 return Err("no colour key marks forest".into());
             }
-            // Figure 6.3: "2 passes of 3x3 filter kernels were used for the dilate and erode stages".
-            let close = lc.close.as_deref().unwrap_or("DDEE");
+            let close = lc.close.as_deref().unwrap_or(DEFAULT_CLOSE);
             let ops = MorphOp::parse_sequence(close)
                 .ok_or_else(|| format!("close {close:?} must be a sequence of D and E"))?;
-            let (radius_px, blur_px) = (lc.close_radius_px.unwrap_or(1), lc.blur_radius_px.unwrap_or(1));
+            let radius_px = lc.close_radius_px.unwrap_or(DEFAULT_CLOSE_RADIUS_PX);
+            let blur_px = lc.blur_radius_px.unwrap_or(DEFAULT_BLUR_RADIUS_PX);
             for (key, px) in [("close_radius_px", radius_px), ("blur_radius_px", blur_px)] {
                 if px > MAX_MAP_RADIUS_PX {
                     return Err(format!("{key} = {px}: at most {MAX_MAP_RADIUS_PX} pixels"));
