@@ -59,6 +59,7 @@ impl FlyArgs {
             frames: self.frames,
             out_dir: Some(self.out),
             overwrite: self.overwrite,
+            watch_signals: true,
             write_frames: !self.no_frames,
             hold_ms: self.hold_ms,
             ..self.render.options()?

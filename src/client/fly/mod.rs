@@ -18,6 +18,7 @@ use super::path::CameraPath;
 use super::render::{Readback, RenderError, Renderer};
 use super::source::TileSource;
 use super::store::LoadError;
+use crate::interrupt::Interrupt;
 pub use flight::{Flight, Framed, Motion, Shot, Visible, visible_tiles};
 use options::MOTION_STEPS;
 pub use options::{FlyOptions, LodMode, MAX_LINEAR_STEPS, parse_traversal};
@@ -118,7 +119,7 @@ pub fn fly(
 ) -> Result<Vec<FrameRecord>, FlyError> {
     // Watched from before the directory is made until the results are
     // written: a first Ctrl-C then waits for the start or the frame in hand.
-    let interrupt = crate::interrupt::Interrupt::watch();
+    let interrupt = options.watch_signals.then(Interrupt::watch);
     let mut out = match &options.out_dir {
         Some(dir) => prepare_out_dir(dir, options.overwrite)?,
         None => OutDir::default(),
@@ -128,7 +129,7 @@ pub fn fly(
     if matches!(options.mode, LodMode::Budget { .. }) {
         out.earlier.retain(|f| !f.ends_with(MODEL_FILE));
     }
-    let flown = fly_in(source, path, renderer, options, std::mem::take(&mut out.earlier), &interrupt);
+    let flown = fly_in(source, path, renderer, options, std::mem::take(&mut out.earlier), interrupt.as_ref());
     if flown.is_err() {
         // Directories made for the flight and left empty go.
         out.remove_made();
@@ -143,7 +144,7 @@ fn fly_in(
     renderer: &mut Renderer,
     options: &FlyOptions,
     mut earlier: Vec<PathBuf>,
-    interrupt: &crate::interrupt::Interrupt,
+    interrupt: Option<&Interrupt>,
 ) -> Result<Vec<FrameRecord>, FlyError> {
     let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
     let motion = Motion { frame_s, limits: path.motion_limits(MOTION_STEPS), shadows: path.sun.is_some() };
@@ -152,7 +153,7 @@ fn fly_in(
     let flown = fly_path(&mut flight, (source, path, renderer), options, (&mut earlier, &mut records), interrupt);
     // A frame that failed because of the signal (a server in the same
     // process group stopped by it) was stopped by the signal.
-    let stopped = flown.err().map(|why| interrupt.came().map_or(why, Stop::Signal));
+    let stopped = flown.err().map(|why| interrupt.and_then(Interrupt::came).map_or(why, Stop::Signal));
     let model = flight.model();
     match (stopped, &options.out_dir) {
         (None, Some(dir)) => outputs::write_results(dir, &records, model.as_ref()).map(|()| records),
@@ -177,10 +178,10 @@ fn fly_path(
     (source, path, renderer): (&dyn TileSource, &CameraPath, &mut Renderer),
     options: &FlyOptions,
     (earlier, records): (&mut Vec<PathBuf>, &mut Vec<FrameRecord>),
-    interrupt: &crate::interrupt::Interrupt,
+    interrupt: Option<&Interrupt>,
 ) -> Result<(), Stop> {
     for k in 0..options.frames {
-        if let Some(signal) = interrupt.came() {
+        if let Some(signal) = interrupt.and_then(Interrupt::came) {
             return Err(Stop::Signal(signal));
         }
         let shot = Shot {

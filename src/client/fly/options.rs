@@ -39,6 +39,10 @@ pub struct FlyOptions {
     pub out_dir: Option<PathBuf>,
     /// Replace an earlier run's outputs in `out_dir` (else refused).
     pub overwrite: bool,
+    /// Watch Ctrl-C and SIGTERM (a command's flight): the first stops the
+    /// flight after the frame in hand. A library's flight leaves the
+    /// process's signals alone.
+    pub watch_signals: bool,
     /// Write every frame's PNG (else only the statistics).
     pub write_frames: bool,
     /// View-ray traversal.
@@ -78,6 +82,7 @@ impl Default for FlyOptions {
             size: (640, 480),
             out_dir: None,
             overwrite: false,
+            watch_signals: false,
             write_frames: true,
             traversal: Traversal::Exact,
             shadow_steps: 10,
