@@ -430,7 +430,7 @@ fn a_flight_stopped_while_it_starts_leaves_no_directory() {
     let dir = TempDir::new("fly-signal-start");
     let path = common::repo().join("config/paths/demo_valley.toml");
     let mut watched = 0;
-    for after_ms in [100, 800, 3000] {
+    for after_ms in [100, 1000, 6000] {
         let (made, out) = (dir.join(&format!("made{after_ms}")), dir.join(&format!("made{after_ms}/out")));
         let flight = spawn_fly(&["--path", path.to_str().unwrap(), "--frames", "500", "--size", "32x24"], &out);
         std::thread::sleep(std::time::Duration::from_millis(after_ms));
