@@ -307,6 +307,24 @@ impl BBox {
         BBox { west, south, east, north }.checked()
     }
 
+    /// The box as longitudes within −180…180 can say it: itself, turned by
+    /// 360° where it lies wholly past ±180°, or every longitude where it
+    /// crosses the antimeridian (what WMS capabilities and TileJSON allow).
+    pub fn on_the_globe(&self) -> BBox {
+        let turn = if self.west >= 180.0 {
+            -360.0
+        } else if self.east <= -180.0 {
+            360.0
+        } else {
+            0.0
+        };
+        let (west, east) = (self.west + turn, self.east + turn);
+        match west >= -180.0 && east <= 180.0 {
+            true => BBox { west, east, ..*self },
+            false => BBox { west: -180.0, east: 180.0, ..*self },
+        }
+    }
+
     /// The same box as a sector.
     pub fn sector(&self) -> Sector {
         Sector { min_lat: self.south, max_lat: self.north, min_lon: self.west, max_lon: self.east }
@@ -418,6 +436,15 @@ mod tests {
         assert!(b(370.0, 371.0).meets(&b(10.5, 12.0)));
         assert!(!b(0.0, 1.0).meets(&b(2.0, 3.0)) && !b(362.0, 363.0).meets(&b(0.0, 1.0)));
         assert!(!b(0.0, 1.0).meets(&BBox { west: 0.0, south: 2.0, east: 1.0, north: 3.0 }));
+    }
+
+    #[test]
+    fn boxes_on_the_globe_keep_within_a_world() {
+        let b = |w: f64, e: f64| BBox { west: w, south: 0.0, east: e, north: 1.0 };
+        assert_eq!(b(10.0, 11.0).on_the_globe(), b(10.0, 11.0));
+        assert_eq!(b(180.5, 181.5).on_the_globe(), b(-179.5, -178.5));
+        assert_eq!(b(-181.0, -180.0).on_the_globe(), b(179.0, 180.0));
+        assert_eq!(b(179.5, 180.5).on_the_globe(), b(-180.0, 180.0), "across the antimeridian: every longitude");
     }
 
     fn grids() -> impl Strategy<Value = TileGrid> {

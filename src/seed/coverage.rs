@@ -113,14 +113,19 @@ impl Coverage {
 
 /// A sector meeting the box only along an edge is outside: its samples on
 /// that edge are the inside neighbour's too, and the client never draws it.
+/// Longitudes are taken modulo 360° (a box may reach past ±180°).
 fn box_relation(b: &BBox, s: &Sector) -> Relation {
-    let b = b.sector();
-    if !b.intersects(s) {
-        Relation::Outside
-    } else if b.min_lon <= s.min_lon && s.max_lon <= b.max_lon && b.min_lat <= s.min_lat && s.max_lat <= b.max_lat {
+    let turned =
+        [0.0, 360.0, -360.0].map(|turn| Sector { min_lon: b.west + turn, max_lon: b.east + turn, ..b.sector() });
+    let holds = |b: &Sector| {
+        b.min_lon <= s.min_lon && s.max_lon <= b.max_lon && b.min_lat <= s.min_lat && s.max_lat <= b.max_lat
+    };
+    if turned.iter().any(holds) {
         Relation::Inside
-    } else {
+    } else if turned.iter().any(|b| b.intersects(s)) {
         Relation::Boundary
+    } else {
+        Relation::Outside
     }
 }
 
@@ -231,6 +236,17 @@ mod tests {
 
     fn sector(w: f64, s: f64, e: f64, n: f64) -> Sector {
         Sector { min_lon: w, min_lat: s, max_lon: e, max_lat: n }
+    }
+
+    #[test]
+    fn a_box_across_the_antimeridian_holds_tiles_on_both_sides() {
+        // Regression: tiles west of 180° were outside a box of 179.5…180.5,
+        // so seeding a region across the antimeridian made half of it.
+        let fiji = Coverage::Box(BBox { west: 179.5, south: -17.0, east: 180.5, north: -16.0 });
+        assert_eq!(fiji.relation(&sector(179.6, -16.9, 179.9, -16.1)), Relation::Inside);
+        assert_eq!(fiji.relation(&sector(-180.0, -16.9, -179.6, -16.1)), Relation::Inside);
+        assert_eq!(fiji.relation(&sector(-179.6, -16.9, -179.0, -16.1)), Relation::Boundary);
+        assert_eq!(fiji.relation(&sector(-179.0, -16.9, -178.0, -16.1)), Relation::Outside);
     }
 
     #[test]

@@ -193,8 +193,9 @@ fn coverage(o: &SeedOptions, region: &Region) -> Result<(Coverage, String), Seed
 }
 
 /// The parts of `b` over the region's `bounds` (`b` as given, and a turn
-/// east and west of it, for a box that reaches across the antimeridian):
-/// tiles beyond the region's data hold nothing to seed.
+/// east and west of it, for a box that reaches across the antimeridian),
+/// in the bounds' longitudes, parts that meet joined: tiles beyond the
+/// region's data hold nothing to seed.
 fn clip(b: BBox, bounds: BBox) -> Vec<BBox> {
     let part = |turn: f64| BBox {
         west: (b.west + turn).max(bounds.west),
@@ -202,7 +203,16 @@ fn clip(b: BBox, bounds: BBox) -> Vec<BBox> {
         east: (b.east + turn).min(bounds.east),
         north: b.north.min(bounds.north),
     };
-    [0.0, -360.0, 360.0].into_iter().map(part).filter(|c| c.west < c.east && c.south < c.north).collect()
+    let mut parts: Vec<BBox> =
+        [0.0, -360.0, 360.0].into_iter().map(part).filter(|c| c.west < c.east && c.south < c.north).collect();
+    parts.sort_by(|a, b| a.west.total_cmp(&b.west));
+    parts.into_iter().fold(Vec::new(), |mut joined: Vec<BBox>, p| {
+        match joined.last_mut() {
+            Some(last) if last.east >= p.west => last.east = last.east.max(p.east),
+            _ => joined.push(p),
+        }
+        joined
+    })
 }
 
 /// A comma-separated list of names.
@@ -291,5 +301,11 @@ mod tests {
         // Over a region on both sides: two parts.
         let both = clip(across, BBox { west: -180.0, ..world });
         assert_eq!(both.len(), 2, "{both:?}");
+        // A region across the antimeridian: the world is one part of it, and
+        // a box west of 180° the part past 180° in the region's longitudes.
+        let fiji = BBox { west: 179.5, south: -17.0, east: 180.5, north: -16.0 };
+        assert_eq!(clip(world, fiji), [fiji]);
+        let west = BBox { west: -180.0, south: -17.0, east: -179.5, north: -16.0 };
+        assert_eq!(clip(west, fiji), [BBox { west: 180.0, ..fiji }]);
     }
 }

@@ -16,7 +16,8 @@ const MERCATOR_MAX_LAT: f64 = 85.051_128_779_806_6;
 
 /// The TileJSON of `layer`'s XYZ tiles, served under `base`.
 pub fn document(region: &Region, layer: MapLayer, base: &str) -> Value {
-    let b = region.bounds;
+    // TileJSON's bounds do not wrap: a region across 180° is every longitude.
+    let b = region.bounds.on_the_globe();
     let lat = |l: f64| l.clamp(-MERCATOR_MAX_LAT, MERCATOR_MAX_LAT);
     let mut doc = json!({
         "tilejson": "3.0.0",

@@ -35,7 +35,8 @@ pub fn document(s: &Service, version: Version) -> (&'static str, String) {
 
 fn v130(s: &Service) -> String {
     let url = escape(s.url);
-    let b = s.bounds;
+    // Longitudes within ±180, as the schema's longitudeType requires.
+    let b = s.bounds.on_the_globe();
     let formats: String = MapFormat::ALL.iter().map(|(_, m)| format!("<Format>{m}</Format>")).collect();
     let crs: String = RequestCrs::ALL.iter().map(|(_, n)| format!("<CRS>{n}</CRS>")).collect();
     format!(
@@ -70,7 +71,8 @@ fn v130(s: &Service) -> String {
 
 fn v111(s: &Service) -> String {
     let url = escape(s.url);
-    let b = s.bounds;
+    // Longitudes within ±180, as the schema's longitudeType requires.
+    let b = s.bounds.on_the_globe();
     let formats: String = MapFormat::ALL.iter().map(|(_, m)| format!("<Format>{m}</Format>")).collect();
     let srs: String = RequestCrs::ALL
         .iter()
@@ -121,8 +123,10 @@ fn dcp_111(url: &str) -> String {
     )
 }
 
-/// A `BoundingBox` per CRS, in the CRS's axis order for `version`.
+/// A `BoundingBox` per CRS, in the CRS's axis order for `version` (within
+/// each CRS's domain: longitudes within ±180).
 fn bounding_boxes(b: BBox, version: Version) -> String {
+    let b = b.on_the_globe();
     let (x0, y0) = to_mercator(b.west, b.south);
     let (x1, y1) = to_mercator(b.east, b.north);
     let attr = if version == Version::V130 { "CRS" } else { "SRS" };
@@ -207,6 +211,19 @@ mod tests {
             bounds: BBox { west: -106.0, south: 40.0, east: -105.0, north: 41.0 },
             max_side: 4096,
             heights_16: Quantization::PNG16_HEIGHTS,
+        }
+    }
+
+    #[test]
+    fn a_region_across_the_antimeridian_is_advertised_within_180() {
+        // Regression: a region of 179.5…180.5° E said eastBoundLongitude
+        // 180.5 and an EPSG:3857 box past the world's edge (the schema's
+        // longitudeType is −180…180).
+        let fiji = Service { bounds: BBox { west: 179.5, south: -17.0, east: 180.5, north: -16.0 }, ..service() };
+        for version in [Version::V111, Version::V130] {
+            let (_, xml) = document(&fiji, version);
+            assert!(!xml.contains("180.5") && !xml.contains("179.5"), "{xml}");
+            assert!(xml.contains(r#"minx="-20037508.342789244""#), "{xml}");
         }
     }
 
