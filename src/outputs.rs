@@ -117,14 +117,20 @@ fn destination(path: &Path) -> Result<PathBuf, OutputError> {
     }
 }
 
+/// A hidden name beside `path` that this process gives no other file:
+/// `.NAME.PID.N.SUFFIX`.
+pub fn sibling_name(path: &Path, suffix: &str) -> PathBuf {
+    static COUNT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = COUNT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
+    path.with_file_name(format!(".{name}.{}.{n}.{suffix}", std::process::id()))
+}
+
 /// A new file beside `path` that no other file has the name of (created
 /// here, so nothing existing is written over), open for writing.
 fn scratch_beside(path: &Path) -> std::io::Result<(PathBuf, std::fs::File)> {
-    static COUNT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
     loop {
-        let n = COUNT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let scratch = path.with_file_name(format!(".{name}.{}.{n}.partial", std::process::id()));
+        let scratch = sibling_name(path, "partial");
         match std::fs::OpenOptions::new().write(true).create_new(true).open(&scratch) {
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
             opened => return opened.map(|file| (scratch, file)),

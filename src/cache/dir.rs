@@ -12,21 +12,19 @@ use super::{CacheError, Lock, Lookup, Stored, TileStore, envelope};
 use std::fs;
 use std::io::{self, Write};
 use std::path::{Component, Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, SystemTime};
 
 /// Encoded tiles in a directory.
 #[derive(Debug)]
 pub struct DirStore {
     root: PathBuf,
-    counter: AtomicU64,
 }
 
 impl DirStore {
     /// A store rooted at `root`, unchecked (its directories are made on
     /// first write).
     pub fn new(root: impl Into<PathBuf>) -> DirStore {
-        DirStore { root: root.into(), counter: AtomicU64::new(0) }
+        DirStore { root: root.into() }
     }
 
     /// A store rooted at `root`, made if missing, so that a server or seeder
@@ -56,20 +54,13 @@ impl DirStore {
         self.root.join(key)
     }
 
-    /// A fresh temporary name beside `path`.
-    fn temporary(&self, path: &Path) -> PathBuf {
-        let n = self.counter.fetch_add(1, Ordering::Relaxed);
-        let name = path.file_name().and_then(|f| f.to_str()).unwrap_or("tile");
-        path.with_file_name(format!(".{name}.{}.{n}.tmp", std::process::id()))
-    }
-
     /// Runs `make` on a temporary name beside `key`'s file, then renames it
     /// into place (the temporary is removed if anything fails).
     fn replace(&self, key: &str, make: impl FnOnce(&Path) -> io::Result<()>) -> Result<(), CacheError> {
         let path = self.path(key);
         let dir = path.parent().ok_or_else(|| CacheError::io(&path, io::Error::other("no parent directory")))?;
         fs::create_dir_all(dir).map_err(|e| CacheError::io(dir, e))?;
-        let tmp = self.temporary(&path);
+        let tmp = crate::outputs::sibling_name(&path, "tmp");
         let result = make(&tmp).and_then(|()| fs::rename(&tmp, &path));
         if result.is_err() {
             let _ = fs::remove_file(&tmp);

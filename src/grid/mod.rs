@@ -128,8 +128,13 @@ impl Sector {
     /// True if the two sectors overlap in more than an edge, longitudes
     /// taken modulo 360° (either may reach past ±180°).
     pub fn meets_on_globe(&self, other: &Sector) -> bool {
-        let turned = |turn: f64| Sector { min_lon: self.min_lon + turn, max_lon: self.max_lon + turn, ..*self };
-        [0.0, 360.0, -360.0].into_iter().any(|turn| turned(turn).intersects(other))
+        self.turns().iter().any(|s| s.intersects(other))
+    }
+
+    /// The sector as it is and turned a world east and west: where a sector
+    /// reaching past ±180° meets sectors within it.
+    pub fn turns(&self) -> [Sector; 3] {
+        [0.0, 360.0, -360.0].map(|turn| Sector { min_lon: self.min_lon + turn, max_lon: self.max_lon + turn, ..*self })
     }
 
     /// True if the point lies in the sector, edges included.

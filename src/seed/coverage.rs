@@ -115,8 +115,7 @@ impl Coverage {
 /// that edge are the inside neighbour's too, and the client never draws it.
 /// Longitudes are taken modulo 360° (a box may reach past ±180°).
 fn box_relation(b: &BBox, s: &Sector) -> Relation {
-    let turned =
-        [0.0, 360.0, -360.0].map(|turn| Sector { min_lon: b.west + turn, max_lon: b.east + turn, ..b.sector() });
+    let turned = b.sector().turns();
     let holds = |b: &Sector| {
         b.min_lon <= s.min_lon && s.max_lon <= b.max_lon && b.min_lat <= s.min_lat && s.max_lat <= b.max_lat
     };
