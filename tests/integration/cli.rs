@@ -84,10 +84,14 @@ fn a_missing_data_file_is_named_and_nothing_is_written() {
 
 #[test]
 fn bad_arguments_are_explained() {
-    let out = sylva(&["tile", "--layer", "relief", "--level", "3", "--row", "1", "--col", "1", "-o", "/tmp/x"]);
-    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown layer \"relief\""));
-    let out = sylva(&["build", "--layer", "cem", "--bbox", "1,2,3", "--width", "4", "--height", "4", "-o", "/tmp/x"]);
-    assert!(String::from_utf8_lossy(&out.stderr).contains("four numbers"));
+    let dir = TempDir::new("cli-bad-arguments");
+    let x = dir.join("x.tif");
+    let x = x.to_str().unwrap();
+    let out = sylva(&["tile", "--layer", "relief", "--level", "3", "--row", "1", "--col", "1", "-o", x]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("unknown layer \"relief\""), "{out:?}");
+    let out = sylva(&["build", "--layer", "cem", "--bbox", "1,2,3", "--width", "4", "--height", "4", "-o", x]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("four numbers"), "{out:?}");
+    assert!(!dir.join("x.tif").exists());
     let out = sylva(&["info"]);
     assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("canopy"));
     // The file and the cause, the cause said once.
@@ -95,14 +99,15 @@ fn bad_arguments_are_explained() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("/no/such/sylva.toml") && err.matches("No such file").count() == 1, "{err}");
     let valley = common::repo().join("config/paths/demo_valley.toml");
+    let never = dir.join("never");
     let fly = |more: &[&str]| {
-        let out = sylva(&[&["fly", "--path", valley.to_str().unwrap(), "--out", "/tmp/sylva-never"], more].concat());
+        let out = sylva(&[&["fly", "--path", valley.to_str().unwrap(), "--out", never.to_str().unwrap()], more].concat());
         String::from_utf8_lossy(&out.stderr).into_owned()
     };
     assert!(fly(&["--budget-ms", "20"]).contains("apply to --lod budget only"));
     assert!(fly(&["--max-level", "99"]).contains("99 is not in 0..=30"));
+    assert!(!never.exists());
     // An output may not overwrite an input.
-    let dir = TempDir::new("cli-clobber");
     let config = dir.join("c.toml");
     std::fs::write(&config, "[grid]\n").unwrap();
     let c = config.to_str().unwrap();
