@@ -118,13 +118,19 @@ fn destination(path: &Path) -> Result<PathBuf, OutputError> {
 }
 
 /// A hidden name beside `path` that this process gives no other file:
-/// `.NAME.PID.N.SUFFIX`.
+/// `.NAME.PID.N.SUFFIX`, NAME cut to [`SIBLING_NAME_BYTES`] so that a name
+/// near the file system's 255-byte limit still has a sibling.
 pub fn sibling_name(path: &Path, suffix: &str) -> PathBuf {
     static COUNT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let n = COUNT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
-    path.with_file_name(format!(".{name}.{}.{n}.{suffix}", std::process::id()))
+    let cut = (0..=SIBLING_NAME_BYTES.min(name.len())).rev().find(|&i| name.is_char_boundary(i)).unwrap_or(0);
+    path.with_file_name(format!(".{}.{}.{n}.{suffix}", &name[..cut], std::process::id()))
 }
+
+/// Most bytes of a name kept in its sibling's: room for the process id,
+/// the count and the suffix within 255.
+const SIBLING_NAME_BYTES: usize = 200;
 
 /// A new file beside `path` that no other file has the name of (created
 /// here, so nothing existing is written over), open for writing.
@@ -218,6 +224,19 @@ mod tests {
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1, "no partial file is left");
         write_all(&[(&a, b"new"), (&b, b"png")]).unwrap();
         assert_eq!((std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap()), (b"new".to_vec(), b"png".to_vec()));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_name_at_the_file_systems_limit_is_written() {
+        // Regression: the scratch name, 20 bytes longer, was refused.
+        let dir = scratch("long");
+        let out = dir.join(format!("{}.tif", "é".repeat(125)));
+        assert_eq!(out.file_name().unwrap().len(), 254);
+        check(&[], &[&out]).unwrap();
+        write_all(&[(&out, b"tif")]).unwrap();
+        assert_eq!(std::fs::read(&out).unwrap(), b"tif");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
