@@ -61,6 +61,9 @@ fn main() {
     let cli = Cli::parse();
     logs(&cli.command);
     if let Err(e) = run(cli.command) {
+        if let Some(usage) = e.downcast_ref::<clap::Error>() {
+            usage.exit();
+        }
         sylva::outputs::say(format_args!("sylva: {}", explain(&e)));
         std::process::exit(1);
     }

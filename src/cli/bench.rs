@@ -133,9 +133,9 @@ pub struct RaycastArgs {
     /// The real-data region (default: config/examples/rmnp.toml).
     #[arg(long)]
     rmnp: Option<PathBuf>,
-    /// Image size, WxH.
-    #[arg(long, default_value = "1280x1024")]
-    size: String,
+    /// Image size, WxH (each 1 to 16384).
+    #[arg(long, default_value = "1280x1024", value_parser = super::flight::size)]
+    size: (u32, u32),
     /// GPU tile cache budget, MiB (at most 1 TiB).
     #[arg(long, default_value_t = 1024, value_parser = super::flight::gpu_budget_mib())]
     gpu_budget_mib: usize,
@@ -217,7 +217,7 @@ impl RaycastArgs {
     /// The table to stdout, the plot to its file.
     fn run(self) -> Result<()> {
         use sylva::bench::raycast;
-        let size = super::flight::parse_size(&self.size)?;
+        let size = self.size;
         let rmnp = real_region(self.rmnp)?;
         let views = raycast::default_views(&rmnp);
         if let Some(view) = views.iter().find(|v| !v.path.is_file()) {

@@ -1,7 +1,7 @@
 //! The commands that render flights over the tiles: `fly` (headless, a
 //! camera path to PNG frames and statistics) and `view` (in a window).
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use std::path::PathBuf;
 use sylva::client::fly::{self, FlyOptions};
 use sylva::client::render::RayPass;
@@ -179,21 +179,21 @@ impl ViewArgs {
 /// How a flight's frames are rendered and their tiles chosen.
 #[derive(clap::Args)]
 pub struct RenderArgs {
-    /// Image size, WxH.
-    #[arg(long, default_value = "640x480")]
-    size: String,
-    /// `exact` or `linear:STEPS`.
-    #[arg(long, default_value = "exact")]
-    traversal: String,
+    /// Image size, WxH (each 1 to 16384).
+    #[arg(long, default_value = "640x480", value_parser = size)]
+    size: (u32, u32),
+    /// `exact` or `linear:STEPS` (STEPS 1 to 4096).
+    #[arg(long, default_value = "exact", value_parser = traversal)]
+    traversal: sylva::client::raycast::Traversal,
     /// Shadow samples per hit (0: none).
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(0..=256))]
     shadow_steps: u32,
     /// Tile selection: `sse` (refine to --max-error-px) or `budget`
     /// (the most benefit whose predicted frame time fits --budget-ms).
-    #[arg(long, default_value = "sse")]
-    lod: String,
+    #[arg(long, value_enum, default_value_t = Lod::Sse)]
+    lod: Lod,
     /// Frame budget of `--lod budget`, ms [default: 33].
-    #[arg(long)]
+    #[arg(long, value_parser = positive_ms)]
     budget_ms: Option<f64>,
     /// Frames between selections of `--lod budget` (the selection
     /// thread's period).
@@ -240,28 +240,22 @@ impl RenderArgs {
     fn options(&self) -> Result<FlyOptions> {
         let budget_only =
             self.budget_ms.is_some() || self.geomorph || self.select_every != 1 || self.cost_model.is_some();
-        let budget_ms = self.budget_ms.unwrap_or(33.0);
-        let mode = match self.lod.as_str() {
-            "sse" if budget_only => bail!(
-                "--budget-ms, --geomorph, --select-every and --cost-model apply to --lod budget only, not to --lod sse"
-            ),
-            "sse" => fly::LodMode::Sse,
-            "budget" if budget_ms.is_finite() && budget_ms > 0.0 => {
-                fly::LodMode::Budget { budget_ms, select_every: self.select_every, prior: self.prior()? }
-            }
-            "budget" => bail!("--budget-ms {budget_ms} is not a positive number of milliseconds"),
-            other => bail!("unknown --lod {other:?}; expected sse or budget"),
+        let mode = match self.lod {
+            // A usage error, as clap's own are (exit 2).
+            Lod::Sse if budget_only => Err(clap::Error::raw(
+                clap::error::ErrorKind::ArgumentConflict,
+                "--budget-ms, --geomorph, --select-every and --cost-model apply to --lod budget only, not to --lod sse\n",
+            ))?,
+            Lod::Sse => fly::LodMode::Sse,
+            Lod::Budget => fly::LodMode::Budget {
+                budget_ms: self.budget_ms.unwrap_or(33.0),
+                select_every: self.select_every,
+                prior: self.prior()?,
+            },
         };
-        let traversal = fly::parse_traversal(&self.traversal).ok_or_else(|| {
-            anyhow::anyhow!(
-                "bad --traversal {:?}; expected exact or linear:STEPS, STEPS 1 to {}",
-                self.traversal,
-                fly::MAX_LINEAR_STEPS
-            )
-        })?;
         Ok(FlyOptions {
-            size: parse_size(&self.size)?,
-            traversal,
+            size: self.size,
+            traversal: self.traversal,
             shadow_steps: self.shadow_steps,
             lod: sylva::client::quadtree::LodRule { max_error_px: self.max_error_px, max_level: self.max_level },
             mode,
@@ -281,19 +275,40 @@ impl RenderArgs {
     }
 }
 
-/// Parses `WxH`.
-pub fn parse_size(text: &str) -> Result<(u32, u32)> {
+/// `--lod`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Lod {
+    /// Refine to `--max-error-px`.
+    Sse,
+    /// The most benefit whose predicted frame time fits `--budget-ms`.
+    Budget,
+}
+
+/// `--size`: `WxH`, each 1 to 16384.
+pub fn size(text: &str) -> Result<(u32, u32), String> {
     let parsed = text.split_once(['x', 'X']).and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)));
     match parsed {
         Some((w, h)) if (1..=16384).contains(&w) && (1..=16384).contains(&h) => Ok((w, h)),
-        _ => bail!("bad size {text:?}; expected WxH, each 1 to 16384, e.g. 640x480"),
+        _ => Err(format!("{text:?} is not WxH, each 1 to 16384, e.g. 640x480")),
     }
+}
+
+/// `--traversal`: `exact` or `linear:STEPS`.
+fn traversal(text: &str) -> Result<sylva::client::raycast::Traversal, String> {
+    let steps = fly::MAX_LINEAR_STEPS;
+    fly::parse_traversal(text).ok_or_else(|| format!("{text:?} is not exact or linear:STEPS, STEPS 1 to {steps}"))
 }
 
 /// A finite number of pixels above 0.
 fn positive_px(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
-        _ => Err(format!("{text:?} is not a positive number of pixels")),
-    }
+    positive(text).ok_or_else(|| format!("{text:?} is not a positive number of pixels"))
+}
+
+/// A finite number of milliseconds above 0.
+fn positive_ms(text: &str) -> Result<f64, String> {
+    positive(text).ok_or_else(|| format!("{text:?} is not a positive number of milliseconds"))
+}
+
+fn positive(text: &str) -> Option<f64> {
+    text.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0)
 }

@@ -43,7 +43,9 @@ impl HeightEnvelope {
     /// The lowest ground and highest CEM over `sector`, widened (see the
     /// module doc); `None` where no coarse sample lies near it.
     pub fn range(&self, sector: &Sector) -> Option<(f64, f64)> {
-        let ranges = self.tiles.iter().filter_map(|t| t.range(sector));
+        // A sector past ±180° meets tiles of the other side turned.
+        let turns = sector.turns();
+        let ranges = self.tiles.iter().flat_map(|t| turns.iter().filter_map(|s| t.range(s)));
         ranges.reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)))
     }
 }
@@ -54,9 +56,15 @@ impl HeightEnvelope {
 pub fn covering(grid: &TileGrid, b: &BBox) -> Vec<TileId> {
     let extent = (b.east - b.west).max(b.north - b.south);
     let level = (0..30).take_while(|&l| grid.tile_delta_deg(l) >= extent).last().unwrap_or(0);
-    let (a, z) = (grid.tile_containing(b.west, b.south, level), grid.tile_containing(b.east, b.north, level));
-    let rows = a.row.min(z.row)..=a.row.max(z.row);
-    rows.flat_map(|row| (a.col.min(z.col)..=a.col.max(z.col)).map(move |col| TileId::new(level, row, col))).collect()
+    // A region across ±180° is two parts on the globe, a column of tiles
+    // each side of the antimeridian.
+    let parts = b.clipped_to(&BBox::WORLD);
+    let tiles = parts.into_iter().flat_map(|p| {
+        let (a, z) = (grid.tile_containing(p.west, p.south, level), grid.tile_containing(p.east, p.north, level));
+        let rows = a.row..=z.row;
+        rows.flat_map(move |row| (a.col..=z.col).map(move |col| TileId::new(level, row, col)))
+    });
+    tiles.collect()
 }
 
 impl Coarse {
@@ -115,5 +123,17 @@ mod tests {
         assert!(finite(&fine.dem).iter().all(|&h| h >= lo), "ground below {lo}");
         assert!(finite(&fine.cem).iter().all(|&h| h <= hi), "CEM above {hi}");
         assert!(hi - lo < 3000.0, "{lo}..{hi} is a useful bound");
+    }
+
+    #[test]
+    fn a_region_across_the_antimeridian_is_covered_on_both_sides() {
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        let across = BBox { west: 179.5, south: -16.5, east: 180.5, north: -16.0 };
+        let tiles = covering(&grid, &across);
+        let (_, cols) = grid.tiles_on_level(tiles[0].level);
+        let mut columns: Vec<u64> = tiles.iter().map(|t| t.col).collect();
+        columns.dedup();
+        assert_eq!(columns, [0, cols - 1], "{tiles:?}");
+        assert!(grid.tile_delta_deg(tiles[0].level) >= 1.0);
     }
 }

@@ -96,12 +96,11 @@ pub fn select(
     out
 }
 
-/// Whether tile `id` overlaps `area`.
+/// Whether tile `id` overlaps `area`, which may reach past ±180°.
 pub fn touches(grid: &TileGrid, id: TileId, area: &Sector) -> bool {
-    let s = grid.sector(id);
-    // Point-registered edges: a tile whose edge lies on the area's edge
-    // holds data there only on that edge; it is not needed.
-    s.min_lat < area.max_lat && area.min_lat < s.max_lat && s.min_lon < area.max_lon && area.min_lon < s.max_lon
+    // Strictly, as point-registered edges ask: a tile whose edge lies on the
+    // area's edge holds data there only on that edge; it is not needed.
+    area.meets_on_globe(&grid.sector(id))
 }
 
 /// The tile's bounding box in its flat frame: the cast range grown by the
@@ -184,7 +183,7 @@ mod tests {
     #[test]
     fn the_far_side_of_the_globe_is_culled() {
         let camera = Camera::looking(Geodetic::new(10.0, 0.0, 2_000_000.0), 0.0, -90.0, 60.0, (640, 480));
-        let world = BBox { west: -180.0, south: -90.0, east: 180.0, north: 90.0 };
+        let world = BBox::WORLD;
         let s =
             select(&grid(), &world, &camera, &|_| Some((0.0, 1000.0)), &LodRule { max_error_px: 2.0, max_level: 8 });
         assert!(!s.tiles.is_empty());

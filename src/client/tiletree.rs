@@ -220,9 +220,22 @@ mod tests {
     }
 
     #[test]
+    fn a_region_across_the_antimeridian_has_nodes_on_both_sides() {
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        let across = BBox { west: 179.5, south: -17.0, east: 180.5, north: -16.0 };
+        let tree = TileTree::build(&grid, &across, 6, &|_| None).unwrap();
+        let at = |level: u32, east: bool| {
+            let on = |n: &&TreeNode| n.id.level == level && (grid.sector(n.id).min_lon < 0.0) == east;
+            tree.nodes.iter().filter(on).count()
+        };
+        assert_eq!((at(0, false), at(0, true)), (1, 1), "a root each side");
+        assert_eq!(at(6, false), at(6, true), "as many tiles each side");
+    }
+
+    #[test]
     fn a_tree_past_the_cap_is_refused() {
         let grid = TileGrid::new(36.0, 513).unwrap();
-        let world = BBox { west: -180.0, south: -90.0, east: 180.0, north: 90.0 };
+        let world = BBox::WORLD;
         assert_eq!(TileTree::build(&grid, &world, 12, &|_| None).unwrap_err(), TooLarge { max_level: 12 });
     }
 }

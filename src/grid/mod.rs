@@ -137,6 +137,16 @@ impl Sector {
         [0.0, 360.0, -360.0].map(|turn| Sector { min_lon: self.min_lon + turn, max_lon: self.max_lon + turn, ..*self })
     }
 
+    /// `self` as it is or turned a world east or west, whichever overlaps
+    /// `other` most: a region reaching past ±180° as a tile beyond it sees it.
+    pub fn turned_to(&self, other: &Sector) -> Sector {
+        let overlap = |s: &Sector| {
+            let lon = (s.max_lon.min(other.max_lon) - s.min_lon.max(other.min_lon)).max(0.0);
+            lon * (s.max_lat.min(other.max_lat) - s.min_lat.max(other.min_lat)).max(0.0)
+        };
+        self.turns().into_iter().max_by(|a, b| overlap(a).total_cmp(&overlap(b))).unwrap_or(*self)
+    }
+
     /// True if the point lies in the sector, edges included.
     pub fn contains(&self, lon: f64, lat: f64) -> bool {
         (self.min_lat..=self.max_lat).contains(&lat) && (self.min_lon..=self.max_lon).contains(&lon)
@@ -299,6 +309,9 @@ pub struct BBox {
 }
 
 impl BBox {
+    /// Every longitude and latitude.
+    pub const WORLD: BBox = BBox { west: -180.0, south: -90.0, east: 180.0, north: 90.0 };
+
     /// Parses `W,S,E,N`.
     pub fn parse(text: &str) -> Result<BBox, GridError> {
         let v: Vec<f64> = text
@@ -328,6 +341,28 @@ impl BBox {
             true => BBox { west, east, ..*self },
             false => BBox { west: -180.0, east: 180.0, ..*self },
         }
+    }
+
+    /// The parts of `self` within `bounds`: the box as it is and turned a
+    /// world east and west (a box may reach across the antimeridian), each
+    /// clipped to `bounds` and in its longitudes, parts that meet joined.
+    pub fn clipped_to(&self, bounds: &BBox) -> Vec<BBox> {
+        let part = |turn: f64| BBox {
+            west: (self.west + turn).max(bounds.west),
+            south: self.south.max(bounds.south),
+            east: (self.east + turn).min(bounds.east),
+            north: self.north.min(bounds.north),
+        };
+        let mut parts: Vec<BBox> =
+            [0.0, -360.0, 360.0].into_iter().map(part).filter(|c| c.west < c.east && c.south < c.north).collect();
+        parts.sort_by(|a, b| a.west.total_cmp(&b.west));
+        parts.into_iter().fold(Vec::new(), |mut joined: Vec<BBox>, p| {
+            match joined.last_mut() {
+                Some(last) if last.east >= p.west => last.east = last.east.max(p.east),
+                _ => joined.push(p),
+            }
+            joined
+        })
     }
 
     /// The same box as a sector.
@@ -570,5 +605,28 @@ mod tests {
         let grid = BBox::parse("0,0,4,2").unwrap().area_grid(4, 2).unwrap();
         assert_eq!(grid.lon.coords(), vec![0.5, 1.5, 2.5, 3.5]);
         assert_eq!(grid.lat.coords(), vec![1.5, 0.5]);
+    }
+
+    #[test]
+    fn a_box_is_clipped_to_bounds_on_both_sides_of_the_antimeridian() {
+        let region = BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 };
+        let world = BBox::WORLD;
+        assert_eq!(world.clipped_to(&region), [region]);
+        let part = BBox { west: 10.1, south: 40.0, east: 20.0, north: 46.4 };
+        assert_eq!(part.clipped_to(&region), [BBox { west: 10.1, south: 46.3, east: 10.25, north: 46.4 }]);
+        assert_eq!(BBox { west: 11.0, south: 46.3, east: 12.0, north: 46.4 }.clipped_to(&region), []);
+        // Across the antimeridian, from 170° E to 170° W, over a region at 175° W.
+        let pacific = BBox { west: -176.0, south: -20.0, east: -174.0, north: -18.0 };
+        let across = BBox { west: 170.0, south: -30.0, east: 190.0, north: 0.0 };
+        assert_eq!(across.clipped_to(&pacific), [pacific]);
+        // Over a region on both sides: two parts.
+        let both = across.clipped_to(&world);
+        assert_eq!(both.len(), 2, "{both:?}");
+        // A region across the antimeridian: the world is one part of it, and
+        // a box west of 180° the part past 180° in the region's longitudes.
+        let fiji = BBox { west: 179.5, south: -17.0, east: 180.5, north: -16.0 };
+        assert_eq!(world.clipped_to(&fiji), [fiji]);
+        let west = BBox { west: -180.0, south: -17.0, east: -179.5, north: -16.0 };
+        assert_eq!(west.clipped_to(&fiji), [BBox { west: 180.0, ..fiji }]);
     }
 }

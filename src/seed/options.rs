@@ -170,7 +170,7 @@ fn coverage(o: &SeedOptions, region: &Region) -> Result<(Coverage, String), Seed
                 let bounds = format!("{},{},{},{}", r.west, r.south, r.east, r.north);
                 SeedError::Usage(format!("--bbox {text}: {why}; the region's bounds are {bounds}"))
             };
-            match clip(b, r)[..] {
+            match b.clipped_to(&r)[..] {
                 [] => Err(usage("does not meet the region")),
                 [part] => Ok((Coverage::Box(part), format!("bbox {text}"))),
                 _ => Err(usage("meets the region on both sides of the antimeridian: give each side its own --bbox")),
@@ -190,29 +190,6 @@ fn coverage(o: &SeedOptions, region: &Region) -> Result<(Coverage, String), Seed
         }
         (None, None) => Ok((Coverage::Box(region.bounds), format!("region bounds {:?}", region.bounds))),
     }
-}
-
-/// The parts of `b` over the region's `bounds` (`b` as given, and a turn
-/// east and west of it, for a box that reaches across the antimeridian),
-/// in the bounds' longitudes, parts that meet joined: tiles beyond the
-/// region's data hold nothing to seed.
-fn clip(b: BBox, bounds: BBox) -> Vec<BBox> {
-    let part = |turn: f64| BBox {
-        west: (b.west + turn).max(bounds.west),
-        south: b.south.max(bounds.south),
-        east: (b.east + turn).min(bounds.east),
-        north: b.north.min(bounds.north),
-    };
-    let mut parts: Vec<BBox> =
-        [0.0, -360.0, 360.0].into_iter().map(part).filter(|c| c.west < c.east && c.south < c.north).collect();
-    parts.sort_by(|a, b| a.west.total_cmp(&b.west));
-    parts.into_iter().fold(Vec::new(), |mut joined: Vec<BBox>, p| {
-        match joined.last_mut() {
-            Some(last) if last.east >= p.west => last.east = last.east.max(p.east),
-            _ => joined.push(p),
-        }
-        joined
-    })
 }
 
 /// A comma-separated list of names.
@@ -284,28 +261,5 @@ mod tests {
         assert!(parse_date("2026-12-01T12:00:00Z").unwrap() > day);
         assert!(parse_date("yesterday").unwrap_err().to_string().contains("--refresh-before"));
         assert!(list("cem,trees", "--layers", Layer::parse, "…").unwrap_err().to_string().contains("\"trees\""));
-    }
-
-    #[test]
-    fn a_box_is_clipped_to_the_region() {
-        let region = BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 };
-        let world = BBox { west: -180.0, south: -90.0, east: 180.0, north: 90.0 };
-        assert_eq!(clip(world, region), [region]);
-        let part = BBox { west: 10.1, south: 40.0, east: 20.0, north: 46.4 };
-        assert_eq!(clip(part, region), [BBox { west: 10.1, south: 46.3, east: 10.25, north: 46.4 }]);
-        assert_eq!(clip(BBox { west: 11.0, south: 46.3, east: 12.0, north: 46.4 }, region), []);
-        // Across the antimeridian, from 170° E to 170° W, over a region at 175° W.
-        let pacific = BBox { west: -176.0, south: -20.0, east: -174.0, north: -18.0 };
-        let across = BBox { west: 170.0, south: -30.0, east: 190.0, north: 0.0 };
-        assert_eq!(clip(across, pacific), [pacific]);
-        // Over a region on both sides: two parts.
-        let both = clip(across, BBox { west: -180.0, ..world });
-        assert_eq!(both.len(), 2, "{both:?}");
-        // A region across the antimeridian: the world is one part of it, and
-        // a box west of 180° the part past 180° in the region's longitudes.
-        let fiji = BBox { west: 179.5, south: -17.0, east: 180.5, north: -16.0 };
-        assert_eq!(clip(world, fiji), [fiji]);
-        let west = BBox { west: -180.0, south: -17.0, east: -179.5, north: -16.0 };
-        assert_eq!(clip(west, fiji), [BBox { west: 180.0, ..fiji }]);
     }
 }

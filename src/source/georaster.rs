@@ -223,7 +223,8 @@ impl GeoRaster {
         let reach = self.reach(grid, scale);
         let pixel = |(lon, lat): (f64, f64)| -> (f64, f64) {
             let lon = self.lon_into_source(lon);
-            let projected = if reach.contains(lon, lat) { g.crs.from_lon_lat(lon, lat) } else { None };
+            let reached = reach.turns().iter().any(|r| r.contains(lon, lat));
+            let projected = if reached { g.crs.from_lon_lat(lon, lat) } else { None };
             match projected {
                 Some((x, y)) => (to_level((x - g.x0) / g.dx), to_level((y - g.y0) / g.dy)),
                 None => (f64::NAN, f64::NAN),
@@ -323,6 +324,7 @@ fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
     let (xa, xb) = (g.x0 - g.overhang * g.dx, g.x0 + (w as f64 - 1.0 + g.overhang) * g.dx);
     let (ya, yb) = (g.y0 - g.overhang * g.dy, g.y0 + (h as f64 - 1.0 + g.overhang) * g.dy);
     let mut s = Sector { min_lat: f64::MAX, max_lat: f64::MIN, min_lon: f64::MAX, max_lon: f64::MIN };
+    let mut lons = Vec::new();
     const STEPS: usize = 64;
     for i in 0..=STEPS {
         let f = i as f64 / STEPS as f64;
@@ -330,13 +332,18 @@ fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
             [(xa + f * (xb - xa), ya), (xa + f * (xb - xa), yb), (xa, ya + f * (yb - ya)), (xb, ya + f * (yb - ya))];
         for (x, y) in edge {
             if let Some((lon, lat)) = g.crs.to_lon_lat(x, y) {
-                s.min_lon = s.min_lon.min(lon);
-                s.max_lon = s.max_lon.max(lon);
+                lons.push(lon);
                 s.min_lat = s.min_lat.min(lat);
                 s.max_lat = s.max_lat.max(lat);
             }
         }
     }
+    // A geographic source's longitudes are its own (they may pass 180°);
+    // a projected one's are on the globe, and its box may cross 180°.
+    (s.min_lon, s.max_lon) = match g.crs.is_geographic() {
+        true => lons.iter().fold((s.min_lon, s.max_lon), |(lo, hi), &l| (lo.min(l), hi.max(l))),
+        false => shortest_arc(lons).unwrap_or((s.min_lon, s.max_lon)),
+    };
     // Projected edges bulge between boundary samples: pad by a pixel. A
     // geographic source's edges are its meridians and parallels, exact.
     let pad = if g.crs.is_geographic() { 0.0 } else { g.pixel_deg() };
@@ -347,6 +354,25 @@ fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
         max_lon: s.max_lon + pad,
     };
     to_the_poles(s, g, ((xa, xb), (ya, yb)))
+}
+
+/// The shortest arc of longitudes that holds all of `lons` (in −180…180),
+/// as `(west, east)` with `east` past 180° where it crosses the
+/// antimeridian; every longitude where that arc is half the globe or more
+/// (boundary samples so far apart no longer tell which side is inside).
+/// None without a longitude.
+fn shortest_arc(mut lons: Vec<f64>) -> Option<(f64, f64)> {
+    lons.sort_by(f64::total_cmp);
+    let (&first, &last) = (lons.first()?, lons.last()?);
+    // The widest gap between neighbours, the wrap from last to first too:
+    // the arc is the rest of the circle.
+    let (mut west, mut gap) = (first, first + 360.0 - last);
+    for pair in lons.windows(2) {
+        if pair[1] - pair[0] > gap {
+            (west, gap) = (pair[1], pair[1] - pair[0]);
+        }
+    }
+    Some(if gap > 180.0 { (west, west + 360.0 - gap) } else { (-180.0, 180.0) })
 }
 
 /// `s` reaching each pole that the projected source's box of `(x, y)`
@@ -466,5 +492,21 @@ mod tests {
         let across = ones(4326, (179.505, -16.005), (100, 100), 0.01);
         assert_eq!(covered(&across, "-179.9,-16.9,-179.6,-16.1", (8, 8)), 1.0);
         assert_eq!(covered(&across, "179.6,-16.9,179.9,-16.1", (8, 8)), 1.0);
+    }
+
+    #[test]
+    fn a_projected_source_across_the_antimeridian_has_bounds_across_it() {
+        // Regression: 120 km of UTM zone 60 S across 180° had bounds of
+        // every longitude, so a seed planned thousands of empty tiles.
+        let raster = ones(32760, (760_500.0, 8_290_500.0), (120, 120), 1000.0);
+        let b = raster.bounds();
+        assert!(b.min_lon > 179.0 && b.min_lon < 179.5 && b.max_lon > 180.4 && b.max_lon < 181.0, "{b:?}");
+        assert_eq!(covered(&raster, "179.7,-16.2,179.9,-16.0", (8, 8)), 1.0);
+        assert_eq!(covered(&raster, "-179.9,-16.2,-179.7,-16.0", (8, 8)), 1.0);
+        assert_eq!(covered(&raster, "-179.0,-16.2,-178.8,-16.0", (8, 8)), 0.0);
+        assert_eq!(shortest_arc(vec![170.0, -170.0, 175.0]), Some((170.0, 190.0)));
+        assert_eq!(shortest_arc(vec![-10.0, 10.0]), Some((-10.0, 10.0)));
+        assert_eq!(shortest_arc(vec![-120.0, 0.0, 120.0]), Some((-180.0, 180.0)), "no side is inside");
+        assert_eq!(shortest_arc(Vec::new()), None);
     }
 }

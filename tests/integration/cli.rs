@@ -101,7 +101,8 @@ fn bad_arguments_are_explained() {
     let valley = common::repo().join("config/paths/demo_valley.toml");
     let never = dir.join("never");
     let fly = |more: &[&str]| {
-        let out = sylva(&[&["fly", "--path", valley.to_str().unwrap(), "--out", never.to_str().unwrap()], more].concat());
+        let out =
+            sylva(&[&["fly", "--path", valley.to_str().unwrap(), "--out", never.to_str().unwrap()], more].concat());
         String::from_utf8_lossy(&out.stderr).into_owned()
     };
     assert!(fly(&["--budget-ms", "20"]).contains("apply to --lod budget only"));
@@ -342,14 +343,21 @@ fn a_build_with_no_data_says_so() {
 
 #[test]
 fn flight_options_out_of_range_are_refused_before_any_work() {
-    // Regression: `--hold-ms inf` held the first frame for ever.
+    // Regression: `--hold-ms inf` held the first frame for ever. Each is a
+    // usage error, exit 2 (some were 1).
     for (args, why) in [
         (&["--hold-ms", "inf"][..], "is not 0 to 60000 milliseconds"),
         (&["--hold-ms=-1"][..], "is not 0 to 60000 milliseconds"),
         (&["--traversal", "linear:0"][..], "STEPS 1 to 4096"),
+        (&["--size", "0x10"][..], "each 1 to 16384"),
+        (&["--lod", "fastest"][..], "possible values: sse, budget"),
+        (&["--lod", "budget", "--budget-ms", "0"][..], "not a positive number of milliseconds"),
+        (&["--geomorph"][..], "apply to --lod budget only"),
     ] {
         let out = sylva(&[&["fly", "--path", "nowhere.toml", "--out", "/nonexistent/out"][..], args].concat());
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(!out.status.success() && err.contains(why), "{args:?}: {err}");
+        assert!(out.status.code() == Some(2) && err.contains(why), "{args:?}: {:?} {err}", out.status);
     }
+    let out = sylva(&["bench", "raycast", "--size", "640"]);
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
 }

@@ -1,6 +1,6 @@
 //! Helpers shared by the integration tests.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use sylva::raster::Raster;
 use sylva::region::Region;
 
@@ -83,6 +83,18 @@ impl Drop for TempDir {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
     }
+}
+
+/// The share of a PNG's pixels in the `columns` (fractions of its width)
+/// that are not the sky's colour.
+pub fn ground_share(file: &Path, columns: std::ops::Range<f64>) -> f64 {
+    let image = image::open(file).unwrap_or_else(|e| panic!("{}: {e}", file.display())).to_rgba8();
+    let sky = sylva::client::reference::rgba(sylva::client::raycast::SKY);
+    let is_sky = |p: &image::Rgba<u8>| p.0.iter().zip(sky).all(|(&a, b)| a.abs_diff(b) <= 2);
+    let width = f64::from(image.width());
+    let inside = |x: u32| columns.contains(&((f64::from(x) + 0.5) / width));
+    let pixels: Vec<_> = image.enumerate_pixels().filter(|(x, _, _)| inside(*x)).map(|(_, _, p)| p).collect();
+    pixels.iter().filter(|p| !is_sky(p)).count() as f64 / pixels.len() as f64
 }
 
 /// A region over in-memory rasters in EPSG:4326: `dem` and, optionally, a

@@ -552,12 +552,17 @@ fn the_antimeridian_and_the_poles_have_no_seams() {
     let grid = small_grid();
     let down = |lon, lat, height| Camera::looking(Geodetic::new(lon, lat, height), 0.0, -90.0, 40.0, (128, 128));
     let antimeridian = down(180.0, 10.0, 60_000.0);
-    let box_ = sylva::grid::BBox { west: -180.0, south: 0.0, east: 180.0, north: 20.0 };
-    let tiles = selected(&grid, box_, &antimeridian);
-    let west = tiles.iter().filter(|t| t.frame.sector.max_lon > 179.0).count();
-    let east = tiles.iter().filter(|t| t.frame.sector.min_lon < -179.0).count();
-    assert!(west > 0 && east > 0, "tiles on both sides: {west} west, {east} east");
-    assert_eq!(assert_whole_view("antimeridian", &tiles, &antimeridian), 0, "no crack to fill off the poles");
+    // A region over every longitude, and one across 180° whose east is past
+    // it (as a DEM of 179.5…180.5° E has): the tiles west of 180° hold it.
+    let world = sylva::grid::BBox { west: -180.0, south: 0.0, east: 180.0, north: 20.0 };
+    let across = sylva::grid::BBox { west: 179.5, south: 9.5, east: 180.5, north: 10.5 };
+    for box_ in [world, across] {
+        let tiles = selected(&grid, box_, &antimeridian);
+        let west = tiles.iter().filter(|t| t.frame.sector.max_lon > 179.0).count();
+        let east = tiles.iter().filter(|t| t.frame.sector.min_lon < -179.0).count();
+        assert!(west > 0 && east > 0, "{box_:?}: tiles on both sides: {west} west, {east} east");
+        assert_eq!(assert_whole_view("antimeridian", &tiles, &antimeridian), 0, "no crack to fill off the poles");
+    }
 
     for (name, lat) in [("north pole", 90.0), ("south pole", -90.0)] {
         let camera = down(0.0, lat, 3_000_000.0);

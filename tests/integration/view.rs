@@ -61,14 +61,6 @@ fn rows(out: &Path) -> Vec<String> {
     text.lines().skip(1).map(str::to_string).collect()
 }
 
-/// Pixels of a PNG that are not the sky's colour.
-fn ground_share(file: &Path) -> f64 {
-    let image = image::open(file).unwrap_or_else(|e| panic!("{}: {e}", file.display())).to_rgba8();
-    let sky = sylva::client::reference::rgba(sylva::client::raycast::SKY);
-    let is_sky = |p: &image::Rgba<u8>| p.0.iter().zip(sky).all(|(&a, b)| a.abs_diff(b) <= 2);
-    image.pixels().filter(|p| !is_sky(p)).count() as f64 / image.pixels().len() as f64
-}
-
 #[test]
 fn a_scripted_view_closes_after_its_frames_with_statistics_and_the_last_frame() {
     let display = VirtualDisplay::start();
@@ -79,7 +71,7 @@ fn a_scripted_view_closes_after_its_frames_with_statistics_and_the_last_frame() 
     assert!(String::from_utf8_lossy(&output.stdout).starts_with("4 frames"));
     assert_eq!(rows(&out).len(), 4);
     // The default start looks down over the demo valley: mostly ground.
-    let share = ground_share(&out.join("view_00003.png"));
+    let share = common::ground_share(&out.join("view_00003.png"), 0.0..1.0);
     assert!(share > 0.5, "{share}");
 }
 
@@ -157,7 +149,7 @@ fn a_view_starts_on_a_path_and_flies_under_a_budget() {
         let predicted: f64 = row.split(',').nth(column).unwrap().parse().unwrap();
         assert!(predicted > 0.0, "{row}");
     }
-    assert!(ground_share(&out.join("view_00002.png")) > 0.2);
+    assert!(common::ground_share(&out.join("view_00002.png"), 0.0..1.0) > 0.2);
 }
 
 #[test]

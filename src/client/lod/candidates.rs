@@ -122,7 +122,7 @@ pub fn candidates(scope: &Scope) -> Candidates {
         let sector = scope.grid.sector(id);
         // Strictly: a tile whose edge lies on the area's edge holds data
         // only along that edge, which the tile inside holds too.
-        if !sector.intersects(&area) {
+        if !area.meets_on_globe(&sector) {
             continue;
         }
         let (lo, hi) = (scope.range)(id).unwrap_or(UNKNOWN_RANGE_M);
@@ -272,8 +272,10 @@ fn drawable(frame: &TileFrame, bounds: &BBox) -> bool {
 }
 
 /// The part of `sector` inside the region (a coarse tile holds data only
-/// there), and its share of the sector's area.
+/// there), and its share of the sector's area. A region across ±180° is
+/// taken on the side the sector lies.
 fn inside(sector: &Sector, b: &BBox) -> (Sector, f64) {
+    let b = b.sector().turned_to(sector).bbox();
     let clipped = Sector {
         min_lat: sector.min_lat.max(b.south),
         max_lat: sector.max_lat.min(b.north),
@@ -322,10 +324,14 @@ mod tests {
     use super::*;
 
     fn walk(camera: Camera, cone: Option<Cone>, max_level: u32) -> Candidates {
-        walk_over(camera, (cone, None), max_level, &|_| Some((500.0, 3500.0)))
+        walk_over(DEMO, camera, (cone, None), max_level, &|_| Some((500.0, 3500.0)))
     }
 
+    /// The demo region's bounds.
+    const DEMO: BBox = BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 };
+
     fn walk_over(
+        bounds: BBox,
         camera: Camera,
         (cone, trees): (Option<Cone>, Option<TreeSettings>),
         max_level: u32,
@@ -334,7 +340,7 @@ mod tests {
         let cameras = [camera];
         let scope = Scope {
             grid: TileGrid::new(36.0, 513).unwrap(),
-            bounds: BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 },
+            bounds,
             cameras: &cameras,
             cone,
             fade: (30.0, 0.5, 2.0),
@@ -385,7 +391,7 @@ mod tests {
         // within metres of the camera: the tiles past the edge counted no
         // pixel, were never refined, and a level-5 tile filled the view.
         let camera = Camera::looking(Geodetic::new(10.124, 46.364, 1050.0), 40.0, -35.0, 60.0, (256, 192));
-        let c = walk_over(camera, (None, None), 16, &|_| Some((900.0, 3100.0)));
+        let c = walk_over(DEMO, camera, (None, None), 16, &|_| Some((900.0, 3100.0)));
         let grid = TileGrid::new(36.0, 513).unwrap();
         let parents: std::collections::HashSet<u32> = c.tiles.iter().filter_map(|t| t.parent).collect();
         let leaves = (0..c.tiles.len() as u32).filter(|k| !parents.contains(k)).map(|k| &c.tiles[k as usize]);
@@ -409,7 +415,7 @@ mod tests {
         let range = move |id: TileId| Some(if flank(id) { (1200.0, 3000.0) } else { (900.0, 3000.0) });
         let lon = 10.125 - 150.0 / (111_320.0 * 46.36f64.to_radians().cos());
         let camera = Camera::looking(Geodetic::new(lon, 46.36, 1000.0), 90.0, 10.0, 60.0, (256, 192));
-        let c = walk_over(camera, (None, None), 16, &range);
+        let c = walk_over(DEMO, camera, (None, None), 16, &range);
         let parents: std::collections::HashSet<u32> = c.tiles.iter().filter_map(|t| t.parent).collect();
         let leaves = (0..c.tiles.len() as u32).filter(|k| !parents.contains(k)).map(|k| &c.tiles[k as usize]);
         let above: Vec<&Candidate> = leaves.filter(|t| flank(t.id)).collect();
@@ -453,12 +459,29 @@ mod tests {
     }
 
     #[test]
+    fn a_region_across_the_antimeridian_has_candidates_on_both_sides() {
+        // Regression: tiles west of 180° were compared with a region of
+        // 179.5…180.5° E unturned, and dropped.
+        let across = BBox { west: 179.5, south: -17.0, east: 180.5, north: -16.0 };
+        let camera = Camera::looking(Geodetic::new(180.0, -16.5, 30_000.0), 0.0, -90.0, 60.0, (320, 240));
+        let c = walk_over(across, camera, (None, None), 16, &|_| Some((0.0, 100.0)));
+        let grid = TileGrid::new(36.0, 513).unwrap();
+        let sides = |east: bool| c.tiles.iter().filter(|t| (grid.sector(t.id).min_lon < 0.0) == east).count();
+        assert!(sides(false) > 0 && sides(true) > 0, "{} west of 180°, {} east", sides(false), sides(true));
+        let deepest = |east: bool| {
+            let on_side = c.tiles.iter().filter(|t| (grid.sector(t.id).min_lon < 0.0) == east);
+            on_side.map(|t| t.id.level).max()
+        };
+        assert_eq!(deepest(false), deepest(true), "both sides refined alike under a camera above 180°");
+    }
+
+    #[test]
     fn no_root_shows_samples_larger_than_the_floor() {
         // 250 m above the valley floor (1150 m): a level-7 sample (61 m)
         // would look ~50 px wide at the nearest point, a level-8 one ~25 px.
         let eye = Geodetic::new(10.05, 46.35, 1400.0);
         let camera = Camera::looking(eye, 90.0, -20.0, 60.0, (320, 240));
-        let c = walk_over(camera, (None, None), 13, &|_| Some((1100.0, 1200.0)));
+        let c = walk_over(DEMO, camera, (None, None), 13, &|_| Some((1100.0, 1200.0)));
         let grid = TileGrid::new(36.0, 513).unwrap();
         let holds = |t: &&Candidate| {
             let s = grid.sector(t.id);
@@ -478,7 +501,7 @@ mod tests {
         // 1150 m up, below the middle of the unknown range (4250 m): the
         // ground is measured below the eye, so it faces the camera.
         let camera = Camera::looking(Geodetic::new(10.01, 46.352, 1150.0), 90.0, -8.0, 60.0, (160, 120));
-        let c = walk_over(camera, (None, None), 13, &|_| None);
+        let c = walk_over(DEMO, camera, (None, None), 13, &|_| None);
         let deepest = c.tiles.iter().map(|t| t.id.level).max().unwrap();
         assert!(deepest >= 9, "{deepest}");
         assert!(c.tiles.iter().any(|t| t.seen_px > 100.0));
@@ -501,7 +524,7 @@ mod tests {
         // reaches 420 m, the far fade begins 3.1 km out.
         let camera = Camera::looking(Geodetic::new(10.1, 46.32, 1300.0), 10.0, -10.0, 60.0, (320, 240));
         let flat = |_| Some((1000.0, 1000.0));
-        let walk = |trees| walk_over(camera, (None, trees), 16, &flat).tiles;
+        let walk = |trees| walk_over(DEMO, camera, (None, trees), 16, &flat).tiles;
         let (bare, wooded) = (walk(None), walk(Some(TreeSettings::default())));
         assert_eq!(bare.iter().map(|t| t.id).collect::<Vec<_>>(), wooded.iter().map(|t| t.id).collect::<Vec<_>>());
         let grid = TileGrid::new(36.0, 513).unwrap();
