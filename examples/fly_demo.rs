@@ -20,6 +20,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..Default::default()
     };
     let records = fly::run(&source, &path, &options, 512 << 20)?;
-    println!("{}", fly::summary(&records));
+    println!("{}", fly::summary(&records, options.lod.max_error_px));
     Ok(())
 }

@@ -61,9 +61,11 @@ fn main() {
     let cli = Cli::parse();
     logs(&cli.command);
     if let Err(e) = run(cli.command) {
-        if let Some(usage) = e.downcast_ref::<clap::Error>() {
-            usage.exit();
-        }
+        // A usage error found after parsing reads as clap's own (exit 2).
+        let e = match e.downcast::<clap::Error>() {
+            Ok(usage) => usage.exit(),
+            Err(e) => e,
+        };
         sylva::outputs::say(format_args!("sylva: {}", explain(&e)));
         std::process::exit(1);
     }

@@ -288,11 +288,8 @@ fn uncached_section(b: &ServeBench, base: &str, region: &crate::region::Region) 
 fn nearest_tiles(region: &crate::region::Region, level: u32, n: usize) -> Vec<TileId> {
     let b = region.bounds;
     let (cx, cy) = (0.5 * (b.west + b.east), 0.5 * (b.south + b.north));
-    let (sw, ne) =
-        (region.tiles.tile_containing(b.west, b.south, level), region.tiles.tile_containing(b.east, b.north, level));
     let centre = region.tiles.tile_containing(cx, cy, level);
-    let mut all: Vec<TileId> =
-        (sw.row..=ne.row).flat_map(|r| (sw.col..=ne.col).map(move |c| TileId::new(level, r, c))).collect();
+    let mut all = region.tiles.tiles_over(&b, level);
     let d = |t: &TileId| (t.row as i64 - centre.row as i64).pow(2) + (t.col as i64 - centre.col as i64).pow(2);
     all.sort_by_key(d);
     all.truncate(n);

@@ -55,7 +55,7 @@ pub enum Bench {
         #[arg(long, default_value = "config/paths")]
         paths: PathBuf,
         /// Frames per second of each path's own time (a real-time flight).
-        #[arg(long, default_value_t = 60.0, conflicts_with = "frames")]
+        #[arg(long, default_value_t = 60.0, conflicts_with = "frames", value_parser = fps)]
         fps: f64,
         /// Frames per path instead, spread over it whatever its length.
         #[arg(long)]
@@ -134,7 +134,7 @@ pub struct RaycastArgs {
     #[arg(long)]
     rmnp: Option<PathBuf>,
     /// Image size, WxH (each 1 to 16384).
-    #[arg(long, default_value = "1280x1024", value_parser = super::flight::size)]
+    #[arg(long, default_value = "1280x1024", value_parser = super::flight::size_px)]
     size: (u32, u32),
     /// GPU tile cache budget, MiB (at most 1 TiB).
     #[arg(long, default_value_t = 1024, value_parser = super::flight::gpu_budget_mib())]
@@ -181,9 +181,6 @@ impl Bench {
             Bench::Sse { rmnp, paths, fps, frames } => {
                 let rmnp = real_region(rmnp)?;
                 use sylva::bench::lod_sse::Pace;
-                if !(fps.is_finite() && fps > 0.0) {
-                    anyhow::bail!("--fps {fps}: a positive number of frames a second");
-                }
                 let pace = frames.map_or(Pace::PerSecond(fps), Pace::Frames);
                 super::print(sylva::bench::lod_sse::report(&rmnp, &paths, pace).map_err(anyhow::Error::msg)?)?;
             }
@@ -256,4 +253,9 @@ fn real_region(named: Option<PathBuf>) -> Result<PathBuf> {
         sylva::config::load(Some(path))?;
     }
     Ok(named.unwrap_or_else(|| PathBuf::from(DEFAULT_REAL_REGION)))
+}
+
+/// `--fps`: a finite number above 0.
+fn fps(text: &str) -> Result<f64, String> {
+    super::positive(text).ok_or_else(|| "not a positive number of frames a second".into())
 }

@@ -75,7 +75,7 @@ impl FlyArgs {
             }
             records => records?,
         };
-        super::print(fly::summary(&records))?;
+        super::print(fly::summary(&records, options.lod.max_error_px))?;
         Ok(())
     }
 }
@@ -92,7 +92,7 @@ const MAX_HOLD_MS: f64 = 60_000.0;
 fn hold_ms(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(ms) if (0.0..=MAX_HOLD_MS).contains(&ms) => Ok(ms),
-        _ => Err(format!("{text:?} is not 0 to {MAX_HOLD_MS} milliseconds")),
+        _ => Err(format!("not 0 to {MAX_HOLD_MS} milliseconds")),
     }
 }
 
@@ -127,10 +127,12 @@ impl ViewArgs {
         // Watched from before the directory is made: a signal while the
         // view starts closes it as one while it runs does.
         let interrupt = sylva::interrupt::Interrupt::watch();
+        // Bad options are refused before any work.
+        let render = self.render.options()?;
         // Refused here, before the window opens; replaced on closing.
         let mut out = self.out.as_deref().map(|dir| fly::prepare_out_dir(dir, self.overwrite)).transpose()?;
         let earlier = out.as_mut().map(|o| std::mem::take(&mut o.earlier)).unwrap_or_default();
-        let viewed = self.view(interrupt, earlier);
+        let viewed = self.view(render, interrupt, earlier);
         if let (Err(_) | Ok(Some(_)), Some(out)) = (&viewed, out) {
             // Directories made for the view and left empty go.
             out.remove_made();
@@ -144,7 +146,12 @@ impl ViewArgs {
 
     /// Opens the window and views until it closes; the signal that closed
     /// it, if one did.
-    fn view(self, interrupt: sylva::interrupt::Interrupt, earlier: Vec<PathBuf>) -> Result<Option<i32>> {
+    fn view(
+        self,
+        render: FlyOptions,
+        interrupt: sylva::interrupt::Interrupt,
+        earlier: Vec<PathBuf>,
+    ) -> Result<Option<i32>> {
         use sylva::client::view;
         let source = self.tiles.open()?;
         let path = self.path.as_deref().map(sylva::client::path::CameraPath::load).transpose()?;
@@ -153,7 +160,7 @@ impl ViewArgs {
             None => view::default_start(source.as_ref())?,
         };
         let options = view::ViewOptions {
-            render: FlyOptions { overwrite: self.overwrite, ..self.render.options()? },
+            render: FlyOptions { overwrite: self.overwrite, ..render },
             start,
             fov_deg: path.as_ref().map_or(view::FOV_DEG, |p| p.fov_deg),
             sun_ecef: match &path {
@@ -165,13 +172,14 @@ impl ViewArgs {
             out_dir: self.out,
             earlier,
         };
+        let asked_px = options.render.lod.max_error_px;
         match view::run(source.into(), options, interrupt) {
             Err(view::ViewError::Interrupted { signal, kept, records }) => {
-                super::print(fly::summary(&records))?;
+                super::print(fly::summary(&records, asked_px))?;
                 sylva::outputs::say(format_args!("sylva: view closed by signal {signal}{kept}"));
                 Ok(Some(signal))
             }
-            records => super::print(fly::summary(&records?)).map(|()| None),
+            records => super::print(fly::summary(&records?, asked_px)).map(|()| None),
         }
     }
 }
@@ -180,7 +188,7 @@ impl ViewArgs {
 #[derive(clap::Args)]
 pub struct RenderArgs {
     /// Image size, WxH (each 1 to 16384).
-    #[arg(long, default_value = "640x480", value_parser = size)]
+    #[arg(long, default_value = "640x480", value_parser = size_px)]
     size: (u32, u32),
     /// `exact` or `linear:STEPS` (STEPS 1 to 4096).
     #[arg(long, default_value = "exact", value_parser = traversal)]
@@ -188,8 +196,7 @@ pub struct RenderArgs {
     /// Shadow samples per hit (0: none).
     #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u32).range(0..=256))]
     shadow_steps: u32,
-    /// Tile selection: `sse` (refine to --max-error-px) or `budget`
-    /// (the most benefit whose predicted frame time fits --budget-ms).
+    /// Tile selection.
     #[arg(long, value_enum, default_value_t = Lod::Sse)]
     lod: Lod,
     /// Frame budget of `--lod budget`, ms [default: 33].
@@ -241,11 +248,11 @@ impl RenderArgs {
         let budget_only =
             self.budget_ms.is_some() || self.geomorph || self.select_every != 1 || self.cost_model.is_some();
         let mode = match self.lod {
-            // A usage error, as clap's own are (exit 2).
-            Lod::Sse if budget_only => Err(clap::Error::raw(
-                clap::error::ErrorKind::ArgumentConflict,
-                "--budget-ms, --geomorph, --select-every and --cost-model apply to --lod budget only, not to --lod sse\n",
-            ))?,
+            Lod::Sse if budget_only => {
+                return Err(super::usage(
+                    "--budget-ms, --geomorph, --select-every and --cost-model apply to --lod budget only, not to --lod sse",
+                ));
+            }
             Lod::Sse => fly::LodMode::Sse,
             Lod::Budget => fly::LodMode::Budget {
                 budget_ms: self.budget_ms.unwrap_or(33.0),
@@ -285,30 +292,26 @@ enum Lod {
 }
 
 /// `--size`: `WxH`, each 1 to 16384.
-pub fn size(text: &str) -> Result<(u32, u32), String> {
+pub fn size_px(text: &str) -> Result<(u32, u32), String> {
     let parsed = text.split_once(['x', 'X']).and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)));
     match parsed {
         Some((w, h)) if (1..=16384).contains(&w) && (1..=16384).contains(&h) => Ok((w, h)),
-        _ => Err(format!("{text:?} is not WxH, each 1 to 16384, e.g. 640x480")),
+        _ => Err("not WxH, each 1 to 16384, e.g. 640x480".into()),
     }
 }
 
 /// `--traversal`: `exact` or `linear:STEPS`.
 fn traversal(text: &str) -> Result<sylva::client::raycast::Traversal, String> {
     let steps = fly::MAX_LINEAR_STEPS;
-    fly::parse_traversal(text).ok_or_else(|| format!("{text:?} is not exact or linear:STEPS, STEPS 1 to {steps}"))
+    fly::parse_traversal(text).ok_or_else(|| format!("not exact or linear:STEPS, STEPS 1 to {steps}"))
 }
 
 /// A finite number of pixels above 0.
 fn positive_px(text: &str) -> Result<f64, String> {
-    positive(text).ok_or_else(|| format!("{text:?} is not a positive number of pixels"))
+    super::positive(text).ok_or_else(|| "not a positive number of pixels".into())
 }
 
 /// A finite number of milliseconds above 0.
 fn positive_ms(text: &str) -> Result<f64, String> {
-    positive(text).ok_or_else(|| format!("{text:?} is not a positive number of milliseconds"))
-}
-
-fn positive(text: &str) -> Option<f64> {
-    text.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0)
+    super::positive(text).ok_or_else(|| "not a positive number of milliseconds".into())
 }

@@ -18,3 +18,14 @@ pub fn print(text: impl std::fmt::Display) -> anyhow::Result<()> {
         written => Ok(written?),
     }
 }
+
+/// A usage error found after parsing (an option that does not apply, or a
+/// box outside the region): reported as clap's own are, exit status 2.
+pub fn usage(message: impl std::fmt::Display) -> anyhow::Error {
+    clap::Error::raw(clap::error::ErrorKind::ValueValidation, format!("{message}\n")).into()
+}
+
+/// A finite number above 0, if `text` is one.
+pub fn positive(text: &str) -> Option<f64> {
+    text.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0)
+}

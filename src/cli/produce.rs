@@ -1,7 +1,7 @@
 //! The commands that make files from a region: `tile`, `build`, `canopy`
 //! and `info`.
 
-use anyhow::{Result, bail};
+use anyhow::Result;
 use std::path::{Path, PathBuf};
 use sylva::cem::Layer;
 use sylva::encode::Format;
@@ -19,11 +19,11 @@ struct ProductArgs {
     #[arg(long)]
     config: Option<PathBuf>,
     /// dem, cover, canopy, cem, surface, max4 or max32.
-    #[arg(long)]
-    layer: String,
+    #[arg(long, value_parser = layer)]
+    layer: Layer,
     /// bil16, bil32, png16 or tiff.
-    #[arg(long, default_value = "tiff")]
-    format: String,
+    #[arg(long, default_value = "tiff", value_parser = format)]
+    format: Format,
     /// Output file.
     #[arg(short, long)]
     output: PathBuf,
@@ -38,8 +38,7 @@ impl ProductArgs {
         let inputs = sylva::config::input_files(self.config.as_deref())?;
         outputs::check(&inputs.iter().map(PathBuf::as_path).collect::<Vec<_>>(), &[&self.output])?;
         let region = sylva::config::load(self.config.as_deref())?;
-        let (layer, format) = (parse_layer(&self.layer)?, parse_format(&self.format)?);
-        let product = product(&region, layer, format)?;
+        let product = product(&region, self.layer, self.format)?;
         abandon.writing(|| write(&self.output, &product))
     }
 }
@@ -81,8 +80,8 @@ pub struct BuildArgs {
     #[command(flatten)]
     product: ProductArgs,
     /// W,S,E,N in degrees (default: the region's bounds).
-    #[arg(long, allow_hyphen_values = true)]
-    bbox: Option<String>,
+    #[arg(long, allow_hyphen_values = true, value_parser = bbox)]
+    bbox: Option<BBox>,
     /// Samples per row; the outer samples lie on the box edges.
     #[arg(long)]
     width: usize,
@@ -93,9 +92,8 @@ pub struct BuildArgs {
 
 impl BuildArgs {
     pub fn run(self) -> Result<()> {
-        let bbox = self.bbox.as_deref().map(BBox::parse).transpose()?;
         self.product.make(|region, layer, format| {
-            let bbox = bbox.unwrap_or(region.bounds);
+            let bbox = self.bbox.unwrap_or(region.bounds);
             in_region(region, &bbox, "--bbox")?;
             Ok(produce::area(region, bbox, self.width, self.height, layer, format)?)
         })
@@ -185,22 +183,27 @@ fn in_region(region: &Region, area: &BBox, what: &str) -> Result<()> {
     let r = region.bounds;
     match area.meets(&r) {
         true => Ok(()),
-        false => bail!("{what} does not meet the region; its bounds are {},{},{},{}", r.west, r.south, r.east, r.north),
+        false => Err(super::usage(format_args!(
+            "{what} does not meet the region; its bounds are {},{},{},{}",
+            r.west, r.south, r.east, r.north
+        ))),
     }
 }
 
-fn parse_layer(text: &str) -> Result<Layer> {
-    match Layer::parse(text) {
-        Some(l) => Ok(l),
-        None => bail!("unknown layer {text:?}; expected one of dem, cover, canopy, cem, surface, max4, max32"),
-    }
+/// `--layer`.
+fn layer(text: &str) -> Result<Layer, String> {
+    Layer::parse(text)
+        .ok_or_else(|| "unknown layer; expected one of dem, cover, canopy, cem, surface, max4, max32".into())
 }
 
-fn parse_format(text: &str) -> Result<Format> {
-    match Format::parse(text) {
-        Some(f) => Ok(f),
-        None => bail!("unknown format {text:?}; expected bil16, bil32, png16 or tiff"),
-    }
+/// `--format`.
+fn format(text: &str) -> Result<Format, String> {
+    Format::parse(text).ok_or_else(|| "unknown format; expected bil16, bil32, png16 or tiff".into())
+}
+
+/// `--bbox`: `W,S,E,N`.
+fn bbox(text: &str) -> Result<BBox, String> {
+    BBox::parse(text).map_err(|e| e.to_string())
 }
 
 /// Writes the product atomically and reports it.

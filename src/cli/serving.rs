@@ -132,6 +132,7 @@ impl SeedArgs {
                 sylva::outputs::say(format_args!("sylva: {e}"));
                 std::process::exit(128 + signal)
             }
+            Err(sylva::seed::SeedError::Usage(why)) => return Err(super::usage(why)),
             report => report?,
         };
         super::print(report.text)?;

@@ -56,15 +56,7 @@ impl HeightEnvelope {
 pub fn covering(grid: &TileGrid, b: &BBox) -> Vec<TileId> {
     let extent = (b.east - b.west).max(b.north - b.south);
     let level = (0..30).take_while(|&l| grid.tile_delta_deg(l) >= extent).last().unwrap_or(0);
-    // A region across ±180° is two parts on the globe, a column of tiles
-    // each side of the antimeridian.
-    let parts = b.clipped_to(&BBox::WORLD);
-    let tiles = parts.into_iter().flat_map(|p| {
-        let (a, z) = (grid.tile_containing(p.west, p.south, level), grid.tile_containing(p.east, p.north, level));
-        let rows = a.row..=z.row;
-        rows.flat_map(move |row| (a.col..=z.col).map(move |col| TileId::new(level, row, col)))
-    });
-    tiles.collect()
+    grid.tiles_over(b, level)
 }
 
 impl Coarse {
@@ -123,6 +115,23 @@ mod tests {
         assert!(finite(&fine.dem).iter().all(|&h| h >= lo), "ground below {lo}");
         assert!(finite(&fine.cem).iter().all(|&h| h <= hi), "CEM above {hi}");
         assert!(hi - lo < 3000.0, "{lo}..{hi} is a useful bound");
+    }
+
+    #[test]
+    fn heights_are_read_across_the_antimeridian() {
+        // A coarse tile each side of 180°: 100 m west of it, 900 m east.
+        let grid = TileGrid::new(36.0, 65).unwrap();
+        let flat = |id: TileId, h: f32| {
+            let n = grid.samples() as usize;
+            Coarse { sector: grid.sector(id), samples: n, ground: vec![h; n * n], cem: vec![h; n * n] }
+        };
+        let (_, cols) = grid.tiles_on_level(0);
+        let envelope =
+            HeightEnvelope { tiles: vec![flat(TileId::new(0, 2, cols - 1), 100.0), flat(TileId::new(0, 2, 0), 900.0)] };
+        let across = Sector { min_lat: -17.0, max_lat: -16.0, min_lon: 179.5, max_lon: 180.5 };
+        assert_eq!(envelope.range(&across), Some((100.0, 900.0)), "both sides of the region");
+        let west_of_it = Sector { min_lon: 170.0, max_lon: 171.0, ..across };
+        assert_eq!(envelope.range(&west_of_it), Some((100.0, 100.0)));
     }
 
     #[test]

@@ -136,12 +136,19 @@ impl TreeBlend {
 /// less than half a pixel.
 pub const PLAIN_ERROR_PX: f64 = 0.5;
 
-/// Whether a tile whose nearest point is `near_m` away and whose terrain
-/// mesh departs from its ground by `mesh_error_m` is drawn plain, without
-/// rays (the renderer's rule, which the LOD cost model predicts too).
-pub fn plain(fade: &Fade, near_m: f64, mesh_error_m: f64) -> bool {
+/// Whether a tile whose nearest point is `near_m` away, whose terrain mesh
+/// departs from its ground by `mesh_error_m` and whose flat frame
+/// misplaces it by up to `flat_error_m` is drawn plain, without rays (the
+/// renderer's rule, which the LOD cost model predicts too): where its
+/// canopy is faded out and its mesh is good to half a pixel, or where the
+/// mesh, at its true place on the ellipsoid, is nearer the truth than the
+/// flat frame rays are cast in (coarse tiles at high latitudes, which a
+/// small GPU cache may hold a view to). Under [`Fade::NONE`] every tile is
+/// ray cast.
+pub fn plain(fade: &Fade, near_m: f64, (mesh_error_m, flat_error_m): (f64, f64)) -> bool {
     let mesh_px = mesh_error_m * fade.focal_px / near_m.max(1e-9);
-    fade.far_factor(near_m) <= 0.0 && mesh_px < PLAIN_ERROR_PX
+    let faded = fade.far_factor(near_m) <= 0.0 && mesh_px < PLAIN_ERROR_PX;
+    fade.end_m().is_finite() && (faded || flat_error_m > mesh_error_m)
 }
 
 fn smoothstep(lo: f64, hi: f64, x: f64) -> f64 {

@@ -29,6 +29,8 @@ pub struct Known {
     pub heights_m: (f64, f64),
     /// How far its terrain mesh departs from its ground, metres.
     pub mesh_error_m: f64,
+    /// How far its flat frame misplaces it, metres.
+    pub flat_error_m: f64,
 }
 
 /// A shared, growing map of what is known of tiles.
@@ -316,7 +318,11 @@ impl TileStore {
     }
 
     fn insert(&mut self, tile: TileData) {
-        let known = Known { heights_m: tile.range.heights_m, mesh_error_m: f64::from(tile.range.mesh_error_m) };
+        let known = Known {
+            heights_m: tile.range.heights_m,
+            mesh_error_m: f64::from(tile.range.mesh_error_m),
+            flat_error_m: tile.flat_error_m(),
+        };
         self.known.insert(tile.id(), known);
         let bytes = tile.gpu_bytes() + tile.hull.vertices.len() * 20 + tile.hull.indices.len() * 4;
         self.bytes += bytes;

@@ -234,6 +234,14 @@ impl TileData {
         self.frame.id
     }
 
+    /// How far its flat frame misplaces any of its points, metres
+    /// ([`TileFrame::flat_error_m`] at its largest height: its base and
+    /// its range).
+    pub fn flat_error_m(&self) -> f64 {
+        let largest_m = self.base_m.abs() + f64::from(self.range.max_m.abs().max(self.range.min_m.abs()));
+        self.frame.flat_error_m(largest_m.max(1.0))
+    }
+
     /// Texel at sample `(i, j)` (may be in the halo).
     pub fn texel(&self, i: i64, j: i64) -> [f32; 4] {
         let b = self.halo as i64;

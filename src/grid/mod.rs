@@ -137,16 +137,6 @@ impl Sector {
         [0.0, 360.0, -360.0].map(|turn| Sector { min_lon: self.min_lon + turn, max_lon: self.max_lon + turn, ..*self })
     }
 
-    /// `self` as it is or turned a world east or west, whichever overlaps
-    /// `other` most: a region reaching past ±180° as a tile beyond it sees it.
-    pub fn turned_to(&self, other: &Sector) -> Sector {
-        let overlap = |s: &Sector| {
-            let lon = (s.max_lon.min(other.max_lon) - s.min_lon.max(other.min_lon)).max(0.0);
-            lon * (s.max_lat.min(other.max_lat) - s.min_lat.max(other.min_lat)).max(0.0)
-        };
-        self.turns().into_iter().max_by(|a, b| overlap(a).total_cmp(&overlap(b))).unwrap_or(*self)
-    }
-
     /// True if the point lies in the sector, edges included.
     pub fn contains(&self, lon: f64, lat: f64) -> bool {
         (self.min_lat..=self.max_lat).contains(&lat) && (self.min_lon..=self.max_lon).contains(&lon)
@@ -245,6 +235,17 @@ impl TileGrid {
         let row = (((lat_deg + 90.0) / d).floor().max(0.0) as u64).min(rows - 1);
         let col = (((lon_deg + 180.0) / d).floor().max(0.0) as u64).min(cols - 1);
         TileId::new(level, row, col)
+    }
+
+    /// The tiles of `level` that hold some of `b` (which may reach past
+    /// ±180°: then those on each side of the antimeridian), row by row.
+    pub fn tiles_over(&self, b: &BBox, level: u32) -> Vec<TileId> {
+        let parts = b.clipped_to(&BBox::WORLD).into_iter();
+        let tiles = parts.flat_map(|p| {
+            let (a, z) = (self.tile_containing(p.west, p.south, level), self.tile_containing(p.east, p.north, level));
+            (a.row..=z.row).flat_map(move |row| (a.col..=z.col).map(move |col| TileId::new(level, row, col)))
+        });
+        tiles.collect()
     }
 
     /// The sample lattice of a tile with `halo` extra samples per side:

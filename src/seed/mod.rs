@@ -59,6 +59,9 @@ pub enum SeedError {
     /// The progress file.
     #[error(transparent)]
     Progress(#[from] progress::ProgressError),
+    /// An output file that may not be written.
+    #[error(transparent)]
+    Output(#[from] crate::outputs::OutputError),
     /// A file of the run.
     #[error("{path}: {source}")]
     Io {

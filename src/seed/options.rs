@@ -152,7 +152,7 @@ impl Job {
         let named = config.files(o.config.as_deref().map_or(Path::new("."), crate::config::base_of));
         let given = [o.config.as_deref(), o.coverage.as_deref(), list].into_iter().flatten();
         let inputs: Vec<&Path> = given.chain(named.iter().map(PathBuf::as_path)).collect();
-        crate::outputs::check(&inputs, &[&files.0, &files.1]).map_err(|e| SeedError::Usage(e.to_string()))?;
+        crate::outputs::check(&inputs, &[&files.0, &files.1])?;
         let what = format!("{} {layers:?} {formats:?} {area} {shard:?}", region.version);
         let fingerprint = format!("{:016x}", crate::cache::digest(what.as_bytes()));
         Ok(Job { config, region, layers, formats, walk, shard, refresh_before, files, fingerprint })

@@ -323,56 +323,63 @@ fn mesh_step(grid: &SampleGrid) -> i64 {
 fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
     let (xa, xb) = (g.x0 - g.overhang * g.dx, g.x0 + (w as f64 - 1.0 + g.overhang) * g.dx);
     let (ya, yb) = (g.y0 - g.overhang * g.dy, g.y0 + (h as f64 - 1.0 + g.overhang) * g.dy);
-    let mut s = Sector { min_lat: f64::MAX, max_lat: f64::MIN, min_lon: f64::MAX, max_lon: f64::MIN };
     let mut lons = Vec::new();
+    let (mut min_lat, mut max_lat) = (f64::MAX, f64::MIN);
     const STEPS: usize = 64;
     for i in 0..=STEPS {
         let f = i as f64 / STEPS as f64;
         let edge =
             [(xa + f * (xb - xa), ya), (xa + f * (xb - xa), yb), (xa, ya + f * (yb - ya)), (xb, ya + f * (yb - ya))];
-        for (x, y) in edge {
-            if let Some((lon, lat)) = g.crs.to_lon_lat(x, y) {
+        for (lon, lat) in edge.into_iter().filter_map(|(x, y)| g.crs.to_lon_lat(x, y)) {
+            if lon.is_finite() && lat.is_finite() {
                 lons.push(lon);
-                s.min_lat = s.min_lat.min(lat);
-                s.max_lat = s.max_lat.max(lat);
+                (min_lat, max_lat) = (min_lat.min(lat), max_lat.max(lat));
             }
         }
     }
-    // A geographic source's longitudes are its own (they may pass 180°);
-    // a projected one's are on the globe, and its box may cross 180°.
-    (s.min_lon, s.max_lon) = match g.crs.is_geographic() {
-        true => lons.iter().fold((s.min_lon, s.max_lon), |(lo, hi), &l| (lo.min(l), hi.max(l))),
-        false => shortest_arc(lons).unwrap_or((s.min_lon, s.max_lon)),
-    };
+    let (min_lon, max_lon) = lon_range(g, &lons, ((xa + xb) / 2.0, (ya + yb) / 2.0)).unwrap_or((f64::MAX, f64::MIN));
     // Projected edges bulge between boundary samples: pad by a pixel. A
     // geographic source's edges are its meridians and parallels, exact.
     let pad = if g.crs.is_geographic() { 0.0 } else { g.pixel_deg() };
-    let s = Sector {
-        min_lat: s.min_lat - pad,
-        max_lat: s.max_lat + pad,
-        min_lon: s.min_lon - pad,
-        max_lon: s.max_lon + pad,
-    };
+    let s = Sector { min_lat: min_lat - pad, max_lat: max_lat + pad, min_lon: min_lon - pad, max_lon: max_lon + pad };
     to_the_poles(s, g, ((xa, xb), (ya, yb)))
 }
 
-/// The shortest arc of longitudes that holds all of `lons` (in −180…180),
-/// as `(west, east)` with `east` past 180° where it crosses the
-/// antimeridian; every longitude where that arc is half the globe or more
-/// (boundary samples so far apart no longer tell which side is inside).
-/// None without a longitude.
-fn shortest_arc(mut lons: Vec<f64>) -> Option<(f64, f64)> {
-    lons.sort_by(f64::total_cmp);
-    let (&first, &last) = (lons.first()?, lons.last()?);
-    // The widest gap between neighbours, the wrap from last to first too:
-    // the arc is the rest of the circle.
-    let (mut west, mut gap) = (first, first + 360.0 - last);
-    for pair in lons.windows(2) {
-        if pair[1] - pair[0] > gap {
-            (west, gap) = (pair[1], pair[1] - pair[0]);
-        }
+/// The longitudes a source spans from those of its boundary, `lons`: a
+/// geographic source's own (they may pass 180°); for a projected one, on
+/// the globe, the arc they enclose ([`enclosed_arc`]) around the
+/// longitude of its box's `centre`. None without a longitude.
+fn lon_range(g: &Georef, lons: &[f64], (x, y): (f64, f64)) -> Option<(f64, f64)> {
+    let (first, rest) = lons.split_first()?;
+    if g.crs.is_geographic() {
+        return Some(rest.iter().fold((*first, *first), |(lo, hi), &l| (lo.min(l), hi.max(l))));
     }
-    Some(if gap > 180.0 { (west, west + 360.0 - gap) } else { (-180.0, 180.0) })
+    let centre = g.crs.to_lon_lat(x, y).map(|(lon, _)| lon);
+    Some(enclosed_arc(lons.to_vec(), centre))
+}
+
+/// The circle of longitudes (`lons` in −180…180) less the widest gap
+/// between neighbours, as `(west, east)` with `east` past 180° where it
+/// crosses the antimeridian. Every longitude where that gap is not clearly
+/// the outside: under twice the next widest (boundary samples so sparse
+/// the gaps tell nothing), or not holding `centre`, the longitude of a
+/// point inside, where one is known.
+fn enclosed_arc(mut lons: Vec<f64>, centre: Option<f64>) -> (f64, f64) {
+    const WORLD: (f64, f64) = (-180.0, 180.0);
+    lons.sort_by(f64::total_cmp);
+    let (Some(&first), Some(&last)) = (lons.first(), lons.last()) else { return WORLD };
+    // (width, west of the arc after it), the wrap from last to first too.
+    let mut gaps: Vec<(f64, f64)> = lons.windows(2).map(|p| (p[1] - p[0], p[1])).collect();
+    gaps.push((first + 360.0 - last, first));
+    gaps.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let (widest, west) = gaps[0];
+    let next = gaps.get(1).map_or(0.0, |g| g.0);
+    let east = west + 360.0 - widest;
+    let holds = |c: f64| [c, c + 360.0].iter().any(|c| (west..=east).contains(c));
+    match widest > 2.0 * next && centre.is_none_or(holds) {
+        true => (west, east),
+        false => WORLD,
+    }
 }
 
 /// `s` reaching each pole that the projected source's box of `(x, y)`
@@ -504,9 +511,20 @@ mod tests {
         assert_eq!(covered(&raster, "179.7,-16.2,179.9,-16.0", (8, 8)), 1.0);
         assert_eq!(covered(&raster, "-179.9,-16.2,-179.7,-16.0", (8, 8)), 1.0);
         assert_eq!(covered(&raster, "-179.0,-16.2,-178.8,-16.0", (8, 8)), 0.0);
-        assert_eq!(shortest_arc(vec![170.0, -170.0, 175.0]), Some((170.0, 190.0)));
-        assert_eq!(shortest_arc(vec![-10.0, 10.0]), Some((-10.0, 10.0)));
-        assert_eq!(shortest_arc(vec![-120.0, 0.0, 120.0]), Some((-180.0, 180.0)), "no side is inside");
-        assert_eq!(shortest_arc(Vec::new()), None);
+        assert_eq!(enclosed_arc(vec![170.0, -170.0, 175.0], Some(-175.0)), (170.0, 190.0));
+        assert_eq!(enclosed_arc(vec![170.0, -170.0, 175.0], Some(0.0)), (-180.0, 180.0), "the centre is outside");
+        assert_eq!(enclosed_arc(vec![-10.0, 10.0], None), (-10.0, 10.0));
+        assert_eq!(enclosed_arc(vec![-120.0, 0.0, 120.0], None), (-180.0, 180.0), "no gap is the outside");
+        assert_eq!(enclosed_arc(Vec::new(), None), (-180.0, 180.0));
+    }
+
+    #[test]
+    fn a_projected_source_wider_than_half_the_globe_keeps_its_longitudes() {
+        // Regression (in review): Web Mercator over 100° W…100° E, whose
+        // outside (160°) is less than half the globe, had every longitude.
+        let m = 111_319.490_793_273_6;
+        let raster = ones(3857, (-100.0 * m + 0.05 * m, 1_000_000.0), (2000, 100), 0.1 * m);
+        let b = raster.bounds();
+        assert!((b.min_lon + 100.0).abs() < 0.2 && (b.max_lon - 100.0).abs() < 0.2, "{b:?}");
     }
 }

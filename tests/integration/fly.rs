@@ -460,7 +460,9 @@ fn an_sse_flight_under_a_tiny_gpu_budget_draws_what_fits() {
     // not fit and the flight stopped; it now draws the cut's nearest tiles.
     let dir = TempDir::new("fly-tiny-gpu");
     let path = common::repo().join("config/paths/demo_valley.toml");
-    fly(&["--path", path.to_str().unwrap(), "--frames", "2", "--size", "64x48", "--gpu-budget-mib", "16"], &dir.0);
+    let summary =
+        fly(&["--path", path.to_str().unwrap(), "--frames", "2", "--size", "64x48", "--gpu-budget-mib", "16"], &dir.0);
+    assert!(summary.contains("in 2 frames the GPU tile cache held no cut at the asked 2 px error"), "{summary}");
     let rows = stats(&dir.0);
     assert_eq!(rows.len(), 2);
     for row in rows {

@@ -510,6 +510,57 @@ fn globe_terrain(lon: f64, lat: f64) -> (f64, f64, u8) {
     (ground, if forest { 25.0 } else { 0.0 }, if forest { 1 } else { 3 })
 }
 
+/// Flat ground: forest where the longitude is 0…90° or −180…−90°, water
+/// elsewhere (quadrants meeting at the poles).
+fn polar_quadrants(lon: f64, _lat: f64) -> (f64, f64, u8) {
+    (0.0, 0.0, if lon.rem_euclid(180.0) < 90.0 { 1 } else { 3 })
+}
+
+/// The longitude where the ray through pixel `(x, y)` of `camera` meets
+/// the ellipsoid (bisection on the height along the ray).
+fn ground_lon(camera: &Camera, x: u32, y: u32) -> f64 {
+    let dir = camera.ray_dir(x, y);
+    let at = |t: f64| Geodetic::from_ecef(camera.position_ecef + dir * t);
+    let (mut lo, mut hi) = (0.0, 1e7);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if at(mid).height_m > 0.0 { lo = mid } else { hi = mid }
+    }
+    at(lo).lon_deg
+}
+
+#[test]
+fn coarse_tiles_at_a_pole_are_drawn_plain_in_their_true_place() {
+    // Regression: a small GPU cache holds a view of a pole only in coarse
+    // tiles, whose flat frames (rectangles for wedges) put the ground tens
+    // of kilometres from its place; their terrain meshes are on the
+    // ellipsoid, and they are drawn so.
+    let grid = small_grid();
+    let camera = Camera::looking(Geodetic::new(0.0, -90.0, 80_000.0), 0.0, -90.0, 40.0, (96, 96));
+    let cap = sylva::grid::BBox { west: -180.0, south: -90.0, east: 180.0, north: -85.0 };
+    let tiles: Vec<TileData> =
+        grid.tiles_over(&cap, 2).into_iter().map(|id| synthetic(&grid, id, 8, &polar_quadrants)).collect();
+    let fade = Fade { focal_px: camera.focal_px(), canopy_ref_m: 30.0, lo_px: 0.5, hi_px: 2.0, trees: TreeBlend::NONE };
+    let frame = FrameSettings { fade, ..settings(Traversal::Exact, None) };
+    let refs: Vec<&TileData> = tiles.iter().collect();
+    let out = with_renderer(65, 8, |r| r.render(&camera, &refs, &frame, Readback::All).expect("fits the cache"));
+    assert_eq!(out.stats.tiles_plain as usize, tiles.len(), "{:?}", out.stats);
+    let (w, h) = (camera.width_px, camera.height_px);
+    let wrong = (0..w * h)
+        .filter(|&k| {
+            let [r, g, b, _] = out.colour[k as usize];
+            let forest = g > b && g > r;
+            forest != (ground_lon(&camera, k % w, k / w).rem_euclid(180.0) < 90.0)
+        })
+        .count();
+    // On the quadrants' edges a pixel may go either way.
+    assert!(wrong <= 2 * (w + h) as usize, "{wrong} pixels of the wrong quadrant");
+    // Under a fade that keeps every canopy, the same tiles are ray cast.
+    let whole = FrameSettings { fade: Fade::NONE, ..frame };
+    let out = with_renderer(65, 8, |r| r.render(&camera, &refs, &whole, Readback::All).expect("fits the cache"));
+    assert_eq!(out.stats.tiles_plain, 0);
+}
+
 /// The tiles the quadtree selects for `camera` over `bounds`, built from
 /// the globe terrain.
 fn selected(grid: &TileGrid, bounds: sylva::grid::BBox, camera: &Camera) -> Vec<TileData> {

@@ -219,22 +219,24 @@ fn bad_input_is_named_with_the_problem() {
     let file = dir.join("a-file");
     std::fs::write(&file, "").unwrap();
     let cache = file.join("cache");
-    let cases: [(&[&str], &str); 7] = [
-        (&["--levels", "12-3"], "--levels \"12-3\": FROM is above TO"),
+    // Bad usage exits 2, bad files 1.
+    let cases: [(&[&str], &str, i32); 7] = [
+        (&["--levels", "12-3"], "--levels \"12-3\": FROM is above TO", 2),
         (
             &["--levels", "0-5", "--coverage", geojson.to_str().unwrap()],
             "points.geojson: Point geometries cannot be seeded",
+            1,
         ),
-        (&["--levels", "0-5", "--config", redis.to_str().unwrap()], "Redis at redis://127.0.0.1:1/0"),
-        (&["--levels", "0-5", "--shard", "4/4"], "--shard \"4/4\""),
-        (&["--tiles-from", list.to_str().unwrap()], "list.txt:2"),
-        (&["--levels", "0-5", "--layers", "trees"], "unknown \"trees\""),
-        (&["--levels", "0-5", "--cache-dir", cache.to_str().unwrap()], "a-file/cache: Not a directory"),
+        (&["--levels", "0-5", "--config", redis.to_str().unwrap()], "Redis at redis://127.0.0.1:1/0", 1),
+        (&["--levels", "0-5", "--shard", "4/4"], "--shard \"4/4\"", 2),
+        (&["--tiles-from", list.to_str().unwrap()], "list.txt:2", 1),
+        (&["--levels", "0-5", "--layers", "trees"], "unknown \"trees\"", 2),
+        (&["--levels", "0-5", "--cache-dir", cache.to_str().unwrap()], "a-file/cache: Not a directory", 1),
     ];
-    for (args, needle) in cases {
+    for (args, needle, code) in cases {
         let out = seed(&dir.0, args);
         let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert_eq!(out.status.code(), Some(code), "{args:?}: {err}");
         assert!(err.contains(needle), "{args:?}: {err}");
     }
 }

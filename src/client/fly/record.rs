@@ -83,8 +83,9 @@ pub struct FrameRecord {
 }
 
 /// A one-paragraph summary of a flight: frames, mean and worst times,
-/// tiles, fetches, memory at the start and the end.
-pub fn summary(records: &[FrameRecord]) -> String {
+/// tiles, fetches, memory at the start and the end; and warnings, among
+/// them frames whose tiles had more error than the `asked_error_px`.
+pub fn summary(records: &[FrameRecord], asked_error_px: f64) -> String {
     let n = records.len().max(1) as f64;
     let mean = |f: &dyn Fn(&FrameRecord) -> f64| records.iter().map(f).sum::<f64>() / n;
     let gpu: Vec<f64> = records.iter().filter_map(|r| r.gpu_ms).collect();
@@ -112,13 +113,21 @@ pub fn summary(records: &[FrameRecord]) -> String {
         records.iter().map(|r| r.bytes_fetched).sum::<u64>(),
         first.map_or(0.0, |r| r.rss_mib),
         last.map_or(0.0, |r| r.rss_mib),
-    ) + &warnings(records)
+    ) + &warnings(records, asked_error_px)
 }
 
-/// What a flight's frames show that was rarely meant: nothing, or the
-/// ground from below.
-fn warnings(records: &[FrameRecord]) -> String {
+/// What a flight's frames show that was rarely meant: nothing, the ground
+/// from below, or tiles coarser than asked (the GPU cache held no finer
+/// cut).
+fn warnings(records: &[FrameRecord], asked_error_px: f64) -> String {
     let mut text = String::new();
+    let coarser: Vec<f64> = records.iter().filter_map(|r| r.error_px).filter(|&e| e > asked_error_px * 1.001).collect();
+    if let Some(worst) = coarser.iter().copied().reduce(f64::max) {
+        text.push_str(&format!(
+            "\nin {} the GPU tile cache held no cut at the asked {asked_error_px} px error, and tiles of up to {worst:.0} px were drawn: a larger --gpu-budget-mib draws finer ones",
+            frames(coarser.len()),
+        ));
+    }
     if !records.is_empty() && records.iter().all(|r| r.tiles_ray + r.tiles_plain == 0) {
         text.push_str("\nno frame drew a tile: does the camera look at the region?");
     }
@@ -128,13 +137,14 @@ fn warnings(records: &[FrameRecord]) -> String {
     {
         text.push_str(&format!(
             "\nthe camera is below the ground in {} (from frame {}, as deep as {:.0} m): they show the sky; heights are above the ellipsoid",
-            match below.len() {
-                1 => "1 frame".to_string(),
-                n => format!("{n} frames"),
-            },
+            frames(below.len()),
             first.frame,
             -deepest
         ));
     }
     text
+}
+/// "1 frame", "2 frames".
+fn frames(n: usize) -> String {
+    if n == 1 { "1 frame".to_string() } else { format!("{n} frames") }
 }

@@ -209,18 +209,18 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
     let n = f64::from(frame.samples.saturating_sub(1));
     let samples = share * n * n * (spacing / (spacing + flat)).powi(2);
     let area_m2 = share * n * n * frame.spacing_m.x * frame.spacing_m.y;
-    let mesh_error_m = (scope.known)(frame.id).map(|k| k.mesh_error_m);
+    let errors_m = (scope.known)(frame.id).map(|k| (k.mesh_error_m, k.flat_error_m));
     let (mut benefit, mut seen, mut ray, mut refinable, mut too_coarse) = (0.0, 0.0, 0.0f64, false, false);
     let mut faded = false;
     for camera in scope.cameras {
         let cam = frame.to_local(camera.position_ecef);
         let near_m = (cam.clamp(box_lo, box_hi) - cam).length();
-        let visible = seen_px(camera, sector, (lo, hi), mesh_error_m.is_some());
+        let visible = seen_px(camera, sector, (lo, hi), errors_m.is_some());
         let full = coverage::full_px(camera, area_m2, near_m).max(visible);
         benefit += tile_benefit_seen(visible, full, samples, Smooth::default());
         seen += visible;
         let fade = canopy_fade(scope.fade, scope.trees.as_ref(), camera.focal_px());
-        if !mesh_error_m.is_some_and(|e| raycast::plain(&fade, near_m, e)) {
+        if !errors_m.is_some_and(|e| raycast::plain(&fade, near_m, e)) {
             ray = ray.max(visible);
             faded |= visible > 0.0 && !fade.whole(near_m, farthest_m(cam, box_lo, box_hi));
         }
@@ -272,19 +272,27 @@ fn drawable(frame: &TileFrame, bounds: &BBox) -> bool {
 }
 
 /// The part of `sector` inside the region (a coarse tile holds data only
-/// there), and its share of the sector's area. A region across ±180° is
-/// taken on the side the sector lies.
+/// there), and its share of the sector's area. A region across ±180° may
+/// meet the sector turned a world either way: the part is then the hull of
+/// the pieces, the share their sum.
 fn inside(sector: &Sector, b: &BBox) -> (Sector, f64) {
-    let b = b.sector().turned_to(sector).bbox();
-    let clipped = Sector {
-        min_lat: sector.min_lat.max(b.south),
-        max_lat: sector.max_lat.min(b.north),
-        min_lon: sector.min_lon.max(b.west),
-        max_lon: sector.max_lon.min(b.east),
+    let clip = |r: &Sector| Sector {
+        min_lat: sector.min_lat.max(r.min_lat),
+        max_lat: sector.max_lat.min(r.max_lat),
+        min_lon: sector.min_lon.max(r.min_lon),
+        max_lon: sector.max_lon.min(r.max_lon),
     };
     let span = |s: &Sector| (s.max_lat - s.min_lat).max(0.0) * (s.max_lon - s.min_lon).max(0.0);
-    let share = span(&clipped) / span(sector);
-    (clipped, if share.is_finite() { share.clamp(0.0, 1.0) } else { 0.0 })
+    let area = b.sector();
+    let pieces: Vec<Sector> = area.turns().iter().map(clip).filter(|p| span(p) > 0.0).collect();
+    let share = pieces.iter().map(span).sum::<f64>() / span(sector);
+    let hull = pieces.into_iter().reduce(|a, b| Sector {
+        min_lat: a.min_lat.min(b.min_lat),
+        max_lat: a.max_lat.max(b.max_lat),
+        min_lon: a.min_lon.min(b.min_lon),
+        max_lon: a.max_lon.max(b.max_lon),
+    });
+    (hull.unwrap_or_else(|| clip(&area)), if share.is_finite() { share.clamp(0.0, 1.0) } else { 0.0 })
 }
 
 /// Pixels of a tile's ground `camera` sees, its heights in `lo..hi` (the
@@ -473,6 +481,17 @@ mod tests {
             on_side.map(|t| t.id.level).max()
         };
         assert_eq!(deepest(false), deepest(true), "both sides refined alike under a camera above 180°");
+    }
+
+    #[test]
+    fn a_tile_holding_both_ends_of_a_region_counts_both() {
+        // A region of 10° W…350° E meets the tile of 36° W…0° on both turns.
+        let tile = Sector { min_lat: 0.0, max_lat: 36.0, min_lon: -36.0, max_lon: 0.0 };
+        let region = BBox { west: -10.0, south: 0.0, east: 350.0, north: 36.0 };
+        let (part, share) = inside(&tile, &region);
+        assert_eq!((part, share), (tile, 1.0));
+        let (part, share) = inside(&tile, &BBox { west: 179.5, east: 180.5, ..region });
+        assert_eq!(share, 0.0, "{part:?}");
     }
 
     #[test]

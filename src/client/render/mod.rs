@@ -574,7 +574,7 @@ fn draw_mode(camera: &Camera, tile: &TileData, settings: &FrameSettings, near_m:
     if uniforms::camera_inside(camera, tile) {
         return DrawMode::Inside;
     }
-    if raycast::plain(&settings.fade, near_m, tile.range.mesh_error_m as f64) {
+    if raycast::plain(&settings.fade, near_m, (tile.range.mesh_error_m as f64, tile.flat_error_m())) {
         DrawMode::Plain
     } else {
         DrawMode::Hull

@@ -194,9 +194,7 @@ impl TileUniform {
 /// flat frame's misplacement, which on slopes up to 3:1 moves heights by
 /// three times as much.
 fn filler_drop_m(tile: &TileData) -> f32 {
-    (tile.range.mesh_error_m as f64
-        + 3.0 * tile.frame.flat_error_m(largest_height_m(tile))
-        + 0.01 * tile.frame.spacing_m.min_element()) as f32
+    (tile.range.mesh_error_m as f64 + 3.0 * tile.flat_error_m() + 0.01 * tile.frame.spacing_m.min_element()) as f32
 }
 
 /// Whether a ray-cast tile needs its terrain mesh beneath it to fill cracks
@@ -208,13 +206,7 @@ fn filler_drop_m(tile: &TileData) -> f32 {
 /// demo), high latitudes and the poles need the mesh, fine tiles do not
 /// (a quarter of a cell at levels 9 to 13 there).
 pub fn needs_filler(tile: &TileData) -> bool {
-    tile.frame.flat_error_m(largest_height_m(tile)) >= 0.5 * tile.frame.spacing_m.min_element()
-}
-
-/// The largest height (absolute, metres) in the tile's frame: its base
-/// and its range.
-fn largest_height_m(tile: &TileData) -> f64 {
-    (tile.base_m.abs() + tile.range.max_m.abs().max(tile.range.min_m.abs()) as f64).max(1.0)
+    tile.flat_error_m() >= 0.5 * tile.frame.spacing_m.min_element()
 }
 
 /// The pixels the tile's box covers on screen, `[x0, y0, x1, y1]` with

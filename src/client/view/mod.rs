@@ -124,7 +124,9 @@ pub fn default_start(source: &dyn TileSource) -> Result<Pose, crate::client::sou
     let b = source.bounds();
     let sector = b.sector();
     let top_m = super::envelope::HeightEnvelope::fetch(source)?.range(&sector).map_or(0.0, |(_, hi)| hi);
-    let eye = Geodetic::new(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), top_m + START_ABOVE_M);
+    // The middle of a box past 180° said on the globe.
+    let lon = (0.5 * (b.west + b.east) + 180.0).rem_euclid(360.0) - 180.0;
+    let eye = Geodetic::new(lon, 0.5 * (b.south + b.north), top_m + START_ABOVE_M);
     Ok(Pose { eye, heading_deg: 0.0, pitch_deg: START_PITCH_DEG })
 }
 
