@@ -95,19 +95,33 @@ impl Coverage {
                 (Relation::Inside, Relation::Inside) => Relation::Inside,
                 _ => Relation::Boundary,
             },
+            // Positions past ±180° meet the sector turned a world.
             Coverage::Polygons(polygons) => {
-                let hits = |ring: &Ring| ring.bounds.intersects_or_touches(sector) && ring_meets(ring, sector);
-                if polygons.iter().flatten().any(hits) {
-                    return Relation::Boundary;
-                }
-                let centre = (0.5 * (sector.min_lon + sector.max_lon), 0.5 * (sector.min_lat + sector.max_lat));
-                if polygons.iter().any(|p| p.iter().filter(|r| contains(r, centre)).count() % 2 == 1) {
+                let relations = sector.turns().map(|s| polygons_relation(polygons, &s));
+                let any = |r: Relation| relations.contains(&r);
+                if any(Relation::Boundary) {
+                    Relation::Boundary
+                } else if any(Relation::Inside) {
                     Relation::Inside
                 } else {
                     Relation::Outside
                 }
             }
         }
+    }
+}
+
+/// How `sector` lies against `polygons`, longitudes as they are.
+fn polygons_relation(polygons: &[Vec<Ring>], sector: &Sector) -> Relation {
+    let hits = |ring: &Ring| ring.bounds.intersects_or_touches(sector) && ring_meets(ring, sector);
+    if polygons.iter().flatten().any(hits) {
+        return Relation::Boundary;
+    }
+    let centre = (0.5 * (sector.min_lon + sector.max_lon), 0.5 * (sector.min_lat + sector.max_lat));
+    if polygons.iter().any(|p| p.iter().filter(|r| contains(r, centre)).count() % 2 == 1) {
+        Relation::Inside
+    } else {
+        Relation::Outside
     }
 }
 
@@ -273,6 +287,22 @@ mod tests {
             let err = Coverage::from_geojson(&path).unwrap_err().to_string();
             assert!(err.contains(name) && err.contains(needle), "{err}");
         }
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+
+    #[test]
+    fn polygons_past_the_antimeridian_hold_tiles_on_both_sides() {
+        // Regression: a polygon of 179.8…180.2° E seeded the west side only.
+        let dir = std::env::temp_dir().join(format!("sylva-coverage-across-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("across.geojson");
+        let ring = "[[179.8,-16.6],[180.2,-16.6],[180.2,-16.4],[179.8,-16.4],[179.8,-16.6]]";
+        std::fs::write(&path, format!(r#"{{"type":"Polygon","coordinates":[{ring}]}}"#)).unwrap();
+        let c = Coverage::from_geojson(&path).unwrap();
+        assert_eq!(c.relation(&sector(-179.95, -16.55, -179.85, -16.45)), Relation::Inside, "east of 180°");
+        assert_eq!(c.relation(&sector(179.85, -16.55, 179.95, -16.45)), Relation::Inside, "west of 180°");
+        assert_eq!(c.relation(&sector(-179.9, -16.55, -179.7, -16.45)), Relation::Boundary);
+        assert_eq!(c.relation(&sector(-179.7, -16.55, -179.6, -16.45)), Relation::Outside);
         std::fs::remove_dir_all(dir).unwrap();
     }
 

@@ -173,6 +173,12 @@ fn coverage(o: &SeedOptions, region: &Region) -> Result<(Coverage, String), Seed
             match b.clipped_to(&r)[..] {
                 [] => Err(usage("does not meet the region")),
                 [part] => Ok((Coverage::Box(part), format!("bbox {text}"))),
+                // Over a region of every longitude the box is one piece on
+                // the globe (tiles meet it modulo 360°).
+                _ if r.east - r.west >= 360.0 => {
+                    let part = BBox { south: b.south.max(r.south), north: b.north.min(r.north), ..b };
+                    Ok((Coverage::Box(part), format!("bbox {text}")))
+                }
                 _ => Err(usage("meets the region on both sides of the antimeridian: give each side its own --bbox")),
             }
         }

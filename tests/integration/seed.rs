@@ -495,3 +495,24 @@ fn existing_tiles_are_remade_or_kept_as_asked() {
     assert_eq!(run(&["--refresh-before", "2000-01-01"]), (0, n));
     assert_eq!(run(&["--refresh-before", "2999-01-01T00:00:00Z"]), (n, 0));
 }
+
+#[test]
+fn a_box_across_the_antimeridian_over_a_global_region_is_one_piece() {
+    // Regression: over a region of every longitude, `--bbox=170,…,190,…`
+    // was refused as meeting it "on both sides of the antimeridian".
+    use sylva::grid::{Axis, SampleGrid};
+    let dir = TempDir::new("seed-global");
+    let grid = SampleGrid { lon: Axis::degrees(-179.5, 1.0, 0, 360), lat: Axis::degrees(89.5, -1.0, 0, 180) };
+    let dem = sylva::raster::Raster::from_fn(360, 180, |x, y| (x + y) as f32);
+    let tiff = sylva::encode::geotiff::write(sylva::encode::Samples::Float(&dem), &grid).unwrap();
+    std::fs::write(dir.join("world.tif"), tiff).unwrap();
+    std::fs::write(dir.join("world.toml"), "[dem]\npath = \"world.tif\"\n").unwrap();
+    let config = dir.join("world.toml");
+    let planned = |bbox: &str| {
+        let args = ["--config", config.to_str().unwrap(), "--layers", "dem", "--levels", "4-6", "--dry-run"];
+        dry_total(&ok(&seed(&dir.0, &[&args[..], &[&format!("--bbox={bbox}")]].concat()))).0
+    };
+    let (west, east) = (planned("170,-20,180,-10"), planned("-180,-20,-170,-10"));
+    assert!(west > 0 && east > 0);
+    assert_eq!(planned("170,-20,190,-10"), west + east);
+}
