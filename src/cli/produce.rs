@@ -93,7 +93,8 @@ pub struct BuildArgs {
 impl BuildArgs {
     pub fn run(self) -> Result<()> {
         self.product.make(|region, layer, format| {
-            let bbox = self.bbox.unwrap_or(region.bounds);
+            // Georeferenced with its west within ±180° (the same samples).
+            let bbox = self.bbox.unwrap_or(region.bounds).turned_home();
             in_region(region, &bbox, "--bbox")?;
             Ok(produce::area(region, bbox, self.width, self.height, layer, format)?)
         })

@@ -366,6 +366,12 @@ impl BBox {
         })
     }
 
+    /// The box turned by whole worlds so that its west lies in −180…180.
+    pub fn turned_home(&self) -> BBox {
+        let turn = -360.0 * ((self.west + 180.0) / 360.0).floor();
+        BBox { west: self.west + turn, east: self.east + turn, ..*self }
+    }
+
     /// The same box as a sector.
     pub fn sector(&self) -> Sector {
         Sector { min_lat: self.south, max_lat: self.north, min_lon: self.west, max_lon: self.east }
@@ -383,8 +389,13 @@ impl BBox {
     /// Validates the box: finite, west < east ≤ west + 360, −90 ≤ south < north ≤ 90.
     pub fn checked(self) -> Result<BBox, GridError> {
         let BBox { west, south, east, north } = self;
-        let finite = [west, south, east, north].iter().all(|v| v.is_finite());
-        if !finite || west >= east || east - west > 360.0 || !(-540.0..=540.0).contains(&west) {
+        if let Some(bad) = [west, south, east, north].into_iter().find(|v| !v.is_finite()) {
+            return Err(GridError::BadBBox(format!("{bad}: need finite degrees")));
+        }
+        if !(-540.0..=540.0).contains(&west) || !(-540.0..=540.0).contains(&east) {
+            return Err(GridError::BadBBox("need longitudes within ±540 (W,S,E,N in degrees)".into()));
+        }
+        if west >= east || east - west > 360.0 {
             return Err(GridError::BadBBox(format!("west {west}, east {east}: need west < east ≤ west + 360")));
         }
         if !((-90.0..=90.0).contains(&south) && south < north && north <= 90.0) {
@@ -609,6 +620,21 @@ mod tests {
     }
 
     #[test]
+    fn a_bad_box_names_its_fault() {
+        for (text, fault) in [
+            ("179.8,-16.6,180.2,nan", "NaN: need finite degrees"),
+            ("0,0,1,inf", "inf: need finite degrees"),
+            ("-600,-17,-599,-16", "need longitudes within ±540"),
+            ("1e300,0,2e300,1", "need longitudes within ±540"),
+            ("2,0,1,1", "need west < east"),
+            ("0,1,1,0", "need -90 ≤ south < north ≤ 90"),
+        ] {
+            let err = BBox::parse(text).unwrap_err().to_string();
+            assert!(err.contains(fault) && err.len() < 200, "{text}: {err}");
+        }
+    }
+
+    #[test]
     fn a_box_is_clipped_to_bounds_on_both_sides_of_the_antimeridian() {
         let region = BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 };
         let world = BBox::WORLD;
@@ -629,5 +655,9 @@ mod tests {
         assert_eq!(world.clipped_to(&fiji), [fiji]);
         let west = BBox { west: -180.0, south: -17.0, east: -179.5, north: -16.0 };
         assert_eq!(west.clipped_to(&fiji), [BBox { west: 180.0, ..fiji }]);
+        let far = BBox { west: 539.6, south: -17.0, east: 540.2, north: -16.0 };
+        let home = far.turned_home();
+        assert!((home.west - 179.6).abs() < 1e-9 && (home.east - 180.2).abs() < 1e-9, "{home:?}");
+        assert_eq!(fiji.turned_home(), fiji);
     }
 }

@@ -272,7 +272,8 @@ async fn xyz_tilejson(
     Path(layer): Path<String>,
     headers: HeaderMap,
 ) -> Result<Response, ServeError> {
-    let doc = super::tilejson::document(state.region(), xyz_layer(&layer)?, &state.public_base(&headers));
+    let doc = super::tilejson::document(state.region(), xyz_layer(&layer)?, &state.public_base(&headers))
+        .ok_or(ServeError::NotFound)?;
     Ok(([(header::CONTENT_TYPE, "application/json")], doc.to_string()).into_response())
 }
 

@@ -14,10 +14,15 @@ const EQUATOR_M: f64 = 2.0 * std::f64::consts::PI * 6_378_137.0;
 /// Web Mercator's latitude limit, degrees.
 const MERCATOR_MAX_LAT: f64 = 85.051_128_779_806_6;
 
-/// The TileJSON of `layer`'s XYZ tiles, served under `base`.
-pub fn document(region: &Region, layer: MapLayer, base: &str) -> Value {
+/// The TileJSON of `layer`'s XYZ tiles, served under `base`; none for a
+/// region beyond Web Mercator's latitudes (around a pole), which has no
+/// XYZ tiles.
+pub fn document(region: &Region, layer: MapLayer, base: &str) -> Option<Value> {
     // TileJSON's bounds do not wrap: a region across 180° is every longitude.
     let b = region.bounds.on_the_globe();
+    if b.south >= MERCATOR_MAX_LAT || b.north <= -MERCATOR_MAX_LAT {
+        return None;
+    }
     let lat = |l: f64| l.clamp(-MERCATOR_MAX_LAT, MERCATOR_MAX_LAT);
     let mut doc = json!({
         "tilejson": "3.0.0",
@@ -32,7 +37,7 @@ pub fn document(region: &Region, layer: MapLayer, base: &str) -> Value {
     if !layer.is_picture() {
         doc["encoding"] = json!("terrarium");
     }
-    doc
+    Some(doc)
 }
 
 /// The side of an XYZ tile, pixels (MapLibre assumes 512 unless told).
@@ -67,7 +72,7 @@ mod tests {
     #[test]
     fn the_demo_dem_is_served_to_the_zoom_of_its_finest_pixels() {
         let region = crate::config::load(None).unwrap();
-        let doc = document(&region, MapLayer::Data(crate::cem::Layer::Dem), "http://h:1");
+        let doc = document(&region, MapLayer::Data(crate::cem::Layer::Dem), "http://h:1").unwrap();
         assert_eq!(doc["tiles"][0], "http://h:1/xyz/dem/{z}/{x}/{y}.png");
         assert_eq!(doc["encoding"], "terrarium");
         assert_eq!(doc["tileSize"], 256);
@@ -77,9 +82,17 @@ mod tests {
         let finest = region.dem.georef().pixel_m();
         let px = |z: i32| EQUATOR_M * 46.375f64.to_radians().cos() / 256.0 / 2f64.powi(z);
         assert!(px(zoom) <= finest * 1.001 && px(zoom - 1) > finest, "zoom {zoom}: {} m, finest {finest} m", px(zoom));
-        let relief = document(&region, MapLayer::Relief, "http://h:1");
+        let relief = document(&region, MapLayer::Relief, "http://h:1").unwrap();
         assert!(relief.get("encoding").is_none());
         // The demo spans 0.25°: 1.4 px at zoom 3, 0.7 at zoom 2.
         assert_eq!(doc["minzoom"], 3);
+    }
+
+    #[test]
+    fn a_region_beyond_web_mercator_has_no_xyz_tiles() {
+        // Regression: it advertised bounds of zero height and zooms 0 to 4.
+        let mut region = crate::config::load(None).unwrap();
+        region.bounds = crate::grid::BBox { west: -180.0, south: -90.0, east: 180.0, north: -86.0 };
+        assert!(document(&region, MapLayer::Relief, "http://h:1").is_none());
     }
 }

@@ -133,6 +133,8 @@ fn bounding_boxes(b: BBox, version: Version) -> String {
     let mut out = Vec::new();
     for (crs, name) in RequestCrs::ALL {
         let [a, bb, c, d] = match (crs, version) {
+            // A region beyond Web Mercator's latitudes has no box in it.
+            (RequestCrs::Epsg3857, _) if y0 >= y1 => continue,
             (RequestCrs::Epsg3857, _) => [x0, y0, x1, y1],
             (RequestCrs::Epsg4326, Version::V130) => [b.south, b.west, b.north, b.east],
             (RequestCrs::Crs84, Version::V111) => continue,
@@ -224,6 +226,12 @@ mod tests {
             let (_, xml) = document(&fiji, version);
             assert!(!xml.contains("180.5") && !xml.contains("179.5"), "{xml}");
             assert!(xml.contains(r#"minx="-20037508.342789244""#), "{xml}");
+        }
+        // Beyond Web Mercator's latitudes: no EPSG:3857 box.
+        let pole = Service { bounds: BBox { west: -180.0, south: -90.0, east: 180.0, north: -86.0 }, ..service() };
+        for version in [Version::V111, Version::V130] {
+            let (_, xml) = document(&pole, version);
+            assert!(!xml.contains(r#"BoundingBox CRS="EPSG:3857""#) && !xml.contains(r#"SRS="EPSG:3857""#), "{xml}");
         }
     }
 
