@@ -150,23 +150,24 @@ pub fn open_file(path: &Path, options: &OpenOptions, cache: &Arc<BlockCache>) ->
 /// The raster, if its data lies on the globe: a file whose coordinates are
 /// read in the wrong CRS (metres as degrees, say, by a wrong `crs =` of the
 /// configuration) is refused here, naming its CRS, rather than giving a
-/// region off the globe that every request misses.
+/// region off the globe that every request misses; so is one wider than the
+/// globe.
 fn on_the_globe(path: &Path, raster: GeoRaster) -> Result<GeoRaster, SourceError> {
     let (s, slack) = (raster.bounds(), raster.georef().pixel_deg());
     let lat =
         (-90.0 - slack..=90.0 + slack).contains(&s.min_lat) && (-90.0 - slack..=90.0 + slack).contains(&s.max_lat);
     let lon = (-540.0..=540.0).contains(&s.min_lon) && (-540.0..=540.0).contains(&s.max_lon);
-    if lat && lon && s.min_lat < s.max_lat && s.min_lon < s.max_lon {
+    let (width, crs) = (s.max_lon - s.min_lon, raster.georef().crs.epsg());
+    let problem = if !(lat && lon && s.min_lat < s.max_lat && s.min_lon < s.max_lon) {
+        format!(
+            "read in EPSG:{crs} its data lies at longitudes {:.6} to {:.6}, latitudes {:.6} to {:.6}, off the globe: \
+             is that its CRS? (`crs = \"EPSG:code\"` in the configuration names another)",
+            s.min_lon, s.max_lon, s.min_lat, s.max_lat
+        )
+    } else if width > 360.0 + slack {
+        format!("its data spans {width:.6}° of longitude ({:.6} to {:.6}), more than the globe", s.min_lon, s.max_lon)
+    } else {
         return Ok(raster);
-    }
-    let problem = format!(
-        "read in EPSG:{} its data lies at longitudes {:.6} to {:.6}, latitudes {:.6} to {:.6}, off the globe: \
-         is that its CRS? (`crs = \"EPSG:code\"` in the configuration names another)",
-        raster.georef().crs.epsg(),
-        s.min_lon,
-        s.max_lon,
-        s.min_lat,
-        s.max_lat
-    );
+    };
     Err(SourceError::Malformed { path: path.to_path_buf(), problem })
 }

@@ -45,6 +45,16 @@ fn garbage_and_plain_tiffs_are_refused_with_the_reason() {
     let unknown = dir.join("x.jp2");
     std::fs::write(&unknown, b"").unwrap();
     assert!(open(&unknown).expect_err("type").to_string().contains("unsupported"));
+
+    // Wider than the globe (0…400° E): refused, naming the file.
+    use sylva::grid::{Axis, SampleGrid};
+    let grid = SampleGrid { lon: Axis::degrees(0.5, 1.0, 0, 400), lat: Axis::degrees(9.5, -1.0, 0, 10) };
+    let heights = sylva::raster::Raster::filled(400, 10, 1.0f32);
+    let wide = dir.join("wide.tif");
+    std::fs::write(&wide, sylva::encode::geotiff::write(sylva::encode::Samples::Float(&heights), &grid).unwrap())
+        .unwrap();
+    let err = open(&wide).expect_err("wider than the globe").to_string();
+    assert!(err.contains("wide.tif") && err.contains("400.000000° of longitude"), "{err}");
 }
 
 #[test]

@@ -40,10 +40,17 @@ pub struct Motion {
 }
 
 /// What a budget flight's selections, made every `select_every` frames,
-/// look ahead by.
+/// look ahead by: at most [`MAX_LOOKAHEAD_S`].
 fn lookahead(select_every: u32, motion: &Motion) -> Lookahead {
-    Lookahead { tau_s: motion.frame_s * f64::from(select_every.max(1)), limits: motion.limits }
+    let tau_s = (motion.frame_s * f64::from(select_every.max(1))).min(MAX_LOOKAHEAD_S);
+    Lookahead { tau_s, limits: motion.limits }
 }
+
+/// The longest a selection looks ahead, seconds: a flight of few frames
+/// far apart selects for each frame's own view (a conservative camera over
+/// their whole gap would cover most of the region, and the cut would be
+/// coarse everywhere).
+const MAX_LOOKAHEAD_S: f64 = 1.0;
 
 /// One frame to render: its camera, its time and its sun.
 #[derive(Clone, Copy, Debug)]

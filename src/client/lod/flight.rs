@@ -135,12 +135,16 @@ impl BudgetFlight {
     /// selection when `τ` has passed since the last and the thread is idle.
     pub fn frame(&mut self, t_s: f64, camera: &Camera) -> Selected {
         self.predictor.observe(t_s, ahead::pose(camera));
+        // A selection looks τ ahead of its request: a frame later than that
+        // (frames farther apart than τ) is past the views the cut in hand
+        // was made for, and waits for one made now.
+        let stale = t_s > self.requested_s + self.look.tau_s;
         if self.morphs.as_ref().is_none_or(Morphs::settled)
             && let Some(p) = self.pending.take()
         {
             self.current = Some(p.selected);
         }
-        if let Some(done) = self.worker.take(false) {
+        if let Some(done) = self.worker.take(stale) {
             self.offer(done, t_s);
         }
         if !self.worker.busy() && t_s >= self.requested_s + self.look.tau_s {
@@ -152,6 +156,10 @@ impl BudgetFlight {
             if self.worker.submit(request) {
                 self.requested_s = t_s;
             }
+        }
+        // Drawn at once: no morph bridges views that far apart.
+        if stale && let Some(done) = self.worker.take(true) {
+            (self.current, self.pending) = (Some(done), None);
         }
         if self.current.is_none() {
             self.current = self.worker.take(true);
@@ -342,6 +350,17 @@ mod tests {
             (ids(&s) != ids(&first)).then_some(s)
         });
         assert!(adopted.is_some(), "the new cut was adopted");
+    }
+
+    #[test]
+    fn a_frame_past_the_selections_horizon_waits_for_its_own() {
+        // Regression: a flight of frames far apart drew each frame with the
+        // cut selected for the frame before, tens of seconds earlier.
+        let mut f = flight();
+        let first = f.frame(0.0, &camera(10.05));
+        let later = f.frame(30.0, &camera(10.2));
+        assert_ne!(ids(&later), ids(&first), "the cut for the view 30 s later");
+        assert!(!f.worker.busy() && f.requested_s == 30.0);
     }
 
     #[test]
