@@ -118,7 +118,7 @@ fn destination(path: &Path) -> Result<PathBuf, OutputError> {
 }
 
 /// A hidden name beside `path` that this process gives no other file:
-/// `.NAME.PID.N.SUFFIX`, NAME cut to [`SIBLING_NAME_BYTES`] so that a name
+/// `.NAME.PID.N.SUFFIX`, NAME cut to 200 bytes so that a name
 /// near the file system's 255-byte limit still has a sibling.
 pub fn sibling_name(path: &Path, suffix: &str) -> PathBuf {
     static COUNT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
