@@ -8,6 +8,7 @@
 use super::table;
 use crate::client::camera::Camera;
 use crate::client::path::CameraPath;
+use crate::client::quadtree::LodRule;
 use crate::client::quadtree::Selection;
 use crate::client::source::RegionSource;
 use crate::client::sse::SseSelector;
@@ -110,7 +111,7 @@ pub fn compare(tree: &TileTree, path: &CameraPath, flight: &Flight) -> Result<Ve
 /// One selection and its wall-clock ms.
 fn timed(sse: &mut SseSelector, camera: &Camera, max_error_px: f64) -> (Selection, f64) {
     let start = Instant::now();
-    let s = sse.select(camera, max_error_px);
+    let s = sse.select(camera, &LodRule { max_error_px, max_level: crate::grid::TileGrid::MAX_LEVEL });
     (s, start.elapsed().as_secs_f64() * 1e3)
 }
 

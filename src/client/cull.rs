@@ -26,9 +26,9 @@ enum Seen {
     Inside,
 }
 
-/// The tiles to draw for `camera` from the nodes flagged in `refined`,
-/// coarse to fine, and the visibility tests made.
-pub fn drawn(tree: &TileTree, refined: &[bool], camera: &Camera) -> (Vec<Selected>, usize) {
+/// The tiles to draw for `camera` from the nodes flagged in `refined`, none
+/// deeper than `max_level`, coarse to fine, and the visibility tests made.
+pub fn drawn(tree: &TileTree, refined: &[bool], camera: &Camera, max_level: u32) -> (Vec<Selected>, usize) {
     let planes = camera.side_planes();
     let eye = camera.position_ecef;
     let mut stack: Vec<(u32, bool)> = (0..tree.nodes.len() as u32)
@@ -47,7 +47,7 @@ pub fn drawn(tree: &TileTree, refined: &[bool], camera: &Camera) -> (Vec<Selecte
         if seen == Seen::Outside {
             continue;
         }
-        if refined[v as usize] && n.children > 0 {
+        if refined[v as usize] && n.children > 0 && n.id.level < max_level {
             stack.extend(tree.child_range(v).map(|c| (c, seen == Seen::Inside)));
             continue;
         }

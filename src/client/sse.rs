@@ -22,7 +22,7 @@
 use super::camera::Camera;
 use super::cull;
 use super::envelope::HeightEnvelope;
-use super::quadtree::Selection;
+use super::quadtree::{LodRule, Selection};
 use super::source::{FetchError, TileSource};
 use super::tiletree::TileTree;
 use crate::lod::deferral::{Hierarchy, ThresholdRefiner, full_refinement};
@@ -79,10 +79,11 @@ impl SseSelector {
         &self.tree
     }
 
-    /// The tiles for `camera` at `max_error_px`; `visited` counts the
-    /// refinement and visibility tests.
-    pub fn select(&mut self, camera: &Camera, max_error_px: f64) -> Selection {
-        let mu = camera.focal_px() / max_error_px;
+    /// The tiles for `camera` by `rule` (its error, and no level deeper
+    /// than its own or the tree's); `visited` counts the refinement and
+    /// visibility tests.
+    pub fn select(&mut self, camera: &Camera, rule: &LodRule) -> Selection {
+        let mu = camera.focal_px() / rule.max_error_px;
         let eye = camera.position_ecef;
         let tree = &self.tree;
         let (evaluated, refined): (usize, &[bool]) = match &mut self.refinement {
@@ -96,7 +97,7 @@ impl SseSelector {
                 (refiner.update(tree, eye), refiner.refined())
             }
         };
-        let (tiles, tests) = cull::drawn(tree, refined, camera);
+        let (tiles, tests) = cull::drawn(tree, refined, camera, rule.max_level);
         Selection { tiles, visited: evaluated + tests, evaluated }
     }
 }
@@ -119,7 +120,8 @@ mod tests {
         for (k, px) in [2.0, 2.0, 2.5, 2.5, 2.0, 8.0].into_iter().enumerate() {
             let eye = Geodetic::new(10.1 + 0.002 * k as f64, 46.35, 2500.0 - 100.0 * k as f64);
             let camera = Camera::looking(eye, 30.0 * k as f64, -20.0, 60.0, (640, 480));
-            let (d, f) = (deferred.select(&camera, px), full.select(&camera, px));
+            let rule = LodRule { max_error_px: px, max_level: 13 };
+            let (d, f) = (deferred.select(&camera, &rule), full.select(&camera, &rule));
             assert_eq!(d.tiles, f.tiles, "frame {k}");
             assert!(!d.tiles.is_empty());
             assert!(d.tiles.iter().all(|t| t.error_px <= px || t.id.level == 13), "frame {k}");

@@ -3,6 +3,7 @@
 
 use crate::common::{self, TempDir};
 use crate::http::Server;
+use std::path::PathBuf;
 use std::sync::Arc;
 use sylva::client::http::HttpSource;
 use sylva::client::source::{RegionSource, TileSource};
@@ -471,23 +472,34 @@ fn an_sse_flight_under_a_tiny_gpu_budget_draws_what_fits() {
     }
 }
 
-/// A DEM of 179.5…180.5° E, 16…17° S and its configuration
-/// (`across.toml`) in `dir`.
-fn region_across_the_antimeridian(dir: &TempDir) -> std::path::PathBuf {
+/// A DEM of `w × h` samples of `step` degrees, the north-west one's
+/// centre at `(lon0, lat0)`, as `NAME.tif` in `dir`; its configuration,
+/// `NAME.toml`.
+fn geographic_region(
+    dir: &TempDir,
+    name: &str,
+    (lon0, lat0): (f64, f64),
+    (w, h): (usize, usize),
+    step: f64,
+) -> PathBuf {
     use sylva::grid::{Axis, SampleGrid};
-    let n = 200;
-    let step = 1.0 / n as f64;
-    let grid = SampleGrid {
-        lon: Axis::degrees(179.5 + 0.5 * step, step, 0, n),
-        lat: Axis::degrees(-16.0 - 0.5 * step, -step, 0, n),
-    };
+    let grid = SampleGrid { lon: Axis::degrees(lon0, step, 0, w), lat: Axis::degrees(lat0, -step, 0, h) };
     let dem =
-        sylva::raster::Raster::from_fn(n, n, |x, y| 400.0 + 300.0 * (x as f32 * 0.2).sin() * (y as f32 * 0.15).cos());
+        sylva::raster::Raster::from_fn(w, h, |x, y| 400.0 + 300.0 * (x as f32 * 0.2).sin() * (y as f32 * 0.15).cos());
     let tiff = sylva::encode::geotiff::write(sylva::encode::Samples::Float(&dem), &grid).expect("GeoTIFF");
-    std::fs::write(dir.join("across.tif"), tiff).unwrap();
-    let config = dir.join("across.toml");
-    std::fs::write(&config, "[dem]\npath = \"across.tif\"\n").unwrap();
+    std::fs::write(dir.join(&format!("{name}.tif")), tiff).unwrap();
+    let config = dir.join(&format!("{name}.toml"));
+    std::fs::write(&config, format!("[dem]\npath = \"{name}.tif\"\n")).unwrap();
     config
+}
+
+/// A path of one key looking down from `height_m` above `(lon, lat)`.
+fn looking_down(dir: &TempDir, (lon, lat): (f64, f64), height_m: f64) -> PathBuf {
+    let path = dir.join("down.toml");
+    let key =
+        format!("t = 0.0\nlon = {lon}\nlat = {lat}\nheight_m = {height_m}\nheading_deg = 0.0\npitch_deg = -89.0\n");
+    std::fs::write(&path, format!("fov_deg = 40\n[[key]]\n{key}")).unwrap();
+    path
 }
 
 #[test]
@@ -495,10 +507,8 @@ fn a_flight_over_a_region_across_the_antimeridian_draws_both_sides() {
     // Regression: tiles west of 180° were compared with the region's bounds
     // (east 180.5°) unturned and never drawn; the frame's east half was sky.
     let dir = TempDir::new("fly-across");
-    let config = region_across_the_antimeridian(&dir);
-    let path = dir.join("down.toml");
-    let key = "t = 0.0\nlon = 180.0\nlat = -16.5\nheight_m = 20000.0\nheading_deg = 0.0\npitch_deg = -89.0\n";
-    std::fs::write(&path, format!("fov_deg = 40\n[[key]]\n{key}")).unwrap();
+    let config = geographic_region(&dir, "across", (179.5025, -16.0025), (200, 200), 0.005);
+    let path = looking_down(&dir, (180.0, -16.5), 20_000.0);
     for lod in ["sse", "budget"] {
         let out = dir.join(lod);
         let (c, p) = (config.to_str().unwrap(), path.to_str().unwrap());
@@ -506,5 +516,24 @@ fn a_flight_over_a_region_across_the_antimeridian_draws_both_sides() {
         let frame = out.join("frame_00000.png");
         let (west, east) = (common::ground_share(&frame, 0.0..0.5), common::ground_share(&frame, 0.5..1.0));
         assert!(west > 0.99 && east > 0.99, "--lod {lod}: ground on {west} of the west half, {east} of the east");
+    }
+}
+
+#[test]
+fn a_flight_above_a_pole_draws_the_whole_view_with_a_small_gpu_cache() {
+    // Regression: 40 km above the South Pole the GPU cache held the 73
+    // nearest of the 80 tiles around the pole the selection asked for,
+    // and the sky showed through a wedge; coarser levels now fit it whole.
+    let dir = TempDir::new("fly-pole");
+    let config = geographic_region(&dir, "cap", (-179.75, -87.25), (720, 6), 0.5);
+    let path = looking_down(&dir, (0.0, -90.0), 40_000.0);
+    for lod in ["sse", "budget"] {
+        let out = dir.join(lod);
+        let (c, p) = (config.to_str().unwrap(), path.to_str().unwrap());
+        let args =
+            ["--config", c, "--path", p, "--frames", "1", "--size", "64x48", "--lod", lod, "--gpu-budget-mib", "256"];
+        let (summary, _) = fly_with(&args, &out, &[]);
+        let ground = common::ground_share(&out.join("frame_00000.png"), 0.0..1.0);
+        assert!(ground > 0.99, "--lod {lod}: ground on {ground} of the frame; {summary}");
     }
 }

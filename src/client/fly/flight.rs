@@ -372,7 +372,8 @@ fn tree_splats(
 pub struct Visible {
     /// The tiles, loaded.
     pub tiles: Vec<Arc<TileData>>,
-    /// The error threshold that made them fit the GPU cache, pixels.
+    /// The error threshold that made them fit the GPU cache (once levels
+    /// were cut, the largest error of a tile drawn), pixels.
     pub error_px: f64,
     /// Quadtree nodes the selections touched.
     pub touched: usize,
@@ -395,11 +396,12 @@ pub fn visible_tiles(
     let (mut touched, start) = (0, Instant::now());
     loop {
         let selection = match sse.as_deref_mut() {
-            Some(sse) => sse.select(camera, rule.max_error_px),
+            Some(sse) => sse.select(camera, &rule),
             None => quadtree::select(&source.grid(), &source.bounds(), camera, &|id| store.range(id), &rule),
         };
         touched += selection.visited;
-        if selection.tiles.len() <= slots as usize || rule.max_error_px > 1e6 {
+        let coarsest = rule.max_error_px > MAX_COARSENED_PX && rule.max_level == 0;
+        if selection.tiles.len() <= slots as usize || coarsest {
             let selection_ms = start.elapsed().as_secs_f64() * 1e3;
             // Even the coarsest cut is too many: its nearest tiles, which
             // fill most of the screen, are drawn (a cache of no slot at all
@@ -408,12 +410,28 @@ pub fn visible_tiles(
             chosen.sort_by(|a, b| a.distance_m.total_cmp(&b.distance_m));
             chosen.truncate((slots as usize).max(1));
             let ids: Vec<_> = chosen.iter().map(|s| s.id).collect();
+            // The threshold that made them fit; once levels were cut, the
+            // largest error drawn.
+            let error_px = match rule.max_level < options.lod.max_level {
+                true => chosen.iter().map(|s| s.error_px).fold(options.lod.max_error_px, f64::max),
+                false => rule.max_error_px,
+            };
             let tiles = store.get_cut(source, &ids)?;
-            return Ok(Visible { tiles, error_px: rule.max_error_px, touched, selection_ms });
+            return Ok(Visible { tiles, error_px, touched, selection_ms });
         }
-        rule.max_error_px *= 1.25;
+        // Past any error a screen shows, coarser levels: tiles around a pole
+        // that hold the eye in their bounds refine at every error.
+        if rule.max_error_px > MAX_COARSENED_PX {
+            rule.max_level -= 1;
+        } else {
+            rule.max_error_px *= 1.25;
+        }
     }
 }
+
+/// The error threshold, pixels, past which [`visible_tiles`] coarsens by
+/// levels.
+const MAX_COARSENED_PX: f64 = 1e4;
 
 /// The camera's height above the surface of the finest tile held under it,
 /// drawn or not (a camera looking ahead often has the ground under it out

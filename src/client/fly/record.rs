@@ -123,8 +123,13 @@ fn warnings(records: &[FrameRecord], asked_error_px: f64) -> String {
     let mut text = String::new();
     let coarser: Vec<f64> = records.iter().filter_map(|r| r.error_px).filter(|&e| e > asked_error_px * 1.001).collect();
     if let Some(worst) = coarser.iter().copied().reduce(f64::max) {
+        // Tiles whose box holds the eye (around a pole) have no finite error.
+        let drawn = match worst < 1e5 {
+            true => format!("tiles of up to {worst:.0} px"),
+            false => "far coarser tiles".to_string(),
+        };
         text.push_str(&format!(
-            "\nin {} the GPU tile cache held no cut at the asked {asked_error_px} px error, and tiles of up to {worst:.0} px were drawn: a larger --gpu-budget-mib draws finer ones",
+            "\nin {} the GPU tile cache held no cut at the asked {asked_error_px} px error, and {drawn} were drawn: a larger --gpu-budget-mib draws finer ones",
             frames(coarser.len()),
         ));
     }

@@ -45,8 +45,9 @@
 //! rounded down, part-full groups trimmed until it fits), and draws at
 //! most `max_tiles` tiles (the GPU cache's slots): a larger cut is chosen
 //! again under a smaller budget, and where even the coarsest cut is larger,
-//! its most beneficial tiles are drawn (the rest of the view is left
-//! undrawn, and the cut's benefit and tree budgets are the coarsest cut's).
+//! its tiles are merged into their parents, deepest first, until they fit
+//! (the view stays whole; its features, benefit and tree budgets are the
+//! coarsest cut's).
 
 use super::candidates::Candidate;
 use crate::client::trees::TreeBudgets;
@@ -249,12 +250,6 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
                 hi = mid;
             }
         }
-        // Even the coarsest cut may need more slots (a wide view of many
-        // root tiles): its most beneficial tiles are drawn.
-        if drawn.len() > max_tiles {
-            drawn.sort_by(|a, b| candidates[*b as usize].benefit.total_cmp(&candidates[*a as usize].benefit));
-            drawn.truncate(max_tiles);
-        }
     }
     let tiles: Vec<Choice> = drawn
         .iter()
@@ -274,6 +269,10 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
         .zip(&tiles)
         .map(|(&i, t)| features(&candidates[i as usize], t.shadow_steps))
         .fold(CostFeatures::default(), |a, f| a.plus(&f));
+    // Even the coarsest cut may need more slots (a wide view of many root
+    // tiles, or the tiles around a pole, refined there to show samples no
+    // larger than the floor): coarser tiles, whole.
+    let tiles = coarsened(tiles, max_tiles);
     let (features, groups) = fit_groups(terrain, groups, model, budget.budget_ms);
     let tree_budgets: TreeBudgets = groups.into_iter().map(|g| (g.item.block, g.splats)).collect();
     Cut {
@@ -286,6 +285,29 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
         stop: Some(selection.stop),
         slot_bound,
     }
+}
+
+/// `tiles` merged into their parents, deepest level first (each parent with
+/// its children's most shadow steps), until at most `max_tiles` remain;
+/// past level 0, the first `max_tiles`.
+fn coarsened(mut tiles: Vec<Choice>, max_tiles: usize) -> Vec<Choice> {
+    while tiles.len() > max_tiles {
+        let deepest = tiles.iter().map(|c| c.id.level).max().unwrap_or(0);
+        if deepest == 0 {
+            tiles.truncate(max_tiles);
+            break;
+        }
+        let mut merged: Vec<Choice> = Vec::new();
+        for c in tiles {
+            let id = if c.id.level == deepest { c.id.parent().unwrap_or(c.id) } else { c.id };
+            match merged.iter_mut().find(|m| m.id == id) {
+                Some(m) => m.shadow_steps = m.shadow_steps.max(c.shadow_steps),
+                None => merged.push(Choice { id, ..c }),
+            }
+        }
+        tiles = merged;
+    }
+    tiles
 }
 
 /// The features of the cut `terrain` plus `groups`, trimmed or dropped,
@@ -561,13 +583,15 @@ mod tests {
         let few = choose(&c, &[], &MODEL, &Budget { max_tiles: 8, ..budget(1e4, true) });
         assert!(few.tiles.len() <= 8 && !few.tiles.is_empty(), "{}", few.tiles.len());
         assert_eq!((few.bound(), dark.bound()), ("slots", "full"));
-        // Fewer slots than the coarsest cut's tiles: the best of them.
-        let coarsest = choose(&c, &[], &MODEL, &budget(0.0, true)).tiles.len();
-        assert!(coarsest > 1, "{coarsest} tiles in the coarsest cut");
+        // Fewer slots than the coarsest cut's tiles: coarser tiles, the
+        // view whole (each of the cut's tiles lies in one of them).
+        let coarsest = choose(&c, &[], &MODEL, &budget(0.0, true)).tiles;
+        assert!(coarsest.len() > 1, "{} tiles in the coarsest cut", coarsest.len());
         let one = choose(&c, &[], &MODEL, &Budget { max_tiles: 1, ..budget(1e4, true) });
-        let best = c.iter().filter(|t| t.parent.is_none()).map(|t| t.benefit).fold(f64::MIN, f64::max);
-        assert_eq!(one.tiles.len(), 1);
-        assert_eq!(c.iter().find(|t| t.id == one.tiles[0].id).map(|t| t.benefit), Some(best));
+        assert_eq!(one.tiles.len(), 1, "{:?}", one.tiles);
+        let within =
+            |id: TileId| std::iter::successors(Some(id), |t| t.parent()).any(|a| one.tiles.iter().any(|t| t.id == a));
+        assert!(coarsest.iter().all(|t| within(t.id)), "{:?} covers {coarsest:?}", one.tiles);
     }
 
     #[test]
