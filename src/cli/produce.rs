@@ -49,7 +49,7 @@ pub struct TileArgs {
     #[command(flatten)]
     product: ProductArgs,
     /// Tile level (0 = coarsest).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva::grid::TileGrid::MAX_LEVEL)))]
     level: u32,
     /// Tile row, counted from the south pole.
     #[arg(long)]
@@ -58,7 +58,7 @@ pub struct TileArgs {
     #[arg(long)]
     col: u64,
     /// Extra samples per side taken from the neighbours.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=sylva::produce::MAX_HALO as u64))]
     halo: usize,
 }
 
@@ -66,7 +66,7 @@ impl TileArgs {
     pub fn run(self) -> Result<()> {
         let id = TileId::new(self.level, self.row, self.col);
         self.product.make(|region, layer, format| {
-            region.tiles.check(id)?;
+            region.tiles.check(id).map_err(super::usage)?;
             let what = format!("tile {}/{}/{}", id.level, id.row, id.col);
             in_region(region, &region.tiles.sector(id).bbox(), &what)?;
             Ok(produce::tile(region, id, self.halo, layer, format)?)
@@ -82,11 +82,11 @@ pub struct BuildArgs {
     /// W,S,E,N in degrees (default: the region's bounds).
     #[arg(long, allow_hyphen_values = true, value_parser = bbox)]
     bbox: Option<BBox>,
-    /// Samples per row; the outer samples lie on the box edges.
-    #[arg(long)]
+    /// Samples per row (1 to 8193); the outer samples lie on the box edges.
+    #[arg(long, value_parser = side())]
     width: usize,
-    /// Samples per column.
-    #[arg(long)]
+    /// Samples per column (1 to 8193).
+    #[arg(long, value_parser = side())]
     height: usize,
 }
 
@@ -108,7 +108,7 @@ pub struct CanopyArgs {
     #[arg(long = "las", required = true)]
     las: Vec<PathBuf>,
     /// Cell side of the canopy height model, metres.
-    #[arg(long, default_value_t = sylva::lidar::DEFAULT_CELL_M)]
+    #[arg(long, default_value_t = sylva::lidar::DEFAULT_CELL_M, value_parser = metres)]
     resolution: f64,
     /// The proxy (a GeoTIFF atlas of Wang tiles).
     #[arg(short, long)]
@@ -189,6 +189,16 @@ fn in_region(region: &Region, area: &BBox, what: &str) -> Result<()> {
             r.west, r.south, r.east, r.north
         ))),
     }
+}
+
+/// `--width`, `--height`: 1 to [`sylva::grid::MAX_REQUEST_SIDE`].
+fn side() -> clap::builder::RangedU64ValueParser<usize> {
+    clap::builder::RangedU64ValueParser::<usize>::new().range(1..=sylva::grid::MAX_REQUEST_SIDE as u64)
+}
+
+/// `--resolution`: a finite number of metres above 0.
+fn metres(text: &str) -> Result<f64, String> {
+    super::positive(text).ok_or_else(|| "not a positive number of metres".into())
 }
 
 /// `--layer`.

@@ -92,6 +92,20 @@ fn bad_arguments_are_explained() {
     assert!(out.status.code() == Some(2) && err.contains("'relief'") && err.contains("unknown layer"), "{out:?}");
     let out = sylva(&["build", "--layer", "cem", "--bbox", "1,2,3", "--width", "4", "--height", "4", "-o", x]);
     assert!(String::from_utf8_lossy(&out.stderr).contains("four numbers"), "{out:?}");
+    // Options out of their range are usage errors too (exit 2).
+    let laz = common::data("lidar_lidR/MixedConifer.laz");
+    let tile = ["tile", "--layer", "dem", "-o", x];
+    for (args, why) in [
+        (&[&tile[..], &["--level", "99", "--row", "1", "--col", "1"]].concat(), "99 is not in 0..=30"),
+        (&[&tile[..], &["--level", "3", "--row", "999", "--col", "1"]].concat(), "tile 3/999/1 does not exist"),
+        (&[&tile[..], &["--level", "3", "--row", "1", "--col", "1", "--halo", "99999"]].concat(), "0..=512"),
+        (&["build", "--layer", "dem", "--width", "0", "--height", "4", "-o", x][..].to_vec(), "1..=8193"),
+        (&["canopy", "--las", laz.to_str().unwrap(), "--resolution", "0", "-o", x][..].to_vec(), "positive number"),
+    ] {
+        let out = sylva(args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.code() == Some(2) && err.contains(why), "{args:?}: {err}");
+    }
     assert!(!dir.join("x.tif").exists());
     let out = sylva(&["info"]);
     assert!(out.status.success() && String::from_utf8_lossy(&out.stdout).contains("canopy"));
