@@ -55,7 +55,7 @@ pub enum Bench {
         #[arg(long, default_value = "config/paths")]
         paths: PathBuf,
         /// Frames per second of each path's own time (a real-time flight).
-        #[arg(long, default_value_t = 60.0, conflicts_with = "frames", value_parser = fps)]
+        #[arg(long, default_value_t = 60.0, conflicts_with = "frames", value_parser = super::positive("frames a second"))]
         fps: f64,
         /// Frames per path instead, spread over it whatever its length.
         #[arg(long)]
@@ -253,9 +253,4 @@ fn real_region(named: Option<PathBuf>) -> Result<PathBuf> {
         sylva::config::load(Some(path))?;
     }
     Ok(named.unwrap_or_else(|| PathBuf::from(DEFAULT_REAL_REGION)))
-}
-
-/// `--fps`: a finite number above 0.
-fn fps(text: &str) -> Result<f64, String> {
-    super::positive(text).ok_or_else(|| "not a positive number of frames a second".into())
 }

@@ -200,7 +200,7 @@ pub struct RenderArgs {
     #[arg(long, value_enum, default_value_t = Lod::Sse)]
     lod: Lod,
     /// Frame budget of `--lod budget`, ms [default: 33].
-    #[arg(long, value_parser = positive_ms)]
+    #[arg(long, value_parser = super::positive("milliseconds"))]
     budget_ms: Option<f64>,
     /// Frames between selections of `--lod budget` (the selection
     /// thread's period).
@@ -217,7 +217,7 @@ pub struct RenderArgs {
     #[arg(long)]
     cost_model: Option<PathBuf>,
     /// Largest projected tile error, pixels.
-    #[arg(long, default_value_t = 2.0, value_parser = positive_px)]
+    #[arg(long, default_value_t = 2.0, value_parser = super::positive("pixels"))]
     max_error_px: f64,
     /// Deepest tile level.
     #[arg(long, default_value_t = 13, value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva::grid::TileGrid::MAX_LEVEL)))]
@@ -304,14 +304,4 @@ pub fn size_px(text: &str) -> Result<(u32, u32), String> {
 fn traversal(text: &str) -> Result<sylva::client::raycast::Traversal, String> {
     let steps = fly::MAX_LINEAR_STEPS;
     fly::parse_traversal(text).ok_or_else(|| format!("not exact or linear:STEPS, STEPS 1 to {steps}"))
-}
-
-/// A finite number of pixels above 0.
-fn positive_px(text: &str) -> Result<f64, String> {
-    super::positive(text).ok_or_else(|| "not a positive number of pixels".into())
-}
-
-/// A finite number of milliseconds above 0.
-fn positive_ms(text: &str) -> Result<f64, String> {
-    super::positive(text).ok_or_else(|| "not a positive number of milliseconds".into())
 }

@@ -25,7 +25,10 @@ pub fn usage(message: impl std::fmt::Display) -> anyhow::Error {
     clap::Error::raw(clap::error::ErrorKind::ValueValidation, format!("{message}\n")).into()
 }
 
-/// A finite number above 0, if `text` is one.
-pub fn positive(text: &str) -> Option<f64> {
-    text.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0)
+/// An option's parser of a finite number of `unit` above 0.
+pub fn positive(unit: &'static str) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync + 'static {
+    move |text| {
+        let v = text.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0);
+        v.ok_or_else(|| format!("not a positive number of {unit}"))
+    }
 }

@@ -108,7 +108,7 @@ pub struct CanopyArgs {
     #[arg(long = "las", required = true)]
     las: Vec<PathBuf>,
     /// Cell side of the canopy height model, metres.
-    #[arg(long, default_value_t = sylva::lidar::DEFAULT_CELL_M, value_parser = metres)]
+    #[arg(long, default_value_t = sylva::lidar::DEFAULT_CELL_M, value_parser = super::positive("metres"))]
     resolution: f64,
     /// The proxy (a GeoTIFF atlas of Wang tiles).
     #[arg(short, long)]
@@ -194,11 +194,6 @@ fn in_region(region: &Region, area: &BBox, what: &str) -> Result<()> {
 /// `--width`, `--height`: 1 to [`sylva::grid::MAX_REQUEST_SIDE`].
 fn side() -> clap::builder::RangedU64ValueParser<usize> {
     clap::builder::RangedU64ValueParser::<usize>::new().range(1..=sylva::grid::MAX_REQUEST_SIDE as u64)
-}
-
-/// `--resolution`: a finite number of metres above 0.
-fn metres(text: &str) -> Result<f64, String> {
-    super::positive(text).ok_or_else(|| "not a positive number of metres".into())
 }
 
 /// `--layer`.

@@ -149,6 +149,7 @@ fn warnings(records: &[FrameRecord], asked_error_px: f64) -> String {
     }
     text
 }
+
 /// "1 frame", "2 frames".
 fn frames(n: usize) -> String {
     if n == 1 { "1 frame".to_string() } else { format!("{n} frames") }
