@@ -262,6 +262,30 @@ fn a_flight_under_a_frame_budget_reports_its_predicted_frame_time() {
 }
 
 #[test]
+fn a_short_budget_flight_draws_the_trees_its_budget_allows() {
+    // Its first selection knows no tile to grow trees on: the groups it did
+    // not price share what its budget leaves.
+    let dir = TempDir::new("fly-budget-trees");
+    let path = common::repo().join("config/paths/demo_valley.toml");
+    let flight = |name: &str, more: &[&str]| {
+        let args = ["--path", path.to_str().unwrap(), "--frames", "3", "--size", "320x240", "--no-frames"];
+        fly(&[&args[..], more].concat(), &dir.join(name));
+        stats(&dir.join(name))
+    };
+    let sse = flight("sse", &[]);
+    let loose = flight("loose", &["--lod", "budget", "--budget-ms", "100000"]);
+    let tight = flight("tight", &["--lod", "budget", "--budget-ms", "0.001"]);
+    let number = |row: &std::collections::HashMap<String, String>, c: &str| row[c].parse::<usize>().unwrap();
+    assert!(number(&sse[0], "trees") > 100, "{:?}", sse[0]);
+    for ((s, l), t) in sse.iter().zip(&loose).zip(&tight) {
+        // Room for all: every tree in reach at full resolution.
+        assert_eq!(number(s, "trees") > 0, number(l, "trees") > 0, "{s:?} {l:?}");
+        assert_eq!(number(l, "splats"), 24 * number(l, "trees"), "{l:?}");
+        assert_eq!(number(t, "splats"), 0, "the budget is spent on the coarsest tiles: {t:?}");
+    }
+}
+
+#[test]
 fn a_calibrated_cost_model_starts_the_next_flight() {
     let dir = TempDir::new("fly-prior");
     let flight = |name: &str, more: &[&str]| budget_flight(&dir.join(name), "6", "50", more);

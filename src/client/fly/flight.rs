@@ -276,10 +276,12 @@ fn frame(
         sun_ecef: shot.sun_ecef,
         fade,
     };
-    let budgets = chosen.selected.as_ref().map(|s| &s.cut.tree_budgets);
-    let trees = tree_splats(options, tiles, &camera, (&fade.trees, budgets));
+    let mut trees = tree_splats(options, tiles, &camera, &fade.trees, lod.as_deref_mut());
     if let Some(lod) = lod.as_deref_mut().filter(|_| options.trees.is_some()) {
         lod.set_drawn(tiles.clone());
+    }
+    if let Some(priced) = trees.priced.take() {
+        chosen.selected = Some(priced);
     }
     let draws: Vec<Draw> = (0..tiles.len())
         .map(|k| Draw {
@@ -350,20 +352,26 @@ struct FrameTrees {
     /// Splats, a list per tile.
     splats: Vec<Vec<trees::Splat>>,
     drawn: trees::Drawn,
+    /// The cut drawn, with budgets for the groups its selection did not
+    /// price (budget mode).
+    priced: Option<Selected>,
 }
 
 /// The trees near the camera on `tiles`, by screen size or, under a
-/// budget, with the selection's splat budgets.
+/// budget, with the splat budgets of the cut drawn.
 fn tree_splats(
     options: &FlyOptions,
     tiles: &[Arc<TileData>],
     camera: &Camera,
-    (blend, budgets): (&TreeBlend, Option<&trees::TreeBudgets>),
+    blend: &TreeBlend,
+    lod: Option<&mut BudgetFlight>,
 ) -> FrameTrees {
     let mut out = FrameTrees { splats: vec![Vec::new(); tiles.len()], ..FrameTrees::default() };
     let Some(settings) = &options.trees else { return out };
     let refs: Vec<&TileData> = tiles.iter().map(|t| t.as_ref()).collect();
     let groups = trees::groups_near(settings, &refs, camera, blend);
+    out.priced = lod.and_then(|lod| lod.price_trees(camera, &refs, &groups));
+    let budgets = out.priced.as_ref().map(|s| &s.cut.tree_budgets);
     out.drawn = trees::splats(settings, &groups, budgets, (blend, camera.focal_px()), &mut out.splats);
     out
 }

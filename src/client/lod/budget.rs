@@ -39,7 +39,9 @@
 //! fewest splats first, until the cut fits. (Setting the group constant of every group in view aside
 //! first let one miscalibrated constant starve the terrain: fifty groups
 //! at a fitted 12 ms each left a 640 × 480 flight one tile for good, since
-//! frames without trees never corrected it.)
+//! frames without trees never corrected it.) Groups the selection did not
+//! see, grown on tiles it did not know, get what its cut leaves of the
+//! budget ([`price_unseen_trees`]).
 //!
 //! Invariant: the cut is feasible as [`optimize`] answers it (steps are
 //! rounded down, part-full groups trimmed until it fits), and draws at
@@ -52,8 +54,8 @@
 use super::candidates::Candidate;
 use crate::client::trees::TreeBudgets;
 use crate::grid::TileId;
-use crate::lod::model::{CostFeatures, CostModel, group_weight};
-use crate::lod::optimizer::{Continuous, Forest, Node, Settings, Stop, optimize};
+use crate::lod::model::{CostFeatures, CostModel, Smooth, group_weight};
+use crate::lod::optimizer::{Continuous, Forest, Levels, Node, Settings, Stop, optimize};
 use crate::lod::split::Item;
 use std::time::Instant;
 
@@ -151,7 +153,8 @@ impl GroupBudget {
 pub struct Cut {
     /// Tiles to draw, none an ancestor of another.
     pub tiles: Vec<Choice>,
-    /// Splat budget per tree group, by block.
+    /// Splat budget per tree group priced, by block (0: none drawn; a
+    /// group not priced has no entry).
     pub tree_budgets: TreeBudgets,
     /// What drawing them costs, as the model sees it.
     pub features: CostFeatures,
@@ -258,12 +261,7 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
             shadow_steps: regions.steps(i, &forest, candidates, &selection.resolutions),
         })
         .collect();
-    let groups: Vec<GroupBudget> = trees
-        .iter()
-        .zip(&selection.resolutions[regions.heads.len().min(selection.resolutions.len())..])
-        .filter(|(_, x)| **x >= 1.0)
-        .map(|((item, _), x)| GroupBudget { item: *item, splats: x.floor() })
-        .collect();
+    let groups = group_budgets(trees, &selection.resolutions[regions.heads.len().min(selection.resolutions.len())..]);
     let terrain = drawn
         .iter()
         .zip(&tiles)
@@ -274,7 +272,8 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
     // larger than the floor): coarser tiles, whole.
     let tiles = coarsened(tiles, max_tiles);
     let (features, groups) = fit_groups(terrain, groups, model, budget.budget_ms);
-    let tree_budgets: TreeBudgets = groups.into_iter().map(|g| (g.item.block, g.splats)).collect();
+    let mut tree_budgets: TreeBudgets = trees.iter().map(|(t, _)| (t.block, 0.0)).collect();
+    tree_budgets.extend(groups.into_iter().map(|g| (g.item.block, g.splats)));
     Cut {
         predicted_ms: model.predict_ms(&features),
         features,
@@ -285,6 +284,34 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
         stop: Some(selection.stop),
         slot_bound,
     }
+}
+
+/// Gives tree groups the cut's selection did not price, `unseen` (each
+/// with its projected pixels), splat budgets from what `budget_ms` leaves
+/// after the cut: its selection grew its groups on the tiles drawn before
+/// it, so it saw none before the first frame and few after a jump. They
+/// take one slope level, as the optimiser sets continuous variables, and
+/// are trimmed until the cut fits, as its own groups are; the cut's
+/// features and prediction include them. A budget spent leaves them none.
+pub fn price_unseen_trees(cut: &mut Cut, unseen: &[(TreeItem, f64)], model: &CostModel, budget_ms: f64) {
+    let left_ms = budget_ms - model.predict_ms(&cut.features);
+    let variables: Vec<Continuous> = unseen.iter().map(|(t, px)| tree_variable(t, *px, model)).collect();
+    let levels = Levels::new(&variables, Smooth::default());
+    let splats = levels.resolutions(levels.level_for_budget(left_ms));
+    let (features, groups) = fit_groups(cut.features, group_budgets(unseen, &splats), model, budget_ms);
+    cut.tree_budgets.extend(unseen.iter().map(|(t, _)| (t.block, 0.0)));
+    cut.tree_budgets.extend(groups.into_iter().map(|g| (g.item.block, g.splats)));
+    (cut.features, cut.predicted_ms) = (features, model.predict_ms(&features));
+}
+
+/// The groups of `trees` given at least a splat by `splats` (in order).
+fn group_budgets(trees: &[(TreeItem, f64)], splats: &[f64]) -> Vec<GroupBudget> {
+    trees
+        .iter()
+        .zip(splats)
+        .filter(|(_, x)| **x >= 1.0)
+        .map(|((item, _), x)| GroupBudget { item: *item, splats: x.floor() })
+        .collect()
 }
 
 /// `tiles` merged into their parents, deepest level first (each parent with
@@ -635,6 +662,31 @@ mod tests {
         assert!(tight.predicted_ms <= 4.0 + 1e-9 && !tight.tree_budgets.is_empty());
         let rich = choose(&c, &trees, &model, &budget(1e4, true));
         assert_eq!(rich.tree_budgets.get(&(0, 0)), Some(&(64.0 * 24.0)));
+    }
+
+    #[test]
+    fn groups_the_selection_did_not_see_take_what_its_budget_leaves() {
+        let c = demo_candidates();
+        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01, 0.0, 0.0] };
+        let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
+        let item = |k: i64| TreeItem { block: (k, 0), group, share: 1.0, fill_px: 0.0 };
+        let trees = [(item(0), 20_000.0), (item(1), 2_000.0), (item(2), 0.0)];
+        // The terrain is whole at 3.8 ms: the unseen groups get the rest,
+        // by worth, as the selection would have given them.
+        let mut cut = choose(&c, &[], &model, &budget(8.0, true));
+        let terrain = cut.clone();
+        price_unseen_trees(&mut cut, &trees, &model, 8.0);
+        let got = |k: i64| cut.tree_budgets[&(k, 0)];
+        assert!(got(0) > got(1) && got(1) > 0.0 && got(2) == 0.0, "{:?}", cut.tree_budgets);
+        assert!(cut.predicted_ms <= 8.0 + 1e-9 && cut.predicted_ms > 7.9, "{}", cut.predicted_ms);
+        assert!((cut.features.splats_k - (got(0) + got(1)) / 1e3).abs() < 1e-12);
+        assert_eq!(cut.tiles, terrain.tiles);
+        // A budget spent on the terrain leaves them none, priced at none.
+        let mut spent = choose(&c, &[], &model, &budget(3.0, true));
+        let before = spent.predicted_ms;
+        price_unseen_trees(&mut spent, &trees, &model, 3.0);
+        assert!(spent.tree_budgets.values().all(|&b| b == 0.0) && spent.tree_budgets.len() == 3);
+        assert_eq!(spent.predicted_ms, before);
     }
 
     #[test]

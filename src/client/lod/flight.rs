@@ -2,7 +2,8 @@
 //! frame the camera feeds the path predictor; every `τ` a selection for the
 //! predicted cameras and the conservative cone is handed to the selection
 //! thread ([`super::worker`]) with the tree groups near those cameras
-//! (grown on the tiles last drawn) while the last finished cut is drawn;
+//! (grown on the tiles last drawn) while the last finished cut is drawn,
+//! its budget's remainder given to tree groups its selection did not see;
 //! after each frame its features and measured time go to the calibrator
 //! (001 §4.2), so the next selection predicts with constants fitted to this
 //! GPU, and its rays' fetches per tile to [`super::steps`], so the next
@@ -176,6 +177,31 @@ impl BudgetFlight {
     /// The tiles drawn, on which the next selections' tree groups grow.
     pub fn set_drawn(&mut self, drawn: Vec<Arc<TileData>>) {
         self.drawn = drawn;
+    }
+
+    /// The cut drawn now, its splat budgets extended to the tree groups
+    /// `groups` of the frame drawn from `camera` on `tiles` that its
+    /// selection did not price ([`budget::price_unseen_trees`], under the
+    /// budget aimed at); `None` before the first [`Self::frame`].
+    pub fn price_trees(
+        &mut self,
+        camera: &Camera,
+        tiles: &[&TileData],
+        groups: &[trees::TreeGroup],
+    ) -> Option<Selected> {
+        let (budget, model) = (self.aimed(), self.model());
+        let field = self.selector.trees.as_ref()?.field;
+        let current = self.current.as_mut()?;
+        let unseen: Vec<(TreeItem, f64)> = groups
+            .iter()
+            .filter(|g| !current.cut.tree_budgets.contains_key(&g.block))
+            .map(|g| g.item(tiles, &field, camera.focal_px()))
+            .map(|item| (item, super::tree_px(std::slice::from_ref(camera), &item)))
+            .collect();
+        if !unseen.is_empty() {
+            budget::price_unseen_trees(&mut current.cut, &unseen, &model, budget.budget_ms);
+        }
+        Some(current.clone())
     }
 
     /// The tree groups near `cameras` on the tiles last drawn, each once,
