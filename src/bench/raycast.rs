@@ -113,15 +113,23 @@ fn settings() -> Vec<Setting> {
     out
 }
 
+/// `name` if a setting is so named, else an error listing the names.
+pub fn setting_named(name: &str) -> Result<String, String> {
+    let all = settings();
+    if all.iter().any(|s| s.0 == name) {
+        return Ok(name.to_string());
+    }
+    let names: Vec<&str> = all.iter().map(|s| s.0.as_str()).collect();
+    Err(format!("no setting is named {name:?}; the settings: {names:?}"))
+}
+
 /// The settings named in `only`, in the table's order (all when empty); an
 /// unknown name is an error listing the known ones.
 fn chosen(only: &[String]) -> Result<Vec<Setting>, String> {
-    let all = settings();
-    if let Some(unknown) = only.iter().find(|name| !all.iter().any(|s| &s.0 == *name)) {
-        let names: Vec<&str> = all.iter().map(|s| s.0.as_str()).collect();
-        return Err(format!("no setting is named {unknown:?}; the settings: {names:?}"));
+    for name in only {
+        setting_named(name)?;
     }
-    Ok(all.into_iter().filter(|s| only.is_empty() || only.contains(&s.0)).collect())
+    Ok(settings().into_iter().filter(|s| only.is_empty() || only.contains(&s.0)).collect())
 }
 
 /// The default views: a low flight and a grazing view over each region.

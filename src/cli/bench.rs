@@ -143,7 +143,7 @@ pub struct RaycastArgs {
     #[arg(long, default_value = DEFAULT_RAYCAST_PLOT)]
     plot: PathBuf,
     /// Run only these settings (e.g. `--only "linear 30 + 10" --only "exact + 10"`); all by default.
-    #[arg(long)]
+    #[arg(long, value_parser = sylva::bench::raycast::setting_named)]
     only: Vec<String>,
     /// Hull fragments without their depth promise (`@early_depth_test`),
     /// for comparison: every hidden fragment casts its ray.

@@ -9,8 +9,8 @@ pub struct ServeArgs {
     /// Region and server configuration (default: the embedded demo region).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Address to listen on (default: `[server] bind`).
-    #[arg(long)]
+    /// Address to listen on, HOST:PORT (default: `[server] bind`).
+    #[arg(long, value_parser = bind_address)]
     bind: Option<String>,
     /// Tile cache directory (default: `[tile_cache]`).
     #[arg(long)]
@@ -25,6 +25,11 @@ impl ServeArgs {
         let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
         runtime.block_on(sylva::server::serve(self.config.as_deref(), options))
     }
+}
+
+/// `--bind`'s parser.
+fn bind_address(text: &str) -> Result<String, String> {
+    sylva::config::check_bind(text).map(|()| text.to_string())
 }
 
 /// `sylva seed`.

@@ -177,16 +177,21 @@ pub const MAX_MAP_SIZE: usize = 16_384;
 /// Largest `[server] max_halo`, samples.
 pub const MAX_HALO: usize = 1024;
 
+/// Checks an address to listen on: `HOST:PORT`, an IPv6 host bracketed
+/// (`[::1]:8080`); the message quotes it.
+pub fn check_bind(bind: &str) -> Result<(), String> {
+    let host_ok = |h: &str| !h.is_empty() && (!h.contains(':') || (h.starts_with('[') && h.ends_with(']')));
+    match bind.rsplit_once(':') {
+        Some((host, port)) if host_ok(host) && port.parse::<u16>().is_ok() => Ok(()),
+        _ => Err(format!("{bind:?}: must be HOST:PORT")),
+    }
+}
+
 impl ServerConfig {
     /// Checks every value: the message names the key, what it must be and
     /// what it is.
     pub fn check(&self) -> Result<(), String> {
-        // An IPv6 host is bracketed: `[::1]:8080`.
-        let host_ok = |h: &str| !h.is_empty() && (!h.contains(':') || (h.starts_with('[') && h.ends_with(']')));
-        let bind = self.bind.rsplit_once(':');
-        if !bind.is_some_and(|(host, port)| host_ok(host) && port.parse::<u16>().is_ok()) {
-            return Err(format!("bind = {:?}: must be HOST:PORT", self.bind));
-        }
+        check_bind(&self.bind).map_err(|e| format!("bind = {e}"))?;
         let within = |key: &str, value: usize, most: usize| {
             if value <= most { Ok(()) } else { Err(format!("{key} = {value}: must be at most {most}")) }
         };

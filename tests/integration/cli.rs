@@ -101,6 +101,8 @@ fn bad_arguments_are_explained() {
         (&[&tile[..], &["--level", "3", "--row", "1", "--col", "1", "--halo", "99999"]].concat(), "0..=512"),
         (&["build", "--layer", "dem", "--width", "0", "--height", "4", "-o", x][..].to_vec(), "1..=8193"),
         (&["canopy", "--las", laz.to_str().unwrap(), "--resolution", "0", "-o", x][..].to_vec(), "positive number"),
+        (&["serve", "--bind", "notanaddr"][..].to_vec(), "must be HOST:PORT"),
+        (&["bench", "raycast", "--only", "nonsense"][..].to_vec(), "the settings: [\"linear 30 + 10\""),
     ] {
         let out = sylva(args);
         let err = String::from_utf8_lossy(&out.stderr);
