@@ -86,6 +86,15 @@ impl TileFrame {
         xy / self.spacing_m + DVec2::splat(self.centre_index())
     }
 
+    /// Sample coordinates of the point at `(lon, lat)`, degrees, its
+    /// longitude taken within half a turn of the tile's.
+    pub fn sample_at(&self, lon_deg: f64, lat_deg: f64) -> DVec2 {
+        let turn = std::f64::consts::TAU;
+        let lon = (lon_deg.to_radians() - self.lon0_rad + turn / 2.0).rem_euclid(turn) - turn / 2.0;
+        let lat = lat_deg.to_radians() - self.lat0_rad;
+        DVec2::new(lon, lat) / self.spacing_rad + DVec2::splat(self.centre_index())
+    }
+
     /// An ECEF point in the local frame.
     pub fn to_local(&self, p_ecef: DVec3) -> DVec3 {
         self.basis.transpose() * (p_ecef - self.origin_ecef)

@@ -9,12 +9,10 @@
 //! iteration limit: a ray misses only if it misses the surface.
 
 use super::camera::Camera;
-use super::globe::{self, Geodetic};
 use super::raycast::{self, Fade, SKY, TileView};
 use super::tile::TileData;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
-use std::sync::Arc;
 
 /// Rendered buffers, row 0 at the top.
 #[derive(Clone, Debug, PartialEq)]
@@ -122,30 +120,6 @@ pub fn view_of<'a>(camera: &Camera, tile: &'a TileData, lighting: &Lighting) -> 
 pub fn rgba(c: [f64; 3]) -> [u8; 4] {
     let b = c.map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8);
     [b[0], b[1], b[2], 255]
-}
-
-/// The surface under the eye is looked for from this height (or the
-/// eye's, if higher): above every summit and its canopy.
-const PROBE_FROM_M: f64 = 10_000.0;
-
-/// The height of `eye` above the surface of `tiles` under it, canopy
-/// included (negative below it), metres; `None` where no tile has surface
-/// under the eye. Exact: a ray down the ellipsoid's normal from above every
-/// summit, intersected with each tile's surface by the reference caster.
-pub fn clearance_m(eye: Geodetic, tiles: &[Arc<TileData>]) -> Option<f64> {
-    let top_m = eye.height_m.max(PROBE_FROM_M);
-    let top = Geodetic::new(eye.lon_deg, eye.lat_deg, top_m).to_ecef();
-    let down = -globe::enu_basis(eye.lon_deg, eye.lat_deg).z_axis;
-    let nearest = tiles
-        .iter()
-        .filter_map(|tile| {
-            let to_local = tile.frame.basis.transpose();
-            let view =
-                TileView { tile, camera_m: tile.frame.to_local(top), sun: None, fade: Fade::NONE, shadow_steps: 0 };
-            intersect(&view, view.camera_m, to_local * down, 0.0, top_m + PROBE_FROM_M).map(|hit| hit.t_m)
-        })
-        .min_by(f64::total_cmp)?;
-    Some(eye.height_m - (top_m - nearest))
 }
 
 /// The first hit of the ray `o + t·d` (local metres, `d` unit) with the

@@ -20,12 +20,19 @@
 //!   corner hold no surface, and bound nothing.
 
 use super::frame::TileFrame;
+use super::globe::Geodetic;
 use super::hull::Hull;
 use super::terrain::TerrainMesh;
 use crate::cem::accel::{MaxMipmap, ZONE_FAR, ZONE_NEAR};
 use crate::grid::{TileGrid, TileId};
 use crate::raster::Raster;
 use crate::raster::morphology::dilate;
+use glam::DVec2;
+use std::sync::Arc;
+
+/// How far outside its sector, in samples, a point is still on a tile's
+/// edge (rounding of degrees to samples).
+const EDGE_SAMPLES: f64 = 1e-6;
 
 /// Height of nodata texels: below this is no surface.
 pub const NODATA_M: f32 = -1.0e30;
@@ -242,6 +249,29 @@ impl TileData {
         self.frame.flat_error_m(largest_m.max(1.0))
     }
 
+    /// The surface, canopy included, at `(lon, lat)` (degrees), metres
+    /// above the ellipsoid: its samples in their true place, bilinear
+    /// between them. `None` outside its sector or beside nodata.
+    pub fn surface_height_m(&self, lon_deg: f64, lat_deg: f64) -> Option<f64> {
+        let s = self.frame.sample_at(lon_deg, lat_deg);
+        let last = f64::from(self.frame.samples - 1);
+        // On its edge within rounding: a point on a sector's border belongs
+        // to both tiles there.
+        let inside = |v: f64| (-EDGE_SAMPLES..=last + EDGE_SAMPLES).contains(&v);
+        if !(inside(s.x) && inside(s.y)) {
+            return None;
+        }
+        let s = s.clamp(DVec2::ZERO, DVec2::splat(last));
+        let (c, f) = (s.floor(), s - s.floor());
+        let height = |di: f64, dj: f64| {
+            let (i, j) = (c.x + di, c.y + dj);
+            let cem = self.texel(i as i64, j as i64)[0];
+            (cem > NODATA_M).then(|| f64::from(cem) - self.frame.ellipsoid_local(i, j).z)
+        };
+        let corners = [height(0.0, 0.0)?, height(1.0, 0.0)?, height(0.0, 1.0)?, height(1.0, 1.0)?];
+        Some(super::raycast::bilinear(corners, f.x, f.y))
+    }
+
     /// Texel at sample `(i, j)` (may be in the halo).
     pub fn texel(&self, i: i64, j: i64) -> [f32; 4] {
         let b = self.halo as i64;
@@ -253,6 +283,17 @@ impl TileData {
         let mip: usize = (0..self.mip.levels()).map(|l| self.mip.level(l).data().len() * 4).sum();
         self.texels.len() * 16 + mip + self.colour.len() * 4 + self.surface.len()
     }
+}
+
+/// The height of `eye` above the surface of `tiles` under it (the highest
+/// where several hold it, [`TileData::surface_height_m`]), canopy included
+/// (negative below it), metres; `None` where no tile has surface under the
+/// eye. Taken along the ellipsoid's normal with samples in their true
+/// place, so it holds where a coarse tile's flat frame misplaces its
+/// ground by kilometres (at a pole, where such a tile is drawn plain).
+pub fn clearance_m(eye: Geodetic, tiles: &[Arc<TileData>]) -> Option<f64> {
+    let highest = tiles.iter().filter_map(|t| t.surface_height_m(eye.lon_deg, eye.lat_deg)).max_by(f64::total_cmp);
+    highest.map(|h| eye.height_m - h)
 }
 
 fn next_serial() -> u64 {
@@ -357,6 +398,46 @@ mod tests {
         assert!((t.range.canopy_max_m - 20.0).abs() < 1e-3);
         for tx in &t.texels {
             assert!(tx[2] >= tx[0] && tx[3] >= tx[2]);
+        }
+    }
+
+    #[test]
+    fn the_surface_height_is_the_payloads_in_its_true_place_even_near_a_pole() {
+        // A level-1 tile 18° wide by the South Pole: its flat frame puts its
+        // corners kilometres off, the heights stay the payload's.
+        let grid = TileGrid::new(36.0, 33).unwrap();
+        let id = grid.tile_containing(10.0, -85.0, 1);
+        let halo = 2;
+        let mut payload = ramp(&grid, id, halo);
+        let size = 33 + 2 * halo;
+        // Hills 800 m high a sample or two apart.
+        for (k, h) in payload.cem.iter_mut().enumerate() {
+            *h = 1000.0 + 800.0 * ((k % size) as f32 * 1.3).sin() * ((k / size) as f32 * 0.9).cos();
+        }
+        let at = |i: usize, j: usize| (size - 1 - (j + halo)) * size + i + halo;
+        payload.cem[at(20, 5)] = f32::NAN;
+        let cem = payload.cem.clone();
+        let t = TileData::prepare(&grid, payload).unwrap();
+        assert!(t.flat_error_m() > 1e4, "{}", t.flat_error_m());
+        let (sector, step) = (grid.sector(id), grid.spacing_deg(id.level));
+        let place = |i: f64, j: f64| (sector.min_lon + i * step, sector.min_lat + j * step);
+        let height = |i: f64, j: f64| t.surface_height_m(place(i, j).0, place(i, j).1);
+        for (i, j) in [(0, 0), (32, 32), (16, 16), (3, 29), (32, 0)] {
+            let got = height(i as f64, j as f64).unwrap();
+            assert!((got - f64::from(cem[at(i, j)])).abs() < 0.05, "({i}, {j}): {got} vs {}", cem[at(i, j)]);
+        }
+        // Bilinear between samples; none beside nodata, none off the tile.
+        let mean = [(7, 9), (8, 9), (7, 10), (8, 10)].map(|(i, j)| f64::from(cem[at(i, j)])).iter().sum::<f64>() / 4.0;
+        assert!((height(7.5, 9.5).unwrap() - mean).abs() < 0.05);
+        assert_eq!(height(19.5, 4.5), None);
+        assert_eq!((height(-0.01, 3.0), height(3.0, 32.01)), (None, None));
+        // A ray cast down in the flat frame found no ground or ground 400 m
+        // off at these corners.
+        let t = [Arc::new(t)];
+        for (i, j) in [(1, 1), (3, 29), (30, 2)] {
+            let eye = Geodetic::new(place(i as f64, j as f64).0, place(i as f64, j as f64).1, 5000.0);
+            let got = clearance_m(eye, &t).unwrap();
+            assert!((got - (5000.0 - f64::from(cem[at(i, j)]))).abs() < 0.05, "({i}, {j}): {got}");
         }
     }
 

@@ -13,12 +13,12 @@ use crate::client::lod::steps::FrameSteps;
 use crate::client::lod::{Selected, Selector};
 use crate::client::quadtree;
 use crate::client::raycast::TreeBlend;
-use crate::client::reference;
 use crate::client::render::uniforms::FrameSettings;
 use crate::client::render::{Draw, DrawWork, FrameStats, Readback, Rendered, Renderer};
 use crate::client::source::TileSource;
 use crate::client::sse::SseSelector;
 use crate::client::store::{LoadError, TileStore};
+use crate::client::tile;
 use crate::client::tile::TileData;
 use crate::client::trees;
 use crate::lod::model::CostModel;
@@ -448,7 +448,7 @@ const MAX_COARSENED_PX: f64 = 1e4;
 fn clearance_m(source: &dyn TileSource, store: &TileStore, camera: &Camera) -> Option<f64> {
     let eye = Geodetic::from_ecef(camera.position_ecef);
     let under = store.finest_at(&source.grid(), eye.lon_deg, eye.lat_deg)?;
-    reference::clearance_m(eye, &[under])
+    tile::clearance_m(eye, &[under])
 }
 
 /// Bytes of one prepared tile, for the CPU store's budget.

@@ -3,7 +3,7 @@
 //! the heading over the ground, sideways, up and down — at a speed that
 //! grows with the height above the surface, so a valley floor and orbit
 //! are both a few seconds of flight away. Given the surface under the eye
-//! before each frame ([`clearance_m`](super::super::reference::clearance_m); the ellipsoid where no tile is
+//! before each frame ([`clearance_m`](super::super::tile::clearance_m); the ellipsoid where no tile is
 //! loaded), the eye is kept [`MIN_CLEARANCE_M`] above it.
 
 use super::super::camera::Camera;
@@ -207,8 +207,8 @@ impl Controls {
 
 #[cfg(test)]
 mod tests {
-    use super::super::super::reference::clearance_m;
     use super::super::super::tile::TileData;
+    use super::super::super::tile::clearance_m;
     use super::*;
     use std::sync::Arc;
 

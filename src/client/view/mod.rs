@@ -433,7 +433,7 @@ impl Viewer {
         let finest = self.flight.tile_at(&source.grid(), eye.lon_deg, eye.lat_deg);
         let drawn = self.drawn.iter().filter(|t| t.frame.sector.contains(eye.lon_deg, eye.lat_deg)).cloned();
         let under: Vec<_> = finest.into_iter().chain(drawn).collect();
-        self.controls.ground(super::reference::clearance_m(eye, &under));
+        self.controls.ground(super::tile::clearance_m(eye, &under));
     }
 
     /// Frame rate, tiles, height and speed in the title, twice a second.
