@@ -5,7 +5,8 @@
 //!
 //! Pixel coordinates are centre-based: `(0.0, 0.0)` is the centre of pixel
 //! `(0, 0)`. Samples outside the source's valid [`Extent`] are NaN; inside it the
-//! kernel taps are clamped to the edge pixels. NaN taps with a non-zero weight
+//! kernel taps are clamped to the edge pixels, or read across the seam of a
+//! raster around the globe ([`Extent::wraps`]). NaN taps with a non-zero weight
 //! make the sample NaN (nodata propagates).
 
 use super::mesh::Mesh;
@@ -42,6 +43,10 @@ impl Resampling {
 /// pixels), and would otherwise be no data on one side.
 pub const EDGE_SLACK: f64 = 1e-6;
 
+/// Columns past either edge a kernel reads from a raster that wraps (the
+/// widest support, bicubic's).
+pub const WRAP_TAPS: i64 = 2;
+
 /// The pixels of a source and the region of pixel coordinates that holds data
 /// (for area pixels `-0.5 ..= n - 0.5`, for point-registered samples
 /// `0 ..= n - 1`; overviews have fractional bounds).
@@ -55,6 +60,10 @@ pub struct Extent {
     pub x_range: (f64, f64),
     /// Smallest and largest row coordinate with data.
     pub y_range: (f64, f64),
+    /// Whether columns repeat every `width` (a geographic raster around the
+    /// globe): taps past an edge read the other edge, up to [`WRAP_TAPS`]
+    /// columns out, where the window read holds them.
+    pub wraps: bool,
 }
 
 impl Extent {
@@ -67,6 +76,18 @@ impl Extent {
             height,
             x_range: (-reach, width as f64 - 1.0 + reach),
             y_range: (-reach, height as f64 - 1.0 + reach),
+            wraps: false,
+        }
+    }
+
+    /// The column a kernel tap at column `x` reads: past an edge the edge
+    /// column, or where the raster wraps the column itself (its window holds
+    /// the columns a period away there).
+    #[inline]
+    pub fn tap_x(&self, x: i64) -> i64 {
+        match self.wraps {
+            true => x.clamp(-WRAP_TAPS, self.width as i64 - 1 + WRAP_TAPS),
+            false => x.clamp(0, self.width as i64 - 1),
         }
     }
 
@@ -162,10 +183,9 @@ impl PixelCoords {
             }
         };
         let s = kind.support();
-        let clamp_x = |v: i64| v.clamp(0, extent.width as i64 - 1);
         let clamp_y = |v: i64| v.clamp(0, extent.height as i64 - 1);
-        let (ax, ay) = (clamp_x(x0.floor() as i64 - s + 1), clamp_y(y0.floor() as i64 - s + 1));
-        let (bx, by) = (clamp_x(x1.floor() as i64 + s), clamp_y(y1.floor() as i64 + s));
+        let (ax, ay) = (extent.tap_x(x0.floor() as i64 - s + 1), clamp_y(y0.floor() as i64 - s + 1));
+        let (bx, by) = (extent.tap_x(x1.floor() as i64 + s), clamp_y(y1.floor() as i64 + s));
         Some(Window::new(ax, ay, (bx - ax + 1) as usize, (by - ay + 1) as usize))
     }
 
@@ -256,7 +276,7 @@ struct View<'a> {
 impl View<'_> {
     #[inline]
     fn tap(&self, x: i64, y: i64) -> f32 {
-        let x = x.clamp(0, self.extent.width as i64 - 1) - self.window.x;
+        let x = self.extent.tap_x(x) - self.window.x;
         let y = y.clamp(0, self.extent.height as i64 - 1) - self.window.y;
         self.src.get(x as usize, y as usize)
     }
@@ -269,7 +289,7 @@ impl View<'_> {
     /// column, the same arithmetic as [`View::bilinear`] (so both paths agree
     /// bitwise).
     fn bilinear_separable(&self, x: &[f64], y: &[f64]) -> Raster<f32> {
-        let clamp_x = |i: i64| (i.clamp(0, self.extent.width as i64 - 1) - self.window.x) as usize;
+        let clamp_x = |i: i64| (self.extent.tap_x(i) - self.window.x) as usize;
         let clamp_y = |i: i64| (i.clamp(0, self.extent.height as i64 - 1) - self.window.y) as usize;
         let cols = taps(x, |p| self.extent.contains_x(p), clamp_x);
         let rows = taps(y, |p| self.extent.contains_y(p), clamp_y);
@@ -337,7 +357,7 @@ impl View<'_> {
 
     /// [`View::bilinear_row`] with extent tests and edge clamping.
     fn bilinear_clamped(&self, xy: &[(f64, f64)], line: &mut [f32]) {
-        let (w, h) = (self.extent.width as i64 - 1, self.extent.height as i64 - 1);
+        let h = self.extent.height as i64 - 1;
         let (ox, oy) = (self.window.x, self.window.y);
         let (stride, data) = (self.src.width(), self.src.data());
         for (o, &(px, py)) in line.iter_mut().zip(xy) {
@@ -346,7 +366,8 @@ impl View<'_> {
             }
             let (x0, y0) = (floor_i64(px), floor_i64(py));
             let (fx, fy) = ((px - x0 as f64) as f32, (py - y0 as f64) as f32);
-            let (xa, xb) = ((x0.clamp(0, w) - ox) as usize, ((x0 + 1).clamp(0, w) - ox) as usize);
+            let column = |x: i64| (self.extent.tap_x(x) - ox) as usize;
+            let (xa, xb) = (column(x0), column(x0 + 1));
             let (ya, yb) = ((y0.clamp(0, h) - oy) as usize * stride, ((y0 + 1).clamp(0, h) - oy) as usize * stride);
             let top = lerp(data[ya + xa], data[ya + xb], fx);
             *o = lerp(top, lerp(data[yb + xa], data[yb + xb], fx), fy);
@@ -454,7 +475,8 @@ mod tests {
         ) {
             let mut src = Raster::from_fn(20, 12, |x, y| ((x * 7 + y * 13) % 11) as f32 * 1.5 - y as f32);
             src.set(nan_at % 20, nan_at / 20, f32::NAN);
-            let extent = Extent { width: 20, height: 12, x_range: (-0.5, 19.0 - short), y_range: (-0.5, 11.5) };
+            let extent =
+                Extent { width: 20, height: 12, x_range: (-0.5, 19.0 - short), y_range: (-0.5, 11.5), wraps: false };
             let x: Vec<f64> = (0..150).map(|i| x0 + dx * i as f64).collect();
             let y: Vec<f64> = (0..9).map(|j| y0 + dy * j as f64).collect();
             let xy = y.iter().flat_map(|&py| x.iter().map(move |&px| (px, py))).collect();

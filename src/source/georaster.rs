@@ -175,7 +175,10 @@ impl GeoRaster {
         let Some(window) = coords.footprint(&extent, kind) else {
             return Ok(None);
         };
-        let bands = self.levels[level].read_bands(window, bands)?;
+        let bands = match extent.wraps {
+            true => read_around(&self.levels[level], window, bands)?,
+            false => self.levels[level].read_bands(window, bands)?,
+        };
         Ok(Some(Footprint { bands, window, extent, coords }))
     }
 
@@ -201,7 +204,17 @@ impl GeoRaster {
             height: h,
             x_range: ((base.x_range.0 - shift) / scale, (base.x_range.1 - shift) / scale),
             y_range: ((base.y_range.0 - shift) / scale, (base.y_range.1 - shift) / scale),
+            wraps: self.wraps() && w as f64 * scale == self.size().0 as f64,
         }
+    }
+
+    /// Whether the source's area pixels go once around the globe, so that
+    /// its last column borders its first (an overview wraps when its
+    /// columns divide the base's evenly).
+    fn wraps(&self) -> bool {
+        let g = &self.georef;
+        let turn = self.size().0 as f64 * g.dx.abs();
+        g.crs.is_geographic() && g.overhang == 0.5 && (turn - 360.0).abs() < WRAP_TOLERANCE_DEG
     }
 
     /// Source pixel coordinates (of overview `level`) of every grid sample.
@@ -293,6 +306,35 @@ impl std::fmt::Debug for GeoRaster {
         let (w, h) = self.size();
         write!(f, "GeoRaster({}, {w}×{h}, {:?})", self.name().display(), self.georef.crs)
     }
+}
+
+/// How near 360° a geographic source's width must be to wrap, degrees
+/// (an arc-second raster's 1,296,000 columns sum their rounding).
+const WRAP_TOLERANCE_DEG: f64 = 1e-6;
+
+/// `window` of `blocks`, whose columns repeat every width: the columns
+/// past either edge are read a period away.
+fn read_around(blocks: &Blocks, window: Window, bands: usize) -> Result<Vec<Raster<f32>>, SourceError> {
+    let period = blocks.size().0 as i64;
+    let mut pieces = Vec::new();
+    let mut x = window.x;
+    while x < window.x_end() && period > 0 {
+        let end = ((x.div_euclid(period) + 1) * period).min(window.x_end());
+        let piece = Window::new(x.rem_euclid(period), window.y, (end - x) as usize, window.height);
+        pieces.push(blocks.read_bands(piece, bands)?);
+        x = end;
+    }
+    let band = |b: usize| {
+        let mut data = Vec::with_capacity(window.area());
+        for y in 0..window.height {
+            pieces.iter().for_each(|p| data.extend_from_slice(p[b].row(y)));
+        }
+        Raster::from_vec(window.width, window.height, data).ok_or_else(|| SourceError::Malformed {
+            path: blocks.source().name().to_path_buf(),
+            problem: "its columns read around the globe do not fill the window".into(),
+        })
+    };
+    (0..pieces.first().map_or(0, Vec::len)).map(band).collect()
 }
 
 /// Base pixel coordinate `p` is overview coordinate `(p - shift) / scale`.
@@ -499,6 +541,38 @@ mod tests {
         let across = ones(4326, (179.505, -16.005), (100, 100), 0.01);
         assert_eq!(covered(&across, "-179.9,-16.9,-179.6,-16.1", (8, 8)), 1.0);
         assert_eq!(covered(&across, "179.6,-16.9,179.9,-16.1", (8, 8)), 1.0);
+    }
+
+    #[test]
+    fn a_source_around_the_globe_is_read_across_its_seam() {
+        // Regression: a 1° world's columns were clamped half a pixel either
+        // side of 180°, a step of the whole range there.
+        let cache = BlockCache::new(1 << 20);
+        let columns = Raster::from_fn(360, 180, |x, _| x as f32);
+        let blocks = Blocks::new(Arc::new(MemorySource::new("<world>", vec![columns]).unwrap()), &cache);
+        let crs = Arc::new(Crs::from_epsg(4326).unwrap());
+        let georef = Georef { crs, x0: -179.5, y0: 89.5, dx: 1.0, dy: -1.0, overhang: 0.5 };
+        let world = GeoRaster::new(blocks, georef, &[Reducer::Mean], &cache);
+        let at = |bbox: &str, w: usize, kind: Resampling| {
+            let grid = BBox::parse(bbox).unwrap().area_grid(w, 1).unwrap();
+            world.sample(&grid, 0, kind).unwrap().data().to_vec()
+        };
+        // Between the last column (359 at 179.5°) and the first (0 at
+        // 180.5°), from either side of 180°.
+        let expected = [0.875, 0.625, 0.375, 0.125].map(|f| 359.0 * f);
+        for bbox in ["179.5,0,180.5,1", "-180.5,0,-179.5,1"] {
+            let got = at(bbox, 4, Resampling::Bilinear);
+            assert!(got.iter().zip(expected).all(|(g, e)| (g - e).abs() < 1e-3), "{bbox}: {got:?}");
+        }
+        // Nearest and bicubic reach across too, and coarser overviews
+        // (columns of their means) meet in the middle at 180°.
+        assert_eq!(at("179.5,0,180.5,1", 4, Resampling::Nearest), [359.0, 359.0, 0.0, 0.0]);
+        let cubic = at("179.98,0,180.02,1", 2, Resampling::Bicubic);
+        assert!((cubic[0] - cubic[1]).abs() < 15.0 && cubic.iter().all(|v| (100.0..260.0).contains(v)), "{cubic:?}");
+        for step in [4.0, 16.0] {
+            let seam = at(&format!("{},0,{},{step}", 180.0 - 1.5 * step, 180.0 + 1.5 * step), 3, Resampling::Bilinear);
+            assert!((seam[1] - 179.5).abs() < 1e-3, "{step}° samples: {seam:?}");
+        }
     }
 
     #[test]
