@@ -913,3 +913,54 @@ fn each_splat_is_lit_once_by_the_ray_casters_shadow_rule() {
     assert!(worst < 1e-3, "a splat's light departs from the reference's by {worst}");
     assert!(shaded * 20 > cpu.len() && shaded < cpu.len(), "{shaded} of {} splats shaded", cpu.len());
 }
+
+/// Casts into one place of draw 0: each invocation a ray of 2³⁰ fetches
+/// and 3 leaf cells, and a shadow ray of 15 · 2²⁸.
+const WIDE_COUNTS: &str = "
+@compute @workgroup_size(64)
+fn count_many(@builtin(global_invocation_id) id: vec3<u32>) {
+    count_cast(0u, vec2<u32>(8u, 4u), 0x40000000u, 3u);
+    count_shadow(0u, vec2<u32>(0u, 0u), 0xf0000000u);
+}
+";
+
+#[test]
+fn work_counters_carry_past_a_word() {
+    // Regression: a place's counters were one word, which a 4K frame's
+    // draw can overflow (260,000 pixels of thousands of fetches).
+    let gpu = Gpu::open().expect("a GPU adapter");
+    let device = &gpu.device;
+    let counters = sylva::client::render::work::WorkCounters::new(device, 1);
+    let source = format!("{}\n{WIDE_COUNTS}", sylva::client::render::shaders::WORK_PARTS[0].1);
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("wide counts"),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("wide counts"),
+        layout: None,
+        module: &module,
+        entry_point: Some("count_many"),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let bind = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("wide counts"),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[wgpu::BindGroupEntry { binding: 6, resource: counters.binding() }],
+    });
+    let mut encoder = device.create_command_encoder(&Default::default());
+    counters.clear(&mut encoder);
+    {
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind, &[]);
+        pass.dispatch_workgroups(4, 1, 1);
+    }
+    gpu.queue.submit([encoder.finish()]);
+    let work = counters.read(device, &gpu.queue, 1);
+    let casts = 256u64;
+    let expected =
+        DrawWork { rays: casts, view_fetches: casts << 30, leaf_cells: 3 * casts, shadow_fetches: casts * 0xf000_0000 };
+    assert_eq!(work, [expected]);
+}

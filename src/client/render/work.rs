@@ -1,7 +1,7 @@
 //! What every ray cast of a frame did, per draw: the rays cast, their
 //! traversal's fetches, the leaf cells they read and their shadow rays'
 //! fetches, counted on the GPU (`count_cast`, `count_shadow` in
-//! `shaders/common.wgsl`) for every ray, shown or not. The pixels' own
+//! `shaders/work_count.wgsl`) for every ray, shown or not. The pixels' own
 //! counts ([`super::Rendered::fetches`]) keep the ray a pixel shows only:
 //! a hull fragment whose ray leaves the tile without a hit is discarded, and
 //! one a nearer tile overwrites is lost, yet both cast their rays: along
@@ -18,15 +18,20 @@
 //!
 //! The counters of a draw are spread over 32 places (`SPREAD`), one per pixel
 //! of an 8 × 4 block, so that the invocations of one GPU wave do not
-//! queue on one address; reading them back sums the places.
+//! queue on one address; reading them back sums the places. Each counter
+//! is 64 bits, two words whose low word carries into the high one (at 4K
+//! a place holds about 260,000 pixels of a draw, thousands of fetches
+//! each: more than a word holds).
 
 /// Places per draw (`WORK_SPREAD`).
 const SPREAD: u64 = 32;
 /// Counters per place: rays, view-ray fetches, leaf cells, shadow-ray
 /// fetches (the order of `count_cast` and `count_shadow`).
 const COUNTERS: u64 = 4;
+/// Words per counter: low, high.
+const WORDS: u64 = 2;
 /// Bytes of one draw's counters.
-const DRAW_BYTES: u64 = SPREAD * COUNTERS * 4;
+const DRAW_BYTES: u64 = SPREAD * COUNTERS * WORDS * 4;
 
 /// The work of one draw's ray casts.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -39,8 +44,7 @@ pub struct DrawWork {
     pub view_fetches: u64,
     /// Leaf cells the exact traversal visited, their corners read or
     /// memoised (0 for the linear march): dearer than a step over the
-    /// maximum mipmap. A place's counters wrap at 2³² (at 4K a place holds
-    /// about 260,000 pixels of a draw: thousands of fetches each).
+    /// maximum mipmap.
     pub leaf_cells: u64,
     /// Fetches of the shadow rays, cast from the hits.
     pub shadow_fetches: u64,
@@ -105,8 +109,10 @@ impl WorkCounters {
 }
 
 /// A draw's work from its places' counters.
-fn sum_places(places: &[u32]) -> DrawWork {
-    let total = |k: usize| places.iter().skip(k).step_by(COUNTERS as usize).map(|&c| u64::from(c)).sum();
+fn sum_places(words: &[u32]) -> DrawWork {
+    let counts: Vec<u64> =
+        words.chunks_exact(WORDS as usize).map(|w| u64::from(w[0]) | u64::from(w[1]) << 32).collect();
+    let total = |k: usize| counts.iter().skip(k).step_by(COUNTERS as usize).sum();
     DrawWork { rays: total(0), view_fetches: total(1), leaf_cells: total(2), shadow_fetches: total(3) }
 }
 
@@ -116,17 +122,17 @@ mod tests {
 
     #[test]
     fn a_draws_places_are_summed_counter_by_counter() {
-        let mut places = vec![0u32; (SPREAD * COUNTERS) as usize];
-        for (k, c) in places.iter_mut().enumerate() {
-            // Place p holds p + 1 rays, 10 (p + 1) fetches, ...
+        let mut words = vec![0u32; (SPREAD * COUNTERS * WORDS) as usize];
+        for (k, pair) in words.chunks_exact_mut(2).enumerate() {
+            // Place p holds p + 1 rays, 10 (p + 1) fetches, ..., and
+            // p + 1 times 2³² shadow fetches more.
             let (place, counter) = (k as u32 / 4, k as u32 % 4);
-            *c = (place + 1) * [1, 10, 100, 1000][counter as usize];
+            pair[0] = (place + 1) * [1, 10, 100, 1000][counter as usize];
+            pair[1] = if counter == 3 { place + 1 } else { 0 };
         }
         let sum = (1..=SPREAD).sum::<u64>();
-        let work = sum_places(&places);
-        assert_eq!(
-            work,
-            DrawWork { rays: sum, view_fetches: 10 * sum, leaf_cells: 100 * sum, shadow_fetches: 1000 * sum }
-        );
+        let work = sum_places(&words);
+        let shadow_fetches = 1000 * sum + (sum << 32);
+        assert_eq!(work, DrawWork { rays: sum, view_fetches: 10 * sum, leaf_cells: 100 * sum, shadow_fetches });
     }
 }
