@@ -155,18 +155,11 @@ impl ViewArgs {
         use sylva::client::view;
         let source = self.tiles.open()?;
         let path = self.path.as_deref().map(sylva::client::path::CameraPath::load).transpose()?;
-        let start = match &path {
-            Some(path) => view::path_start(path),
-            None => view::default_start(source.as_ref())?,
-        };
         let options = view::ViewOptions {
             render: FlyOptions { overwrite: self.overwrite, ..render },
-            start,
+            start: path.as_ref().map(view::path_start),
             fov_deg: path.as_ref().map_or(view::FOV_DEG, |p| p.fov_deg),
-            sun_ecef: match &path {
-                Some(path) => path.sun_ecef(),
-                None => Some(view::SUN.ecef(start.eye.lon_deg, start.eye.lat_deg)),
-            },
+            sun: path.as_ref().map_or(Some(view::SUN), |p| p.sun),
             gpu_budget_bytes: self.render.gpu_budget_mib << 20,
             exit_after: self.frames,
             out_dir: self.out,

@@ -11,6 +11,7 @@
 //! steer refinement; hulls and culling of drawn tiles use their own data.
 
 use super::source::{FetchError, TileSource};
+use super::tile::TilePayload;
 use crate::grid::{BBox, Sector, TileGrid, TileId};
 
 /// One coarse tile's samples (no halo), row 0 at the north.
@@ -29,15 +30,31 @@ pub struct HeightEnvelope {
 impl HeightEnvelope {
     /// Fetches the coarse tiles over `source`'s region.
     pub fn fetch(source: &dyn TileSource) -> Result<HeightEnvelope, FetchError> {
-        let grid = source.grid();
-        let mut tiles = Vec::new();
-        for id in covering(&grid, &source.bounds()) {
-            if let Some(p) = source.fetch(id, 0)? {
-                let sector = grid.sector(id);
-                tiles.push(Coarse { sector, samples: grid.samples() as usize, ground: p.dem, cem: p.cem });
-            }
+        let mut payloads = Vec::new();
+        for id in covering(&source.grid(), &source.bounds()) {
+            payloads.extend(source.fetch(id, 0)?);
         }
-        Ok(HeightEnvelope { tiles })
+        Ok(HeightEnvelope::of(&source.grid(), &payloads))
+    }
+
+    /// The envelope of the coarse tiles `payloads` on `grid` (their halos
+    /// left out; a payload of the wrong size, which no tile is prepared
+    /// from, too).
+    pub fn of<'a>(grid: &TileGrid, payloads: impl IntoIterator<Item = &'a TilePayload>) -> HeightEnvelope {
+        let n = grid.samples() as usize;
+        let whole = |p: &&TilePayload| [&p.dem, &p.cem].iter().all(|l| l.len() == (n + 2 * p.halo).pow(2));
+        let tiles = payloads
+            .into_iter()
+            .filter(whole)
+            .map(|p| {
+                let size = n + 2 * p.halo;
+                let inner = |layer: &[f32]| -> Vec<f32> {
+                    (p.halo..p.halo + n).flat_map(|y| layer[y * size + p.halo..][..n].iter().copied()).collect()
+                };
+                Coarse { sector: grid.sector(p.id), samples: n, ground: inner(&p.dem), cem: inner(&p.cem) }
+            })
+            .collect();
+        HeightEnvelope { tiles }
     }
 
     /// The lowest ground and highest CEM over `sector`, widened (see the

@@ -25,6 +25,7 @@ use super::envelope::HeightEnvelope;
 use super::quadtree::{LodRule, Selection};
 use super::source::{FetchError, TileSource};
 use super::tiletree::TileTree;
+use crate::grid::{BBox, TileGrid};
 use crate::lod::deferral::{Hierarchy, ThresholdRefiner, full_refinement};
 
 /// Buckets of each deferral table: a bucket is ~1.2 m of travel, about a
@@ -65,13 +66,18 @@ impl SseSelector {
         SseSelector { tree, refinement: Refinement::Full(flags) }
     }
 
-    /// The deferred selector over `source`'s region down to `max_level`,
-    /// bounds from its coarse tiles; `None` if the region's tree is too
-    /// large to hold ([`super::tiletree::MAX_NODES`]).
+    /// [`Self::over`] `source`'s region, its coarse tiles fetched.
     pub fn for_source(source: &dyn TileSource, max_level: u32) -> Result<Option<SseSelector>, FetchError> {
         let envelope = HeightEnvelope::fetch(source)?;
-        let tree = TileTree::build(&source.grid(), &source.bounds(), max_level, &|s| envelope.range(s));
-        Ok(tree.ok().map(SseSelector::deferred))
+        Ok(SseSelector::over(&source.grid(), &source.bounds(), &envelope, max_level))
+    }
+
+    /// The deferred selector over the region `bounds` on `grid` down to
+    /// `max_level`, bounds from its coarse tiles' `envelope`; `None` if the
+    /// region's tree is too large to hold ([`super::tiletree::MAX_NODES`]).
+    pub fn over(grid: &TileGrid, bounds: &BBox, envelope: &HeightEnvelope, max_level: u32) -> Option<SseSelector> {
+        let tree = TileTree::build(grid, bounds, max_level, &|s| envelope.range(s));
+        tree.ok().map(SseSelector::deferred)
     }
 
     /// The tree selected from.
@@ -106,7 +112,6 @@ impl SseSelector {
 mod tests {
     use super::*;
     use crate::client::globe::Geodetic;
-    use crate::grid::{BBox, TileGrid};
 
     fn tree() -> TileTree {
         let grid = TileGrid::new(36.0, 513).unwrap();

@@ -13,8 +13,9 @@
 //! the coarse tiles over the region are loaded first and kept, so every
 //! tile of the region has one).
 
+use super::envelope::HeightEnvelope;
 use super::source::{FetchError, TileSource};
-use super::tile::{TileData, TileError};
+use super::tile::{TileData, TileError, TilePayload};
 use crate::grid::TileId;
 use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
@@ -121,6 +122,8 @@ pub struct TileStore {
     clock: u64,
     pool: rayon::ThreadPool,
     background: Option<Background>,
+    /// The heights of the coarse tiles, once held.
+    envelope: Option<Arc<HeightEnvelope>>,
 }
 
 impl TileStore {
@@ -142,17 +145,30 @@ impl TileStore {
             bytes: 0,
             clock: 0,
             background: None,
+            envelope: None,
         })
     }
 
     /// Loads and keeps the coarse tiles over `source`'s region
-    /// ([`super::envelope::covering`]): some tile is held under every point
-    /// of the region ([`Self::finest_at`]).
-    pub fn hold_coarse(&mut self, source: &dyn TileSource) -> Result<(), LoadError> {
-        let anchors = super::envelope::covering(&source.grid(), &source.bounds());
-        self.get(source, &anchors)?;
+    /// ([`super::envelope::covering`]), once: some tile is held under every
+    /// point of the region ([`Self::finest_at`]). Returns their heights,
+    /// the envelope of every finer tile's.
+    pub fn hold_coarse(&mut self, source: &dyn TileSource) -> Result<Arc<HeightEnvelope>, LoadError> {
+        if let Some(envelope) = &self.envelope {
+            return Ok(envelope.clone());
+        }
+        let (grid, halo) = (source.grid(), self.halo);
+        let anchors = super::envelope::covering(&grid, &source.bounds());
+        let fetched: Result<Vec<(TileId, Option<TilePayload>)>, FetchError> =
+            self.pool.install(|| anchors.par_iter().map(|&id| Ok((id, source.fetch(id, halo)?))).collect());
+        let payloads = fetched?;
+        let envelope = Arc::new(HeightEnvelope::of(&grid, payloads.iter().filter_map(|p| p.1.as_ref())));
+        for (id, payload) in payloads {
+            self.keep(id, payload.map(|p| TileData::prepare(&grid, p)).transpose()?);
+        }
         self.pinned.extend(anchors);
-        Ok(())
+        self.envelope = Some(envelope.clone());
+        Ok(envelope)
     }
 
     /// From now on loads tiles from `source` in the background, after
@@ -387,10 +403,22 @@ mod tests {
         assert_eq!(stand_in(&[a, b], &[]), vec![a, b]);
     }
 
-    /// The demo region as a source whose tiles of `failing` never load.
+    /// The demo region as a source whose tiles of `failing` never load,
+    /// counting its fetches.
     struct Flaky {
         inner: RegionSource,
         failing: TileId,
+        fetches: std::sync::atomic::AtomicUsize,
+    }
+
+    impl Flaky {
+        fn new(region: &Arc<crate::region::Region>, failing: TileId) -> Flaky {
+            Flaky { inner: RegionSource::new(region.clone()), failing, fetches: Default::default() }
+        }
+
+        fn fetches(&self) -> usize {
+            self.fetches.load(std::sync::atomic::Ordering::SeqCst)
+        }
     }
 
     impl TileSource for Flaky {
@@ -401,6 +429,7 @@ mod tests {
             self.inner.bounds()
         }
         fn fetch(&self, id: TileId, halo: usize) -> Result<Option<super::super::tile::TilePayload>, FetchError> {
+            self.fetches.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
             if id == self.failing {
                 return Err(FetchError::Http { id, url: "test".into(), reason: "refused".into() });
             }
@@ -428,13 +457,33 @@ mod tests {
     }
 
     #[test]
+    fn the_coarse_tiles_are_fetched_once_and_bound_the_finer_ones() {
+        let region = Arc::new(crate::config::load(None).unwrap());
+        let source = Flaky::new(&region, TileId::new(30, 0, 0));
+        let mut store = TileStore::new(4, usize::MAX, 2).unwrap();
+        let envelope = store.hold_coarse(&source).unwrap();
+        let anchors = crate::client::envelope::covering(&source.grid(), &source.bounds());
+        store.hold_coarse(&source).unwrap();
+        assert_eq!(source.fetches(), anchors.len());
+        assert!(anchors.iter().all(|id| store.tiles.contains_key(id)));
+        // Their halos cropped, the heights of the tiles fetched without.
+        let plain = HeightEnvelope::fetch(&source.inner).unwrap();
+        let b = region.bounds;
+        for level in [6, 9, 12] {
+            let sector = region.tiles.sector(region.tiles.tile_containing(b.west + 0.01, b.south + 0.01, level));
+            assert_eq!(envelope.range(&sector), plain.range(&sector), "level {level}");
+            assert!(envelope.range(&sector).is_some());
+        }
+    }
+
+    #[test]
     fn a_background_store_answers_at_once_and_loads_for_later_frames() {
         let region = Arc::new(crate::config::load(None).unwrap());
         let b = region.bounds;
         let fine = region.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), 12);
         let [a, _, c, d] = fine.parent().unwrap().children();
         let failing = fine.parent().unwrap().children()[1];
-        let source: Arc<dyn TileSource> = Arc::new(Flaky { inner: RegionSource::new(region.clone()), failing });
+        let source: Arc<dyn TileSource> = Arc::new(Flaky::new(&region, failing));
         let mut store = TileStore::new(4, usize::MAX, 2).unwrap();
         store.load_in_background(source.clone()).unwrap();
         let anchors = crate::client::envelope::covering(&source.grid(), &source.bounds());

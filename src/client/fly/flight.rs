@@ -5,6 +5,7 @@
 
 use super::{FlyError, FlyOptions, FrameRecord, LodMode};
 use crate::client::camera::Camera;
+use crate::client::envelope::HeightEnvelope;
 use crate::client::globe::Geodetic;
 use crate::client::lod::ahead::Lookahead;
 use crate::client::lod::budget::{Budget, Choice};
@@ -17,7 +18,7 @@ use crate::client::render::uniforms::FrameSettings;
 use crate::client::render::{Draw, DrawWork, FrameStats, Readback, Rendered, Renderer};
 use crate::client::source::TileSource;
 use crate::client::sse::SseSelector;
-use crate::client::store::{LoadError, TileStore};
+use crate::client::store::TileStore;
 use crate::client::tile;
 use crate::client::tile::TileData;
 use crate::client::trees;
@@ -82,6 +83,8 @@ pub struct Flight {
     store: TileStore,
     lod: Option<BudgetFlight>,
     sse: Option<SseSelector>,
+    /// The coarse tiles' heights.
+    envelope: Arc<HeightEnvelope>,
 }
 
 impl Flight {
@@ -97,9 +100,9 @@ impl Flight {
         let mut store = TileStore::new(options.halo, budget, options.in_flight)?;
         // Some tile under the camera wherever it flies over the region, for
         // its clearance; the view's background loading holds them too.
-        store.hold_coarse(source)?;
+        let envelope = store.hold_coarse(source)?;
         let sse = match options.mode {
-            LodMode::Sse => SseSelector::for_source(source, options.lod.max_level).map_err(LoadError::from)?,
+            LodMode::Sse => SseSelector::over(&source.grid(), &source.bounds(), &envelope, options.lod.max_level),
             LodMode::Budget { .. } => None,
         };
         let lod = match options.mode {
@@ -123,7 +126,7 @@ impl Flight {
                 Some(BudgetFlight::new(selector, budget, look, prior, options.geomorph).map_err(FlyError::Thread)?)
             }
         };
-        Ok(Flight { store, lod, sse })
+        Ok(Flight { store, lod, sse, envelope })
     }
 
     /// From now on loads tiles in the background: a frame draws the tiles
@@ -154,6 +157,12 @@ impl Flight {
         if let (Some(lod), LodMode::Budget { select_every, .. }) = (&mut self.lod, options.mode) {
             lod.set_motion(lookahead(select_every, &motion), motion.shadows);
         }
+    }
+
+    /// The heights of the coarse tiles over the region, which bound every
+    /// finer tile's.
+    pub fn envelope(&self) -> &HeightEnvelope {
+        &self.envelope
     }
 
     /// The finest tile held that contains the point `(lon, lat)`, degrees.

@@ -16,6 +16,7 @@ pub mod controls;
 pub mod input;
 pub mod present;
 
+use super::envelope::HeightEnvelope;
 use super::fly::{self, FlyError, FlyOptions, FrameRecord, Motion, Shot};
 use super::globe::Geodetic;
 use super::path::{CameraPath, Sun};
@@ -24,6 +25,8 @@ use super::render::gpu::{Gpu, GpuError};
 use super::render::{Readback, Renderer};
 use super::source::TileSource;
 use super::tile::TileData;
+use crate::grid::BBox;
+use crate::lod::predict::MotionLimits;
 use controls::{Controls, Pose};
 use glam::DVec3;
 use input::Input;
@@ -44,12 +47,12 @@ pub struct ViewOptions {
     /// first size (its `frames`, `out_dir`, `write_frames` and `hold_ms`
     /// are not used).
     pub render: FlyOptions,
-    /// Where the eye starts.
-    pub start: Pose,
+    /// Where the eye starts (`None`: [`default_start`]).
+    pub start: Option<Pose>,
     /// Vertical field of view, degrees.
     pub fov_deg: f64,
-    /// Unit direction to the sun (ECEF), if it is on.
-    pub sun_ecef: Option<DVec3>,
+    /// The sun seen from the start, if it is on.
+    pub sun: Option<Sun>,
     /// GPU tile cache budget, bytes.
     pub gpu_budget_bytes: usize,
     /// Close after this many frames (scripted runs).
@@ -118,16 +121,15 @@ pub fn path_start(path: &CameraPath) -> Pose {
     Pose { eye: Geodetic::new(k.lon, k.lat, k.height_m), heading_deg: k.heading_deg, pitch_deg: k.pitch_deg }
 }
 
-/// Where a view without a start begins ([`START_ABOVE_M`] above the
-/// highest surface the coarse tiles over the region know).
-pub fn default_start(source: &dyn TileSource) -> Result<Pose, crate::client::source::FetchError> {
-    let b = source.bounds();
-    let sector = b.sector();
-    let top_m = super::envelope::HeightEnvelope::fetch(source)?.range(&sector).map_or(0.0, |(_, hi)| hi);
+/// Where a view of the region `b` without a start begins
+/// ([`START_ABOVE_M`] above the highest surface its coarse tiles'
+/// `envelope` knows).
+pub fn default_start(b: &BBox, envelope: &HeightEnvelope) -> Pose {
+    let top_m = envelope.range(&b.sector()).map_or(0.0, |(_, hi)| hi);
     // The middle of a box past 180° said on the globe.
     let lon = (0.5 * (b.west + b.east) + 180.0).rem_euclid(360.0) - 180.0;
     let eye = Geodetic::new(lon, 0.5 * (b.south + b.north), top_m + START_ABOVE_M);
-    Ok(Pose { eye, heading_deg: 0.0, pitch_deg: START_PITCH_DEG })
+    Pose { eye, heading_deg: 0.0, pitch_deg: START_PITCH_DEG }
 }
 
 /// Opens a window over `source` and flies until it is closed (or Ctrl-C
@@ -239,6 +241,8 @@ struct Viewer {
     drawn: Vec<Arc<TileData>>,
     controls: Controls,
     input: Input,
+    /// Unit direction to the sun (ECEF), if it is on.
+    sun_ecef: Option<DVec3>,
     sun_on: bool,
     traversal: Traversal,
     /// Save the next frame.
@@ -272,7 +276,7 @@ impl ApplicationHandler for App {
             WindowEvent::KeyboardInput { event, is_synthetic, .. } => {
                 let PhysicalKey::Code(key) = event.physical_key else { return };
                 let pressed = event.state == ElementState::Pressed;
-                if pressed && !event.repeat && !is_synthetic && viewer.toggle(key, &self.options) {
+                if pressed && !event.repeat && !is_synthetic && viewer.toggle(key) {
                     event_loop.exit();
                 }
                 viewer.input.key(key, pressed);
@@ -347,9 +351,14 @@ impl Viewer {
             Renderer::new(gpu, source.grid().samples(), r.halo as u32, options.gpu_budget_bytes, r.geomorph)?
                 .with_hull_factor(r.hull_factor)
                 .with_ray_pass(r.ray_pass);
-        let controls = Controls::new(options.start, options.start.eye.height_m);
-        let motion = Motion { frame_s: 1.0 / 60.0, limits: controls.limits(), shadows: options.sun_ecef.is_some() };
-        let mut flight = fly::Flight::new(source.as_ref(), &renderer, r, motion)?;
+        // The flight holds the coarse tiles that place a default start. Each
+        // frame tells it the camera's motion before it selects.
+        let shadows = options.sun.is_some();
+        let still = MotionLimits { max_speed_mps: 0.0, max_turn_radps: 0.0 };
+        let mut flight =
+            fly::Flight::new(source.as_ref(), &renderer, r, Motion { frame_s: 1.0 / 60.0, limits: still, shadows })?;
+        let start = options.start.unwrap_or_else(|| default_start(&source.bounds(), flight.envelope()));
+        let controls = Controls::new(start, start.eye.height_m);
         flight.load_in_background(source.clone())?;
         let now = Instant::now();
         Ok(Viewer {
@@ -360,7 +369,8 @@ impl Viewer {
             drawn: Vec::new(),
             controls,
             input: Input::default(),
-            sun_on: options.sun_ecef.is_some(),
+            sun_ecef: options.sun.map(|sun| sun.ecef(start.eye.lon_deg, start.eye.lat_deg)),
+            sun_on: shadows,
             traversal: r.traversal,
             snapshot: false,
             started: now,
@@ -371,10 +381,10 @@ impl Viewer {
     }
 
     /// Acts on a key just pressed; true to quit.
-    fn toggle(&mut self, key: KeyCode, options: &ViewOptions) -> bool {
+    fn toggle(&mut self, key: KeyCode) -> bool {
         match key {
             KeyCode::Escape => return true,
-            KeyCode::KeyL => self.sun_on = !self.sun_on && options.sun_ecef.is_some(),
+            KeyCode::KeyL => self.sun_on = !self.sun_on && self.sun_ecef.is_some(),
             KeyCode::KeyT => {
                 self.traversal = match self.traversal {
                     Traversal::Exact => Traversal::Linear(LINEAR_STEPS),
@@ -401,7 +411,7 @@ impl Viewer {
             index: self.frames,
             t_s: (now - self.started).as_secs_f64(),
             camera: self.controls.pose.camera(options.fov_deg, self.presenter.size()),
-            sun_ecef: options.sun_ecef.filter(|_| self.sun_on),
+            sun_ecef: self.sun_ecef.filter(|_| self.sun_on),
         };
         let render = FlyOptions { traversal: self.traversal, ..options.render.clone() };
         let readback = if self.snapshot { Readback::Colour } else { Readback::None };
