@@ -6,7 +6,8 @@
 //! keep their default action (the process ends), also in a process that
 //! runs several (`sylva bench seed`). A build, whose work is worth nothing
 //! until its outputs are written whole, is [`Abandon`]ed: the process ends
-//! at once unless it is writing them, which it finishes first.
+//! at once unless it is writing them, which it finishes first (a second
+//! signal abandons them, none left half-written).
 
 use signal_hook::consts::{SIGINT, SIGTERM};
 use signal_hook::flag;
@@ -63,40 +64,73 @@ impl Drop for Interrupt {
 }
 
 /// A process that ends at once on the first signal, saying whether its
-/// outputs were written, except while [`Abandon::writing`] runs: the signal
-/// then waits for the writing to end.
+/// outputs were written, except while [`Abandon::writing`] runs: the
+/// writing then ends first, and a second signal ends the process at once,
+/// the outputs not yet in place removed.
 pub struct Abandon {
     /// Held while writing; true once the outputs are written.
     written: Arc<Mutex<bool>>,
+    /// The first signal that came (0: none).
+    signal: Arc<AtomicUsize>,
 }
 
 impl Abandon {
     /// Starts watching, for the rest of the process.
     pub fn watch() -> Abandon {
-        let written = Arc::new(Mutex::new(false));
-        let watched = written.clone();
+        let (written, signal) = (Arc::new(Mutex::new(false)), Arc::new(AtomicUsize::new(0)));
+        let (watched, came) = (written.clone(), signal.clone());
         let signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM]);
         let started = signals.and_then(|mut signals| {
             std::thread::Builder::new().name("signals".into()).spawn(move || {
-                let Some(signal) = signals.forever().next() else { return };
-                let written = *watched.lock().unwrap_or_else(|e| e.into_inner());
-                let what = if written { " after the outputs were written" } else { "; nothing written" };
-                crate::outputs::say(format_args!("sylva: interrupted by signal {signal}{what}"));
-                std::process::exit(128 + signal);
+                let mut signals = signals.forever();
+                let Some(first) = signals.next() else { return };
+                // Said before looking: writing that ends after this sees it.
+                came.store(first as usize, Ordering::SeqCst);
+                let idle = match watched.try_lock() {
+                    Ok(written) => Some(*written),
+                    Err(std::sync::TryLockError::Poisoned(e)) => Some(*e.into_inner()),
+                    Err(std::sync::TryLockError::WouldBlock) => None,
+                };
+                if let Some(written) = idle {
+                    end(first, written);
+                }
+                crate::outputs::say(format_args!(
+                    "sylva: signal {first}: finishing the outputs (a second signal abandons them)"
+                ));
+                if let Some(second) = signals.next() {
+                    crate::outputs::remove_partial();
+                    crate::outputs::say(format_args!(
+                        "sylva: interrupted by signal {second} while writing; the outputs not yet in place abandoned"
+                    ));
+                    std::process::exit(128 + second);
+                }
             })
         });
         if let Err(e) = started {
             tracing::warn!("Ctrl-C may leave a half-written output (signals not watched: {e})");
         }
-        Abandon { written }
+        Abandon { written, signal }
     }
 
-    /// Runs `write`, which a signal does not interrupt; its success marks
-    /// the outputs written.
+    /// Runs `write`, which a first signal lets finish (then ends the
+    /// process) and a second one abandons
+    /// ([`crate::outputs::remove_partial`]); its success marks the outputs
+    /// written.
     pub fn writing<T, E>(&self, write: impl FnOnce() -> Result<T, E>) -> Result<T, E> {
         let mut written = self.written.lock().unwrap_or_else(|e| e.into_inner());
         let result = write();
         *written = result.is_ok();
-        result
+        match self.signal.load(Ordering::SeqCst) {
+            0 => result,
+            signal => end(signal as i32, *written),
+        }
     }
+}
+
+/// Ends the process after `signal`, saying whether the outputs were
+/// `written`.
+fn end(signal: i32, written: bool) -> ! {
+    let what = if written { " after the outputs were written" } else { "; nothing written" };
+    crate::outputs::say(format_args!("sylva: interrupted by signal {signal}{what}"));
+    std::process::exit(128 + signal);
 }

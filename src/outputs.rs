@@ -150,27 +150,51 @@ fn scratch_beside(path: &Path) -> std::io::Result<(PathBuf, std::fs::File)> {
 /// leaves those before it renamed).
 pub fn write_all(files: &[(&Path, &[u8])]) -> Result<(), OutputError> {
     use std::io::Write;
-    let mut written: Vec<(PathBuf, PathBuf)> = Vec::new();
+    let (mut written, mut mine): (Vec<(PathBuf, PathBuf)>, Vec<PathBuf>) = (Vec::new(), Vec::new());
     let mut write_one = |path: &Path, bytes: &[u8]| -> Result<(), OutputError> {
         let target = destination(path)?;
         let fail = |source| OutputError::Write { path: path.to_path_buf(), source };
         let (scratch, mut file) = scratch_beside(&target).map_err(fail)?;
+        partial().push(scratch.clone());
+        mine.push(scratch.clone());
         written.push((scratch, target));
         file.write_all(bytes).map_err(fail)
     };
     let result = files.iter().try_for_each(|&(path, bytes)| write_one(path, bytes));
-    if result.is_err() {
-        written.iter().for_each(|(scratch, _)| drop(std::fs::remove_file(scratch)));
-        return result;
-    }
-    for (k, ((scratch, target), &(path, _))) in written.iter().zip(files).enumerate() {
-        if let Err(source) = std::fs::rename(scratch, target) {
-            // Those renamed stay; the rest go with their scratch files.
-            written[k..].iter().for_each(|(scratch, _)| drop(std::fs::remove_file(scratch)));
-            return Err(OutputError::Write { path: path.to_path_buf(), source });
+    let result = result.and_then(|()| {
+        for (k, ((scratch, target), &(path, _))) in written.iter().zip(files).enumerate() {
+            if let Err(source) = std::fs::rename(scratch, target) {
+                // Those renamed stay; the rest go with their scratch files.
+                written.drain(..k);
+                return Err(OutputError::Write { path: path.to_path_buf(), source });
+            }
         }
-    }
-    Ok(())
+        written.clear();
+        Ok(())
+    });
+    written.iter().for_each(|(scratch, _)| drop(std::fs::remove_file(scratch)));
+    partial().retain(|p| !mine.contains(p));
+    result
+}
+
+/// The new files [`write_all`] is writing, not yet renamed into place.
+fn partial() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
+    static PARTIAL: std::sync::Mutex<Vec<PathBuf>> = std::sync::Mutex::new(Vec::new());
+    PARTIAL.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Removes the new files a [`write_all`] still writes (a process that
+/// abandons its outputs on a signal leaves none behind); the outputs
+/// already renamed into place stay. Returns how many it removed.
+pub fn remove_partial() -> usize {
+    remove_files(&mut partial())
+}
+
+/// Removes the files `paths` and forgets them; how many were there.
+fn remove_files(paths: &mut Vec<PathBuf>) -> usize {
+    let removed = paths.iter().filter(|path| std::fs::remove_file(path).is_ok()).count();
+    paths.clear();
+    removed
 }
 
 /// Writes a line to stderr. A stderr nobody reads any more (a pipe whose
@@ -189,6 +213,20 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("sylva-outputs-{name}-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         dir
+    }
+
+    #[test]
+    fn abandoning_removes_the_new_files_being_written_and_no_output() {
+        let dir = scratch("abandon");
+        let (out, new) = (dir.join("out.tif"), dir.join(".out.tif.1.partial"));
+        std::fs::write(&out, b"old").unwrap();
+        std::fs::write(&new, b"half").unwrap();
+        assert_eq!(remove_files(&mut vec![new.clone()]), 1);
+        assert!(!new.exists() && std::fs::read(&out).unwrap() == b"old");
+        // A write registers its new files while it writes, and no more.
+        write_all(&[(&out, b"new")]).unwrap();
+        assert!(!partial().iter().any(|p| p.starts_with(&dir)), "{:?}", partial());
+        assert_eq!(std::fs::read(&out).unwrap(), b"new");
     }
 
     #[test]
