@@ -31,7 +31,8 @@ use glam::DVec2;
 use std::sync::Arc;
 
 /// How far outside its sector, in samples, a point is still on a tile's
-/// edge (rounding of degrees to samples).
+/// edge, and how near a sample it is on it (rounding of degrees to
+/// samples).
 const EDGE_SAMPLES: f64 = 1e-6;
 
 /// Height of nodata texels: below this is no surface.
@@ -261,10 +262,13 @@ impl TileData {
         if !(inside(s.x) && inside(s.y)) {
             return None;
         }
-        let s = s.clamp(DVec2::ZERO, DVec2::splat(last));
+        // On a sample within rounding is on it: a corner of no weight is
+        // not read (beside the last sample the halo may hold no data).
+        let snap = |v: f64| if (v - v.round()).abs() < EDGE_SAMPLES { v.round() } else { v };
+        let s = DVec2::new(snap(s.x), snap(s.y)).clamp(DVec2::ZERO, DVec2::splat(last));
         let (c, f) = (s.floor(), s - s.floor());
         let height = |di: f64, dj: f64| {
-            let (i, j) = (c.x + di, c.y + dj);
+            let (i, j) = (c.x + if f.x > 0.0 { di } else { 0.0 }, c.y + if f.y > 0.0 { dj } else { 0.0 });
             let cem = self.texel(i as i64, j as i64)[0];
             (cem > NODATA_M).then(|| f64::from(cem) - self.frame.ellipsoid_local(i, j).z)
         };
@@ -430,6 +434,7 @@ mod tests {
         let mean = [(7, 9), (8, 9), (7, 10), (8, 10)].map(|(i, j)| f64::from(cem[at(i, j)])).iter().sum::<f64>() / 4.0;
         assert!((height(7.5, 9.5).unwrap() - mean).abs() < 0.05);
         assert_eq!(height(19.5, 4.5), None);
+        assert!(height(20.0, 4.0).is_some() && height(19.0, 5.0).is_some(), "a neighbour of no weight");
         assert_eq!((height(-0.01, 3.0), height(3.0, 32.01)), (None, None));
         // A ray cast down in the flat frame found no ground or ground 400 m
         // off at these corners.

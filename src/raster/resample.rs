@@ -336,7 +336,8 @@ impl View<'_> {
     /// gather, the blend) so that the first and last are vectorized.
     fn bilinear_interior(&self, xy: &[(f64, f64)], line: &mut [f32]) {
         let (stride, data) = (self.src.width(), self.src.data());
-        let origin = self.window.y as usize * stride + self.window.x as usize;
+        // A wrapping source's window may start a column or two west of 0.
+        let origin = (self.window.y as usize * stride).wrapping_add_signed(self.window.x as isize);
         let (mut index, mut fx, mut fy) = ([0usize; RUN], [0f32; RUN], [0f32; RUN]);
         let mut taps = [[0f32; 4]; RUN];
         let n = xy.len();

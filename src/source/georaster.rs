@@ -197,24 +197,23 @@ impl GeoRaster {
 
     fn extent(&self, level: usize) -> Extent {
         let (w, h) = self.levels[level].size();
-        let base = Extent::new(self.size().0, self.size().1, self.georef.overhang);
+        let (base_w, base_h) = self.size();
+        let wraps = around_the_globe(&self.georef, base_w);
+        let base = Extent::new(base_w, base_h, self.georef.overhang);
+        // Around the globe every longitude has data, point samples too.
+        let x_range = match wraps {
+            true => Extent::new(base_w, base_h, 0.5).x_range,
+            false => base.x_range,
+        };
         let (scale, shift) = level_map(level);
         Extent {
             width: w,
             height: h,
-            x_range: ((base.x_range.0 - shift) / scale, (base.x_range.1 - shift) / scale),
+            x_range: ((x_range.0 - shift) / scale, (x_range.1 - shift) / scale),
             y_range: ((base.y_range.0 - shift) / scale, (base.y_range.1 - shift) / scale),
-            wraps: self.wraps() && w as f64 * scale == self.size().0 as f64,
+            // An overview wraps where its columns divide the base's evenly.
+            wraps: wraps && w as f64 * scale == base_w as f64,
         }
-    }
-
-    /// Whether the source's area pixels go once around the globe, so that
-    /// its last column borders its first (an overview wraps when its
-    /// columns divide the base's evenly).
-    fn wraps(&self) -> bool {
-        let g = &self.georef;
-        let turn = self.size().0 as f64 * g.dx.abs();
-        g.crs.is_geographic() && g.overhang == 0.5 && (turn - 360.0).abs() < WRAP_TOLERANCE_DEG
     }
 
     /// Source pixel coordinates (of overview `level`) of every grid sample.
@@ -308,9 +307,17 @@ impl std::fmt::Debug for GeoRaster {
     }
 }
 
-/// How near 360° a geographic source's width must be to wrap, degrees
-/// (an arc-second raster's 1,296,000 columns sum their rounding).
-const WRAP_TOLERANCE_DEG: f64 = 1e-6;
+/// How near 360° a geographic source's width must be to wrap, pixels (a
+/// pixel size written to ten digits, summed over 43,200 columns, is off by
+/// 2·10⁻⁴ of a pixel).
+const WRAP_TOLERANCE_PX: f64 = 1e-3;
+
+/// Whether a source of `width` columns goes once around the globe, so that
+/// its last column borders its first (area pixels or point samples).
+fn around_the_globe(g: &Georef, width: usize) -> bool {
+    let dx = g.dx.abs();
+    g.crs.is_geographic() && (width as f64 * dx - 360.0).abs() < WRAP_TOLERANCE_PX * dx
+}
 
 /// `window` of `blocks`, whose columns repeat every width: the columns
 /// past either edge are read a period away.
@@ -363,7 +370,9 @@ fn mesh_step(grid: &SampleGrid) -> i64 {
 /// projected one (to the pole, over every longitude, where the source holds
 /// a pole: its boundary does not pass there).
 fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
-    let (xa, xb) = (g.x0 - g.overhang * g.dx, g.x0 + (w as f64 - 1.0 + g.overhang) * g.dx);
+    // Around the globe, point samples reach half a step either way too.
+    let ox = if around_the_globe(g, w) { 0.5 } else { g.overhang };
+    let (xa, xb) = (g.x0 - ox * g.dx, g.x0 + (w as f64 - 1.0 + ox) * g.dx);
     let (ya, yb) = (g.y0 - g.overhang * g.dy, g.y0 + (h as f64 - 1.0 + g.overhang) * g.dy);
     let mut lons = Vec::new();
     let (mut min_lat, mut max_lat) = (f64::MAX, f64::MIN);
@@ -443,7 +452,7 @@ fn to_the_poles(s: Sector, g: &Georef, ((xa, xb), (ya, yb)): ((f64, f64), (f64, 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::grid::BBox;
+    use crate::grid::{Axis, BBox};
     use crate::source::memory::MemorySource;
 
     #[test]
@@ -548,22 +557,37 @@ mod tests {
         // Regression: a 1° world's columns were clamped half a pixel either
         // side of 180°, a step of the whole range there.
         let cache = BlockCache::new(1 << 20);
-        let columns = Raster::from_fn(360, 180, |x, _| x as f32);
-        let blocks = Blocks::new(Arc::new(MemorySource::new("<world>", vec![columns]).unwrap()), &cache);
-        let crs = Arc::new(Crs::from_epsg(4326).unwrap());
-        let georef = Georef { crs, x0: -179.5, y0: 89.5, dx: 1.0, dy: -1.0, overhang: 0.5 };
-        let world = GeoRaster::new(blocks, georef, &[Reducer::Mean], &cache);
-        let at = |bbox: &str, w: usize, kind: Resampling| {
+        let world = |dx: f64, overhang: f64| {
+            let columns = Raster::from_fn(360, 180, |x, _| x as f32);
+            let blocks = Blocks::new(Arc::new(MemorySource::new("<world>", vec![columns]).unwrap()), &cache);
+            let crs = Arc::new(Crs::from_epsg(4326).unwrap());
+            let georef = Georef { crs, x0: -179.5, y0: 89.5, dx, dy: -1.0, overhang };
+            GeoRaster::new(blocks, georef, &[Reducer::Mean], &cache)
+        };
+        let sample = |world: &GeoRaster, bbox: &str, w: usize, kind: Resampling| {
             let grid = BBox::parse(bbox).unwrap().area_grid(w, 1).unwrap();
             world.sample(&grid, 0, kind).unwrap().data().to_vec()
         };
         // Between the last column (359 at 179.5°) and the first (0 at
-        // 180.5°), from either side of 180°.
+        // 180.5°), from either side of 180°; point samples as area pixels,
+        // and pixels whose size was written to ten digits.
         let expected = [0.875, 0.625, 0.375, 0.125].map(|f| 359.0 * f);
-        for bbox in ["179.5,0,180.5,1", "-180.5,0,-179.5,1"] {
-            let got = at(bbox, 4, Resampling::Bilinear);
-            assert!(got.iter().zip(expected).all(|(g, e)| (g - e).abs() < 1e-3), "{bbox}: {got:?}");
+        for (dx, overhang) in [(1.0, 0.5), (1.0, 0.0), (0.999_999_996, 0.5)] {
+            let world = world(dx, overhang);
+            for bbox in ["179.5,0,180.5,1", "-180.5,0,-179.5,1"] {
+                let got = sample(&world, bbox, 4, Resampling::Bilinear);
+                assert!(got.iter().zip(expected).all(|(g, e)| (g - e).abs() < 1e-2), "{dx} {overhang} {bbox}: {got:?}");
+            }
         }
+        let world = world(1.0, 0.5);
+        let at = |bbox: &str, w: usize, kind: Resampling| sample(&world, bbox, w, kind);
+        // A grid past the South Pole reads the opposite meridian (column
+        // 190 is 10.5° E), and across the seam (its window starts at
+        // column −1).
+        let grid = SampleGrid { lon: Axis::degrees(-179.8, 190.3, 0, 2), lat: Axis::degrees(-88.5, -1.0, 0, 4) };
+        let past = world.sample(&grid, 0, Resampling::Bilinear).unwrap();
+        assert_eq!([past.get(1, 0), past.get(1, 3)], [190.0, 10.0], "{:?}", past.data());
+        assert!((past.get(0, 0) - 359.0 * 0.3).abs() < 1e-3, "{:?}", past.data());
         // Nearest and bicubic reach across too, and coarser overviews
         // (columns of their means) meet in the middle at 180°.
         assert_eq!(at("179.5,0,180.5,1", 4, Resampling::Nearest), [359.0, 359.0, 0.0, 0.0]);

@@ -65,6 +65,9 @@ pub struct BudgetFlight {
     pairs: Pairs,
     /// The tiles last drawn, on which the selector's trees grow.
     drawn: Vec<Arc<TileData>>,
+    /// The current cut as this frame draws it: with the tree groups its
+    /// selection did not see priced (see [`Self::price_trees`]).
+    priced: Option<Selected>,
     /// What the frames drawn cost over what their selections predicted,
     /// both priced by the model now (a moving average): selections price
     /// the cameras ahead and the conservative cone, which see more than
@@ -104,6 +107,7 @@ impl BudgetFlight {
             morphs: geomorph.then(|| Morphs::new(look.tau_s)),
             pairs: Pairs::default(),
             drawn: Vec::new(),
+            priced: None,
             aim: 1.0,
         })
     }
@@ -135,6 +139,7 @@ impl BudgetFlight {
     /// finished selection (waiting only for the first). Starts the next
     /// selection when `τ` has passed since the last and the thread is idle.
     pub fn frame(&mut self, t_s: f64, camera: &Camera) -> Selected {
+        self.priced = None;
         self.predictor.observe(t_s, ahead::pose(camera));
         // A selection looks τ ahead of its request: a frame later than that
         // (frames farther apart than τ) is past the views the cut in hand
@@ -179,10 +184,12 @@ impl BudgetFlight {
         self.drawn = drawn;
     }
 
-    /// The cut drawn now, its splat budgets extended to the tree groups
-    /// `groups` of the frame drawn from `camera` on `tiles` that its
-    /// selection did not price ([`budget::price_unseen_trees`], under the
-    /// budget aimed at); `None` before the first [`Self::frame`].
+    /// The cut drawn now as this frame draws it: its splat budgets
+    /// extended to the tree groups `groups` of the frame drawn from
+    /// `camera` on `tiles` that its selection did not price
+    /// ([`budget::price_unseen_trees`], under the budget aimed at; each
+    /// frame anew, so groups passed by leave the budget); `None` before the
+    /// first [`Self::frame`].
     pub fn price_trees(
         &mut self,
         camera: &Camera,
@@ -191,17 +198,18 @@ impl BudgetFlight {
     ) -> Option<Selected> {
         let (budget, model) = (self.aimed(), self.model());
         let field = self.selector.trees.as_ref()?.field;
-        let current = self.current.as_mut()?;
+        let mut priced = self.current.clone()?;
         let unseen: Vec<(TreeItem, f64)> = groups
             .iter()
-            .filter(|g| !current.cut.tree_budgets.contains_key(&g.block))
+            .filter(|g| !priced.cut.tree_budgets.contains_key(&g.block))
             .map(|g| g.item(tiles, &field, camera.focal_px()))
             .map(|item| (item, super::tree_px(std::slice::from_ref(camera), &item)))
             .collect();
         if !unseen.is_empty() {
-            budget::price_unseen_trees(&mut current.cut, &unseen, &model, budget.budget_ms);
+            budget::price_unseen_trees(&mut priced.cut, &unseen, &model, budget.budget_ms);
         }
-        Some(current.clone())
+        self.priced = Some(priced.clone());
+        Some(priced)
     }
 
     /// The tree groups near `cameras` on the tiles last drawn, each once,
@@ -298,7 +306,7 @@ impl BudgetFlight {
     /// Moves the aim toward what the frame drawn with `features` costs
     /// over what its selection predicted, both priced by the model now.
     fn follow_aim(&mut self, features: &CostFeatures) {
-        let Some(selected) = &self.current else { return };
+        let Some(selected) = self.priced.as_ref().or(self.current.as_ref()) else { return };
         let model = self.model();
         let ratio = model.predict_ms(features) / model.predict_ms(&selected.cut.features);
         if ratio.is_finite() && ratio > 0.0 {
