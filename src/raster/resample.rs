@@ -43,10 +43,6 @@ impl Resampling {
 /// pixels), and would otherwise be no data on one side.
 pub const EDGE_SLACK: f64 = 1e-6;
 
-/// Columns past either edge a kernel reads from a raster that wraps (the
-/// widest support, bicubic's).
-pub const WRAP_TAPS: i64 = 2;
-
 /// The pixels of a source and the region of pixel coordinates that holds data
 /// (for area pixels `-0.5 ..= n - 0.5`, for point-registered samples
 /// `0 ..= n - 1`; overviews have fractional bounds).
@@ -61,8 +57,8 @@ pub struct Extent {
     /// Smallest and largest row coordinate with data.
     pub y_range: (f64, f64),
     /// Whether columns repeat every `width` (a geographic raster around the
-    /// globe): taps past an edge read the other edge, up to [`WRAP_TAPS`]
-    /// columns out, where the window read holds them.
+    /// globe): a tap past an edge reads the column a period away, which the
+    /// window read holds (its columns read modulo the width).
     pub wraps: bool,
 }
 
@@ -86,7 +82,7 @@ impl Extent {
     #[inline]
     pub fn tap_x(&self, x: i64) -> i64 {
         match self.wraps {
-            true => x.clamp(-WRAP_TAPS, self.width as i64 - 1 + WRAP_TAPS),
+            true => x,
             false => x.clamp(0, self.width as i64 - 1),
         }
     }

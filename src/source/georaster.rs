@@ -206,13 +206,18 @@ impl GeoRaster {
             false => base.x_range,
         };
         let (scale, shift) = level_map(level);
+        // An overview wraps where its columns divide the base's evenly: its
+        // columns are read modulo its width, any coordinate has data.
+        let wraps = wraps && w as f64 * scale == base_w as f64;
         Extent {
             width: w,
             height: h,
-            x_range: ((x_range.0 - shift) / scale, (x_range.1 - shift) / scale),
+            x_range: match wraps {
+                true => (f64::NEG_INFINITY, f64::INFINITY),
+                false => ((x_range.0 - shift) / scale, (x_range.1 - shift) / scale),
+            },
             y_range: ((base.y_range.0 - shift) / scale, (base.y_range.1 - shift) / scale),
-            // An overview wraps where its columns divide the base's evenly.
-            wraps: wraps && w as f64 * scale == base_w as f64,
+            wraps,
         }
     }
 
@@ -224,8 +229,12 @@ impl GeoRaster {
         if g.crs.is_geographic() && !grid_crosses_pole(grid) {
             let x =
                 (0..grid.width() as i64).map(|c| to_level((self.lon_into_source(grid.on_globe(c, 0).0) - g.x0) / g.dx));
+            let mut x: Vec<f64> = x.collect();
+            if self.extent(level).wraps {
+                unwrap_columns(&mut x, self.levels[level].size().0 as f64);
+            }
             let y = (0..grid.height() as i64).map(|r| to_level((grid.on_globe(0, r).1 - g.y0) / g.dy));
-            return PixelCoords::Separable { x: x.collect(), y: y.collect() };
+            return PixelCoords::Separable { x, y: y.collect() };
         }
         // Rows past a pole read the opposite meridian: a mesh cell across the
         // pole would interpolate nonsense, so project every sample there.
@@ -317,6 +326,17 @@ const WRAP_TOLERANCE_PX: f64 = 1e-3;
 fn around_the_globe(g: &Georef, width: usize) -> bool {
     let dx = g.dx.abs();
     g.crs.is_geographic() && (width as f64 * dx - 360.0).abs() < WRAP_TOLERANCE_PX * dx
+}
+
+/// Column coordinates of a source whose columns repeat every `period` made
+/// continuous, each within half a period of the one before: a grid across
+/// the seam then reads the columns either side of it, not every column
+/// between (a 30″ world's 43,200 per row).
+fn unwrap_columns(x: &mut [f64], period: f64) {
+    for k in 1..x.len() {
+        let turns = ((x[k] - x[k - 1]) / period).round();
+        x[k] -= turns * period;
+    }
 }
 
 /// `window` of `blocks`, whose columns repeat every width: the columns
@@ -581,6 +601,13 @@ mod tests {
         }
         let world = world(1.0, 0.5);
         let at = |bbox: &str, w: usize, kind: Resampling| sample(&world, bbox, w, kind);
+        // Only the columns either side of the seam are read, not the 360
+        // between them.
+        for bbox in ["179.5,0,180.5,1", "-180.5,0,-179.5,1", "179.9,0,180.1,1"] {
+            let grid = BBox::parse(bbox).unwrap().area_grid(4, 1).unwrap();
+            let read = world.read(&grid, Resampling::Bicubic, 1).unwrap().unwrap();
+            assert!(read.window.width <= 6, "{bbox}: {:?}", read.window);
+        }
         // A grid past the South Pole reads the opposite meridian (column
         // 190 is 10.5° E), and across the seam (its window starts at
         // column −1).
