@@ -178,12 +178,12 @@ pub const MAX_MAP_SIZE: usize = 16_384;
 pub const MAX_HALO: usize = 1024;
 
 /// Checks an address to listen on: `HOST:PORT`, an IPv6 host bracketed
-/// (`[::1]:8080`); the message quotes it.
+/// (`[::1]:8080`).
 pub fn check_bind(bind: &str) -> Result<(), String> {
     let host_ok = |h: &str| !h.is_empty() && (!h.contains(':') || (h.starts_with('[') && h.ends_with(']')));
     match bind.rsplit_once(':') {
         Some((host, port)) if host_ok(host) && port.parse::<u16>().is_ok() => Ok(()),
-        _ => Err(format!("{bind:?}: must be HOST:PORT")),
+        _ => Err("must be HOST:PORT".into()),
     }
 }
 
@@ -191,7 +191,7 @@ impl ServerConfig {
     /// Checks every value: the message names the key, what it must be and
     /// what it is.
     pub fn check(&self) -> Result<(), String> {
-        check_bind(&self.bind).map_err(|e| format!("bind = {e}"))?;
+        check_bind(&self.bind).map_err(|e| format!("bind = {:?}: {e}", self.bind))?;
         let within = |key: &str, value: usize, most: usize| {
             if value <= most { Ok(()) } else { Err(format!("{key} = {value}: must be at most {most}")) }
         };
