@@ -141,7 +141,29 @@ impl GeoRaster {
     pub fn level_for(&self, grid: &SampleGrid) -> usize {
         let spacing = grid.lon.step_deg().min(grid.lat.step_deg());
         let ratio = spacing / self.georef.pixel_deg();
-        if ratio < 2.0 { 0 } else { (ratio.log2().floor() as usize).min(self.levels.len() - 1) }
+        let mut level = if ratio < 2.0 { 0 } else { (ratio.log2().floor() as usize).min(self.levels.len() - 1) };
+        // An overview whose columns do not divide the base's evenly does not
+        // wrap: a grid that reaches the seam reads the coarsest one that does.
+        while level > 0 && self.clamped_at_seam(grid, level) {
+            level -= 1;
+        }
+        level
+    }
+
+    /// Whether overview `level` of a source around the globe does not wrap
+    /// and `grid` reads within a kernel's reach of its seam.
+    fn clamped_at_seam(&self, grid: &SampleGrid, level: usize) -> bool {
+        let extent = self.extent(level);
+        if extent.wraps || !around_the_globe(&self.georef, self.size().0) {
+            return false;
+        }
+        let (g, (scale, shift), last) = (&self.georef, level_map(level), extent.width as f64 - 1.0);
+        let reach = 1.5;
+        grid_crosses_pole(grid)
+            || (0..grid.width() as i64).any(|c| {
+                let x = ((self.lon_into_source(grid.on_globe(c, 0).0) - g.x0) / g.dx - shift) / scale;
+                x < reach || x > last - reach
+            })
     }
 
     /// True if a sample that grids `a` and `b` share (nested lattices of two
@@ -624,6 +646,24 @@ mod tests {
             let seam = at(&format!("{},0,{},{step}", 180.0 - 1.5 * step, 180.0 + 1.5 * step), 3, Resampling::Bilinear);
             assert!((seam[1] - 179.5).abs() < 1e-3, "{step}° samples: {seam:?}");
         }
+    }
+
+    #[test]
+    fn a_grid_at_the_seam_reads_an_overview_that_wraps() {
+        // 1350 columns: overview 1 (675) wraps, overview 2 (338) does not.
+        let cache = BlockCache::new(1 << 20);
+        let columns = Raster::from_fn(1350, 675, |x, _| x as f32);
+        let blocks = Blocks::new(Arc::new(MemorySource::new("<world>", vec![columns]).unwrap()), &cache);
+        let crs = Arc::new(Crs::from_epsg(4326).unwrap());
+        let step = 360.0 / 1350.0;
+        let georef = Georef { crs, x0: -180.0 + step / 2.0, y0: 90.0 - step / 2.0, dx: step, dy: -step, overhang: 0.5 };
+        let world = GeoRaster::new(blocks, georef, &[Reducer::Mean], &cache);
+        let grid = |w: f64, e: f64| BBox { west: w, south: -1.8, east: e, north: 1.8 }.area_grid(3, 3).unwrap();
+        let (seam, away) = (grid(178.2, 181.8), grid(8.2, 11.8));
+        assert_eq!((world.level_for(&seam), world.level_for(&away)), (1, 2));
+        // Met in the middle at 180°, as the base's last and first columns.
+        let got = world.sample(&seam, 0, Resampling::Bilinear).unwrap();
+        assert!((got.get(1, 1) - 674.5).abs() < 1.0, "{:?}", got.data());
     }
 
     #[test]
