@@ -150,30 +150,29 @@ fn scratch_beside(path: &Path) -> std::io::Result<(PathBuf, std::fs::File)> {
 /// leaves those before it renamed).
 pub fn write_all(files: &[(&Path, &[u8])]) -> Result<(), OutputError> {
     use std::io::Write;
-    let (mut written, mut mine): (Vec<(PathBuf, PathBuf)>, Vec<PathBuf>) = (Vec::new(), Vec::new());
+    let mut written: Vec<(PathBuf, PathBuf)> = Vec::new();
     let mut write_one = |path: &Path, bytes: &[u8]| -> Result<(), OutputError> {
         let target = destination(path)?;
         let fail = |source| OutputError::Write { path: path.to_path_buf(), source };
         let (scratch, mut file) = scratch_beside(&target).map_err(fail)?;
         partial().push(scratch.clone());
-        mine.push(scratch.clone());
         written.push((scratch, target));
         file.write_all(bytes).map_err(fail)
     };
-    let result = files.iter().try_for_each(|&(path, bytes)| write_one(path, bytes));
-    let result = result.and_then(|()| {
-        for (k, ((scratch, target), &(path, _))) in written.iter().zip(files).enumerate() {
+    let mut result = files.iter().try_for_each(|&(path, bytes)| write_one(path, bytes));
+    let mut renamed = 0;
+    if result.is_ok() {
+        for ((scratch, target), &(path, _)) in written.iter().zip(files) {
             if let Err(source) = std::fs::rename(scratch, target) {
-                // Those renamed stay; the rest go with their scratch files.
-                written.drain(..k);
-                return Err(OutputError::Write { path: path.to_path_buf(), source });
+                result = Err(OutputError::Write { path: path.to_path_buf(), source });
+                break;
             }
+            renamed += 1;
         }
-        written.clear();
-        Ok(())
-    });
-    written.iter().for_each(|(scratch, _)| drop(std::fs::remove_file(scratch)));
-    partial().retain(|p| !mine.contains(p));
+    }
+    // Those renamed stay; the rest go with their scratch files.
+    written[renamed..].iter().for_each(|(scratch, _)| drop(std::fs::remove_file(scratch)));
+    partial().retain(|p| !written.iter().any(|(scratch, _)| scratch == p));
     result
 }
 
@@ -185,16 +184,14 @@ fn partial() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
 
 /// Removes the new files a [`write_all`] still writes (a process that
 /// abandons its outputs on a signal leaves none behind); the outputs
-/// already renamed into place stay. Returns how many it removed.
-pub fn remove_partial() -> usize {
-    remove_files(&mut partial())
+/// already renamed into place stay.
+pub fn remove_partial() {
+    remove_files(&mut partial());
 }
 
-/// Removes the files `paths` and forgets them; how many were there.
-fn remove_files(paths: &mut Vec<PathBuf>) -> usize {
-    let removed = paths.iter().filter(|path| std::fs::remove_file(path).is_ok()).count();
-    paths.clear();
-    removed
+/// Removes the files `paths` and forgets them.
+fn remove_files(paths: &mut Vec<PathBuf>) {
+    paths.drain(..).for_each(|path| drop(std::fs::remove_file(path)));
 }
 
 /// Writes a line to stderr. A stderr nobody reads any more (a pipe whose
@@ -221,8 +218,9 @@ mod tests {
         let (out, new) = (dir.join("out.tif"), dir.join(".out.tif.1.partial"));
         std::fs::write(&out, b"old").unwrap();
         std::fs::write(&new, b"half").unwrap();
-        assert_eq!(remove_files(&mut vec![new.clone()]), 1);
-        assert!(!new.exists() && std::fs::read(&out).unwrap() == b"old");
+        let mut paths = vec![new.clone()];
+        remove_files(&mut paths);
+        assert!(paths.is_empty() && !new.exists() && std::fs::read(&out).unwrap() == b"old");
         // A write registers its new files while it writes, and no more.
         write_all(&[(&out, b"new")]).unwrap();
         assert!(!partial().iter().any(|p| p.starts_with(&dir)), "{:?}", partial());

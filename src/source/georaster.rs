@@ -157,13 +157,16 @@ impl GeoRaster {
         if extent.wraps || !around_the_globe(&self.georef, self.size().0) {
             return false;
         }
-        let (g, (scale, shift), last) = (&self.georef, level_map(level), extent.width as f64 - 1.0);
-        let reach = 1.5;
+        let (last, reach) = (extent.width as f64 - 1.0, 1.5);
         grid_crosses_pole(grid)
-            || (0..grid.width() as i64).any(|c| {
-                let x = ((self.lon_into_source(grid.on_globe(c, 0).0) - g.x0) / g.dx - shift) / scale;
-                x < reach || x > last - reach
-            })
+            || (0..grid.width() as i64).map(|c| self.column(grid, c, level)).any(|x| x < reach || x > last - reach)
+    }
+
+    /// The column coordinate, in overview `level`, of column `c` of `grid`
+    /// (a geographic source).
+    fn column(&self, grid: &SampleGrid, c: i64, level: usize) -> f64 {
+        let (g, (scale, shift)) = (&self.georef, level_map(level));
+        ((self.lon_into_source(grid.on_globe(c, 0).0) - g.x0) / g.dx - shift) / scale
     }
 
     /// True if a sample that grids `a` and `b` share (nested lattices of two
@@ -249,9 +252,7 @@ impl GeoRaster {
         let g = &self.georef;
         let to_level = |p: f64| (p - shift) / scale;
         if g.crs.is_geographic() && !grid_crosses_pole(grid) {
-            let x =
-                (0..grid.width() as i64).map(|c| to_level((self.lon_into_source(grid.on_globe(c, 0).0) - g.x0) / g.dx));
-            let mut x: Vec<f64> = x.collect();
+            let mut x: Vec<f64> = (0..grid.width() as i64).map(|c| self.column(grid, c, level)).collect();
             if self.extent(level).wraps {
                 unwrap_columns(&mut x, self.levels[level].size().0 as f64);
             }

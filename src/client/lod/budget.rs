@@ -272,8 +272,8 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
     // larger than the floor): coarser tiles, whole.
     let tiles = coarsened(tiles, max_tiles);
     let (features, groups) = fit_groups(terrain, groups, model, budget.budget_ms);
-    let mut tree_budgets: TreeBudgets = trees.iter().map(|(t, _)| (t.block, 0.0)).collect();
-    tree_budgets.extend(groups.into_iter().map(|g| (g.item.block, g.splats)));
+    let mut tree_budgets = TreeBudgets::new();
+    record_budgets(&mut tree_budgets, trees, groups);
     Cut {
         predicted_ms: model.predict_ms(&features),
         features,
@@ -299,8 +299,7 @@ pub fn price_unseen_trees(cut: &mut Cut, unseen: &[(TreeItem, f64)], model: &Cos
     let levels = Levels::new(&variables, Smooth::default());
     let splats = levels.resolutions(levels.level_for_budget(left_ms));
     let (features, groups) = fit_groups(cut.features, group_budgets(unseen, &splats), model, budget_ms);
-    cut.tree_budgets.extend(unseen.iter().map(|(t, _)| (t.block, 0.0)));
-    cut.tree_budgets.extend(groups.into_iter().map(|g| (g.item.block, g.splats)));
+    record_budgets(&mut cut.tree_budgets, unseen, groups);
     (cut.features, cut.predicted_ms) = (features, model.predict_ms(&features));
 }
 
@@ -312,6 +311,13 @@ fn group_budgets(trees: &[(TreeItem, f64)], splats: &[f64]) -> Vec<GroupBudget> 
         .filter(|(_, x)| **x >= 1.0)
         .map(|((item, _), x)| GroupBudget { item: *item, splats: x.floor() })
         .collect()
+}
+
+/// Records the groups `priced`: those `kept` with their splats, the rest
+/// with none.
+fn record_budgets(budgets: &mut TreeBudgets, priced: &[(TreeItem, f64)], kept: Vec<GroupBudget>) {
+    budgets.extend(priced.iter().map(|(t, _)| (t.block, 0.0)));
+    budgets.extend(kept.into_iter().map(|g| (g.item.block, g.splats)));
 }
 
 /// `tiles` merged into their parents, deepest level first (each parent with
@@ -638,14 +644,20 @@ mod tests {
         assert!((third.features.groups_h * 3.0 - all.features.groups_h).abs() < 1e-12);
     }
 
-    #[test]
-    fn tree_groups_get_splats_by_their_worth_within_the_budget() {
-        let c = demo_candidates();
-        // A full group costs 3.1 ms: the groups compete with the terrain.
+    /// A model under which a full group costs 3.1 ms (the groups compete
+    /// with the terrain), and three groups of 64 trees seen at 20,000,
+    /// 2,000 and 0 pixels.
+    fn three_groups() -> (CostModel, [(TreeItem, f64); 3]) {
         let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01, 0.0, 0.0] };
         let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
         let item = |k: i64| TreeItem { block: (k, 0), group, share: 1.0, fill_px: 0.0 };
-        let trees = [(item(0), 20_000.0), (item(1), 2_000.0), (item(2), 0.0)];
+        (model, [(item(0), 20_000.0), (item(1), 2_000.0), (item(2), 0.0)])
+    }
+
+    #[test]
+    fn tree_groups_get_splats_by_their_worth_within_the_budget() {
+        let c = demo_candidates();
+        let (model, trees) = three_groups();
         let cut = choose(&c, &trees, &model, &budget(8.0, true));
         let got = |k: i64| cut.tree_budgets.get(&(k, 0)).copied().unwrap_or(0.0);
         assert!(got(0) > got(1) && got(1) > 0.0 && got(1) < 64.0 * 24.0, "{:?}", cut.tree_budgets);
@@ -667,10 +679,7 @@ mod tests {
     #[test]
     fn groups_the_selection_did_not_see_take_what_its_budget_leaves() {
         let c = demo_candidates();
-        let model = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 2.0, 0.01, 0.0, 0.0] };
-        let group = Item { center_m: DVec3::ZERO, radius_m: 30.0, trees: 64, capacity: 64.0 * 24.0 };
-        let item = |k: i64| TreeItem { block: (k, 0), group, share: 1.0, fill_px: 0.0 };
-        let trees = [(item(0), 20_000.0), (item(1), 2_000.0), (item(2), 0.0)];
+        let (model, trees) = three_groups();
         // The terrain is whole at 3.8 ms: the unseen groups get the rest,
         // by worth, as the selection would have given them.
         let mut cut = choose(&c, &[], &model, &budget(8.0, true));
