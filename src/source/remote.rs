@@ -9,6 +9,7 @@
 use super::link::Link;
 use super::{BLOCK, BlockCache, Blocks, Crs, GeoRaster, Georef, PixelSource, SourceError};
 use crate::config::{UpstreamConfig, UpstreamService};
+use crate::grid::BBox;
 use crate::grid::mercator::HALF_WORLD_M;
 use crate::raster::Raster;
 use std::path::{Path, PathBuf};
@@ -26,26 +27,8 @@ pub fn open(config: &UpstreamConfig, cache: &Arc<BlockCache>) -> Result<GeoRaste
             {
                 return Err(bad("a Terrarium template needs {z}, {x} and {y}, and zoom ≤ 22".into()));
             }
-            let crs = Arc::new(Crs::from_epsg(3857).map_err(|source| SourceError::Crs { path: name.clone(), source })?);
-            let levels: Vec<Blocks> = (0..=config.zoom)
-                .rev()
-                .map(|z| {
-                    Blocks::new(
-                        Arc::new(Terrarium { link: link.clone(), zoom: z, template: config.url.clone() }),
-                        cache,
-                    )
-                })
-                .collect();
-            let res = 2.0 * HALF_WORLD_M / (BLOCK as f64 * (1u64 << config.zoom) as f64);
-            let georef = Georef {
-                crs,
-                x0: -HALF_WORLD_M + 0.5 * res,
-                y0: HALF_WORLD_M - 0.5 * res,
-                dx: res,
-                dy: -res,
-                overhang: 0.5,
-            };
-            Ok(GeoRaster::from_levels(levels, georef))
+            let crs = Crs::from_epsg(3857).map_err(|source| SourceError::Crs { path: name.clone(), source })?;
+            Ok(terrarium(config, link, crs, cache))
         }
         UpstreamService::Wms => {
             let area = config.bbox().map_err(bad)?;
@@ -53,38 +36,61 @@ pub fn open(config: &UpstreamConfig, cache: &Arc<BlockCache>) -> Result<GeoRaste
             if !(res > 0.0 && res.is_finite()) {
                 return Err(bad(format!("resolution_deg {res} must be positive")));
             }
-            let width = ((area.east - area.west) / res).ceil() as usize;
-            let height = ((area.north - area.south) / res).ceil() as usize;
-            let mut levels = Vec::new();
-            let mut k = 0;
-            loop {
-                let scale = (1u64 << k) as f64;
-                let (w, h) = (width.div_ceil(1 << k), height.div_ceil(1 << k));
-                let level = Wms {
-                    link: link.clone(),
-                    url: config.url.clone(),
-                    west: area.west,
-                    north: area.north,
-                    res: res * scale,
-                    size: (w, h),
-                };
-                levels.push(Blocks::new(Arc::new(level), cache));
-                if w <= BLOCK && h <= BLOCK || k > 20 {
-                    break;
-                }
-                k += 1;
-            }
-            let georef = Georef {
-                crs: Arc::new(Crs::wgs84()),
-                x0: area.west + 0.5 * res,
-                y0: area.north - 0.5 * res,
-                dx: res,
-                dy: -res,
-                overhang: 0.5,
-            };
-            Ok(GeoRaster::from_levels(levels, georef))
+            Ok(wms(config, link, area, cache))
         }
     }
+}
+
+/// A Terrarium service as a Web Mercator raster (`crs`), a level per
+/// zoom from the finest.
+fn terrarium(config: &UpstreamConfig, link: Arc<Link>, crs: Crs, cache: &Arc<BlockCache>) -> GeoRaster {
+    let levels: Vec<Blocks> = (0..=config.zoom)
+        .rev()
+        .map(|z| Blocks::new(Arc::new(Terrarium { link: link.clone(), zoom: z, template: config.url.clone() }), cache))
+        .collect();
+    let res = 2.0 * HALF_WORLD_M / (BLOCK as f64 * (1u64 << config.zoom) as f64);
+    let georef = Georef {
+        crs: Arc::new(crs),
+        x0: -HALF_WORLD_M + 0.5 * res,
+        y0: HALF_WORLD_M - 0.5 * res,
+        dx: res,
+        dy: -res,
+        overhang: 0.5,
+    };
+    GeoRaster::from_levels(levels, georef)
+}
+
+/// A WMS over `area` at the configured resolution, with levels halving it
+/// until one fits a block.
+fn wms(config: &UpstreamConfig, link: Arc<Link>, area: BBox, cache: &Arc<BlockCache>) -> GeoRaster {
+    let res = config.resolution_deg;
+    let width = ((area.east - area.west) / res).ceil() as usize;
+    let height = ((area.north - area.south) / res).ceil() as usize;
+    let mut levels = Vec::new();
+    for k in 0..=21 {
+        let (w, h) = (width.div_ceil(1 << k), height.div_ceil(1 << k));
+        let level = Wms {
+            link: link.clone(),
+            url: config.url.clone(),
+            west: area.west,
+            north: area.north,
+            res: res * (1u64 << k) as f64,
+            size: (w, h),
+        };
+        levels.push(Blocks::new(Arc::new(level), cache));
+        if w <= BLOCK && h <= BLOCK {
+            break;
+        }
+    }
+    let georef = Georef {
+        crs: Arc::new(Crs::wgs84()),
+        x0: area.west + 0.5 * res,
+        y0: area.north - 0.5 * res,
+        dx: res,
+        dy: -res,
+        overhang: 0.5,
+    };
+    GeoRaster::from_levels(levels, georef)
 }
 
 /// One zoom level of a Terrarium service: a Web Mercator raster of

@@ -269,15 +269,53 @@ fn frame(
 ) -> Result<Framed, FlyError> {
     let start = Instant::now();
     let bytes_before = source.bytes_fetched();
-    let (camera, t_s) = (shot.camera, shot.t_s);
+    let camera = shot.camera;
     let mut chosen =
-        choose(source, (store, lod.as_deref_mut(), sse), (t_s, &camera), (options, renderer.cache_slots()))?;
+        choose(source, (store, lod.as_deref_mut(), sse), (shot.t_s, &camera), (options, renderer.cache_slots()))?;
     if shot.sun_ecef.is_none() {
         // No sun, no shadow rays: none drawn, none priced.
         chosen.steps.fill(0);
     }
-    let (tiles, error_px) = (&chosen.tiles, chosen.error_px);
     let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
+    let drawn = draw(renderer, &mut chosen, lod.as_deref_mut(), options, (shot, readback))?;
+    let budget = lod.map(|lod| {
+        // Expected before the frame moves the aim.
+        let predicted_ms = chosen.selected.as_ref().map(|s| lod.expected_ms(s));
+        let frame_ms = drawn.out.stats.gpu_ms.unwrap_or(drawn.out.stats.wall_ms);
+        let model_ms = lod.observe(&camera, &drawn.choices, &drawn.trees.drawn, (frame_ms, &drawn.steps)).model_ms;
+        (lod.budget().budget_ms, predicted_ms, model_ms)
+    });
+    let frame = Frame {
+        shot,
+        cpu_ms,
+        bytes_fetched: source.bytes_fetched() - bytes_before,
+        cpu_bytes: store.bytes(),
+        clearance_m: clearance_m(source, store, &camera),
+        budget,
+    };
+    Ok(Framed { record: record(&frame, &chosen, &drawn), rendered: drawn.out, tiles: chosen.tiles })
+}
+
+/// A frame drawn: what the renderer returned, its trees, each tile as
+/// drawn, and the view-ray steps it measured.
+struct Drawn {
+    out: Rendered,
+    trees: FrameTrees,
+    choices: Vec<Choice>,
+    steps: FrameSteps,
+}
+
+/// Draws the tiles `chosen` with their trees (under a budget, the cut
+/// drawn takes the trees' prices: `chosen.selected` becomes it), held for
+/// `options.hold_ms` where asked.
+fn draw(
+    renderer: &mut Renderer,
+    chosen: &mut Chosen,
+    mut lod: Option<&mut BudgetFlight>,
+    options: &FlyOptions,
+    (shot, readback): (&Shot, Readback),
+) -> Result<Drawn, FlyError> {
+    let (camera, tiles) = (&shot.camera, &chosen.tiles);
     let fade = trees::canopy_fade(options.fade, options.trees.as_ref(), camera.focal_px());
     let settings = FrameSettings {
         traversal: options.traversal,
@@ -285,8 +323,8 @@ fn frame(
         sun_ecef: shot.sun_ecef,
         fade,
     };
-    let mut trees = tree_splats(options, tiles, &camera, &fade.trees, lod.as_deref_mut());
-    if let Some(lod) = lod.as_deref_mut().filter(|_| options.trees.is_some()) {
+    let mut trees = tree_splats(options, tiles, camera, &fade.trees, lod.as_deref_mut());
+    if let Some(lod) = lod.filter(|_| options.trees.is_some()) {
         lod.set_drawn(tiles.clone());
     }
     if let Some(priced) = trees.priced.take() {
@@ -300,59 +338,69 @@ fn frame(
             morph_weight: chosen.weights[k],
         })
         .collect();
-    let mut out = renderer.render_draws(&camera, &draws, &settings, readback)?;
+    let mut out = renderer.render_draws(camera, &draws, &settings, readback)?;
     if options.hold_ms > 0.0 {
-        let held = held(renderer, (&camera, &draws, &settings), options.hold_ms)?;
+        let held = held(renderer, (camera, &draws, &settings), options.hold_ms)?;
         (out.stats.gpu_ms, out.stats.gpu_rays_ms, out.stats.wall_ms) = (held.gpu_ms, held.gpu_rays_ms, held.wall_ms);
     }
-    let selected = chosen.selected.as_ref();
-    let predicted_ms = lod.as_deref().zip(selected).map(|(l, s)| l.expected_ms(s));
-    let budget_ms = lod.as_deref().map(|l| l.budget().budget_ms);
-    let drawn: Vec<Choice> = draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
-    let steps = FrameSteps::measure(&out.fetches, &out.draws, &drawn);
-    let model_ms = lod.map(|lod| {
-        lod.observe(&camera, &drawn, &trees.drawn, (out.stats.gpu_ms.unwrap_or(out.stats.wall_ms), &steps)).model_ms
-    });
+    let choices: Vec<Choice> = draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
+    let steps = FrameSteps::measure(&out.fetches, &out.draws, &choices);
+    Ok(Drawn { out, trees, choices, steps })
+}
+
+/// What a frame measured outside its render.
+struct Frame<'a> {
+    shot: &'a Shot,
+    cpu_ms: f64,
+    bytes_fetched: u64,
+    cpu_bytes: usize,
+    clearance_m: Option<f64>,
+    /// Under a budget: the budget, the cut's expected time, and the model's
+    /// prediction for what was drawn, ms.
+    budget: Option<(f64, Option<f64>, f64)>,
+}
+
+/// The statistics of a frame that drew `drawn`, the tiles `chosen`.
+fn record(frame: &Frame, chosen: &Chosen, drawn: &Drawn) -> FrameRecord {
+    let (out, selected) = (&drawn.out, chosen.selected.as_ref());
     let mut levels = BTreeMap::new();
-    for t in tiles {
+    for t in &chosen.tiles {
         *levels.entry(t.id().level).or_insert(0) += 1;
     }
     let rays: Vec<&[u32; 2]> = out.fetches.iter().filter(|f| f[0] > 0).collect();
-    let clearance_m = clearance_m(source, store, &camera);
-    let record = FrameRecord {
-        frame: shot.index,
-        cpu_ms,
+    FrameRecord {
+        frame: frame.shot.index,
+        cpu_ms: frame.cpu_ms,
         gpu_ms: out.stats.gpu_ms,
         gpu_rays_ms: out.stats.gpu_rays_ms,
         render_ms: out.stats.wall_ms,
         levels,
         tiles_ray: out.stats.tiles_hull + out.stats.tiles_inside,
         tiles_plain: out.stats.tiles_plain,
-        error_px,
+        error_px: chosen.error_px,
         ray_pixels: rays.len(),
-        view_fetches: (steps.view.mean.unwrap_or(0.0), rays.iter().map(|f| f[0]).max().unwrap_or(0)),
+        view_fetches: (drawn.steps.view.mean.unwrap_or(0.0), rays.iter().map(|f| f[0]).max().unwrap_or(0)),
         shadow_fetches_mean: mean_or_zero(rays.iter().map(|f| f64::from(f[1]))),
         work: (!out.work.is_empty()).then(|| out.work.iter().fold(DrawWork::default(), |a, w| a.plus(w))),
-        bytes_fetched: source.bytes_fetched() - bytes_before,
+        bytes_fetched: frame.bytes_fetched,
         gpu_bytes: out.stats.resident_bytes,
-        cpu_bytes: store.bytes(),
+        cpu_bytes: frame.cpu_bytes,
         rss_mib: crate::bench::rss_mib().0,
         selection_ms: chosen.selection_ms,
-        budget_ms,
-        predicted_ms,
-        model_ms,
+        budget_ms: frame.budget.map(|b| b.0),
+        predicted_ms: frame.budget.and_then(|b| b.1),
+        model_ms: frame.budget.map(|b| b.2),
         candidates: selected.map(|s| s.candidates),
         benefit_bound: selected.map(|s| s.cut.share_of_bound()),
         bound: selected.map(|s| s.cut.bound()),
         morphing: chosen.morphing,
         nodes_touched: chosen.touched,
-        clearance_m,
+        clearance_m: frame.clearance_m,
         shadow_steps_mean: mean_or_zero(chosen.steps.iter().map(|&s| f64::from(s))),
-        trees: trees.drawn.trees,
+        trees: drawn.trees.drawn.trees,
         splats: out.stats.splats as usize,
-        splat_fill_px: trees.drawn.fill_px,
-    };
-    Ok(Framed { record, rendered: out, tiles: chosen.tiles })
+        splat_fill_px: drawn.trees.drawn.fill_px,
+    }
 }
 
 /// A frame's trees.

@@ -55,7 +55,7 @@ use super::candidates::Candidate;
 use crate::client::trees::TreeBudgets;
 use crate::grid::TileId;
 use crate::lod::model::{CostFeatures, CostModel, Smooth, group_weight};
-use crate::lod::optimizer::{Continuous, Forest, Levels, Node, Settings, Stop, optimize};
+use crate::lod::optimizer::{Continuous, Forest, Levels, Node, Selection, Settings, Stop, optimize};
 use crate::lod::split::Item;
 use std::time::Instant;
 
@@ -238,22 +238,7 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
         (selection, drawn)
     };
     let max_tiles = budget.max_tiles.max(1);
-    let (mut selection, mut drawn) = run(budget.budget_ms - model.constants_ms[0]);
-    let slot_bound = drawn.len() > max_tiles;
-    if slot_bound {
-        // The largest budget whose cut fits the slots, by bisection.
-        let (mut lo, mut hi) = (0.0, selection.cost_ms);
-        (selection, drawn) = run(lo);
-        for _ in 0..SLOT_BISECTIONS {
-            let mid = 0.5 * (lo + hi);
-            let (s, d) = run(mid);
-            if d.len() <= max_tiles {
-                (lo, selection, drawn) = (mid, s, d);
-            } else {
-                hi = mid;
-            }
-        }
-    }
+    let ((selection, drawn), slot_bound) = within_slots(run, budget.budget_ms - model.constants_ms[0], max_tiles);
     let tiles: Vec<Choice> = drawn
         .iter()
         .map(|&i| Choice {
@@ -284,6 +269,32 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
         stop: Some(selection.stop),
         slot_bound,
     }
+}
+
+/// The optimiser's selection by `run` under `budget_ms` and the tiles it
+/// draws; where they are more than `max_tiles`, those of the largest
+/// budget whose cut fits, by bisection (and `true`: the slots bound it).
+fn within_slots(
+    run: impl Fn(f64) -> (Selection, Vec<u32>),
+    budget_ms: f64,
+    max_tiles: usize,
+) -> ((Selection, Vec<u32>), bool) {
+    let first = run(budget_ms);
+    if first.1.len() <= max_tiles {
+        return (first, false);
+    }
+    let (mut lo, mut hi) = (0.0, first.0.cost_ms);
+    let mut fits = run(lo);
+    for _ in 0..SLOT_BISECTIONS {
+        let mid = 0.5 * (lo + hi);
+        let cut = run(mid);
+        if cut.1.len() <= max_tiles {
+            (lo, fits) = (mid, cut);
+        } else {
+            hi = mid;
+        }
+    }
+    (fits, true)
 }
 
 /// Gives tree groups the cut's selection did not price, `unseen` (each

@@ -323,66 +323,73 @@ impl Renderer {
         settings: &FrameSettings,
         stats: &mut FrameStats,
     ) -> Result<Vec<Prepared>, CacheFull> {
-        let (device, queue) = (&self.gpu.device, &self.gpu.queue);
         let mut order: Vec<(f64, usize, &Draw)> =
             tiles.iter().enumerate().map(|(k, d)| (uniforms::tile_near_m(camera, d.tile), k, d)).collect();
         order.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut blocks = Vec::with_capacity(order.len());
         let mut draws = Vec::with_capacity(order.len());
         let mut splats: Vec<Splat> = Vec::new();
-        let linear = matches!(settings.traversal, Traversal::Linear(_));
         self.splat_ranges = vec![0..0; tiles.len()];
-        for (near_m, draw, &Draw { tile, shadow_steps, splats: tile_splats, morph_weight }) in order {
-            let slot = self.cache.insert(device, queue, tile, self.frame_no)?;
-            let whole = uniforms::canopy_whole(camera, tile, &settings.fade);
-            let mode = draw_mode(camera, tile, settings, near_m);
-            // A tile drawn plain shows its own ground: no morph layer.
-            let morph = match mode {
-                DrawMode::Plain => None,
-                _ => self.cache.morph_layer(queue, tile, self.frame_no).map(|layer| (layer, morph_weight)),
-            };
-            match mode {
-                DrawMode::Hull => stats.tiles_hull += 1,
-                DrawMode::Inside => stats.tiles_inside += 1,
-                DrawMode::Plain => stats.tiles_plain += 1,
-            }
-            let hull_quad_samples = self.cache.hull_quad_samples(slot).unwrap_or_else(|| tile.hull.quad_samples());
-            let start = splats.len() as u32;
-            splats.extend_from_slice(tile_splats);
-            let tile_splats = start..splats.len() as u32;
-            self.splat_ranges[draw] = tile_splats.clone();
-            let at = Placement {
-                draw: draw as u32,
-                slot,
-                mode,
-                hull_quad_samples,
-                morph,
-                splats: tile_splats.clone(),
-                near_m,
-            };
-            let block = TileUniform::new(camera, settings, tile, at, shadow_steps);
+        for (near_m, k, draw) in order {
+            let (prepared, block) = self.prepare_tile(camera, settings, (k, draw, near_m), stats, &mut splats)?;
             let mut bytes = bytemuck::bytes_of(&block).to_vec();
             bytes.resize(TILE_STRIDE as usize, 0);
             blocks.extend(bytes);
-            let variant = RayVariant {
-                inside: mode == DrawMode::Inside,
-                morphing: morph.is_some(),
-                whole,
-                linear,
-                counted: self.counting,
-            };
-            if mode != DrawMode::Plain && self.compute.is_none() {
-                self.pipelines.prepare_ray(device, variant);
-            }
-            let mesh = mode == DrawMode::Plain || uniforms::needs_filler(tile);
-            draws.push(Prepared { slot, mode, variant, splats: tile_splats, screen: block.screen, mesh });
+            draws.push(prepared);
         }
+        let (device, queue) = (&self.gpu.device, &self.gpu.queue);
         let frame = FrameUniform::new(camera, settings, &self.cache.mip_rects);
         queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
         queue.write_buffer(&self.tile_buffer, 0, &blocks);
         stats.splats = splats.len() as u32;
         SplatBuffers::upload(&mut self.splats, (device, queue), &self.pipelines, &splats);
         Ok(draws)
+    }
+
+    /// Uploads the `k`-th draw, `near_m` from the camera, and appends its
+    /// splats to `splats`: how the tile is drawn, and its uniform block.
+    fn prepare_tile(
+        &mut self,
+        camera: &Camera,
+        settings: &FrameSettings,
+        (k, draw, near_m): (usize, &Draw, f64),
+        stats: &mut FrameStats,
+        splats: &mut Vec<Splat>,
+    ) -> Result<(Prepared, TileUniform), CacheFull> {
+        let (device, queue) = (&self.gpu.device, &self.gpu.queue);
+        let tile = draw.tile;
+        let slot = self.cache.insert(device, queue, tile, self.frame_no)?;
+        let mode = draw_mode(camera, tile, settings, near_m);
+        // A tile drawn plain shows its own ground: no morph layer.
+        let morph = match mode {
+            DrawMode::Plain => None,
+            _ => self.cache.morph_layer(queue, tile, self.frame_no).map(|layer| (layer, draw.morph_weight)),
+        };
+        match mode {
+            DrawMode::Hull => stats.tiles_hull += 1,
+            DrawMode::Inside => stats.tiles_inside += 1,
+            DrawMode::Plain => stats.tiles_plain += 1,
+        }
+        let hull_quad_samples = self.cache.hull_quad_samples(slot).unwrap_or_else(|| tile.hull.quad_samples());
+        let start = splats.len() as u32;
+        splats.extend_from_slice(draw.splats);
+        let tile_splats = start..splats.len() as u32;
+        self.splat_ranges[k] = tile_splats.clone();
+        let at =
+            Placement { draw: k as u32, slot, mode, hull_quad_samples, morph, splats: tile_splats.clone(), near_m };
+        let block = TileUniform::new(camera, settings, tile, at, draw.shadow_steps);
+        let variant = RayVariant {
+            inside: mode == DrawMode::Inside,
+            morphing: morph.is_some(),
+            whole: uniforms::canopy_whole(camera, tile, &settings.fade),
+            linear: matches!(settings.traversal, Traversal::Linear(_)),
+            counted: self.counting,
+        };
+        if mode != DrawMode::Plain && self.compute.is_none() {
+            self.pipelines.prepare_ray(device, variant);
+        }
+        let mesh = mode == DrawMode::Plain || uniforms::needs_filler(tile);
+        Ok((Prepared { slot, mode, variant, splats: tile_splats, screen: block.screen, mesh }, block))
     }
 
     /// With rays in a compute pass, its pipeline for the frame's tiles (one
