@@ -8,7 +8,7 @@ use crate::cem::landcover::{ForestTypes, Landcover, Rule};
 use crate::cem::surface::SurfaceType;
 use crate::demo;
 use crate::encode::Quantization;
-use crate::grid::{Sector, TileGrid};
+use crate::grid::{BBox, Sector, TileGrid};
 use crate::raster::morphology::MorphOp;
 use crate::region::{Forest, Region};
 use crate::source::{
@@ -93,51 +93,14 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
     // Data from upstream servers expires, in the block cache as in the tile cache.
     let ttls = [config.dem.upstream.as_ref(), config.landcover.as_ref().and_then(|l| l.upstream.as_ref())];
     let upstream_ttl = ttls.into_iter().flatten().map(|u| std::time::Duration::from_secs(u.ttl_s)).min();
-    let memory_mb = config.cache.memory_mb;
-    if !(MIN_CACHE_MB..=MAX_CACHE_MB).contains(&memory_mb) {
-        return Err(invalid(format!("[cache] memory_mb = {memory_mb}: must be {MIN_CACHE_MB} to {MAX_CACHE_MB}")));
-    }
-    let cache = BlockCache::expiring(memory_mb * 1024 * 1024, upstream_ttl);
-    let enc = &config.encoding;
-    if !(enc.png16_scale_m > 0.0 && enc.png16_scale_m.is_finite()) {
-        return Err(invalid(format!("[encoding] png16_scale_m must be positive, got {}", enc.png16_scale_m)));
-    }
-    if !enc.png16_offset_m.is_finite() {
-        return Err(invalid(format!("[encoding] png16_offset_m must be a finite number, got {}", enc.png16_offset_m)));
-    }
-    config.canopy.check().map_err(|m| invalid(format!("[canopy] {m}")))?;
-    config.server.check().map_err(|m| invalid(format!("[server] {m}")))?;
     // Check every value before opening any file.
+    check_values(config).map_err(invalid)?;
+    let cache = BlockCache::expiring(config.cache.memory_mb * 1024 * 1024, upstream_ttl);
     let landcover_rule =
         config.landcover.as_ref().map(rule).transpose().map_err(|m| invalid(format!("[landcover] {m}")))?;
     let types = forest_types(config).map_err(invalid)?;
     let resolve = |p: &PathBuf| if p.is_absolute() { p.clone() } else { base.join(p) };
-    let (dem, bounds, name) = match (&config.dem.path, &config.dem.upstream) {
-        (Some(_), Some(_)) => return Err(invalid("[dem] give a path or an upstream, not both".into())),
-        (None, Some(up)) => {
-            let bounds = up.bbox().map_err(|m| invalid(format!("[dem.upstream] {m}")))?;
-            (upstream(up, &cache, &invalid)?, bounds, up.url.clone())
-        }
-        (Some(path), None) => {
-            let crs = parse_crs(&config.dem.crs).map_err(|m| invalid(format!("[dem] {m}")))?;
-            let options = OpenOptions { crs, nodata: config.dem.nodata.clone(), classes: false };
-            let dem =
-                source::open_file(&resolve(path), &options, &cache).map_err(|e| invalid(format!("[dem] path: {e}")))?;
-            let bands = dem.base().source().bands();
-            if bands != 1 {
-                let file = resolve(path);
-                return Err(invalid(format!("[dem] path: {} has {bands} bands; a DEM has one", file.display())));
-            }
-            let bounds = dem.bounds().bbox();
-            let name = path.file_stem().map_or_else(|| "dem".into(), |s| s.to_string_lossy().into_owned());
-            (dem, bounds, name)
-        }
-        (None, None) => {
-            let d = demo::sources()?;
-            let pixels = source::nodata::apply(d.dem, &config.dem.nodata, &cache);
-            (GeoRaster::new(pixels, d.dem_georef, &[Reducer::Mean], &cache), demo::BBOX, demo::NAME.to_string())
-        }
-    };
+    let (dem, bounds, name) = open_dem(config, &resolve, &cache, &invalid)?;
     let demo = config.dem.path.is_none() && config.dem.upstream.is_none();
     let (landcover, map) = match (&config.landcover, landcover_rule, demo) {
         (Some(lc), Some(rule), _) => {
@@ -164,15 +127,69 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
         map,
         proxy: fallback.clone(),
         forests: forests(config, &fallback, &resolve, &invalid)?,
-        heights_16: Quantization { offset: enc.png16_offset_m, scale: enc.png16_scale_m },
+        heights_16: Quantization { offset: config.encoding.png16_offset_m, scale: config.encoding.png16_scale_m },
         cache,
+    })
+}
+
+/// The scalar settings of `config` checked: a message naming the first
+/// that is out of range.
+fn check_values(config: &Config) -> Result<(), String> {
+    let memory_mb = config.cache.memory_mb;
+    if !(MIN_CACHE_MB..=MAX_CACHE_MB).contains(&memory_mb) {
+        return Err(format!("[cache] memory_mb = {memory_mb}: must be {MIN_CACHE_MB} to {MAX_CACHE_MB}"));
+    }
+    let enc = &config.encoding;
+    if !(enc.png16_scale_m > 0.0 && enc.png16_scale_m.is_finite()) {
+        return Err(format!("[encoding] png16_scale_m must be positive, got {}", enc.png16_scale_m));
+    }
+    if !enc.png16_offset_m.is_finite() {
+        return Err(format!("[encoding] png16_offset_m must be a finite number, got {}", enc.png16_offset_m));
+    }
+    config.canopy.check().map_err(|m| format!("[canopy] {m}"))?;
+    config.server.check().map_err(|m| format!("[server] {m}"))
+}
+
+/// The region's DEM, its bounds and its name: a file, an upstream server,
+/// or the embedded demo.
+fn open_dem(
+    config: &Config,
+    resolve: &impl Fn(&PathBuf) -> PathBuf,
+    cache: &Arc<BlockCache>,
+    invalid: &dyn Fn(String) -> ConfigError,
+) -> Result<(GeoRaster, BBox, String), ConfigError> {
+    Ok(match (&config.dem.path, &config.dem.upstream) {
+        (Some(_), Some(_)) => return Err(invalid("[dem] give a path or an upstream, not both".into())),
+        (None, Some(up)) => {
+            let bounds = up.bbox().map_err(|m| invalid(format!("[dem.upstream] {m}")))?;
+            (upstream(up, cache, invalid)?, bounds, up.url.clone())
+        }
+        (Some(path), None) => {
+            let crs = parse_crs(&config.dem.crs).map_err(|m| invalid(format!("[dem] {m}")))?;
+            let options = OpenOptions { crs, nodata: config.dem.nodata.clone(), classes: false };
+            let dem =
+                source::open_file(&resolve(path), &options, cache).map_err(|e| invalid(format!("[dem] path: {e}")))?;
+            let bands = dem.base().source().bands();
+            if bands != 1 {
+                let file = resolve(path);
+                return Err(invalid(format!("[dem] path: {} has {bands} bands; a DEM has one", file.display())));
+            }
+            let bounds = dem.bounds().bbox();
+            let name = path.file_stem().map_or_else(|| "dem".into(), |s| s.to_string_lossy().into_owned());
+            (dem, bounds, name)
+        }
+        (None, None) => {
+            let d = demo::sources()?;
+            let pixels = source::nodata::apply(d.dem, &config.dem.nodata, cache);
+            (GeoRaster::new(pixels, d.dem_georef, &[Reducer::Mean], cache), demo::BBOX, demo::NAME.to_string())
+        }
     })
 }
 
 /// Which revision of Sylva's products a cached tile holds: change it with
 /// any change to the code that changes some tile's bytes, so that caches
 /// seeded before it are not served beside tiles made after it.
-const PRODUCT_REVISION: &str = "2026-12-07: the relief shaded with each row's own spacings (Web Mercator rows too); overviews of sources in feet chosen in metres";
+const PRODUCT_REVISION: &str = "2026-12-08: one overview per spacing around the globe; Web Mercator worlds read across 180°; float32 nodata matched as GDAL does";
 
 /// A key that changes with anything that changes a tile's bytes: every
 /// setting, the size and time of every source file, and the products'
