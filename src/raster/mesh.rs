@@ -43,6 +43,12 @@ impl Mesh {
         Mesh { m, first, size, k0: (kx0, ky0), cols, points }
     }
 
+    /// Makes the control points' x continuous where x repeats every
+    /// `period` (a source around the globe; [`unwrap_rows`]).
+    pub fn unwrap_x(&mut self, period: f64) {
+        unwrap_rows(&mut self.points, self.cols, period);
+    }
+
     /// Width and height of the grid in samples.
     pub fn size(&self) -> (usize, usize) {
         self.size
@@ -108,6 +114,35 @@ impl Mesh {
 #[inline]
 fn lerp(a: f64, b: f64, t: f64) -> f64 {
     (1.0 - t) * a + t * b
+}
+
+/// Makes the x of `points`, rows of `cols`, continuous where x repeats
+/// every `period`: down the first column, then along each row
+/// ([`unwrap_periodic`]).
+pub fn unwrap_rows(points: &mut [(f64, f64)], cols: usize, period: f64) {
+    unwrap_periodic(points.iter_mut().step_by(cols.max(1)).map(|p| &mut p.0), period);
+    for row in points.chunks_mut(cols.max(1)) {
+        unwrap_periodic(row.iter_mut().map(|p| &mut p.0), period);
+    }
+}
+
+/// Values that repeat every `period` made continuous, each moved by whole
+/// periods to within half a period of the last finite one before it (NaN
+/// skipped): a grid across the seam of a source around the globe then reads
+/// the columns either side of it, not every column between.
+pub fn unwrap_periodic<'a>(values: impl Iterator<Item = &'a mut f64>, period: f64) {
+    let mut last: Option<f64> = None;
+    for x in values {
+        if let Some(to) = last {
+            let turns = ((*x - to) / period).round();
+            if turns.is_finite() {
+                *x -= turns * period;
+            }
+        }
+        if x.is_finite() {
+            last = Some(*x);
+        }
+    }
 }
 
 #[cfg(test)]

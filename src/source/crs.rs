@@ -89,6 +89,21 @@ impl Crs {
         }
     }
 
+    /// How far x goes once around the globe, in the CRS's units, where x
+    /// follows longitude alone, evenly (360 for geographic CRSs; the
+    /// equator's length for Web Mercator and other cylindrical projections
+    /// centred on the prime meridian); `None` for other projections.
+    pub fn period_x(&self) -> Option<f64> {
+        if self.is_geographic() {
+            return Some(360.0);
+        }
+        let x = |lon: f64, lat: f64| self.from_lon_lat(lon, lat).map(|p| p.0);
+        let quarter = x(90.0, 0.0)? - x(0.0, 0.0)?;
+        let steps = [x(0.0, 0.0)? - x(-90.0, 0.0)?, x(90.0, 60.0)? - x(0.0, 60.0)?];
+        let even = quarter > 0.0 && steps.iter().all(|s| (s - quarter).abs() <= 1e-9 * quarter);
+        even.then_some(4.0 * quarter)
+    }
+
     /// Projects `(lon, lat)` degrees into this CRS; `None` where the projection
     /// is undefined.
     pub fn from_lon_lat(&self, lon_deg: f64, lat_deg: f64) -> Option<(f64, f64)> {
@@ -135,5 +150,14 @@ mod tests {
         assert!(err.to_string().contains("EPSG:99999"));
         assert!(Crs::from_epsg(4269).unwrap().is_geographic());
         assert!(!Crs::from_epsg(2193).unwrap().is_geographic());
+    }
+
+    #[test]
+    fn x_goes_around_the_globe_in_geographic_and_cylindrical_crss_only() {
+        let period = |code| Crs::from_epsg(code).unwrap().period_x();
+        assert_eq!(period(4326), Some(360.0));
+        let mercator = period(3857).unwrap();
+        assert!((mercator - 2.0 * crate::grid::mercator::HALF_WORLD_M).abs() < 1e-6, "{mercator}");
+        assert_eq!((period(32610), period(3031), period(2193)), (None, None, None));
     }
 }

@@ -12,7 +12,7 @@ use super::pyramid::{self, Reducer};
 use super::{BlockCache, Blocks, Crs, SourceError};
 use crate::geo::METRES_PER_DEGREE;
 use crate::grid::{SampleGrid, Sector};
-use crate::raster::mesh::Mesh;
+use crate::raster::mesh::{Mesh, unwrap_periodic, unwrap_rows};
 use crate::raster::resample::{self, Extent, PixelCoords, Resampling};
 use crate::raster::{Raster, Window};
 use rayon::prelude::*;
@@ -90,15 +90,16 @@ pub struct GeoRaster {
     levels: Vec<Blocks>,
     georef: Georef,
     bounds: Sector,
+    /// Whether the columns go once around the globe, the last bordering
+    /// the first.
+    wraps: bool,
 }
 
 impl GeoRaster {
     /// Wraps `base` with its georeferencing; overviews reduce band `b` with
     /// `reducers[b]` (the last entry for further bands).
     pub fn new(base: Blocks, georef: Georef, reducers: &[Reducer], cache: &Arc<BlockCache>) -> GeoRaster {
-        let georef = georef.turned_onto_the_globe(base.size().0);
-        let bounds = lon_lat_bounds(&georef, base.size());
-        GeoRaster { levels: pyramid::build(base, reducers, cache), georef, bounds }
+        GeoRaster::from_levels(pyramid::build(base, reducers, cache), georef)
     }
 
     /// A source whose overviews come with it (level `k` halves level
@@ -106,8 +107,9 @@ impl GeoRaster {
     pub fn from_levels(levels: Vec<Blocks>, georef: Georef) -> GeoRaster {
         let size = levels.first().map_or((0, 0), Blocks::size);
         let georef = georef.turned_onto_the_globe(size.0);
-        let bounds = lon_lat_bounds(&georef, size);
-        GeoRaster { levels, georef, bounds }
+        let wraps = around_the_globe(&georef, size.0);
+        let bounds = lon_lat_bounds(&georef, size, wraps);
+        GeoRaster { levels, georef, bounds, wraps }
     }
 
     /// The source's name (its file, or a description).
@@ -136,30 +138,17 @@ impl GeoRaster {
     }
 
     /// The overview level used for `grid`: the coarsest whose pixels are no
-    /// larger than the grid spacing. Depends on the spacing alone, so every
-    /// tile of a level reads the same overview.
+    /// larger than the grid spacing and, around the globe, that wraps (its
+    /// columns divide the base's evenly). Depends on the spacing alone, so
+    /// every tile of a level reads the same overview, at the seam or not.
     pub fn level_for(&self, grid: &SampleGrid) -> usize {
         let spacing = grid.lon.step_deg().min(grid.lat.step_deg());
         let ratio = spacing / self.georef.pixel_deg();
         let mut level = if ratio < 2.0 { 0 } else { (ratio.log2().floor() as usize).min(self.levels.len() - 1) };
-        // An overview whose columns do not divide the base's evenly does not
-        // wrap: a grid that reaches the seam reads the coarsest one that does.
-        while level > 0 && self.clamped_at_seam(grid, level) {
+        while level > 0 && self.wraps && !self.extent(level).wraps {
             level -= 1;
         }
         level
-    }
-
-    /// Whether overview `level` of a source around the globe does not wrap
-    /// and `grid` reads within a kernel's reach of its seam.
-    fn clamped_at_seam(&self, grid: &SampleGrid, level: usize) -> bool {
-        let extent = self.extent(level);
-        if extent.wraps || !around_the_globe(&self.georef, self.size().0) {
-            return false;
-        }
-        let (last, reach) = (extent.width as f64 - 1.0, 1.5);
-        grid_crosses_pole(grid)
-            || (0..grid.width() as i64).map(|c| self.column(grid, c, level)).any(|x| x < reach || x > last - reach)
     }
 
     /// The column coordinate, in overview `level`, of column `c` of `grid`
@@ -223,7 +212,7 @@ impl GeoRaster {
     fn extent(&self, level: usize) -> Extent {
         let (w, h) = self.levels[level].size();
         let (base_w, base_h) = self.size();
-        let wraps = around_the_globe(&self.georef, base_w);
+        let wraps = self.wraps;
         let base = Extent::new(base_w, base_h, self.georef.overhang);
         // Around the globe every longitude has data, point samples too.
         let x_range = match wraps {
@@ -254,7 +243,7 @@ impl GeoRaster {
         if g.crs.is_geographic() && !grid_crosses_pole(grid) {
             let mut x: Vec<f64> = (0..grid.width() as i64).map(|c| self.column(grid, c, level)).collect();
             if self.extent(level).wraps {
-                unwrap_columns(&mut x, self.levels[level].size().0 as f64);
+                unwrap_periodic(x.iter_mut(), self.levels[level].size().0 as f64);
             }
             let y = (0..grid.height() as i64).map(|r| to_level((grid.on_globe(0, r).1 - g.y0) / g.dy));
             return PixelCoords::Separable { x, y: y.collect() };
@@ -275,7 +264,13 @@ impl GeoRaster {
             }
         };
         let first = (grid.lon.first, grid.lat.first);
-        let mesh = Mesh::new(m, first, (grid.width(), grid.height()), |c, r| pixel(grid.on_globe(c, r)));
+        let mut mesh = Mesh::new(m, first, (grid.width(), grid.height()), |c, r| pixel(grid.on_globe(c, r)));
+        // Around the globe, positions jump a period at the seam: a mesh cell
+        // across it would interpolate through every column between.
+        let period = self.extent(level).wraps.then(|| self.levels[level].size().0 as f64);
+        if let Some(period) = period {
+            mesh.unwrap_x(period);
+        }
         if mesh.is_finite() {
             return PixelCoords::Mesh(mesh);
         }
@@ -289,6 +284,9 @@ impl GeoRaster {
                 }
             }
         });
+        if let Some(period) = period {
+            unwrap_rows(&mut xy, grid.width(), period);
+        }
         PixelCoords::Dense { width: grid.width(), xy }
     }
 
@@ -345,21 +343,12 @@ impl std::fmt::Debug for GeoRaster {
 const WRAP_TOLERANCE_PX: f64 = 1e-3;
 
 /// Whether a source of `width` columns goes once around the globe, so that
-/// its last column borders its first (area pixels or point samples).
+/// its last column borders its first (area pixels or point samples;
+/// geographic, or a projection whose x follows longitude alone, such as
+/// Web Mercator).
 fn around_the_globe(g: &Georef, width: usize) -> bool {
     let dx = g.dx.abs();
-    g.crs.is_geographic() && (width as f64 * dx - 360.0).abs() < WRAP_TOLERANCE_PX * dx
-}
-
-/// Column coordinates of a source whose columns repeat every `period` made
-/// continuous, each within half a period of the one before: a grid across
-/// the seam then reads the columns either side of it, not every column
-/// between (a 30″ world's 43,200 per row).
-fn unwrap_columns(x: &mut [f64], period: f64) {
-    for k in 1..x.len() {
-        let turns = ((x[k] - x[k - 1]) / period).round();
-        x[k] -= turns * period;
-    }
+    g.crs.period_x().is_some_and(|period| (width as f64 * dx - period).abs() < WRAP_TOLERANCE_PX * dx)
 }
 
 /// `window` of `blocks`, whose columns repeat every width: the columns
@@ -412,9 +401,9 @@ fn mesh_step(grid: &SampleGrid) -> i64 {
 /// data's own extent for a geographic source, a box that contains it for a
 /// projected one (to the pole, over every longitude, where the source holds
 /// a pole: its boundary does not pass there).
-fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize)) -> Sector {
+fn lon_lat_bounds(g: &Georef, (w, h): (usize, usize), wraps: bool) -> Sector {
     // Around the globe, point samples reach half a step either way too.
-    let ox = if around_the_globe(g, w) { 0.5 } else { g.overhang };
+    let ox = if wraps { 0.5 } else { g.overhang };
     let (xa, xb) = (g.x0 - ox * g.dx, g.x0 + (w as f64 - 1.0 + ox) * g.dx);
     let (ya, yb) = (g.y0 - g.overhang * g.dy, g.y0 + (h as f64 - 1.0 + g.overhang) * g.dy);
     let mut lons = Vec::new();
@@ -650,21 +639,55 @@ mod tests {
     }
 
     #[test]
-    fn a_grid_at_the_seam_reads_an_overview_that_wraps() {
+    fn every_grid_of_a_spacing_reads_one_overview_that_wraps() {
         // 1350 columns: overview 1 (675) wraps, overview 2 (338) does not.
-        let cache = BlockCache::new(1 << 20);
-        let columns = Raster::from_fn(1350, 675, |x, _| x as f32);
-        let blocks = Blocks::new(Arc::new(MemorySource::new("<world>", vec![columns]).unwrap()), &cache);
+        // Regression: a grid at the seam read overview 1 and one away from it
+        // overview 2, so neighbouring tiles differed on their shared samples.
+        let cache = BlockCache::new(1 << 22);
+        let waves = Raster::from_fn(1350, 675, |x, y| 1000.0 * ((0.37 * x as f32).sin() * (0.23 * y as f32).cos()));
+        let blocks = Blocks::new(Arc::new(MemorySource::new("<world>", vec![waves]).unwrap()), &cache);
         let crs = Arc::new(Crs::from_epsg(4326).unwrap());
         let step = 360.0 / 1350.0;
         let georef = Georef { crs, x0: -180.0 + step / 2.0, y0: 90.0 - step / 2.0, dx: step, dy: -step, overhang: 0.5 };
         let world = GeoRaster::new(blocks, georef, &[Reducer::Mean], &cache);
         let grid = |w: f64, e: f64| BBox { west: w, south: -1.8, east: e, north: 1.8 }.area_grid(3, 3).unwrap();
         let (seam, away) = (grid(178.2, 181.8), grid(8.2, 11.8));
-        assert_eq!((world.level_for(&seam), world.level_for(&away)), (1, 2));
-        // Met in the middle at 180°, as the base's last and first columns.
-        let got = world.sample(&seam, 0, Resampling::Bilinear).unwrap();
-        assert!((got.get(1, 1) - 674.5).abs() < 1.0, "{:?}", got.data());
+        assert_eq!((world.level_for(&seam), world.level_for(&away)), (1, 1));
+        // Tiles of 36° with 33 samples (4.2 base pixels apart): the one at
+        // 180° and its western neighbour share their edge samples exactly.
+        let tiles = crate::grid::TileGrid::new(36.0, 33).unwrap();
+        let [west, east] = [8, 9].map(|col| {
+            world.sample(&tiles.tile_samples(crate::grid::TileId::new(0, 2, col), 0), 0, Resampling::Bilinear).unwrap()
+        });
+        assert!((0..33).all(|r| west.get(32, r).to_bits() == east.get(0, r).to_bits()));
+    }
+
+    #[test]
+    fn a_web_mercator_world_is_read_across_its_seam() {
+        // Regression: a projection mesh cell across 180° interpolated from
+        // x = +half the world to −half, so its samples read the middle of
+        // the world, and the window spanned every column.
+        let cache = BlockCache::new(1 << 22);
+        let n = 1024;
+        let columns = Raster::from_fn(n, n, |x, _| x as f32);
+        let blocks = Blocks::new(Arc::new(MemorySource::new("<mercator>", vec![columns]).unwrap()), &cache);
+        let half = crate::grid::mercator::HALF_WORLD_M;
+        let res = 2.0 * half / n as f64;
+        let crs = Arc::new(Crs::from_epsg(3857).unwrap());
+        let georef = Georef { crs, x0: -half + 0.5 * res, y0: half - 0.5 * res, dx: res, dy: -res, overhang: 0.5 };
+        let world = GeoRaster::new(blocks, georef, &[Reducer::Mean], &cache);
+        let grid = BBox { west: 179.99, south: -0.005, east: 180.01, north: 0.005 }.area_grid(201, 11).unwrap();
+        assert!(mesh_step(&grid) > 1);
+        let read = world.read(&grid, Resampling::Bilinear, 1).unwrap().unwrap();
+        assert!(read.window.width <= 4, "{:?}", read.window);
+        // Between the last column (1023) and the first (0), either side of 180°.
+        let got = world.sample(&grid, 0, Resampling::Bilinear).unwrap();
+        for c in 0..201 {
+            let lon = grid.lon.coord(c);
+            let x = (lon + 180.0) / 360.0 * n as f64 - 0.5;
+            let expected = 1023.0 * (1024.0 - x);
+            assert!((f64::from(got.get(c, 5)) - expected).abs() < 0.5, "{lon}: {} vs {expected}", got.get(c, 5));
+        }
     }
 
     #[test]

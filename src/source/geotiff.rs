@@ -153,7 +153,9 @@ fn to_f32(data: DecodingResult, nodata: Option<f64>) -> Option<Vec<f32>> {
         DecodingResult::I16(v) => conv(v, nodata),
         DecodingResult::U32(v) => conv(v, nodata),
         DecodingResult::I32(v) => conv(v, nodata),
-        DecodingResult::F32(v) => conv(v, nodata),
+        // GDAL writes the nodata text of the double it was given; float32
+        // pixels hold it rounded to float32, and GDAL compares them so.
+        DecodingResult::F32(v) => conv(v, nodata.map(|n| f64::from(n as f32))),
         DecodingResult::F64(v) => conv(v, nodata),
         _ => return None,
     })
@@ -248,5 +250,20 @@ mod tests {
         assert_eq!(crs_code(Some(1), None, Some(26910)), Some(26910));
         assert_eq!(crs_code(Some(1), Some(4269), Some(USER_DEFINED)), None);
         assert_eq!(geokey(&[1, 1, 0, 9], 1024), None);
+    }
+
+    #[test]
+    fn float32_pixels_match_the_nodata_text_gdal_wrote() {
+        // Regression: GDAL writes the double it was given ("-3.402823e+38"
+        // as below); float32 pixels hold it rounded, and compared as
+        // doubles they were heights of −3.4·10³⁸.
+        for text in ["-3.40282299999999995e+38", "0.100000000000000006"] {
+            let nodata: f64 = text.parse().unwrap();
+            let pixels = vec![nodata as f32, 1500.0];
+            let read = to_f32(DecodingResult::F32(pixels), Some(nodata)).unwrap();
+            assert!(read[0].is_nan() && read[1] == 1500.0, "{text}: {read:?}");
+        }
+        let read = to_f32(DecodingResult::I16(vec![-32768, 7]), Some(-32768.0)).unwrap();
+        assert!(read[0].is_nan() && read[1] == 7.0);
     }
 }
