@@ -31,6 +31,7 @@ use crate::grid::TileId;
 use options::Job;
 use progress::Progress;
 use rayon::prelude::*;
+use std::path::Path;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -110,19 +111,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     }
     let store = crate::cache::open(&job.config.tile_cache.backend(options.cache_dir.as_deref()))?;
     probe(&*store)?;
-    let (progress_path, failed_path) = &job.files;
-    // A list is read before the failed-tiles file (perhaps the same) is emptied.
-    let list = options.tiles_from.as_deref().map(|p| failed::read(p, &job.region.tiles)).transpose()?;
-    let progress = match options.resume && list.is_none() {
-        true => Progress::resume(progress_path, &job.fingerprint)?,
-        false => Progress::start(progress_path, &job.fingerprint),
-    };
-    let rerun_in_place = options.tiles_from.as_deref().is_some_and(|l| crate::outputs::same_file(l, failed_path));
-    let failed = match rerun_in_place {
-        true => failed::Failed::replacing(failed_path),
-        false => failed::Failed::open(failed_path, options.resume),
-    }
-    .map_err(|source| SeedError::Io { path: failed_path.clone(), source })?;
+    let (list, progress, failed) = records(&job, options)?;
     let threads =
         rayon::ThreadPoolBuilder::new().num_threads(options.concurrency).thread_name(|i| format!("sylva-seed-{i}"));
     let pool = threads.build().map_err(|e| SeedError::Usage(format!("--concurrency {}: {e}", options.concurrency)))?;
@@ -148,13 +137,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     }
     let n = counters.failed.load(Ordering::Relaxed);
     if let Some(signal) = interrupt.came() {
-        let next = match &options.tiles_from {
-            Some(list) => {
-                format!("run --tiles-from {} again, with --skip-existing to keep what was made", list.display())
-            }
-            None => format!("the progress is saved in {}; resume with --resume", progress_path.display()),
-        };
-        return Err(SeedError::Interrupted { signal, next });
+        return Err(SeedError::Interrupted { signal, next: how_to_go_on(options, &job.files.0) });
     }
     if run.stop.load(Ordering::Relaxed) {
         return Err(SeedError::TooManyFailures {
@@ -163,8 +146,39 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
             list: failed.path().display().to_string(),
         });
     }
-    let list = failed.finish().map_err(|source| SeedError::Io { path: failed_path.clone(), source })?;
+    let list = failed.finish().map_err(|source| SeedError::Io { path: job.files.1.clone(), source })?;
     Ok(Report { text: summary(&job, &*store, counters, started.elapsed(), &list), failed: n })
+}
+
+/// The run's records: the tiles listed by `--tiles-from`, if any, the
+/// progress (resumed or new) and the failed-tiles file (appended to on
+/// resume, replaced when it is the list re-run).
+fn records(
+    job: &Job,
+    options: &SeedOptions,
+) -> Result<(Option<Vec<failed::Entry>>, Progress, failed::Failed), SeedError> {
+    let (progress_path, failed_path) = &job.files;
+    // A list is read before the failed-tiles file (perhaps the same) is emptied.
+    let list = options.tiles_from.as_deref().map(|p| failed::read(p, &job.region.tiles)).transpose()?;
+    let progress = match options.resume && list.is_none() {
+        true => Progress::resume(progress_path, &job.fingerprint)?,
+        false => Progress::start(progress_path, &job.fingerprint),
+    };
+    let rerun_in_place = options.tiles_from.as_deref().is_some_and(|l| crate::outputs::same_file(l, failed_path));
+    let failed = match rerun_in_place {
+        true => failed::Failed::replacing(failed_path),
+        false => failed::Failed::open(failed_path, options.resume),
+    }
+    .map_err(|source| SeedError::Io { path: failed_path.clone(), source })?;
+    Ok((list, progress, failed))
+}
+
+/// What an interrupted run tells its operator to do next.
+fn how_to_go_on(options: &SeedOptions, progress_path: &Path) -> String {
+    match &options.tiles_from {
+        Some(list) => format!("run --tiles-from {} again, with --skip-existing to keep what was made", list.display()),
+        None => format!("the progress is saved in {}; resume with --resume", progress_path.display()),
+    }
 }
 
 /// Cache entries written up to this long before a job started count as the
@@ -233,40 +247,52 @@ impl Run<'_> {
                 self.visit(walk, &seeder, &display, root);
             });
         }
-        display.finish(self.counters.failed.load(Ordering::Relaxed));
-        let complete = !self.stopped();
+        let failed = self.counters.failed.load(Ordering::Relaxed);
+        display.finish(failed);
+        // With tiles failed, a resumed run retries them.
+        let complete = !self.stopped() && failed == 0;
         let path = &self.job.files.0;
         self.progress
             .save(self.counters.total(), complete)
             .map_err(|source| SeedError::Io { path: path.clone(), source })
     }
 
-    /// Seeds a subtree (children first); the halves its parent can use.
-    fn visit(&self, walk: &Walk, seeder: &Seeder, display: &display::Display, node: Node) -> Option<Halves> {
+    /// Seeds a subtree (children first): the halves its parent can use, and
+    /// whether every tile of it was made. Only then is it recorded as
+    /// finished, so that a resumed run retries what failed.
+    fn visit(&self, walk: &Walk, seeder: &Seeder, display: &display::Display, node: Node) -> (Option<Halves>, bool) {
         let tile = node.0;
-        if self.stopped() || self.progress.is_done(tile) {
-            return None;
+        if self.progress.is_done(tile) {
+            return (None, true);
+        }
+        if self.stopped() {
+            return (None, false);
         }
         let children = walk.children(node);
-        let kids: Vec<Option<Halves>> = children.par_iter().map(|&c| self.visit(walk, seeder, display, c)).collect();
+        let kids: Vec<(Option<Halves>, bool)> =
+            children.par_iter().map(|&c| self.visit(walk, seeder, display, c)).collect();
         if self.stopped() {
-            return None;
+            return (None, false);
         }
+        let mut made = kids.iter().all(|k| k.1);
         let mut halves = None;
         if walk.seeds(tile) {
             let four: Option<[Halves; 4]> =
-                kids.into_iter().collect::<Option<Vec<_>>>().and_then(|k| k.try_into().ok());
+                kids.into_iter().map(|k| k.0).collect::<Option<Vec<_>>>().and_then(|k| k.try_into().ok());
             let for_parent = tile.parent().is_some_and(|p| walk.seeds(p));
             let (h, failures) = seeder.tile(tile, four.as_ref(), for_parent);
+            made &= failures.is_empty();
             self.record(failures);
             display.advance(self.files_per_tile(), self.counters.failed.load(Ordering::Relaxed));
             halves = h.iter().any(Option::is_some).then_some(h);
         }
-        let ids: Vec<TileId> = children.iter().map(|c| c.0).collect();
-        if let Err(e) = self.progress.finish(tile, &ids, self.counters.total()) {
-            self.warn_once(&format!("cannot save the progress file {}: {e}", self.job.files.0.display()));
+        if made {
+            let ids: Vec<TileId> = children.iter().map(|c| c.0).collect();
+            if let Err(e) = self.progress.finish(tile, &ids, self.counters.total()) {
+                self.warn_once(&format!("cannot save the progress file {}: {e}", self.job.files.0.display()));
+            }
         }
-        halves
+        (halves, made)
     }
 
     /// Seeds the tiles of a list, each in the formats it lists (or the
@@ -382,13 +408,7 @@ fn dry_run(job: &Job, resumed: Option<&Progress>) -> Report {
     Report { text: format!("{head}\n{}", crate::bench::table(&["level", "tiles", "files"], &rows)), failed: 0 }
 }
 
-fn summary(
-    job: &Job,
-    store: &dyn crate::cache::TileStore,
-    c: &Counters,
-    took: Duration,
-    failed: &std::path::Path,
-) -> String {
+fn summary(job: &Job, store: &dyn crate::cache::TileStore, c: &Counters, took: Duration, failed: &Path) -> String {
     let get = |a: &std::sync::atomic::AtomicU64| a.load(Ordering::Relaxed);
     let made = get(&c.computed) + get(&c.derived);
     let mut text = format!(
