@@ -172,8 +172,6 @@ pub const MAX_WORKERS: usize = 1024;
 pub const MAX_QUEUE: usize = 1 << 20;
 /// Longest `[server] request_timeout_s`: a day.
 pub const MAX_REQUEST_TIMEOUT_S: f64 = 86_400.0;
-/// Largest `[server] max_size` (a float32 GetMap of 16384² is 1 GiB).
-pub const MAX_MAP_SIZE: usize = 16_384;
 /// Largest `[server] max_halo`, samples.
 pub const MAX_HALO: usize = 1024;
 
@@ -198,8 +196,10 @@ impl ServerConfig {
         within("workers", self.workers, MAX_WORKERS)?;
         within("queue", self.queue, MAX_QUEUE)?;
         within("max_halo", self.max_halo, MAX_HALO)?;
-        if !(1..=MAX_MAP_SIZE).contains(&self.max_size) {
-            return Err(format!("max_size = {}: must be 1 to {MAX_MAP_SIZE}", self.max_size));
+        // No larger than a request may be.
+        let most = crate::grid::MAX_REQUEST_SIDE;
+        if !(1..=most).contains(&self.max_size) {
+            return Err(format!("max_size = {}: must be 1 to {most}", self.max_size));
         }
         let t = self.request_timeout_s;
         if !(t > 0.0 && t <= MAX_REQUEST_TIMEOUT_S) {

@@ -87,7 +87,9 @@ fn bad_configs_name_the_file_and_the_problem() {
         ("workers.toml", "[server]\nworkers = 100000\n", "[server] workers = 100000: must be at most 1024"),
         ("queue.toml", "[server]\nqueue = 9223372036854775807\n", "queue = 9223372036854775807: must be at most"),
         ("bind.toml", "[server]\nbind = \"nonsense\"\n", "[server] bind = \"nonsense\": must be HOST:PORT"),
-        ("size.toml", "[server]\nmax_size = 0\n", "max_size = 0: must be 1 to 16384"),
+        ("size.toml", "[server]\nmax_size = 0\n", "max_size = 0: must be 1 to 8193"),
+        // Regression: 16384 was accepted and advertised, and GetMaps over 8193 refused.
+        ("large.toml", "[server]\nmax_size = 10000\n", "max_size = 10000: must be 1 to 8193"),
         ("memory.toml", "[cache]\nmemory_mb = 0\n", "[cache] memory_mb = 0: must be 16 to 1048576"),
         ("url.toml", "[server]\npublic_url = \"example.org\"\n", "public_url = \"example.org\": must start with"),
         (

@@ -413,6 +413,12 @@ fn in_image_and_blank_exceptions_are_images() {
     assert!(img.pixels().any(|p| p.0[3] > 0));
     let blank = server.get(&format!("{q}&EXCEPTIONS=BLANK").replace("image/png", "application/bil16"));
     assert_eq!((blank.status, blank.body.len()), (200, 200 * 50 * 2));
+    // Blank in the layer asked for: a DEM in PNG is 16-bit nodata (regression:
+    // white relief, which reads as 9,330 m).
+    let dem = server.get(&format!("{}&EXCEPTIONS=BLANK", q.replace("trees", "dem").replace("0,0,1,1", "1,0,0,1")));
+    let img = image::load_from_memory(&dem.body).unwrap();
+    assert!(matches!(&img, image::DynamicImage::ImageLuma16(_)), "{:?}", img.color());
+    assert!(img.to_luma16().pixels().all(|p| p.0[0] == 0));
 }
 
 #[test]

@@ -54,7 +54,7 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
 
 /// A GetMap's or GetFeatureInfo's answer, or its failure as a report.
 fn answer(state: &AppState, version: request::Version, result: Result<Response, ServeError>) -> Response {
-    let reply = Reply { version, style: ExceptionStyle::Xml, image: None, background: None };
+    let reply = Reply { version, style: ExceptionStyle::Xml, image: None, background: None, layer: None };
     match result {
         Ok(response) => response,
         Err(ServeError::BadRequest(m)) => {
@@ -193,12 +193,12 @@ fn exception(e: &Exception, reply: Reply, state: &AppState) -> Response {
             let grid = crate::grid::BBox { west: 0.0, south: 0.0, east: 1.0, north: 1.0 }.area_grid(w, h);
             match grid {
                 Ok(g) => {
-                    // The request did not parse: a picture of its background,
-                    // or nodata in the format asked for.
-                    let layer = match format.picture() {
+                    // The request did not parse: nodata in the layer and
+                    // format asked for (a picture of its background).
+                    let layer = reply.layer.unwrap_or(match format.picture() {
                         Some(_) => MapLayer::Relief,
                         None => MapLayer::Data(Layer::Dem),
-                    };
+                    });
                     (
                         [(header::CONTENT_TYPE, format.mime())],
                         inimage::blank(&g, layer, format, state.region().heights_16, reply.background),

@@ -58,6 +58,15 @@ impl MapLayer {
         matches!(self, MapLayer::Colour | MapLayer::Relief)
     }
 
+    /// Whether GetMap offers the layer in `format`: pictures in PNG and
+    /// JPEG, data in any format but JPEG.
+    pub fn offered_in(self, format: MapFormat) -> bool {
+        match self.is_picture() {
+            true => format.picture().is_some(),
+            false => format != MapFormat::Jpeg,
+        }
+    }
+
     /// The layer with this name (any case).
     pub fn parse(text: &str) -> Option<MapLayer> {
         LAYERS.into_iter().find(|l| l.name().eq_ignore_ascii_case(text))
@@ -201,13 +210,16 @@ pub struct Reply {
     pub image: Option<(usize, usize, MapFormat)>,
     /// Their background (`TRANSPARENT` and `BGCOLOR`, if they parse).
     pub background: Option<[u8; 3]>,
+    /// The layer asked for, if it is served and offered in the format: what
+    /// a blank reply is blank in.
+    pub layer: Option<MapLayer>,
 }
 
 /// Parses a query string.
 pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)> {
     let params = Params::new(query);
     let version = negotiate(&params);
-    let mut reply = Reply { version, style: ExceptionStyle::Xml, image: None, background: None };
+    let mut reply = Reply { version, style: ExceptionStyle::Xml, image: None, background: None, layer: None };
     let fail = |e: Exception, reply: Reply| Err((e, reply));
     if let Some((key, message)) = params.conflict() {
         return fail(Exception::new(Code::InvalidParameterValue, message).locator(key), reply);
@@ -227,6 +239,7 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)>
             reply.style = exception_style(params.get("EXCEPTIONS"));
             reply.image = image_of(&params, limits);
             reply.background = background(&params, reply.image.map(|(_, _, f)| f)).unwrap_or(None);
+            reply.layer = layer_of(&params, reply.image.map(|(_, _, f)| f));
             get_map(&params, version, limits).map(Request::GetMap).map_err(|e| (e, reply))
         }
         "getfeatureinfo" | "feature_info" => {
@@ -293,6 +306,12 @@ fn image_of(params: &Params, limits: Limits) -> Option<(usize, usize, MapFormat)
     let f = MapFormat::parse(params.get("FORMAT")?)?;
     let fits = |side: usize| (1..=limits.max_side).contains(&side);
     (fits(w) && fits(h)).then_some((w, h, f))
+}
+
+/// The one layer `LAYERS` names, if it is served and offered in `format`.
+fn layer_of(params: &Params, format: Option<MapFormat>) -> Option<MapLayer> {
+    let (layer, format) = (MapLayer::parse(params.get("LAYERS")?.trim())?, format?);
+    layer.offered_in(format).then_some(layer)
 }
 
 /// A GetMap: the map part, in a format its layer is offered in.
@@ -577,9 +596,22 @@ mod tests {
                 version: Version::V111,
                 style: ExceptionStyle::InImage,
                 image: Some((8, 4, MapFormat::Png)),
-                background: Some([255, 255, 255])
+                background: Some([255, 255, 255]),
+                layer: None,
             }
         );
+        // A blank reply is blank in the layer asked for where it is offered
+        // in the format (regression: a DEM in PNG came back as white relief).
+        let blank = |layers: &str, format: &str| {
+            let q = format!(
+                "REQUEST=GetMap&VERSION=1.3.0&LAYERS={layers}&CRS=CRS:84&BBOX=1,0,0,1&WIDTH=8&HEIGHT=4&FORMAT={format}&EXCEPTIONS=BLANK"
+            );
+            parse(&q, LIMITS).err().map(|(_, reply)| reply.layer)
+        };
+        assert_eq!(blank("dem", "image/png"), Some(Some(MapLayer::Data(Layer::Dem))));
+        assert_eq!(blank("relief", "image/png"), Some(Some(MapLayer::Relief)));
+        assert_eq!(blank("dem", "image/jpeg"), Some(None));
+        assert_eq!(blank("relief", "application/bil16"), Some(None));
     }
 
     #[test]
