@@ -1,7 +1,9 @@
 //! GeoTIFF reading with the `tiff` crate: integer and float bands, one band or
 //! several (RGB), strips or tiles, chunky or planar; georeferencing from the
 //! ModelPixelScale/ModelTiepoint or ModelTransformation tags and the CRS from
-//! the GeoKey directory (EPSG codes, geographic or projected).
+//! the GeoKey directory (EPSG codes, geographic or projected). Stored values
+//! become heights as GDAL's per-band scale and offset (the GDAL_METADATA tag)
+//! and the vertical unit (feet to metres) say.
 //!
 //! Blocks are the file's own strips or tiles, decoded once into the block
 //! cache. The decoder sits behind a mutex; decoding is short next to what is
@@ -21,8 +23,11 @@ const GT_MODEL_TYPE: u16 = 1024;
 const GT_RASTER_TYPE: u16 = 1025;
 const GEOGRAPHIC_TYPE: u16 = 2048;
 const PROJECTED_CS_TYPE: u16 = 3072;
+const VERTICAL_UNITS: u16 = 4099;
 const USER_DEFINED: u16 = 32767;
 const RASTER_PIXEL_IS_POINT: u16 = 2;
+/// GDAL's metadata tag: XML items, among them each band's scale and offset.
+const GDAL_METADATA: u16 = 42112;
 
 /// Opens a GeoTIFF with its own CRS, or `crs_override` (an EPSG code) when
 /// given. The file's nodata value reads as NaN.
@@ -41,6 +46,9 @@ struct TiffFile {
     nodata: Option<f64>,
     /// Palette (indexed-colour) image: the indices are the data.
     palette: bool,
+    /// Per band, `(a, b)`: a stored value `v` is `a · v + b` metres (or
+    /// whatever the band holds); `None` where every band is stored as is.
+    linear: Option<Vec<(f64, f64)>>,
 }
 
 impl TiffFile {
@@ -55,6 +63,7 @@ impl TiffFile {
         let palette =
             dec.find_tag_unsigned::<u16>(Tag::PhotometricInterpretation).map_err(|e| bad(e.to_string()))? == Some(3);
         let georef = read_georef(&mut dec, path, crs_override)?;
+        let linear = if palette { None } else { read_linear(&mut dec, bands as usize).map_err(bad)? };
         let (cw, ch) = dec.chunk_dimensions();
         if w == 0 || h == 0 || cw == 0 || ch == 0 || bands == 0 {
             return Err(bad(format!("empty image ({w}×{h}, {bands} bands, chunks {cw}×{ch})")));
@@ -68,6 +77,7 @@ impl TiffFile {
             chunk: (cw as usize, ch as usize),
             nodata,
             palette,
+            linear,
         };
         Ok((tf, georef))
     }
@@ -122,17 +132,21 @@ impl PixelSource for TiffFile {
         let mut dec = self.decoder.lock().map_err(|_| self.bad("decoder poisoned by an earlier panic".into()))?;
         let (h, w) =
             (self.chunk.1.min(self.size.1 - by * self.chunk.1), self.chunk.0.min(self.size.0 - bx * self.chunk.0));
+        let value = |b: usize, v: f32| match &self.linear {
+            Some(linear) => (linear[b].0 * f64::from(v) + linear[b].1) as f32,
+            None => v,
+        };
         if self.planar {
             (0..self.bands)
                 .map(|b| {
                     let (v, row_len) = self.decode(&mut dec, (b * per_plane + index) as u32, 1)?;
-                    Ok(Raster::from_fn(w, h, |x, y| v[y * row_len + x]))
+                    Ok(Raster::from_fn(w, h, |x, y| value(b, v[y * row_len + x])))
                 })
                 .collect()
         } else {
             let (v, row_len) = self.decode(&mut dec, index as u32, self.bands)?;
             let n = self.bands;
-            Ok((0..n).map(|b| Raster::from_fn(w, h, |x, y| v[(y * row_len + x) * n + b])).collect())
+            Ok((0..n).map(|b| Raster::from_fn(w, h, |x, y| value(b, v[(y * row_len + x) * n + b]))).collect())
         }
     }
 }
@@ -165,6 +179,50 @@ fn to_f32(data: DecodingResult, nodata: Option<f64>) -> Option<Vec<f32>> {
 fn read_nodata(dec: &mut Decoder<BufReader<File>>) -> Option<f64> {
     let text = dec.get_tag_ascii_string(Tag::GdalNodata).ok()?;
     text.trim_matches(char::from(0)).trim().parse().ok()
+}
+
+/// How each of `bands` bands' stored values become values: GDAL's scale
+/// and offset items, then, in a one-band file (a DEM), its vertical unit in
+/// metres (feet and US survey feet; other units are left as they are, as GDAL
+/// leaves them). `None` where nothing changes a value.
+fn read_linear(dec: &mut Decoder<BufReader<File>>, bands: usize) -> Result<Option<Vec<(f64, f64)>>, String> {
+    let mut linear = vec![(1.0, 0.0); bands];
+    if let Ok(text) = dec.get_tag_ascii_string(Tag::Unknown(GDAL_METADATA)) {
+        scale_and_offset(text.trim_matches(char::from(0)), &mut linear)?;
+    }
+    let keys = dec.get_tag_u16_vec(Tag::GeoKeyDirectoryTag).ok();
+    let unit_m = match keys.as_deref().and_then(|k| geokey(k, VERTICAL_UNITS)) {
+        Some(9002) => 0.3048,
+        Some(9003) => 1200.0 / 3937.0,
+        _ => 1.0,
+    };
+    if bands == 1 {
+        linear[0] = (linear[0].0 * unit_m, linear[0].1 * unit_m);
+    }
+    Ok(linear.iter().any(|&l| l != (1.0, 0.0)).then_some(linear))
+}
+
+/// Reads the `scale` and `offset` items of GDAL's metadata XML into
+/// `linear`, per band (`sample`, 0 when absent).
+fn scale_and_offset(xml: &str, linear: &mut [(f64, f64)]) -> Result<(), String> {
+    let doc = roxmltree::Document::parse(xml).map_err(|e| format!("its GDAL_METADATA tag is not XML: {e}"))?;
+    for item in doc.descendants().filter(|n| n.has_tag_name("Item")) {
+        let role = item.attribute("role").unwrap_or("");
+        if role != "scale" && role != "offset" {
+            continue;
+        }
+        let text = item.text().unwrap_or("").trim();
+        let value: f64 = text.parse().map_err(|_| format!("GDAL_METADATA {role} {text:?} is not a number"))?;
+        let band = item.attribute("sample").map_or(Ok(0), str::parse::<usize>);
+        let Some(l) = band.ok().and_then(|b| linear.get_mut(b)) else {
+            return Err(format!("GDAL_METADATA {role} for sample {:?}: no such band", item.attribute("sample")));
+        };
+        match role {
+            "scale" => l.0 = value,
+            _ => l.1 = value,
+        }
+    }
+    Ok(())
 }
 
 fn read_georef(
@@ -250,6 +308,57 @@ mod tests {
         assert_eq!(crs_code(Some(1), None, Some(26910)), Some(26910));
         assert_eq!(crs_code(Some(1), Some(4269), Some(USER_DEFINED)), None);
         assert_eq!(geokey(&[1, 1, 0, 9], 1024), None);
+    }
+
+    /// A 4 × 2 UInt16 GeoTIFF (values 0, 100, …, 700) in EPSG:4326 with
+    /// `metadata` and, if given, a VerticalUnitsGeoKey.
+    fn stored(name: &str, metadata: Option<&str>, vertical_unit: Option<u16>) -> PathBuf {
+        use tiff::encoder::{TiffEncoder, colortype};
+        let path = std::env::temp_dir().join(format!("sylva-geotiff-{}-{name}.tif", std::process::id()));
+        let mut keys = vec![1, 1, 0, 3, 1024, 0, 1, 2, 1025, 0, 1, 1, 2048, 0, 1, 4326];
+        if let Some(unit) = vertical_unit {
+            keys[3] = 4;
+            keys.extend([VERTICAL_UNITS, 0, 1, unit]);
+        }
+        let mut enc = TiffEncoder::new(std::fs::File::create(&path).unwrap()).unwrap();
+        let mut img = enc.new_image::<colortype::Gray16>(4, 2).unwrap();
+        let dir = img.encoder();
+        dir.write_tag(Tag::ModelPixelScaleTag, &[0.1, 0.1, 0.0][..]).unwrap();
+        dir.write_tag(Tag::ModelTiepointTag, &[0.0, 0.0, 0.0, 10.0, 47.0, 0.0][..]).unwrap();
+        dir.write_tag(Tag::GeoKeyDirectoryTag, &keys[..]).unwrap();
+        if let Some(text) = metadata {
+            dir.write_tag(Tag::Unknown(GDAL_METADATA), text).unwrap();
+        }
+        img.write_data(&(0..8).map(|v| v * 100).collect::<Vec<u16>>()).unwrap();
+        path
+    }
+
+    /// The first row of the file at `path`, which is then removed.
+    fn first_row(path: &Path) -> Result<Vec<f32>, SourceError> {
+        let read = open(path, None).and_then(|(file, _)| Ok(file.read_block(0, 0)?[0].data()[..4].to_vec()));
+        std::fs::remove_file(path).ok();
+        read
+    }
+
+    #[test]
+    fn scaled_and_offset_bands_and_heights_in_feet_are_read_in_metres() {
+        // Regression: GDAL's scale and offset and the vertical unit were
+        // ignored: a DEM stored in decimetres from −500 m read 10× too high.
+        let gdal = r#"<GDALMetadata>
+  <Item name="OFFSET" sample="0" role="offset">-500</Item>
+  <Item name="SCALE" sample="0" role="scale">0.1</Item>
+</GDALMetadata>"#;
+        assert_eq!(first_row(&stored("plain", None, None)).unwrap(), [0.0, 100.0, 200.0, 300.0]);
+        assert_eq!(first_row(&stored("scaled", Some(gdal), None)).unwrap(), [-500.0, -490.0, -480.0, -470.0]);
+        let feet = first_row(&stored("feet", None, Some(9002))).unwrap();
+        assert_eq!(feet, [0.0, 30.48, 60.96, 91.44]);
+        assert_eq!(first_row(&stored("metres", None, Some(9001))).unwrap(), [0.0, 100.0, 200.0, 300.0]);
+        let bad = stored("bad", Some(r#"<GDALMetadata><Item role="scale">ten</Item></GDALMetadata>"#), None);
+        let err = first_row(&bad).err().expect("a scale that is no number").to_string();
+        assert!(err.contains("sylva-geotiff") && err.contains("scale \"ten\" is not a number"), "{err}");
+        let other =
+            stored("band", Some(r#"<GDALMetadata><Item sample="3" role="scale">2</Item></GDALMetadata>"#), None);
+        assert!(first_row(&other).err().unwrap().to_string().contains("no such band"));
     }
 
     #[test]
