@@ -65,7 +65,7 @@ pub enum Product {
         /// Zoom, column, row.
         zxy: (u32, u64, u64),
     },
-    /// A WMS image on its own grid (not cached).
+    /// A WMS image on its own grid (kept in memory, not in the cache).
     Image {
         /// Layer.
         layer: MapLayer,
@@ -91,6 +91,18 @@ impl Product {
             }
             Product::Xyz { layer, zxy: (z, x, y) } => Some(format!("{version}/xyz/{}/{z}/{x}/{y}.png", layer.name())),
             Product::Image { .. } => None,
+        }
+    }
+
+    /// The key of the product in memory: its cache key or, for an image
+    /// (kept in memory only), one naming its grid exactly, so that a retry
+    /// after a timeout, or the same request at once, shares one computation.
+    pub fn memory_key(&self, version: &str) -> String {
+        match self {
+            Product::Image { layer, grid, encoding } => {
+                format!("{version}/image/{}/{encoding:?}/{grid:?}", layer.name())
+            }
+            _ => self.key(version).unwrap_or_default(),
         }
     }
 

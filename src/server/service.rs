@@ -88,15 +88,18 @@ impl TileService {
         &self.region
     }
 
-    /// The product, from memory, disk, or computed (and then stored).
+    /// The product, from memory, disk, or computed (and then stored; an
+    /// image in memory only).
     pub async fn get(&self, product: Product) -> Result<Arc<Tile>, ServeError> {
-        let Some(key) = product.key(&self.region.version) else {
-            return self.compute(product).await.map(|c| Arc::new(tile_of(c)));
-        };
+        let version = &self.region.version;
+        let (key, stored) = (product.memory_key(version), product.key(version));
         let (this, k) = (self.clone(), key.clone());
         // Inserts itself: the request that started it may be gone by then.
         let load = async move {
-            let tile = this.load(k.clone(), product).await?;
+            let tile = match stored {
+                Some(stored) => this.load(stored, product).await?,
+                None => Arc::new(tile_of(this.compute(product).await?)),
+            };
             this.memory.insert(k, tile.clone()).await;
             Ok::<_, ServeError>(tile)
         };

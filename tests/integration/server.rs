@@ -485,6 +485,21 @@ fn sigterm_stops_the_server_cleanly() {
 }
 
 #[test]
+fn a_get_map_off_the_lattice_is_computed_once_for_its_retries() {
+    // Regression: it was computed inside its request, anew for each retry,
+    // so after a timeout every retry timed out the same way.
+    let dir = TempDir::new("srv-image");
+    let server = Server::start(None, &dir.join("cache"));
+    let q = "/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=dem&STYLES=&CRS=CRS:84&BBOX=10.01,46.31,10.04,46.33&WIDTH=37&HEIGHT=23&FORMAT=application/bil32";
+    let first = server.get(q);
+    assert_eq!((first.status, first.body.len()), (200, 37 * 23 * 4), "{}", first.text());
+    assert_eq!(server.get(q).body, first.body);
+    assert_eq!(server.metric("sylva_tile_computations_total"), 1.0);
+    let other = server.get(&q.replace("WIDTH=37", "WIDTH=38"));
+    assert_eq!((other.status, server.metric("sylva_tile_computations_total")), (200, 2.0));
+}
+
+#[test]
 fn get_maps_on_the_tile_lattice_come_from_the_tile_cache() {
     let dir = TempDir::new("srv-stitch");
     let server = Server::start(None, &dir.join("cache"));
