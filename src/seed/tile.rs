@@ -175,9 +175,20 @@ impl Seeder<'_> {
     /// they were derived from children.
     fn file(&self, key: &str, mut make: impl FnMut() -> Result<(Vec<u8>, bool, bool), String>) -> Result<Made, String> {
         let usable = |s: &Stored| s.written >= self.refresh_before && !flight::expired(self.region.upstream_ttl, s);
-        let mut busy = 0;
+        let (mut busy, mut failed) = (0, 0);
         loop {
-            match flight::claim(self.store, key, &usable, self.lock_ttl).map_err(|e| e.to_string())? {
+            let claim = match flight::claim(self.store, key, &usable, self.lock_ttl) {
+                Ok(claim) => claim,
+                // The cache unreadable for a moment (a Redis timeout): tried
+                // again as a failed tile is.
+                Err(_) if failed < self.retries => {
+                    failed += 1;
+                    std::thread::sleep(backoff(failed));
+                    continue;
+                }
+                Err(e) => return Err(format!("{} attempts failed; last: {e}", failed + 1)),
+            };
+            match claim {
                 Claim::Ready(_) => return Ok(Made::Existing),
                 Claim::Busy => {
                     if busy == LONG_WAIT_PAUSES {
@@ -188,8 +199,10 @@ impl Seeder<'_> {
                 }
                 Claim::Compute { lock, .. } => {
                     let result = self.attempts(key, &mut make);
-                    let released = self.store.unlock(&lock).map_err(|e| e.to_string());
-                    return result.and_then(|made| released.map(|()| made));
+                    // A lock not released expires after the TTL; the tile is
+                    // made (or failed) all the same.
+                    let _ = self.store.unlock(&lock);
+                    return result;
                 }
             }
         }
@@ -204,7 +217,7 @@ impl Seeder<'_> {
         });
     }
 
-    /// Up to `1 + retries` attempts, 100 ms apart, doubling.
+    /// Up to `1 + retries` attempts, [`backoff`] apart.
     fn attempts(
         &self,
         key: &str,
@@ -213,7 +226,7 @@ impl Seeder<'_> {
         let mut last = String::new();
         for attempt in 0..=self.retries {
             if attempt > 0 {
-                std::thread::sleep(Duration::from_millis(100 << (attempt - 1).min(6)));
+                std::thread::sleep(backoff(attempt));
             }
             let saved = make().and_then(|(bytes, uniform, derived)| {
                 flight::save(self.store, key, &bytes, uniform).map_err(|e| e.to_string())?;
@@ -225,5 +238,87 @@ impl Seeder<'_> {
             }
         }
         Err(format!("{} attempts failed; last: {last}", self.retries + 1))
+    }
+}
+
+/// The pause before the `attempt`-th retry: 100 ms, doubling.
+fn backoff(attempt: u32) -> Duration {
+    Duration::from_millis(100 << (attempt.max(1) - 1).min(6))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cache::dir::DirStore;
+    use crate::cache::{CacheError, Lock, Lookup, TileStore};
+    use std::sync::atomic::AtomicU32;
+
+    /// A directory cache whose first `failing` reads and every unlock fail,
+    /// as a Redis server that timed out would.
+    struct Flaky {
+        dir: DirStore,
+        failing: AtomicU32,
+    }
+
+    impl Flaky {
+        fn error(&self) -> CacheError {
+            CacheError::Io { path: "flaky".into(), source: std::io::Error::other("timed out") }
+        }
+    }
+
+    impl TileStore for Flaky {
+        fn get(&self, key: &str) -> Result<Lookup, CacheError> {
+            let left = self.failing.load(Ordering::SeqCst);
+            if left > 0 {
+                self.failing.store(left - 1, Ordering::SeqCst);
+                return Err(self.error());
+            }
+            self.dir.get(key)
+        }
+        fn put(&self, key: &str, payload: &[u8]) -> Result<(), CacheError> {
+            self.dir.put(key, payload)
+        }
+        fn put_shared(&self, key: &str, blob: &str, payload: &[u8]) -> Result<(), CacheError> {
+            self.dir.put_shared(key, blob, payload)
+        }
+        fn try_lock(&self, key: &str, ttl: Duration) -> Result<Option<Lock>, CacheError> {
+            self.dir.try_lock(key, ttl)
+        }
+        fn unlock(&self, _: &Lock) -> Result<(), CacheError> {
+            Err(self.error())
+        }
+        fn describe(&self) -> String {
+            "flaky".into()
+        }
+    }
+
+    #[test]
+    fn cache_errors_are_retried_and_a_lock_left_does_not_fail_a_made_tile() {
+        // Regression: a read that failed (a Redis timeout) failed the tile at
+        // once, skipping --retries, and a tile stored but not unlocked was
+        // counted failed.
+        let region = crate::config::load(None).unwrap();
+        let (counters, notice) = (Counters::default(), std::sync::Once::new());
+        let root = std::env::temp_dir().join(format!("sylva-flaky-{}", std::process::id()));
+        let store = Flaky { dir: DirStore::new(&root), failing: AtomicU32::new(0) };
+        let seeder = |retries| Seeder {
+            region: &region,
+            store: &store,
+            layers: vec![],
+            formats: vec![],
+            refresh_before: SystemTime::now(),
+            lock_ttl: Duration::from_secs(5),
+            retries,
+            from_children: vec![],
+            counters: &counters,
+            wait_notice: &notice,
+        };
+        let make = || Ok((b"tile".to_vec(), false, false));
+        store.failing.store(2, Ordering::SeqCst);
+        assert!(matches!(seeder(2).file("a", make), Ok(Made::Computed)));
+        store.failing.store(2, Ordering::SeqCst);
+        let err = seeder(1).file("b", make).err().unwrap();
+        assert!(err.starts_with("2 attempts failed; last: flaky: timed out"), "{err}");
+        std::fs::remove_dir_all(&root).ok();
     }
 }
