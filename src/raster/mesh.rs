@@ -7,7 +7,8 @@
 //! and a sample's position depends only on its global lattice index and the
 //! control points around it, so every grid that holds a sample gives it the
 //! same position, bit for bit. Positions are computed a row at a time when
-//! they are read, never stored for a whole grid.
+//! they are read, never stored for a whole grid. Around the globe, control
+//! points' x are first made continuous across the seam ([`unwrap_rows`]).
 
 /// Control points every `m` lattice samples over a grid of `width × height`
 /// samples whose first sample has global lattice index `first`.
