@@ -50,6 +50,12 @@ impl Mesh {
         unwrap_rows(&mut self.points, self.cols, period);
     }
 
+    /// The mesh with every position moved by `d` in x and in y.
+    pub fn shifted(&self, d: f64) -> Mesh {
+        let points = self.points.iter().map(|&(x, y)| (x + d, y + d)).collect();
+        Mesh { m: self.m, first: self.first, size: self.size, k0: self.k0, cols: self.cols, points }
+    }
+
     /// Width and height of the grid in samples.
     pub fn size(&self) -> (usize, usize) {
         self.size

@@ -130,6 +130,19 @@ pub enum PixelCoords {
 }
 
 impl PixelCoords {
+    /// Every position moved by `d` pixels in x and in y.
+    pub fn shifted(&self, d: f64) -> PixelCoords {
+        match self {
+            PixelCoords::Separable { x, y } => {
+                PixelCoords::Separable { x: x.iter().map(|v| v + d).collect(), y: y.iter().map(|v| v + d).collect() }
+            }
+            PixelCoords::Dense { width, xy } => {
+                PixelCoords::Dense { width: *width, xy: xy.iter().map(|&(x, y)| (x + d, y + d)).collect() }
+            }
+            PixelCoords::Mesh(mesh) => PixelCoords::Mesh(mesh.shifted(d)),
+        }
+    }
+
     /// Output width and height.
     pub fn shape(&self) -> (usize, usize) {
         match self {

@@ -8,7 +8,7 @@
 //! global lattice indices, so the interpolated position of a sample does not
 //! depend on which tile or build asks for it.
 
-use super::pyramid::{self, Reducer};
+use super::pyramid::{self, Reducer, level_map};
 use super::{BlockCache, Blocks, Crs, SourceError};
 use crate::geo::METRES_PER_DEGREE;
 use crate::grid::{SampleGrid, Sector};
@@ -90,6 +90,8 @@ pub struct GeoRaster {
     levels: Vec<Blocks>,
     georef: Georef,
     bounds: Sector,
+    /// How the overviews reduce each band (none: means, or the source's own).
+    reducers: Arc<[Reducer]>,
     /// Whether the columns go once around the globe, the last bordering
     /// the first.
     wraps: bool,
@@ -99,7 +101,8 @@ impl GeoRaster {
     /// Wraps `base` with its georeferencing; overviews reduce band `b` with
     /// `reducers[b]` (the last entry for further bands).
     pub fn new(base: Blocks, georef: Georef, reducers: &[Reducer], cache: &Arc<BlockCache>) -> GeoRaster {
-        GeoRaster::from_levels(pyramid::build(base, reducers, cache), georef)
+        let raster = GeoRaster::from_levels(pyramid::build(base, reducers, cache), georef);
+        GeoRaster { reducers: reducers.into(), ..raster }
     }
 
     /// A source whose overviews come with it (level `k` halves level
@@ -109,7 +112,7 @@ impl GeoRaster {
         let georef = georef.turned_onto_the_globe(size.0);
         let wraps = around_the_globe(&georef, size.0);
         let bounds = lon_lat_bounds(&georef, size, wraps);
-        GeoRaster { levels, georef, bounds, wraps }
+        GeoRaster { levels, georef, bounds, reducers: Arc::new([]), wraps }
     }
 
     /// The source's name (its file, or a description).
@@ -193,7 +196,8 @@ impl GeoRaster {
             true => read_around(&self.levels[level], window, bands)?,
             false => self.levels[level].read_bands(window, bands)?,
         };
-        Ok(Some(Footprint { bands, window, extent, coords }))
+        let offsets = (0..bands.len()).map(|b| pyramid::offset_px(pyramid::reducer_of(&self.reducers, b), level));
+        Ok(Some(Footprint { window, extent, coords, offsets: offsets.collect(), bands }))
     }
 
     /// True unless the grid certainly misses the data (a cheap test on boxes,
@@ -320,13 +324,30 @@ pub struct Footprint {
     pub window: Window,
     extent: Extent,
     coords: PixelCoords,
+    /// Per band, where its pixels lie from where `coords` place them, in
+    /// pixels: decimated overviews hold their blocks' north-west pixels.
+    offsets: Vec<f64>,
 }
 
 impl Footprint {
     /// Band `band` evaluated at every grid sample with `kind` (whose support
-    /// must not exceed the one the footprint was read for).
+    /// must not exceed the one the footprint was read for; a decimated band
+    /// reads the pixel up to half a pixel nearer, within bilinear support).
     pub fn resample(&self, band: usize, kind: Resampling) -> Raster<f32> {
-        resample::resample(&self.bands[band], self.window, &self.extent, &self.coords, kind)
+        let shifted;
+        let (coords, extent) = match self.offsets[band] {
+            0.0 => (&self.coords, &self.extent),
+            offset => {
+                let extent = Extent {
+                    x_range: (self.extent.x_range.0 - offset, self.extent.x_range.1 - offset),
+                    y_range: (self.extent.y_range.0 - offset, self.extent.y_range.1 - offset),
+                    ..self.extent
+                };
+                shifted = (self.coords.shifted(-offset), extent);
+                (&shifted.0, &shifted.1)
+            }
+        };
+        resample::resample(&self.bands[band], self.window, extent, coords, kind)
     }
 }
 
@@ -374,12 +395,6 @@ fn read_around(blocks: &Blocks, window: Window, bands: usize) -> Result<Vec<Rast
         })
     };
     (0..pieces.first().map_or(0, Vec::len)).map(band).collect()
-}
-
-/// Base pixel coordinate `p` is overview coordinate `(p - shift) / scale`.
-fn level_map(level: usize) -> (f64, f64) {
-    let scale = (1u64 << level) as f64;
-    (scale, (scale - 1.0) / 2.0)
 }
 
 fn grid_crosses_pole(grid: &SampleGrid) -> bool {
@@ -688,6 +703,28 @@ mod tests {
             let expected = 1023.0 * (1024.0 - x);
             assert!((f64::from(got.get(c, 5)) - expected).abs() < 0.5, "{lon}: {} vs {expected}", got.get(c, 5));
         }
+    }
+
+    #[test]
+    fn a_decimated_band_is_read_where_its_pixels_lie() {
+        // Regression: an overview pixel of a decimated band (classes) holds
+        // its block's north-west pixel, and was read as if it lay at the
+        // block's centre: coarse samples took their class from up to half an
+        // overview pixel away.
+        let cache = BlockCache::new(1 << 24);
+        let columns = Raster::from_fn(8192, 16, |x, _| x as f32);
+        let blocks = Blocks::new(Arc::new(MemorySource::new("<classes>", vec![columns]).unwrap()), &cache);
+        let crs = Arc::new(Crs::from_epsg(4326).unwrap());
+        let georef = Georef { crs, x0: 0.0005, y0: 0.0155, dx: 0.001, dy: -0.001, overhang: 0.5 };
+        let classes = GeoRaster::new(blocks, georef, &[Reducer::Decimate], &cache);
+        // Samples 16.1 pixels apart (overview 4), at base columns 507.9, 524
+        // and 540.1: the nearest decimated pixels are columns 512, 528, 544.
+        let grid = BBox { west: 0.5245 - 1.5 * 0.0161, south: 0.0, east: 0.5245 + 1.5 * 0.0161, north: 0.0161 }
+            .area_grid(3, 1)
+            .unwrap();
+        assert_eq!(classes.level_for(&grid), 4);
+        let got = classes.sample(&grid, 0, Resampling::Nearest).unwrap();
+        assert_eq!(got.data(), [512.0, 528.0, 544.0]);
     }
 
     #[test]

@@ -354,11 +354,11 @@ mod tests {
         assert_eq!(feet, [0.0, 30.48, 60.96, 91.44]);
         assert_eq!(first_row(&stored("metres", None, Some(9001))).unwrap(), [0.0, 100.0, 200.0, 300.0]);
         let bad = stored("bad", Some(r#"<GDALMetadata><Item role="scale">ten</Item></GDALMetadata>"#), None);
-        let err = first_row(&bad).err().expect("a scale that is no number").to_string();
+        let err = first_row(&bad).expect_err("a scale that is no number").to_string();
         assert!(err.contains("sylva-geotiff") && err.contains("scale \"ten\" is not a number"), "{err}");
         let other =
             stored("band", Some(r#"<GDALMetadata><Item sample="3" role="scale">2</Item></GDALMetadata>"#), None);
-        assert!(first_row(&other).err().unwrap().to_string().contains("no such band"));
+        assert!(first_row(&other).expect_err("a band that is not there").to_string().contains("no such band"));
     }
 
     #[test]

@@ -58,9 +58,33 @@ impl PixelSource for Overview {
         let b = self.block_window(bx, by)?;
         let (bw, bh) = (b.width, b.height);
         let fine = self.finer.read(Window::new(2 * b.x, 2 * b.y, 2 * bw, 2 * bh))?;
-        let reducer = |b: usize| self.reducers.get(b).or(self.reducers.last()).copied().unwrap_or(Reducer::Mean);
-        Ok(fine.iter().enumerate().map(|(b, band)| reduce(band, bw, bh, reducer(b))).collect())
+        Ok(fine.iter().enumerate().map(|(b, band)| reduce(band, bw, bh, reducer_of(&self.reducers, b))).collect())
     }
+}
+
+/// The reducer of band `band` among `reducers` (the last one for bands
+/// beyond the list; the mean for none).
+pub fn reducer_of(reducers: &[Reducer], band: usize) -> Reducer {
+    reducers.get(band).or(reducers.last()).copied().unwrap_or(Reducer::Mean)
+}
+
+/// Where an overview pixel of level `level` reduced by `reducer` lies, in
+/// its own pixels, from where [`level_map`] places it: a mean lies at its
+/// block's centre, a decimated pixel at the block's north-west pixel,
+/// `(scale − 1) / 2` base pixels north and west of it.
+pub fn offset_px(reducer: Reducer, level: usize) -> f64 {
+    let scale = (1u64 << level) as f64;
+    match reducer {
+        Reducer::Mean => 0.0,
+        Reducer::Decimate => -(scale - 1.0) / (2.0 * scale),
+    }
+}
+
+/// Base pixel coordinate `p` is overview coordinate `(p - shift) / scale`
+/// (`(scale, shift)`): each overview pixel at its block's centre.
+pub fn level_map(level: usize) -> (f64, f64) {
+    let scale = (1u64 << level) as f64;
+    (scale, (scale - 1.0) / 2.0)
 }
 
 fn reduce(fine: &Raster<f32>, w: usize, h: usize, reducer: Reducer) -> Raster<f32> {
