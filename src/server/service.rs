@@ -89,27 +89,29 @@ impl TileService {
     }
 
     /// The product, from memory, disk, or computed (and then stored; an
-    /// image in memory only).
+    /// image in memory only, where it fits).
     pub async fn get(&self, product: Product) -> Result<Arc<Tile>, ServeError> {
         let version = &self.region.version;
         let (key, stored) = (product.memory_key(version), product.key(version));
-        let (this, k) = (self.clone(), key.clone());
-        // Inserts itself: the request that started it may be gone by then.
-        let load = async move {
-            let tile = match stored {
-                Some(stored) => this.load(stored, product).await?,
-                None => Arc::new(tile_of(this.compute(product).await?)),
+        let this = self.clone();
+        // In a task of its own, which the request's timeout does not cancel:
+        // requests for the same product meanwhile wait for it (an image has
+        // no lock in the shared cache to meet them there).
+        let task = tokio::spawn(async move {
+            let load = async {
+                let tile = match stored {
+                    Some(stored) => this.load(stored, product).await?,
+                    None => Arc::new(tile_of(this.compute(product).await?)),
+                };
+                Ok::<_, ServeError>(tile)
             };
-            this.memory.insert(k, tile.clone()).await;
-            Ok::<_, ServeError>(tile)
-        };
-        // Spawned only by the request that initialises the entry.
-        let spawned = async { tokio::spawn(load).await.map_err(ServeError::internal)? };
-        let entry = self.memory.entry(key).or_try_insert_with(spawned).await.map_err(|e| (*e).clone())?;
-        if !entry.is_fresh() {
-            self.metrics.cache(CacheResult::Memory);
-        }
-        Ok(entry.into_value())
+            let entry = this.memory.entry(key).or_try_insert_with(load).await.map_err(|e| (*e).clone())?;
+            if !entry.is_fresh() {
+                this.metrics.cache(CacheResult::Memory);
+            }
+            Ok(entry.into_value())
+        });
+        task.await.map_err(ServeError::internal)?
     }
 
     /// The tile from the shared cache, or computed here if no other process
