@@ -196,7 +196,10 @@ impl GeoRaster {
             true => read_around(&self.levels[level], window, bands)?,
             false => self.levels[level].read_bands(window, bands)?,
         };
-        let offsets = (0..bands.len()).map(|b| pyramid::offset_px(pyramid::reducer_of(&self.reducers, b), level));
+        let offsets = (0..bands.len()).map(|b| match pyramid::reducer_of(&self.reducers, b) {
+            Reducer::Mean => None,
+            decimate => Some(pyramid::offset_px(decimate, level)),
+        });
         Ok(Some(Footprint { window, extent, coords, offsets: offsets.collect(), bands }))
     }
 
@@ -324,27 +327,30 @@ pub struct Footprint {
     pub window: Window,
     extent: Extent,
     coords: PixelCoords,
-    /// Per band, where its pixels lie from where `coords` place them, in
-    /// pixels: decimated overviews hold their blocks' north-west pixels.
-    offsets: Vec<f64>,
+    /// Per decimated band (classes), where its pixels lie from where
+    /// `coords` place them, in pixels: its overviews hold their blocks'
+    /// north-west pixels.
+    offsets: Vec<Option<f64>>,
 }
 
 impl Footprint {
     /// Band `band` evaluated at every grid sample with `kind` (whose support
-    /// must not exceed the one the footprint was read for; a decimated band
-    /// reads the pixel up to half a pixel nearer, within bilinear support).
+    /// must not exceed the one the footprint was read for); a decimated band
+    /// (classes, never interpolated) nearest whatever `kind`, from the pixel
+    /// that lies nearest (up to half a pixel past the one `coords` name,
+    /// within any footprint's support).
     pub fn resample(&self, band: usize, kind: Resampling) -> Raster<f32> {
         let shifted;
-        let (coords, extent) = match self.offsets[band] {
-            0.0 => (&self.coords, &self.extent),
-            offset => {
+        let (coords, extent, kind) = match self.offsets[band] {
+            None => (&self.coords, &self.extent, kind),
+            Some(offset) => {
                 let extent = Extent {
                     x_range: (self.extent.x_range.0 - offset, self.extent.x_range.1 - offset),
                     y_range: (self.extent.y_range.0 - offset, self.extent.y_range.1 - offset),
                     ..self.extent
                 };
                 shifted = (self.coords.shifted(-offset), extent);
-                (&shifted.0, &shifted.1)
+                (&shifted.0, &shifted.1, Resampling::Nearest)
             }
         };
         resample::resample(&self.bands[band], self.window, extent, coords, kind)
@@ -723,8 +729,10 @@ mod tests {
             .area_grid(3, 1)
             .unwrap();
         assert_eq!(classes.level_for(&grid), 4);
-        let got = classes.sample(&grid, 0, Resampling::Nearest).unwrap();
-        assert_eq!(got.data(), [512.0, 528.0, 544.0]);
+        for kind in [Resampling::Nearest, Resampling::Bilinear, Resampling::Bicubic] {
+            let got = classes.sample(&grid, 0, kind).unwrap();
+            assert_eq!(got.data(), [512.0, 528.0, 544.0], "{kind:?}: classes are never interpolated");
+        }
     }
 
     #[test]
