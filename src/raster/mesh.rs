@@ -8,7 +8,9 @@
 //! control points around it, so every grid that holds a sample gives it the
 //! same position, bit for bit. Positions are computed a row at a time when
 //! they are read, never stored for a whole grid. Around the globe, control
-//! points' x are first made continuous across the seam ([`unwrap_rows`]).
+//! points' x are first made continuous across the seam ([`unwrap_rows`]):
+//! a grid across it may place a shared sample a whole period (and a
+//! rounding) away from another grid, the same pixel read modulo the period.
 
 /// Control points every `m` lattice samples over a grid of `width × height`
 /// samples whose first sample has global lattice index `first`.

@@ -96,22 +96,21 @@ pub struct Failed {
 }
 
 impl Failed {
-    /// Opens `path`, emptied unless `append`.
-    pub fn open(path: &Path, append: bool) -> std::io::Result<Failed> {
+    /// Opens `path`, emptied.
+    pub fn open(path: &Path) -> std::io::Result<Failed> {
         let file = std::fs::OpenOptions::new().create(true).append(true).truncate(false).open(path)?;
-        if !append {
-            file.set_len(0)?;
-        }
+        file.set_len(0)?;
         Ok(Failed { path: path.to_path_buf(), replaces: None, file: Mutex::new(file) })
     }
 
-    /// Records into `LIST.next` while `list`, the tiles this run re-runs,
-    /// stays whole: [`Failed::finish`] puts the new failures in its place,
-    /// so an interrupted run loses no tile of the list.
+    /// Records into `LIST.next` while `list`, the tiles this run re-runs
+    /// (a list given, or a resumed run's earlier failures), stays whole:
+    /// [`Failed::finish`] puts the new failures in its place, so an
+    /// interrupted run loses no tile of the list.
     pub fn replacing(list: &Path) -> std::io::Result<Failed> {
         let mut next = list.as_os_str().to_owned();
         next.push(".next");
-        let mut failed = Failed::open(Path::new(&next), false)?;
+        let mut failed = Failed::open(Path::new(&next))?;
         failed.replaces = Some(list.to_path_buf());
         Ok(failed)
     }
@@ -163,7 +162,7 @@ mod tests {
     #[test]
     fn recorded_failures_read_back_with_their_formats_and_bad_lines_are_named() {
         let path = std::env::temp_dir().join(format!("sylva-failed-{}.txt", std::process::id()));
-        let f = Failed::open(&path, false).unwrap();
+        let f = Failed::open(&path).unwrap();
         let failed = [
             entry(Layer::Cem, (12, 3, 4), &[Format::Png16, Format::Tiff]),
             entry(Layer::Dem, (5, 1, 2), &[Format::Bil32]),

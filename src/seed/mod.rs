@@ -151,8 +151,8 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
 }
 
 /// The run's records: the tiles listed by `--tiles-from`, if any, the
-/// progress (resumed or new) and the failed-tiles file (appended to on
-/// resume, replaced when it is the list re-run).
+/// progress (resumed or new) and the failed-tiles file (replaced at the end
+/// when it is the list re-run or the run resumes, else emptied).
 fn records(
     job: &Job,
     options: &SeedOptions,
@@ -165,9 +165,10 @@ fn records(
         false => Progress::start(progress_path, &job.fingerprint),
     };
     let rerun_in_place = options.tiles_from.as_deref().is_some_and(|l| crate::outputs::same_file(l, failed_path));
-    let failed = match rerun_in_place {
+    // A resumed run retries the earlier failures: they are listed anew.
+    let failed = match rerun_in_place || (options.resume && list.is_none()) {
         true => failed::Failed::replacing(failed_path),
-        false => failed::Failed::open(failed_path, options.resume),
+        false => failed::Failed::open(failed_path),
     }
     .map_err(|source| SeedError::Io { path: failed_path.clone(), source })?;
     Ok((list, progress, failed))

@@ -2,13 +2,15 @@
 //! atomically (temporary file, then rename) about once a second and at the
 //! end, so a seeder killed at any moment resumes from its last save.
 //!
-//! The state is a set of finished subtree roots: when a tile is finished (its
-//! children are, being walked first), its children leave the set and it
-//! enters. Every root in the set has an unfinished parent that some worker is
-//! walking, so the set stays as small as the walk's frontier, however many
-//! tiles the job has. A resumed walk skips the subtrees in the set; tiles
-//! finished after the last save are found in the cache, newer than the job's
-//! start, and kept.
+//! The state is a set of finished subtree roots: when a tile is finished (it
+//! and every tile below it were made, its children walked first), its
+//! children leave the set and it enters. Every root in the set has an
+//! unfinished parent, which some worker is walking or under which a tile
+//! failed, so the set stays about as small as the walk's frontier (plus a
+//! few siblings per level above each failure), however many tiles the job
+//! has. A resumed walk skips the subtrees in the set and retries the rest;
+//! tiles finished after the last save are found in the cache, newer than the
+//! job's start, and kept.
 
 use crate::grid::TileId;
 use serde::{Deserialize, Serialize};

@@ -438,13 +438,14 @@ fn failing_tiles_are_retried_listed_and_rerun_and_uniform_tiles_are_stored_once(
     // Healed, a resumed run retries what failed, and only that (regression:
     // failed tiles were recorded as finished, the resumed run made nothing
     // and exited 0).
+    let list = dir.join("failed-first.txt");
+    std::fs::copy(dir.join("seed-failed.txt"), &list).unwrap();
     up.healed.store(true, std::sync::atomic::Ordering::SeqCst);
     let resumed = ok(&seed(&dir.0, &[&job[..], &["--resume"]].concat()));
     assert_eq!(count(&resumed, "tile files made"), 2 * failed.len() as u64, "{resumed}");
     assert!(tiles(&cache).len() > partial.len());
-    // The list is re-run: the cache is complete and equals one healthy run.
-    let list = dir.join("failed-first.txt");
-    std::fs::copy(dir.join("seed-failed.txt"), &list).unwrap();
+    assert_eq!(std::fs::read_to_string(dir.join("seed-failed.txt")).unwrap(), "", "the healed tiles are not listed");
+    // The first list is re-run: the cache is complete and equals one healthy run.
     let rerun = ok(&seed(
         &dir.0,
         &[
