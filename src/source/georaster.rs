@@ -196,10 +196,8 @@ impl GeoRaster {
             true => read_around(&self.levels[level], window, bands)?,
             false => self.levels[level].read_bands(window, bands)?,
         };
-        let offsets = (0..bands.len()).map(|b| match pyramid::reducer_of(&self.reducers, b) {
-            Reducer::Mean => None,
-            decimate => Some(pyramid::offset_px(decimate, level)),
-        });
+        let offsets =
+            (0..bands.len()).map(|b| pyramid::decimated_offset_px(pyramid::reducer_of(&self.reducers, b), level));
         Ok(Some(Footprint { window, extent, coords, offsets: offsets.collect(), bands }))
     }
 
@@ -219,17 +217,16 @@ impl GeoRaster {
     fn extent(&self, level: usize) -> Extent {
         let (w, h) = self.levels[level].size();
         let (base_w, base_h) = self.size();
-        let wraps = self.wraps;
         let base = Extent::new(base_w, base_h, self.georef.overhang);
         // Around the globe every longitude has data, point samples too.
-        let x_range = match wraps {
+        let x_range = match self.wraps {
             true => Extent::new(base_w, base_h, 0.5).x_range,
             false => base.x_range,
         };
         let (scale, shift) = level_map(level);
         // An overview wraps where its columns divide the base's evenly: its
         // columns are read modulo its width, any coordinate has data.
-        let wraps = wraps && w as f64 * scale == base_w as f64;
+        let wraps = self.wraps && w as f64 * scale == base_w as f64;
         Extent {
             width: w,
             height: h,

@@ -62,8 +62,10 @@ impl TiffFile {
         let nodata = read_nodata(&mut dec);
         let palette =
             dec.find_tag_unsigned::<u16>(Tag::PhotometricInterpretation).map_err(|e| bad(e.to_string()))? == Some(3);
-        let georef = read_georef(&mut dec, path, crs_override)?;
-        let linear = if palette { None } else { read_linear(&mut dec, bands as usize).map_err(bad)? };
+        let keys = dec.get_tag_u16_vec(Tag::GeoKeyDirectoryTag).ok();
+        let georef = read_georef(&mut dec, keys.as_deref(), path, crs_override)?;
+        let linear =
+            if palette { None } else { read_linear(&mut dec, keys.as_deref(), bands as usize).map_err(bad)? };
         let (cw, ch) = dec.chunk_dimensions();
         if w == 0 || h == 0 || cw == 0 || ch == 0 || bands == 0 {
             return Err(bad(format!("empty image ({w}×{h}, {bands} bands, chunks {cw}×{ch})")));
@@ -185,13 +187,16 @@ fn read_nodata(dec: &mut Decoder<BufReader<File>>) -> Option<f64> {
 /// and offset items, then, in a one-band file (a DEM), its vertical unit in
 /// metres (feet and US survey feet; other units are left as they are, as GDAL
 /// leaves them). `None` where nothing changes a value.
-fn read_linear(dec: &mut Decoder<BufReader<File>>, bands: usize) -> Result<Option<Vec<(f64, f64)>>, String> {
+fn read_linear(
+    dec: &mut Decoder<BufReader<File>>,
+    keys: Option<&[u16]>,
+    bands: usize,
+) -> Result<Option<Vec<(f64, f64)>>, String> {
     let mut linear = vec![(1.0, 0.0); bands];
     if let Ok(text) = dec.get_tag_ascii_string(Tag::Unknown(GDAL_METADATA)) {
         scale_and_offset(text.trim_matches(char::from(0)), &mut linear)?;
     }
-    let keys = dec.get_tag_u16_vec(Tag::GeoKeyDirectoryTag).ok();
-    let unit_m = match keys.as_deref().and_then(|k| geokey(k, VERTICAL_UNITS)) {
+    let unit_m = match keys.and_then(|k| geokey(k, VERTICAL_UNITS)) {
         Some(9002) => 0.3048,
         Some(9003) => 1200.0 / 3937.0,
         _ => 1.0,
@@ -225,14 +230,15 @@ fn scale_and_offset(xml: &str, linear: &mut [(f64, f64)]) -> Result<(), String> 
     Ok(())
 }
 
+/// The georeferencing from the file's tags and its GeoKey directory `keys`.
 fn read_georef(
     dec: &mut Decoder<BufReader<File>>,
+    keys: Option<&[u16]>,
     path: &Path,
     crs_override: Option<u32>,
 ) -> Result<Georef, SourceError> {
     let bad = |problem: &str| SourceError::Malformed { path: path.into(), problem: problem.into() };
-    let keys = dec.get_tag_u16_vec(Tag::GeoKeyDirectoryTag).ok();
-    let key = |id: u16| keys.as_deref().and_then(|k| geokey(k, id));
+    let key = |id: u16| keys.and_then(|k| geokey(k, id));
     let crs = match crs_override.or_else(|| crs_code(key(GT_MODEL_TYPE), key(GEOGRAPHIC_TYPE), key(PROJECTED_CS_TYPE)))
     {
         Some(code) => Crs::from_epsg(code).map_err(|source| SourceError::Crs { path: path.into(), source })?,

@@ -68,16 +68,13 @@ pub fn reducer_of(reducers: &[Reducer], band: usize) -> Reducer {
     reducers.get(band).or(reducers.last()).copied().unwrap_or(Reducer::Mean)
 }
 
-/// Where an overview pixel of level `level` reduced by `reducer` lies, in
-/// its own pixels, from where [`level_map`] places it: a mean lies at its
-/// block's centre, a decimated pixel at the block's north-west pixel,
-/// `(scale − 1) / 2` base pixels north and west of it.
-pub fn offset_px(reducer: Reducer, level: usize) -> f64 {
+/// For a decimated band, where its overview pixels of level `level` lie,
+/// in their own pixels, from where [`level_map`] places them: at their
+/// blocks' north-west pixels, `(scale − 1) / 2` base pixels north and west
+/// of the centres; `None` for a mean, which lies at its block's centre.
+pub fn decimated_offset_px(reducer: Reducer, level: usize) -> Option<f64> {
     let scale = (1u64 << level) as f64;
-    match reducer {
-        Reducer::Mean => 0.0,
-        Reducer::Decimate => -(scale - 1.0) / (2.0 * scale),
-    }
+    (reducer == Reducer::Decimate).then(|| -(scale - 1.0) / (2.0 * scale))
 }
 
 /// Base pixel coordinate `p` is overview coordinate `(p - shift) / scale`

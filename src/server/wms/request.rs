@@ -317,20 +317,13 @@ fn layer_of(params: &Params, format: Option<MapFormat>) -> Option<MapLayer> {
 /// A GetMap: the map part, in a format its layer is offered in.
 pub(super) fn get_map(params: &Params, version: Version, limits: Limits) -> Result<GetMap, Exception> {
     let map = map_part(params, version, limits)?;
-    let (layer, format) = (map.layer, map.format);
-    if layer.is_picture() && format.picture().is_none() {
-        return Err(Exception::new(
-            Code::InvalidFormat,
-            format!("{} is a picture: ask for image/png or image/jpeg", layer.name()),
-        )
-        .locator("FORMAT"));
-    }
-    if !layer.is_picture() && format == MapFormat::Jpeg {
-        return Err(Exception::new(
-            Code::InvalidFormat,
-            format!("{} is data: JPEG is offered for the pictures (relief, colour)", layer.name()),
-        )
-        .locator("FORMAT"));
+    let layer = map.layer;
+    if !layer.offered_in(map.format) {
+        let why = match layer.is_picture() {
+            true => format!("{} is a picture: ask for image/png or image/jpeg", layer.name()),
+            false => format!("{} is data: JPEG is offered for the pictures (relief, colour)", layer.name()),
+        };
+        return Err(Exception::new(Code::InvalidFormat, why).locator("FORMAT"));
     }
     Ok(map)
 }
