@@ -396,7 +396,12 @@ fn dry_run(job: &Job, resumed: Option<&Progress>) -> Report {
         ]))
         .collect();
     let resuming = resumed.map_or(String::new(), |p| {
-        format!(", left after {} tile files made earlier ({})", p.earlier, job.files.0.display())
+        format!(
+            ", left to walk after {} tile files made earlier ({}){}",
+            p.earlier,
+            job.files.0.display(),
+            failed_earlier(job)
+        )
     });
     let head = format!(
         "{} — shard {}/{}, {} layer(s) × {} format(s){resuming}",
@@ -407,6 +412,21 @@ fn dry_run(job: &Job, resumed: Option<&Progress>) -> Report {
         job.formats.len()
     );
     Report { text: format!("{head}\n{}", crate::bench::table(&["level", "tiles", "files"], &rows)), failed: 0 }
+}
+
+/// What a resumed dry run's count includes above the failures of earlier
+/// runs: the tiles over a failed tile were made, but their subtrees are not
+/// finished, so the walk visits them again and finds them in the cache.
+fn failed_earlier(job: &Job) -> String {
+    let path = &job.files.1;
+    match failed::read(path, &job.region.tiles) {
+        Ok(list) if !list.is_empty() => format!(
+            "; {} tile(s) failed earlier (listed in {}): the tiles above them are counted but will be found in the cache",
+            list.len(),
+            path.display()
+        ),
+        _ => String::new(),
+    }
 }
 
 fn summary(job: &Job, store: &dyn crate::cache::TileStore, c: &Counters, took: Duration, failed: &Path) -> String {

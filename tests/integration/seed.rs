@@ -440,6 +440,10 @@ fn failing_tiles_are_retried_listed_and_rerun_and_uniform_tiles_are_stored_once(
     // and exited 0).
     let list = dir.join("failed-first.txt");
     std::fs::copy(dir.join("seed-failed.txt"), &list).unwrap();
+    // A resumed dry run says that the tiles above the failures are counted
+    // but will be found in the cache.
+    let dry = ok(&seed(&dir.0, &[&job[..], &["--resume", "--dry-run"]].concat()));
+    assert!(dry.contains(&format!("{} tile(s) failed earlier", failed.len())), "{dry}");
     up.healed.store(true, std::sync::atomic::Ordering::SeqCst);
     let resumed = ok(&seed(&dir.0, &[&job[..], &["--resume"]].concat()));
     assert_eq!(count(&resumed, "tile files made"), 2 * failed.len() as u64, "{resumed}");
