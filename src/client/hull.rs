@@ -44,13 +44,16 @@ pub struct Hull {
 }
 
 impl Hull {
-    /// The hull of a tile's cast range: `cem` and `dem` hold samples −1 ..= N
+    /// The hull of a tile's cast range: `cem` holds the highest CEM, `ground`
+    /// the highest and the lowest ground each sample takes (the same raster
+    /// twice unless the tile morphs between two surfaces), samples −1 ..= N
     /// on both axes, row 0 at the south, NaN for nodata.
-    pub fn build(cem: &Raster<f32>, dem: &Raster<f32>) -> Hull {
+    pub fn build(cem: &Raster<f32>, ground: (&Raster<f32>, &Raster<f32>)) -> Hull {
+        let (dem, lowest) = ground;
         let cells = cem.width() - 1;
         let k = cells.div_ceil(QUAD_SAMPLES).max(1);
         let pos: Vec<f64> = (0..=k).map(|a| a as f64 * cells as f64 / k as f64).collect();
-        let bottom_m = dem.min_max().map_or(0.0, |(lo, _)| lo - 1.0);
+        let bottom_m = lowest.min_max().map_or(0.0, |(lo, _)| lo - 1.0);
         let quad_max = |layer: &Raster<f32>, a: usize, b: usize| {
             let (x0, x1) = (pos[a].floor() as usize, (pos[a + 1].ceil() as usize).min(cells));
             let (y0, y1) = (pos[b].floor() as usize, (pos[b + 1].ceil() as usize).min(cells));
@@ -181,7 +184,7 @@ mod tests {
     /// (2 quads a side, the second narrower).
     fn hulls() -> ((Raster<f32>, Raster<f32>), [Hull; 2]) {
         let (cem, dem) = bumpy(67);
-        let hull = Hull::build(&cem, &dem);
+        let hull = Hull::build(&cem, (&dem, &dem));
         let coarse = hull.coarsened(3);
         assert_eq!((hull.quads, coarse.quads), (5, 2));
         assert!((hull.quad_samples() - 13.2).abs() < 1e-4 && (coarse.quad_samples() - 39.6).abs() < 1e-4);

@@ -159,7 +159,7 @@ impl TileData {
         let n = grid.samples() as usize;
         let terrain =
             TerrainMesh::build(&frame, &dem.crop(crate::raster::Window::new(halo as i64, halo as i64, n, n), f32::NAN));
-        let bounded = Bounded::new((&cem, &dem), (&cem, &dem), halo, n);
+        let bounded = Bounded::new((&cem, &dem), Reach { cem: &cem, ground: (&dem, &dem) }, halo, n);
         Ok(TileData {
             frame,
             base_m: base,
@@ -206,8 +206,9 @@ impl TileData {
             })
         };
         let (upper, lower) = (end(&cem, 0, f32::max), end(&dem, 1, f32::min));
+        let reach = Reach { cem: &upper, ground: (&end(&dem, 1, f32::max), &lower) };
         let n = self.frame.samples as usize;
-        let bounded = Bounded::new((&cem, &dem), (&upper, &lower), self.halo, n);
+        let bounded = Bounded::new((&cem, &dem), reach, self.halo, n);
         let sink = cast_window(&dem, self.halo, n)
             .data()
             .iter()
@@ -334,10 +335,18 @@ fn nodata_nan(v: f32) -> f32 {
     if v <= NODATA_M { f32::NAN } else { v }
 }
 
+/// Where a tile's surface can lie at any morph weight, per texel: the
+/// highest CEM and the highest and lowest ground of its two ends (its own
+/// heights unless it morphs). Local metres, rows south-up, halo included,
+/// NaN for nodata.
+struct Reach<'a> {
+    cem: &'a Raster<f32>,
+    ground: (&'a Raster<f32>, &'a Raster<f32>),
+}
+
 /// A tile's texels and what bounds its surface, from its own CEM and
-/// ground and the envelope that surface stays in (the highest CEM and
-/// lowest ground it can take; its own heights unless it morphs). Layers
-/// are local metres, rows south-up, halo included, NaN for nodata.
+/// ground and the [`Reach`] of that surface. Layers are local metres, rows
+/// south-up, halo included, NaN for nodata.
 struct Bounded {
     texels: Vec<[f32; 4]>,
     mip: MaxMipmap,
@@ -347,19 +356,15 @@ struct Bounded {
 }
 
 impl Bounded {
-    fn new(
-        (cem, dem): (&Raster<f32>, &Raster<f32>),
-        (upper, lower): (&Raster<f32>, &Raster<f32>),
-        halo: usize,
-        n: usize,
-    ) -> Bounded {
+    fn new((cem, dem): (&Raster<f32>, &Raster<f32>), reach: Reach, halo: usize, n: usize) -> Bounded {
+        let (upper, (high, lower)) = (reach.cem, reach.ground);
         let near = dilate(upper, ZONE_NEAR);
         let far = dilate(&near, ZONE_FAR - ZONE_NEAR);
         let texels = (0..cem.data().len())
             .map(|k| [cem.data()[k], dem.data()[k], near.data()[k], far.data()[k]].map(nodata_low))
             .collect();
         let (cast, cast_lower) = (cast_window(upper, halo, n), cast_window(lower, halo, n));
-        let hull = Hull::build(&cast, &cast_lower);
+        let hull = Hull::build(&cast, (&cast_window(high, halo, n), &cast_lower));
         let range = TileRange {
             min_m: hull.bottom_m,
             max_m: cast.min_max().map_or(0.0, |(_, hi)| hi),
@@ -485,6 +490,18 @@ mod tests {
                         assert!(at(i, j, 1) >= m.range.min_m, "w {w} ground at {i},{j} below the hull");
                         sank = sank.max(own.texels[j * size + i][1] - at(i, j, 1));
                     }
+                }
+            }
+            // The hull over each top vertex bounds the surface there at every
+            // canopy fade (regression: its ground height was the lower end's,
+            // 40 m under a coarser ground above the tile's own).
+            let k = m.hull.quads;
+            for v in &m.hull.vertices[..(k + 1) * (k + 1)] {
+                let [x, y] = v.sample.map(|s| (s.round() as i64 + b as i64) as usize);
+                for f in [0.0f32, 0.5, 1.0] {
+                    let surface = at(x, y, 1) + f * (at(x, y, 0) - at(x, y, 1));
+                    let hull = v.hull_m[0] + f * (v.hull_m[1] - v.hull_m[0]);
+                    assert!(surface <= hull + 1e-3, "w {w} f {f}: surface {surface} above the hull {hull} at {x},{y}");
                 }
             }
         }
