@@ -11,7 +11,7 @@
 //! steer refinement; hulls and culling of drawn tiles use their own data.
 
 use super::source::{FetchError, TileSource};
-use super::tile::TilePayload;
+use super::tile::{TilePayload, plausible};
 use crate::grid::{BBox, Sector, TileGrid, TileId};
 
 /// One coarse tile's samples (no halo), row 0 at the north.
@@ -39,7 +39,7 @@ impl HeightEnvelope {
 
     /// The envelope of the coarse tiles `payloads` on `grid` (their halos
     /// left out; a payload of the wrong size, which no tile is prepared
-    /// from, too).
+    /// from, too; heights no tile holds are nodata, as in tiles).
     pub fn of<'a>(grid: &TileGrid, payloads: impl IntoIterator<Item = &'a TilePayload>) -> HeightEnvelope {
         let n = grid.samples() as usize;
         let whole = |p: &&TilePayload| [&p.dem, &p.cem].iter().all(|l| l.len() == (n + 2 * p.halo).pow(2));
@@ -49,7 +49,9 @@ impl HeightEnvelope {
             .map(|p| {
                 let size = n + 2 * p.halo;
                 let inner = |layer: &[f32]| -> Vec<f32> {
-                    (p.halo..p.halo + n).flat_map(|y| layer[y * size + p.halo..][..n].iter().copied()).collect()
+                    (p.halo..p.halo + n)
+                        .flat_map(|y| layer[y * size + p.halo..][..n].iter().map(|&v| plausible(v)))
+                        .collect()
                 };
                 Coarse { sector: grid.sector(p.id), samples: n, ground: inner(&p.dem), cem: inner(&p.cem) }
             })
@@ -132,6 +134,21 @@ mod tests {
         assert!(finite(&fine.dem).iter().all(|&h| h >= lo), "ground below {lo}");
         assert!(finite(&fine.cem).iter().all(|&h| h <= hi), "CEM above {hi}");
         assert!(hi - lo < 3000.0, "{lo}..{hi} is a useful bound");
+    }
+
+    #[test]
+    fn implausible_heights_bound_nothing() {
+        // Regression: one infinite sample made every range (−∞, ∞), and
+        // every tile was culled.
+        let grid = TileGrid::new(36.0, 33).unwrap();
+        let id = TileId::new(3, 10, 20);
+        let size = 33 + 2;
+        let mut payload = crate::client::tile::tests::ramp(&grid, id, 1);
+        payload.cem[5 * size + 7] = f32::INFINITY;
+        payload.dem[6 * size + 7] = f32::MIN;
+        let envelope = HeightEnvelope::of(&grid, [&payload]);
+        let (lo, hi) = envelope.range(&grid.sector(id)).unwrap();
+        assert!(lo > 900.0 && hi < 1200.0, "{lo}..{hi}");
     }
 
     #[test]

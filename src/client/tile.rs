@@ -38,6 +38,12 @@ const EDGE_SAMPLES: f64 = 1e-6;
 /// Height of nodata texels: below this is no surface.
 pub const NODATA_M: f32 = -1.0e30;
 
+/// Heights a tile may hold, metres: Earth's deepest trench and highest
+/// summit with its canopy, and a margin. Anything else a source delivers
+/// (an infinity, GDAL's float32 nodata left unflagged) is nodata: one such
+/// sample would raise the tile's frame to it and its bounds to infinity.
+pub const PLAUSIBLE_M: std::ops::RangeInclusive<f32> = -12_000.0..=12_000.0;
+
 /// What a tile source delivers for one tile: `(N + 2B)²` samples per
 /// layer, row 0 at the north (the server's order), NaN for nodata.
 #[derive(Clone, Debug)]
@@ -54,6 +60,21 @@ pub struct TilePayload {
     pub surface: Vec<u8>,
     /// Map colour, sRGB with alpha 0 for nodata.
     pub colour: Vec<[u8; 4]>,
+}
+
+/// `v`, or nodata (NaN) outside [`PLAUSIBLE_M`].
+pub fn plausible(v: f32) -> f32 {
+    if PLAUSIBLE_M.contains(&v) { v } else { f32::NAN }
+}
+
+impl TilePayload {
+    /// The payload with heights outside [`PLAUSIBLE_M`] made nodata.
+    fn plausible(mut self) -> TilePayload {
+        for v in self.cem.iter_mut().chain(&mut self.dem) {
+            *v = plausible(*v);
+        }
+        self
+    }
 }
 
 /// Height statistics of a prepared tile, in its local frame.
@@ -142,6 +163,7 @@ impl TileData {
         if halo == 0 {
             return Err(TileError::NoHalo(id));
         }
+        let payload = payload.plausible();
         let flat = TileFrame::new(grid, id);
         let base = base_height(&payload.cem);
         let frame = flat.raised(base);
@@ -381,7 +403,7 @@ fn canopy_max(cem: &Raster<f32>, dem: &Raster<f32>) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// A payload whose CEM is a ramp plus canopy on the east half.
@@ -507,6 +529,32 @@ mod tests {
         }
         assert!(sank > 10.0, "the coarser ground lies below the tile's: {sank}");
         assert!(m.range.mesh_error_m >= own.range.mesh_error_m + sank - 1e-3, "the filler mesh sinks with it");
+    }
+
+    #[test]
+    fn implausible_heights_are_nodata() {
+        // Regression: one infinite or 3·10³⁸ m sample (a float nodata left
+        // unflagged) raised the frame and every bound to it, and the flight
+        // drew nothing.
+        let grid = TileGrid::new(36.0, 33).unwrap();
+        let id = grid.tile_containing(10.2, 46.4, 12);
+        let mut payload = ramp(&grid, id, 2);
+        let size = 37;
+        let spikes = [(f32::INFINITY, 5), (3.0e38, 6), (f32::MIN, 7), (-20_000.0, 8)];
+        for (v, k) in spikes {
+            payload.cem[k * size + 10] = v;
+            payload.dem[k * size + 11] = v;
+        }
+        let t = TileData::prepare(&grid, payload).unwrap();
+        let good = TileData::prepare(&grid, ramp(&grid, id, 2)).unwrap();
+        assert_eq!(t.base_m, good.base_m);
+        let (lo, hi) = t.range.heights_m;
+        assert!((1000.0..1200.0).contains(&lo) && (1000.0..1200.0).contains(&hi), "{lo} {hi}");
+        for (_, k) in spikes {
+            let row = size - 1 - k;
+            assert_eq!(t.texels[row * size + 10][0], NODATA_M);
+            assert_eq!(t.texels[row * size + 11][1], NODATA_M);
+        }
     }
 
     #[test]
