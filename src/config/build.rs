@@ -146,6 +146,7 @@ fn check_values(config: &Config) -> Result<(), String> {
     if !enc.png16_offset_m.is_finite() {
         return Err(format!("[encoding] png16_offset_m must be a finite number, got {}", enc.png16_offset_m));
     }
+    config.dem.nodata.check().map_err(|m| format!("[dem] nodata: {m}"))?;
     config.canopy.check().map_err(|m| format!("[canopy] {m}"))?;
     config.server.check().map_err(|m| format!("[server] {m}"))
 }

@@ -11,7 +11,7 @@
 //! stay nodata.
 
 use super::{BlockCache, Blocks, PixelSource, SourceError};
-use crate::raster::Raster;
+use crate::raster::{Raster, Window};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::sync::Arc;
@@ -37,6 +37,25 @@ pub enum NodataPolicy {
 
 fn default_distance() -> usize {
     64
+}
+
+/// The longest search of [`NodataPolicy::Fill`], source pixels: each block
+/// is filled from its pixels and this many around them.
+pub const MAX_FILL_DISTANCE_PX: usize = 2048;
+
+impl NodataPolicy {
+    /// Why the policy cannot be used, if it cannot.
+    pub fn check(&self) -> Result<(), String> {
+        match *self {
+            NodataPolicy::Fill { max_distance_px } if !(1..=MAX_FILL_DISTANCE_PX).contains(&max_distance_px) => {
+                Err(format!("max_distance_px = {max_distance_px}: must be 1 to {MAX_FILL_DISTANCE_PX}"))
+            }
+            NodataPolicy::Constant { value } if !value.is_finite() => {
+                Err(format!("value = {value}: must be a finite height"))
+            }
+            _ => Ok(()),
+        }
+    }
 }
 
 impl Default for NodataPolicy {
@@ -83,21 +102,25 @@ impl PixelSource for Policy {
                 Ok(self.raw.read(block)?.into_iter().map(|b| b.map(|v| if v.is_nan() { value } else { v })).collect())
             }
             NodataPolicy::Fill { max_distance_px } => {
-                let margin = max_distance_px;
-                let around = self.raw.read(block.grown(margin))?;
-                Ok(around.iter().map(|band| fill(band, margin, block.width, block.height, max_distance_px)).collect())
+                // Beyond the raster lies no data to fill from.
+                let (w, h) = self.size();
+                let around = block.grown(max_distance_px).intersect(&Window::new(0, 0, w, h)).unwrap_or(block);
+                let at = ((block.x - around.x) as usize, (block.y - around.y) as usize);
+                let bands = self.raw.read(around)?;
+                Ok(bands.iter().map(|band| fill(band, at, (block.width, block.height), max_distance_px)).collect())
             }
             NodataPolicy::Propagate => self.raw.read(block),
         }
     }
 }
 
-/// The centre `w × h` of `src` (which has `margin` extra pixels per side), with
-/// voids filled.
-fn fill(src: &Raster<f32>, margin: usize, w: usize, h: usize, max_distance: usize) -> Raster<f32> {
+/// The `w × h` window of `src` at `at`, with voids filled from `src`.
+fn fill(src: &Raster<f32>, at: (usize, usize), (w, h): (usize, usize), max_distance: usize) -> Raster<f32> {
     const DIRECTIONS: [(i64, i64); 8] = [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)];
+    // No search goes past the edge of `src`.
+    let max_distance = max_distance.min(src.width().max(src.height()));
     Raster::from_fn(w, h, |x, y| {
-        let (cx, cy) = ((x + margin) as i64, (y + margin) as i64);
+        let (cx, cy) = ((x + at.0) as i64, (y + at.1) as i64);
         let v = src.get(cx as usize, cy as usize);
         if !v.is_nan() {
             return v;
@@ -128,12 +151,45 @@ mod tests {
         let mut src = Raster::filled(5, 5, 10.0);
         src.set(2, 2, f32::NAN);
         src.set(3, 2, 20.0);
-        let out = fill(&src, 0, 5, 5, 4);
+        let out = fill(&src, (0, 0), (5, 5), 4);
         // Seven neighbours of 10 (distances² 1,1,1,2,2,2,2) and one of 20 at distance 1.
         let expect = (20.0 + 10.0 * (3.0 + 4.0 * 0.5)) / (4.0 + 4.0 * 0.5);
         assert!((out.get(2, 2) - expect).abs() < 1e-5);
         let empty = Raster::filled(9, 9, f32::NAN);
-        assert!(fill(&empty, 0, 9, 9, 3).all_nodata());
+        assert!(fill(&empty, (0, 0), (9, 9), 3).all_nodata());
+    }
+
+    #[test]
+    fn blocks_are_filled_as_the_whole_raster_and_read_no_more_than_it() {
+        // 300 × 280 pixels, four blocks, a void across their corner.
+        let mut src = Raster::from_fn(300, 280, |x, y| (x as f32 * 0.1).sin() * 50.0 + y as f32);
+        for (x, y) in (230..290).flat_map(|x| (240..270).map(move |y| (x, y))) {
+            src.set(x, y, f32::NAN);
+        }
+        let memory: Arc<dyn PixelSource> =
+            Arc::new(super::super::memory::MemorySource::new("holes", vec![src.clone()]).unwrap());
+        let cache = BlockCache::new(64 << 20);
+        // Regression: the distance grew every block's read by itself, so
+        // 10⁹ asked for exabytes.
+        for distance in [40, MAX_FILL_DISTANCE_PX, 1_000_000_000] {
+            let filled = apply(memory.clone(), &NodataPolicy::Fill { max_distance_px: distance }, &cache);
+            let got = filled.read(Window::new(0, 0, 300, 280)).unwrap().remove(0);
+            let whole = fill(&src, (0, 0), (300, 280), distance);
+            assert!(got == whole, "distance {distance}: blocks differ from the whole");
+            assert_eq!(got.data().iter().filter(|v| v.is_nan()).count(), 0, "distance {distance}");
+        }
+    }
+
+    #[test]
+    fn distances_and_values_that_cannot_fill_are_refused() {
+        for (policy, needle) in [
+            (NodataPolicy::Fill { max_distance_px: 0 }, "must be 1 to 2048"),
+            (NodataPolicy::Fill { max_distance_px: 1_000_000_000 }, "max_distance_px = 1000000000"),
+            (NodataPolicy::Constant { value: f32::NAN }, "value = NaN: must be a finite height"),
+        ] {
+            assert!(policy.check().unwrap_err().contains(needle), "{policy:?}");
+        }
+        assert!(NodataPolicy::default().check().is_ok() && NodataPolicy::Propagate.check().is_ok());
     }
 
     #[test]
