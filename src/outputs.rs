@@ -157,7 +157,11 @@ pub fn write_all(files: &[(&Path, &[u8])]) -> Result<(), OutputError> {
         let (scratch, mut file) = scratch_beside(&target).map_err(fail)?;
         partial().push(scratch.clone());
         written.push((scratch, target));
-        file.write_all(bytes).map_err(fail)
+        // In pieces: a signal that comes during a write(2) to a file waits
+        // for it to end, and a second one sent meanwhile merges with it, so
+        // one call for hundreds of MB left no room for the second Ctrl-C
+        // that abandons the outputs.
+        bytes.chunks(WRITE_CHUNK).try_for_each(|chunk| file.write_all(chunk)).map_err(fail)
     };
     let mut result = files.iter().try_for_each(|&(path, bytes)| write_one(path, bytes));
     let mut renamed = 0;
@@ -175,6 +179,9 @@ pub fn write_all(files: &[(&Path, &[u8])]) -> Result<(), OutputError> {
     partial().retain(|p| !written.iter().any(|(scratch, _)| scratch == p));
     result
 }
+
+/// Bytes per write(2) of [`write_all`]: milliseconds each.
+const WRITE_CHUNK: usize = 4 << 20;
 
 /// The new files [`write_all`] is writing, not yet renamed into place.
 fn partial() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {

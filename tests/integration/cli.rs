@@ -244,6 +244,38 @@ fn ctrl_c_during_a_build_ends_it_at_once_and_writes_nothing() {
 }
 
 #[test]
+fn a_second_ctrl_c_while_a_build_writes_abandons_its_output() {
+    // Regression: the 268 MB were written in one write(2), during which
+    // both signals merged into one; the output was written and replaced
+    // the old one.
+    let dir = TempDir::new("cli-build-abandon");
+    let out = dir.join("big.tif");
+    std::fs::write(&out, "the old output").unwrap();
+    let build = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(["build", "--layer", "max32", "--width", "8193", "--height", "8193", "-o", out.to_str().unwrap()])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let writing =
+        || std::fs::read_dir(&dir.0).unwrap().any(|e| e.unwrap().file_name().to_string_lossy().ends_with(".partial"));
+    while !writing() {
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    let interrupt =
+        || assert!(Command::new("kill").arg("-INT").arg(build.id().to_string()).status().unwrap().success());
+    interrupt();
+    std::thread::sleep(std::time::Duration::from_millis(30));
+    interrupt();
+    let output = build.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("the outputs not yet in place abandoned"), "{stderr}");
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), "the old output");
+    let left: Vec<_> = std::fs::read_dir(&dir.0).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(left.len(), 1, "{left:?}");
+}
+
+#[test]
 fn an_error_said_to_a_stderr_nobody_reads_still_exits_1() {
     // Regression: eprintln! panicked on the closed pipe (exit 101).
     let (reader, writer) = std::io::pipe().unwrap();
