@@ -23,6 +23,7 @@ const GT_MODEL_TYPE: u16 = 1024;
 const GT_RASTER_TYPE: u16 = 1025;
 const GEOGRAPHIC_TYPE: u16 = 2048;
 const PROJECTED_CS_TYPE: u16 = 3072;
+const VERTICAL_CS_TYPE: u16 = 4096;
 const VERTICAL_UNITS: u16 = 4099;
 const USER_DEFINED: u16 = 32767;
 const RASTER_PIXEL_IS_POINT: u16 = 2;
@@ -184,9 +185,8 @@ fn read_nodata(dec: &mut Decoder<BufReader<File>>) -> Option<f64> {
 }
 
 /// How each of `bands` bands' stored values become values: GDAL's scale
-/// and offset items, then, in a one-band file (a DEM), its vertical unit in
-/// metres (feet and US survey feet; other units are left as they are, as GDAL
-/// leaves them). `None` where nothing changes a value.
+/// and offset items, then, in a one-band file (a DEM), metres up per stored
+/// unit ([`vertical_unit_m`]). `None` where nothing changes a value.
 fn read_linear(
     dec: &mut Decoder<BufReader<File>>,
     keys: Option<&[u16]>,
@@ -196,15 +196,23 @@ fn read_linear(
     if let Ok(text) = dec.get_tag_ascii_string(Tag::Unknown(GDAL_METADATA)) {
         scale_and_offset(text.trim_matches(char::from(0)), &mut linear)?;
     }
-    let unit_m = match keys.and_then(|k| geokey(k, VERTICAL_UNITS)) {
-        Some(9002) => 0.3048,
-        Some(9003) => 1200.0 / 3937.0,
-        _ => 1.0,
-    };
+    let unit_m = keys.map_or(1.0, vertical_unit_m);
     if bands == 1 {
         linear[0] = (linear[0].0 * unit_m, linear[0].1 * unit_m);
     }
     Ok(linear.iter().any(|&l| l != (1.0, 0.0)).then_some(linear))
+}
+
+/// Metres up per stored unit of the GeoKey directory `keys`: its vertical
+/// CRS's (GDAL writes no unit key beside an EPSG code), else its vertical
+/// unit key's (feet and US survey feet).
+fn vertical_unit_m(keys: &[u16]) -> f64 {
+    let by_crs = geokey(keys, VERTICAL_CS_TYPE).and_then(super::vertical::metres_up);
+    by_crs.unwrap_or(match geokey(keys, VERTICAL_UNITS) {
+        Some(9002) => 0.3048,
+        Some(9003) => 1200.0 / 3937.0,
+        _ => 1.0,
+    })
 }
 
 /// Reads the `scale` and `offset` items of GDAL's metadata XML into
@@ -318,13 +326,13 @@ mod tests {
 
     /// A 4 × 2 UInt16 GeoTIFF (values 0, 100, …, 700) in EPSG:4326 with
     /// `metadata` and, if given, a VerticalUnitsGeoKey.
-    fn stored(name: &str, metadata: Option<&str>, vertical_unit: Option<u16>) -> PathBuf {
+    fn stored(name: &str, metadata: Option<&str>, vertical: Option<(u16, u16)>) -> PathBuf {
         use tiff::encoder::{TiffEncoder, colortype};
         let path = std::env::temp_dir().join(format!("sylva-geotiff-{}-{name}.tif", std::process::id()));
         let mut keys = vec![1, 1, 0, 3, 1024, 0, 1, 2, 1025, 0, 1, 1, 2048, 0, 1, 4326];
-        if let Some(unit) = vertical_unit {
+        if let Some((key, value)) = vertical {
             keys[3] = 4;
-            keys.extend([VERTICAL_UNITS, 0, 1, unit]);
+            keys.extend([key, 0, 1, value]);
         }
         let mut enc = TiffEncoder::new(std::fs::File::create(&path).unwrap()).unwrap();
         let mut img = enc.new_image::<colortype::Gray16>(4, 2).unwrap();
@@ -356,9 +364,19 @@ mod tests {
 </GDALMetadata>"#;
         assert_eq!(first_row(&stored("plain", None, None)).unwrap(), [0.0, 100.0, 200.0, 300.0]);
         assert_eq!(first_row(&stored("scaled", Some(gdal), None)).unwrap(), [-500.0, -490.0, -480.0, -470.0]);
-        let feet = first_row(&stored("feet", None, Some(9002))).unwrap();
+        let feet = first_row(&stored("feet", None, Some((VERTICAL_UNITS, 9002)))).unwrap();
         assert_eq!(feet, [0.0, 30.48, 60.96, 91.44]);
-        assert_eq!(first_row(&stored("metres", None, Some(9001))).unwrap(), [0.0, 100.0, 200.0, 300.0]);
+        let metres = first_row(&stored("metres", None, Some((VERTICAL_UNITS, 9001)))).unwrap();
+        assert_eq!(metres, [0.0, 100.0, 200.0, 300.0]);
+        // GDAL writes a vertical CRS's code and no unit key (regression:
+        // heights in NAVD88 US survey feet were read as metres); depths
+        // are heights below.
+        let navd88_ft = first_row(&stored("navd88-ft", None, Some((VERTICAL_CS_TYPE, 6360)))).unwrap();
+        assert!((navd88_ft[3] - 91.44018).abs() < 1e-4, "{navd88_ft:?}");
+        let depth = first_row(&stored("depth", None, Some((VERTICAL_CS_TYPE, 5715)))).unwrap();
+        assert_eq!(depth, [0.0, -100.0, -200.0, -300.0]);
+        let navd88_m = first_row(&stored("navd88-m", None, Some((VERTICAL_CS_TYPE, 5703)))).unwrap();
+        assert_eq!(navd88_m, [0.0, 100.0, 200.0, 300.0]);
         let bad = stored("bad", Some(r#"<GDALMetadata><Item role="scale">ten</Item></GDALMetadata>"#), None);
         let err = first_row(&bad).expect_err("a scale that is no number").to_string();
         assert!(err.contains("sylva-geotiff") && err.contains("scale \"ten\" is not a number"), "{err}");

@@ -28,6 +28,7 @@ pub mod proxy;
 pub mod pyramid;
 #[cfg(feature = "http")]
 pub mod remote;
+pub mod vertical;
 
 pub use blocks::{BlockCache, Blocks};
 pub use crs::{Crs, CrsError};
