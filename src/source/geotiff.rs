@@ -71,6 +71,9 @@ impl TiffFile {
         if w == 0 || h == 0 || cw == 0 || ch == 0 || bands == 0 {
             return Err(bad(format!("empty image ({w}×{h}, {bands} bands, chunks {cw}×{ch})")));
         }
+        check_compression(&mut dec).map_err(bad)?;
+        let length = std::fs::metadata(path).map_err(|source| SourceError::Open { path: path.into(), source })?.len();
+        check_chunks(&mut dec, length).map_err(bad)?;
         let tf = TiffFile {
             path: path.into(),
             decoder: Mutex::new(dec),
@@ -176,6 +179,38 @@ fn to_f32(data: DecodingResult, nodata: Option<f64>) -> Option<Vec<f32>> {
         DecodingResult::F64(v) => conv(v, nodata),
         _ => return None,
     })
+}
+
+/// Refuses, when the file is opened and not at its first read, a
+/// compression the decoder cannot undo, naming it.
+fn check_compression(dec: &mut Decoder<BufReader<File>>) -> Result<(), String> {
+    let code = dec.find_tag_unsigned::<u16>(Tag::Compression).map_err(|e| e.to_string())?.unwrap_or(1);
+    let name = match code {
+        // None, LZW, JPEG, Deflate (and its old code), PackBits, CCITT Group 4, Zstandard.
+        1 | 5 | 7 | 8 | 32946 | 32773 | 4 | 50000 => return Ok(()),
+        34712 => "JPEG 2000",
+        34887 => "LERC",
+        34925 => "LZMA",
+        50001 => "WebP",
+        50002 => "JPEG XL",
+        _ => "an unknown method",
+    };
+    Err(format!(
+        "compressed with {name} (TIFF compression {code}), which Sylva cannot read; recompress it with DEFLATE, LZW or ZSTD (gdal_translate -co COMPRESS=DEFLATE IN OUT)"
+    ))
+}
+
+/// Refuses a file cut short: every chunk must lie within its `length` bytes.
+fn check_chunks(dec: &mut Decoder<BufReader<File>>, length: u64) -> Result<(), String> {
+    let tiled = dec.find_tag(Tag::TileOffsets).map_err(|e| e.to_string())?.is_some();
+    let (offsets, counts) =
+        if tiled { (Tag::TileOffsets, Tag::TileByteCounts) } else { (Tag::StripOffsets, Tag::StripByteCounts) };
+    let offsets = dec.get_tag_u64_vec(offsets).map_err(|e| e.to_string())?;
+    let counts = dec.get_tag_u64_vec(counts).map_err(|e| e.to_string())?;
+    match offsets.iter().zip(&counts).position(|(o, c)| o.saturating_add(*c) > length) {
+        Some(i) => Err(format!("truncated: chunk {i} lies past the end of its {length} bytes")),
+        None => Ok(()),
+    }
 }
 
 /// GDAL's nodata tag (ASCII, e.g. "-32768" or "nan").
@@ -383,6 +418,35 @@ mod tests {
         let other =
             stored("band", Some(r#"<GDALMetadata><Item sample="3" role="scale">2</Item></GDALMetadata>"#), None);
         assert!(first_row(&other).expect_err("a band that is not there").to_string().contains("no such band"));
+    }
+
+    /// Sets the low 16 bits of the value of the first IFD's tag `tag` (one
+    /// short or long) in the little-endian TIFF at `path`.
+    fn patch_tag(path: &Path, tag: u16, value: u16) {
+        let mut bytes = std::fs::read(path).unwrap();
+        let ifd = u32::from_le_bytes(bytes[4..8].try_into().unwrap()) as usize;
+        let count = u16::from_le_bytes([bytes[ifd], bytes[ifd + 1]]) as usize;
+        let entry = (0..count).map(|i| ifd + 2 + 12 * i).find(|&e| bytes[e..e + 2] == tag.to_le_bytes()).unwrap();
+        bytes[entry + 8..entry + 10].copy_from_slice(&value.to_le_bytes());
+        std::fs::write(path, bytes).unwrap();
+    }
+
+    #[test]
+    fn unreadable_compression_and_truncation_are_refused_at_open() {
+        // Regression: both opened (`sylva info` passed them) and failed at
+        // the first read, the compression as "Unknown(34887)".
+        let lerc = stored("lerc", None, None);
+        patch_tag(&lerc, 259, 34887);
+        let err = first_row(&lerc).expect_err("LERC").to_string();
+        assert!(
+            err.contains("sylva-geotiff") && err.contains("compressed with LERC (TIFF compression 34887)"),
+            "{err}"
+        );
+        // A strip of 65535 bytes in a file of a few hundred, as if cut short.
+        let cut = stored("cut", None, None);
+        patch_tag(&cut, 279, u16::MAX);
+        let err = first_row(&cut).expect_err("cut short").to_string();
+        assert!(err.contains("truncated: chunk 0 lies past the end of its"), "{err}");
     }
 
     #[test]
