@@ -21,7 +21,7 @@ use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::sync::{Arc, PoisonError, RwLock};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// What a loaded tile told about itself.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -93,15 +93,24 @@ type Loaded = (TileId, Result<Option<TileData>, LoadError>);
 struct Background {
     source: Arc<dyn TileSource>,
     pending: HashSet<TileId>,
-    /// Tiles whose load failed, and when.
-    failed: HashMap<TileId, Instant>,
+    /// Tiles whose load failed: when each may be asked again, and how
+    /// often it failed in a row.
+    failed: HashMap<TileId, (Instant, u32)>,
     failures: usize,
     sender: Sender<Loaded>,
     receiver: Receiver<Loaded>,
 }
 
-/// Seconds before a tile that failed to load is asked for again.
+/// Seconds before a tile that failed to load is asked for again, doubling
+/// with each failure in a row up to [`RETRY_MAX_S`].
 const RETRY_S: f64 = 2.0;
+/// The longest wait before a tile that keeps failing is asked for again.
+const RETRY_MAX_S: f64 = 120.0;
+
+/// How long a tile that failed `times` in a row waits to be asked again.
+fn retry_after(times: u32) -> Duration {
+    Duration::from_secs_f64((RETRY_S * 2f64.powi(times.saturating_sub(1).min(16) as i32)).min(RETRY_MAX_S))
+}
 
 /// Tiles asked for in the background and not yet back, at most: a camera
 /// moving fast asks for more than the source can deliver, and what it
@@ -280,7 +289,7 @@ impl TileStore {
     }
 
     /// Keeps the tiles loaded in the background since the last frame. A
-    /// tile that failed is asked again after [`RETRY_S`] (and counted).
+    /// tile that failed is asked again after [`retry_after`] (and counted).
     fn receive(&mut self) {
         let Some(b) = &mut self.background else { return };
         let done: Vec<Loaded> = b.receiver.try_iter().collect();
@@ -293,7 +302,8 @@ impl TileStore {
                     kept.push((id, tile));
                 }
                 Err(_) => {
-                    b.failed.insert(id, Instant::now());
+                    let times = b.failed.get(&id).map_or(1, |&(_, times)| times + 1);
+                    b.failed.insert(id, (Instant::now() + retry_after(times), times));
                     b.failures += 1;
                 }
             }
@@ -322,7 +332,7 @@ impl TileStore {
             if b.pending.len() >= PENDING_LIMIT {
                 break;
             }
-            let failed_lately = b.failed.get(&id).is_some_and(|t| t.elapsed().as_secs_f64() < RETRY_S);
+            let failed_lately = b.failed.get(&id).is_some_and(|&(again, _)| Instant::now() < again);
             if !failed_lately && b.pending.insert(id) {
                 let (source, sender, halo) = (b.source.clone(), b.sender.clone(), self.halo);
                 self.pool.spawn(move || {
@@ -499,6 +509,11 @@ mod tests {
         let drawn = settle(&mut store, source.as_ref(), &cut);
         assert_eq!(drawn, vec![fine.parent().unwrap()]);
         assert!(store.failures() >= 1);
+        // Asked again later and later (regression: every 2 s for ever).
+        let (again, times) = store.background.as_ref().unwrap().failed[&failing];
+        assert!(times >= 1 && again > Instant::now(), "{times}");
+        let waits: Vec<f64> = [1, 2, 3, 7, 8, u32::MAX].map(|n| retry_after(n).as_secs_f64()).to_vec();
+        assert_eq!(waits, [2.0, 4.0, 8.0, 120.0, 120.0, 120.0]);
         // A budget below one tile: evicted to it, but for the coarse tiles.
         store.budget_bytes = 1;
         store.get_cut(source.as_ref(), &anchors[..1]).unwrap();

@@ -1,7 +1,10 @@
 //! HTTP for sources and clients: GETs with a timeout, retried a bounded
-//! number of times with exponential backoff; after repeated failures a
-//! circuit breaker fails requests at once for a cool-down, so a dead server
-//! costs no waiting. Bodies are read up to a size limit; 404 is "no data".
+//! number of times with exponential backoff where a retry may succeed (a
+//! network error, a timeout, 408, 429, a 5xx but 501 and 505; not a refusal
+//! such as 400 or 403); after repeated failures a circuit breaker fails
+//! requests at once for a cool-down, so a dead server costs no waiting.
+//! Bodies are read up to a size limit, a larger one is an error; 404 is "no
+//! data".
 
 use super::SourceError;
 use crate::config::UpstreamConfig;
@@ -10,8 +13,15 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
-/// Largest response read, bytes (a 577² float32 tile is 1.3 MiB).
-const MAX_RESPONSE_BYTES: u64 = 16 << 20;
+/// Largest response read, bytes: a tile of the largest grid with the
+/// largest halo in float32 ((4097 + 2 · 64)² · 4, 71 MB) fits.
+const MAX_RESPONSE_BYTES: u64 = 128 << 20;
+
+/// Why one attempt failed, and whether another may succeed.
+struct Failure {
+    problem: String,
+    retry: bool,
+}
 
 /// Timeouts, retries and the breaker.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -89,10 +99,13 @@ impl Link {
                     self.failures.store(0, Ordering::Relaxed);
                     return Ok(body);
                 }
-                Err(e) => {
-                    let attempt = format!("{} of {}", attempt + 1, self.retries + 1);
-                    tracing::warn!(url, attempt, error = %e, "request failed");
-                    last = e;
+                Err(Failure { problem, retry }) => {
+                    let tried = attempt + 1;
+                    tracing::warn!(url, attempt = format!("{tried} of {}", self.retries + 1), error = %problem, "request failed");
+                    last = format!("{problem} (after {tried} attempt{})", if tried == 1 { "" } else { "s" });
+                    if !retry {
+                        break;
+                    }
                 }
             }
         }
@@ -101,24 +114,80 @@ impl Link {
         {
             *guard = Some(Instant::now() + self.cooldown);
         }
-        Err(fail(format!("{last} (after {} attempts)", self.retries + 1)))
+        Err(fail(last))
     }
 
-    fn try_once(&self, url: &str) -> Result<Option<Vec<u8>>, String> {
-        let mut response = self.agent.get(url).call().map_err(|e| e.to_string())?;
+    fn try_once(&self, url: &str) -> Result<Option<Vec<u8>>, Failure> {
+        let again = |problem: String| Failure { problem, retry: true };
+        let mut response = self.agent.get(url).call().map_err(|e| again(e.to_string()))?;
         match response.status().as_u16() {
             200 => {
+                let too_large = || Failure {
+                    problem: format!("the response is larger than {} MiB", MAX_RESPONSE_BYTES >> 20),
+                    retry: false,
+                };
+                if response.body().content_length().is_some_and(|n| n > MAX_RESPONSE_BYTES) {
+                    return Err(too_large());
+                }
                 let mut body = Vec::new();
-                response
-                    .body_mut()
-                    .as_reader()
-                    .take(MAX_RESPONSE_BYTES)
-                    .read_to_end(&mut body)
-                    .map_err(|e| e.to_string())?;
+                let mut reader = response.body_mut().as_reader().take(MAX_RESPONSE_BYTES + 1);
+                reader.read_to_end(&mut body).map_err(|e| again(e.to_string()))?;
+                if body.len() as u64 > MAX_RESPONSE_BYTES {
+                    return Err(too_large());
+                }
                 Ok(Some(body))
             }
             404 => Ok(None),
-            status => Err(format!("HTTP {status}")),
+            status => Err(Failure {
+                problem: format!("HTTP {status}"),
+                retry: matches!(status, 408 | 425 | 429) || (status >= 500 && !matches!(status, 501 | 505)),
+            }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    /// A loopback server answering every request with `head` (a status
+    /// line and headers); the requests it had.
+    fn answering(head: &'static str) -> (String, std::sync::Arc<AtomicU32>) {
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let url = format!("http://{}/tile", listener.local_addr().unwrap());
+        let count = std::sync::Arc::new(AtomicU32::new(0));
+        let counted = count.clone();
+        std::thread::spawn(move || {
+            for mut stream in listener.incoming().flatten() {
+                counted.fetch_add(1, Ordering::SeqCst);
+                let _ = stream.read(&mut [0u8; 2048]);
+                let _ = write!(stream, "{head}\r\nConnection: close\r\n\r\n");
+            }
+        });
+        (url, count)
+    }
+
+    #[test]
+    fn refusals_and_oversized_bodies_are_not_retried() {
+        // Regression: a 400 or 403 was asked 7 times, backing off, 16 s.
+        let settings = LinkSettings {
+            timeout_ms: 2000,
+            retries: 3,
+            backoff_ms: 1,
+            breaker_failures: 100,
+            breaker_cooldown_s: 1.0,
+        };
+        for (head, tries, said) in [
+            ("HTTP/1.1 403 Forbidden\r\nContent-Length: 0", 1, "HTTP 403 (after 1 attempt)"),
+            ("HTTP/1.1 200 OK\r\nContent-Length: 200000000", 1, "larger than 128 MiB (after 1 attempt)"),
+            ("HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0", 4, "HTTP 503 (after 4 attempts)"),
+            ("HTTP/1.1 429 Too Many Requests\r\nContent-Length: 0", 4, "HTTP 429 (after 4 attempts)"),
+        ] {
+            let (url, count) = answering(head);
+            let err = Link::new(&settings).fetch(&url).unwrap_err().to_string();
+            assert!(err.contains(said), "{head}: {err}");
+            assert_eq!(count.load(Ordering::SeqCst), tries, "{head}");
         }
     }
 }
