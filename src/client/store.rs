@@ -350,7 +350,7 @@ impl TileStore {
             flat_error_m: tile.flat_error_m(),
         };
         self.known.insert(tile.id(), known);
-        let bytes = tile.gpu_bytes() + tile.hull.vertices.len() * 20 + tile.hull.indices.len() * 4;
+        let bytes = tile.cpu_bytes();
         self.bytes += bytes;
         if let Some(old) = self.tiles.insert(tile.id(), Entry { tile: Arc::new(tile), last_used: self.clock, bytes }) {
             self.bytes -= old.bytes;

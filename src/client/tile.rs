@@ -305,6 +305,17 @@ impl TileData {
         self.texels[((j + b) as usize) * self.size + (i + b) as usize]
     }
 
+    /// Bytes the tile holds on the CPU: what it takes on the GPU, its hull,
+    /// its terrain mesh and the coarser surface it morphs from.
+    pub fn cpu_bytes(&self) -> usize {
+        use std::mem::size_of_val;
+        let meshes = size_of_val(&self.hull.vertices[..])
+            + size_of_val(&self.hull.indices[..])
+            + size_of_val(&self.terrain.vertices[..])
+            + size_of_val(&self.terrain.indices[..]);
+        self.gpu_bytes() + meshes + self.morph_from.as_ref().map_or(0, |m| size_of_val(&m[..]))
+    }
+
     /// Bytes the tile takes on the GPU (texels, mipmap, colour, classes).
     pub fn gpu_bytes(&self) -> usize {
         let mip: usize = (0..self.mip.levels()).map(|l| self.mip.level(l).data().len() * 4).sum();

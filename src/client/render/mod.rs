@@ -95,9 +95,9 @@ pub struct Rendered {
     pub colour: Vec<[u8; 4]>,
     /// Distance along the view axis, metres; 0 where nothing was hit.
     pub view_z_m: Vec<f32>,
-    /// Texture fetches per pixel: view ray, shadow ray and shading (with
-    /// rays in a compute pass, the view rays of every tile the pixel's ray
-    /// was cast through).
+    /// Texture fetches per pixel: the view ray with the read of its hit
+    /// cell for shading (with rays in a compute pass, the view rays of every
+    /// tile the pixel's ray was cast through), and the shadow rays.
     pub fetches: Vec<[u32; 2]>,
     /// The draw whose rays a pixel shows: `k + 1` for the `k`-th of the
     /// frame's draws, 0 where no ray was cast.
