@@ -408,11 +408,9 @@ fn check_styles(styles: Option<&str>) -> Result<(), Exception> {
 
 fn size(text: &str, key: &'static str, limits: Limits) -> Result<usize, Exception> {
     let bad = |why: String| Exception::new(Code::InvalidParameterValue, format!("{key}={text}: {why}")).locator(key);
-    let v: usize = text.trim().parse().map_err(|_| bad("not a whole number".into()))?;
-    if v == 0 || v > limits.max_side {
-        return Err(bad(format!("must be 1 to {}", limits.max_side)));
-    }
-    Ok(v)
+    let v: Option<usize> = text.trim().parse().ok();
+    v.filter(|v| (1..=limits.max_side).contains(v))
+        .ok_or_else(|| bad(format!("must be a whole number from 1 to {}", limits.max_side)))
 }
 
 fn numbers(text: &str) -> Result<[f64; 4], Exception> {
@@ -496,6 +494,13 @@ mod tests {
         assert_eq!(code(&(base.replace("image/png", "image/gif") + "&LAYERS=dem")), Code::InvalidFormat);
         assert_eq!(code(&(base.replace("&WIDTH=4", "") + "&LAYERS=dem")), Code::MissingParameterValue);
         assert_eq!(code(&(base.replace("WIDTH=4", "WIDTH=99999") + "&LAYERS=dem")), Code::InvalidParameterValue);
+        // One message for every size that is no side (regression: −5 was
+        // "not a whole number").
+        for width in ["-5", "0", "99999", "1.5", "x"] {
+            let query = base.replace("WIDTH=4", &format!("WIDTH={width}")) + "&LAYERS=dem";
+            let Err((e, _)) = parse(&query, LIMITS) else { panic!("{width}") };
+            assert_eq!(e.message, format!("WIDTH={width}: must be a whole number from 1 to 4096"));
+        }
         assert_eq!(
             code(&(base.replace("BBOX=40,-106,41,-105", "BBOX=41,-106,40,-105") + "&LAYERS=dem")),
             Code::InvalidParameterValue
