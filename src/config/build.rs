@@ -493,6 +493,12 @@ fn class_table(lc: &LandcoverConfig) -> Result<HashMap<i64, (SurfaceType, f32)>,
     }
     let mut table = HashMap::new();
     for entry in &lc.classes {
+        if let Some([a, b]) = entry.ranges.iter().find(|[a, b]| a > b) {
+            return Err(format!(
+                "the range [{a}, {b}] of {} classes is empty (write [{b}, {a}])",
+                entry.surface.name()
+            ));
+        }
         let cover = entry.cover.unwrap_or(if entry.surface == SurfaceType::Forest { 1.0 } else { 0.0 });
         if !(0.0..=1.0).contains(&cover) {
             return Err(format!("cover {cover} of {} classes is outside [0, 1]", entry.surface.name()));

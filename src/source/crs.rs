@@ -66,6 +66,12 @@ impl Crs {
         if proj.is_latlong() {
             return Ok(Crs { epsg: code, kind: Kind::Geographic });
         }
+        if proj.is_geocent() {
+            return Err(CrsError::Unusable {
+                code,
+                reason: "geocentric (x, y, z from the Earth's centre), not a map".into(),
+            });
+        }
         let wgs84 = Proj::from_epsg_code(4326).map_err(|e| CrsError::Unusable { code, reason: e.to_string() })?;
         Ok(Crs { epsg: code, kind: Kind::Projected { proj: Box::new(proj), wgs84: Box::new(wgs84) } })
     }
@@ -150,6 +156,10 @@ mod tests {
         assert!(err.to_string().contains("EPSG:99999"));
         assert!(Crs::from_epsg(4269).unwrap().is_geographic());
         assert!(!Crs::from_epsg(2193).unwrap().is_geographic());
+        // Regression: EPSG:4978 was taken for a map, its x and y for eastings
+        // and northings (bounds near 86° E, 0° N).
+        let err = Crs::from_epsg(4978).unwrap_err().to_string();
+        assert!(err.contains("EPSG:4978 cannot be used: geocentric"), "{err}");
     }
 
     #[test]

@@ -129,6 +129,23 @@ fn bad_configs_name_the_file_and_the_problem() {
             "[landcover]\nkind = \"map\"\nforest = \"oak\"\n[[forest]]\nname = \"pine\"\n",
             "forest = \"oak\" names no [[forest]] type",
         ),
+        // Regression: these three were taken (an empty range matched nothing,
+        // NaN filled like propagate, a long fill ran out of memory).
+        (
+            "inverted.toml",
+            "[landcover]\nkind = \"classes\"\npath = \"c.tif\"\n[[landcover.classes]]\nranges = [[9000, 7000]]\nsurface = \"forest\"\n",
+            "the range [9000, 7000] of forest classes is empty",
+        ),
+        (
+            "nan_fill.toml",
+            "[dem]\nnodata = { policy = \"constant\", value = nan }\n",
+            "[dem] nodata: value = NaN: must be a finite height",
+        ),
+        (
+            "far_fill.toml",
+            "[dem]\nnodata = { policy = \"fill\", max_distance_px = 100000 }\n",
+            "max_distance_px = 100000: must be 1 to 2048",
+        ),
         (
             "typed_water.toml",
             "[landcover]\nkind = \"classes\"\npath = \"c.tif\"\n[[landcover.classes]]\nvalues = [1]\nsurface = \"water\"\nforest = \"pine\"\n[[forest]]\nname = \"pine\"\n",
@@ -142,6 +159,12 @@ fn bad_configs_name_the_file_and_the_problem() {
         assert!(err.contains(needle), "{name}: {err}");
         assert!(err.contains(name) || err.contains(needle), "{name}: {err}");
     }
+    // A geocentric CRS is no map (regression: read as one, bounds near 86° E, 0° N).
+    let geocentric = dir.join("geocentric.toml");
+    let text = format!("[dem]\npath = {:?}\ncrs = \"EPSG:4978\"\n", common::data("rmnp/rmnp-dem.tif"));
+    std::fs::write(&geocentric, text).unwrap();
+    let err = sylva::config::load(Some(&geocentric)).expect_err("geocentric").to_string();
+    assert!(err.contains("EPSG:4978 cannot be used: geocentric"), "{err}");
     // A picture is no DEM.
     let picture = dir.join("picture.toml");
     std::fs::write(&picture, format!("[dem]\npath = {:?}\n", common::data("rmnp/rmnp-rgb.tif"))).unwrap();
