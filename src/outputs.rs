@@ -19,9 +19,13 @@ pub enum OutputError {
     /// An output names an existing directory.
     #[error("{0}: is a directory")]
     Directory(PathBuf),
-    /// An output names a device, a pipe, a socket or a link to nothing.
+    /// An output names a device, a pipe or a socket.
     #[error("{0}: is not a regular file; refusing to replace it")]
     NotRegular(PathBuf),
+    /// An output names a link to nothing (as `cp`, Sylva does not write
+    /// through it).
+    #[error("{0}: is a link to {1}, which does not exist; refusing to write through it")]
+    DanglingLink(PathBuf, PathBuf),
     /// An output's directory is a file.
     #[error("{0}: is not a directory to write into")]
     NotDirectory(PathBuf),
@@ -105,7 +109,10 @@ fn destination(path: &Path) -> Result<PathBuf, OutputError> {
     };
     let target = match meta.is_symlink() {
         true => match std::fs::canonicalize(path) {
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Err(OutputError::NotRegular(path.into())),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                let to = std::fs::read_link(path).unwrap_or_default();
+                return Err(OutputError::DanglingLink(path.into(), to));
+            }
             resolved => resolved.map_err(|source| OutputError::Write { path: path.into(), source })?,
         },
         false => path.to_path_buf(),
@@ -308,12 +315,13 @@ mod tests {
         assert_eq!(std::fs::read(&target).unwrap(), b"new");
         let dangling = dir.join("dangling.tif");
         std::os::unix::fs::symlink(dir.join("nothing"), &dangling).unwrap();
+        let err = check(&[], &[&dangling]).unwrap_err().to_string();
+        assert!(err.ends_with("nothing, which does not exist; refusing to write through it"), "{err}");
+        assert!(matches!(write_all(&[(&dangling, b"x")]), Err(OutputError::DanglingLink(..))));
         let null = Path::new("/dev/null");
-        for special in [null, &dangling] {
-            let err = check(&[], &[special]).unwrap_err().to_string();
-            assert!(err.contains("not a regular file"), "{err}");
-            assert!(matches!(write_all(&[(special, b"x")]), Err(OutputError::NotRegular(_))));
-        }
+        let err = check(&[], &[null]).unwrap_err().to_string();
+        assert!(err.contains("not a regular file"), "{err}");
+        assert!(matches!(write_all(&[(null, b"x")]), Err(OutputError::NotRegular(_))));
         assert!(std::fs::metadata(null).unwrap().file_type().is_char_device(), "/dev/null untouched");
         std::fs::remove_dir_all(&dir).unwrap();
     }
