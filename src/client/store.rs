@@ -223,11 +223,18 @@ impl TileStore {
             self.ask(&missing);
         } else {
             let (missing, grid, halo) = (self.missing(ids), source.grid(), self.halo);
-            let loaded: Vec<(TileId, Option<TileData>)> = self.pool.install(|| {
-                missing.par_iter().map(|&id| Ok((id, load(source, &grid, id, halo)?))).collect::<Result<_, LoadError>>()
-            })?;
+            let loaded: Vec<Loaded> =
+                self.pool.install(|| missing.par_iter().map(|&id| (id, load(source, &grid, id, halo))).collect());
+            // The tiles that came are kept, whatever failed beside them.
+            let mut failed = None;
             for (id, tile) in loaded {
-                self.keep(id, tile);
+                match tile {
+                    Ok(tile) => self.keep(id, tile),
+                    Err(e) => failed = failed.or(Some(e)),
+                }
+            }
+            if let Some(e) = failed {
+                return Err(e);
             }
         }
         let out = ids.iter().filter_map(|&id| self.touch(id)).collect();
@@ -484,6 +491,20 @@ mod tests {
             assert_eq!(envelope.range(&sector), plain.range(&sector), "level {level}");
             assert!(envelope.range(&sector).is_some());
         }
+    }
+
+    #[test]
+    fn a_failed_tile_loses_none_loaded_beside_it() {
+        let region = Arc::new(crate::config::load(None).unwrap());
+        let b = region.bounds;
+        let fine = region.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), 12);
+        let [good, failing, ..] = fine.parent().unwrap().children();
+        let source = Flaky::new(&region, failing);
+        let mut store = TileStore::new(2, usize::MAX, 2).unwrap();
+        assert!(store.get(&source, &[good, failing]).is_err());
+        assert!(store.tiles.contains_key(&good), "regression: the batch's good tiles were dropped");
+        assert_eq!(store.get(&source, &[good]).unwrap().len(), 1);
+        assert_eq!(source.fetches(), 2, "the good tile is not fetched again");
     }
 
     #[test]
