@@ -124,12 +124,6 @@ impl Run<'_> {
         Some((take, room, gain))
     }
 
-    /// Whether `e` can still be applied: its head is unsplit and its parent
-    /// split (or it is a root).
-    fn available(&self, e: &Entry) -> bool {
-        !self.split[e.node as usize] && self.forest.node(e.node).parent.is_none_or(|p| self.split[p as usize])
-    }
-
     /// The most recently split nodes with no split child (Mason and Blake's
     /// decrement candidates), at most [`CANDIDATES`].
     fn undoable(&self) -> Vec<u32> {

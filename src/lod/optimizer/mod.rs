@@ -276,9 +276,15 @@ impl<'a> Run<'a> {
     /// continuous level it needs: the current one, or a higher one that
     /// frees the room (continuous variables are divisible, so they give way
     /// to a discrete step that is worth more than what they lose). Blocked
-    /// groups are dropped; their head alone is offered instead.
+    /// groups are dropped; their head alone is offered instead. Entries an
+    /// exchange made stale (applied since, or below an undone split) are
+    /// discarded.
     fn best_fitting(&mut self) -> Option<(Entry, f64)> {
         while let Some(e) = self.heap.peek().copied() {
+            if !self.available(&e) {
+                self.heap.pop();
+                continue;
+            }
             let (db, dc) = self.delta(&e);
             if !crate::lod::positive(e.value) || !(db > 0.0 || dc < 0.0) {
                 self.heap.clear();
@@ -339,6 +345,12 @@ impl<'a> Run<'a> {
                 self.dropped.push(alone);
             }
         }
+    }
+
+    /// Whether `e` can still be applied: its head is unsplit and its parent
+    /// split (or it is a root).
+    fn available(&self, e: &Entry) -> bool {
+        !self.split[e.node as usize] && self.forest.node(e.node).parent.is_none_or(|p| self.split[p as usize])
     }
 
     fn continuous_slope(&self) -> Option<f64> {

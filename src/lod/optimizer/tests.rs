@@ -120,6 +120,11 @@ fn depth_of(nodes: &[Node], mut i: usize) -> usize {
     d
 }
 
+/// A forest from `(parent, benefit, cost_ms)` rows.
+fn forest_of(rows: &[(Option<u32>, f64, f64)]) -> Forest {
+    Forest::new(rows.iter().map(|&(parent, benefit, cost_ms)| Node { parent, benefit, cost_ms }).collect()).unwrap()
+}
+
 /// Cases per property (and fixed seeds of the random instances): 300, or
 /// `SYLVA_LOD_CASES` for a longer search.
 fn cases() -> u32 {
@@ -340,4 +345,30 @@ fn parents_must_come_first() {
     assert_eq!(Forest::new(nodes).unwrap_err(), LodError::ParentAfterChild { node: 0, parent: 1 });
     let looped = vec![Node { parent: Some(0), benefit: 1.0, cost_ms: 1.0 }];
     assert!(Forest::new(looped).is_err());
+}
+
+/// An instance on which an exchange undoes 0's split and takes 1's, then
+/// 3's, which 1 opens.
+fn exchanging_instance() -> (Forest, f64) {
+    let forest = forest_of(&[
+        (None, 0.5469239471139316, 0.4594792327275998),
+        (None, 0.16176975419084982, 0.27292652428633873),
+        (Some(0), 1.3367224309052932, 0.6029250822155918),
+        (Some(1), 0.5817401614372553, 1.2681007491879956),
+        (Some(3), 0.8489283481992361, 0.5133750205103131),
+        (Some(3), 0.7376661422780353, 1.569053386010419),
+        (Some(4), 2.1237040983072286, 1.0662633101850394),
+        (Some(5), 0.8639932277557765, 0.4339855238299229),
+    ]);
+    (forest, 1.779111252466815)
+}
+
+#[test]
+fn a_group_an_exchange_opens_and_takes_is_not_applied_again() {
+    // 3 was also offered to the heap when 1 was applied, and the greedy
+    // then applied it a second time (1.96 ms).
+    let (forest, budget) = exchanging_instance();
+    let sel = optimize(&forest, &[], &Settings::budget(budget));
+    assert!(feasible(&sel, budget), "{} > {budget}", sel.cost_ms);
+    assert!(sel.benefit >= 0.5 * exact(&forest, &[], Smooth::default(), budget));
 }
