@@ -79,7 +79,9 @@ impl Run<'_> {
     /// `first` (if it fits and does not hang below `out`), then the best of
     /// `others` and of what `first` makes available, each if it fits and
     /// gains more than the continuous variables would make of its time: the
-    /// increments taken, the room left and the benefit gained.
+    /// increments taken, the room left and the benefit gained; `None` if
+    /// `first` does not fit or the room ends below 0 (undoing a split that
+    /// saved time can cost more than the budget left).
     fn fill(&self, out: u32, first: Option<Entry>, others: &[Entry], mut room: f64) -> Option<(Vec<Entry>, f64, f64)> {
         let below_out = |e: &Entry| self.forest.node(e.node).parent == Some(out);
         let mut take = Vec::new();
@@ -121,7 +123,7 @@ impl Run<'_> {
                 take.push(e);
             }
         }
-        Some((take, room, gain))
+        (room >= 0.0).then_some((take, room, gain))
     }
 
     /// The most recently split nodes with no split child (Mason and Blake's

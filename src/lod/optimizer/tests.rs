@@ -372,3 +372,29 @@ fn a_group_an_exchange_opens_and_takes_is_not_applied_again() {
     assert!(feasible(&sel, budget), "{} > {budget}", sel.cost_ms);
     assert!(sel.benefit >= 0.5 * exact(&forest, &[], Smooth::default(), budget));
 }
+
+#[test]
+fn an_exchange_does_not_undo_a_time_saving_split_it_has_no_room_for() {
+    // Splitting 5 alone loses benefit and saves time (its group, with 9,
+    // gains both). After one exchange undid 9's split, the next undid 5's
+    // for its benefit, with no room for the 1.04 ms it gives back: 6.35 ms.
+    let forest = forest_of(&[
+        (None, 0.5851299370361258, 0.47309685978665866),
+        (None, 0.6839380336061618, 0.5710193633597809),
+        (None, 1.7899956308758627, 0.6247585212177713),
+        (Some(0), 7.370040280666403, 1.3685399049836142),
+        (Some(1), 4.044751054770041, 2.198444939206387),
+        (Some(1), 6.934983655611227, 1.3676147203138025),
+        (Some(3), 3.7434715758584893, 1.247473546092847),
+        (Some(4), 8.041393502244938, 1.1378757086353264),
+        (Some(4), 6.069064726873882, 1.8487094979353411),
+        (Some(5), 0.4457231528448069, 0.32517901530743215),
+        (Some(8), 2.8613000269441646, 1.198497453871937),
+        (Some(8), 1.6195173435890775, 0.498613071990929),
+        (Some(8), 2.0322689652331083, 2.0419718257228485),
+        (Some(9), 7.196220958217331, 0.9381779598777502),
+    ]);
+    let budget = 5.742489373228253;
+    let sel = optimize(&forest, &[], &Settings::budget(budget));
+    assert!(feasible(&sel, budget), "{} > {budget}", sel.cost_ms);
+}
