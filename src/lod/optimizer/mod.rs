@@ -16,7 +16,14 @@
 //!   alternative "its ancestors and it alone" is remembered; the better of
 //!   that and the greedy answer is at least half the optimum whenever that
 //!   alternative fits the budget and increments add benefit (Mason and
-//!   Blake's bound, via the fractional relaxation).
+//!   Blake's bound, via the fractional relaxation). A convexified group can
+//!   be larger than the budget where each of its splits fits; then the
+//!   alternative is the best part of it that fits: a prefix in the order
+//!   Horn's merging built it, or one member's own block with its
+//!   ancestors. That is a heuristic, with no bound proven: it keeps half
+//!   on forks of two branches (tested), but with three, a branch left out
+//!   of the group can be what the optimum takes besides the greedy's
+//!   increments, and the answer falls below half.
 //! - **An upper bound.** At the same moment the greedy state lies on the
 //!   path of the fractional optimum, and no discrete increment left is
 //!   worth more per ms than the blocked one, so the discrete benefit so far
@@ -39,7 +46,7 @@ pub use discrete::{Forest, Node};
 
 use super::model::Smooth;
 use discrete::{Groups, ratio};
-use std::collections::BinaryHeap;
+use std::collections::{BinaryHeap, HashMap};
 use std::time::Instant;
 
 /// Bad optimiser input.
@@ -169,6 +176,14 @@ impl Ord for Entry {
     fn cmp(&self, o: &Entry) -> std::cmp::Ordering {
         self.value.total_cmp(&o.value).then(o.node.cmp(&self.node))
     }
+}
+
+/// Which part of a blocked group the half-optimality alternative splits.
+enum Part {
+    /// Its first members in merge order.
+    Prefix(usize),
+    /// A member's own block, with the member's ancestors.
+    Block(u32),
 }
 
 /// The optimiser's state.
@@ -448,29 +463,71 @@ impl<'a> Run<'a> {
         if bound.is_nan() { f64::INFINITY } else { bound }
     }
 
-    /// The half-optimality alternative: the roots, the ancestors of `v`
-    /// split one by one, and `v`'s group. Adopted if it fits and is better.
+    /// The half-optimality alternative to the greedy blocked at group `v`
+    /// ([`Run::alternative`]), adopted if it is better.
     fn try_alternative(&mut self, v: u32) -> bool {
+        let Some(split) = self.alternative(v) else { return false };
+        let greedy = drawn_sums(self.forest, &self.split).0 + self.levels.benefit(self.mu);
+        let (benefit_d, cost_d) = drawn_sums(self.forest, &split);
+        let mu = self.levels.level_for_budget(self.budget_ms - cost_d);
+        let better = cost_d <= self.budget_ms && benefit_d + self.levels.benefit(mu) > greedy;
+        if better {
+            self.split = split;
+            self.mu = mu;
+        }
+        better
+    }
+
+    /// The split of the alternative to the greedy blocked at group `v`,
+    /// the part of the group that fits and gains the most with the
+    /// continuous variables taking the rest (the whole group may not fit
+    /// where part of it does): a prefix of its members in merge order, or
+    /// one member's own block (the group it headed when merged), each with
+    /// its ancestors. Every such part is a cut: a member's parent is a
+    /// member before it or an ancestor of `v`. `None` if none fits.
+    fn alternative(&self, v: u32) -> Option<Vec<bool>> {
+        let members: Vec<u32> = self.groups.members(v).collect();
         let mut split = vec![false; self.forest.len()];
+        self.split_ancestors(v, &mut split);
+        let base = drawn_sums(self.forest, &split);
+        let mut best: Option<(f64, Part)> = None;
+        let mut consider = |(b, c): (f64, f64), part: Part| {
+            let total = b + self.levels.benefit(self.levels.level_for_budget(self.budget_ms - c));
+            if c <= self.budget_ms && best.as_ref().is_none_or(|(t, _)| total > *t) {
+                best = Some((total, part));
+            }
+        };
+        // The sums with each member's ancestors split, and with a prefix.
+        let mut path = HashMap::from([(v, base)]);
+        let mut prefix = base;
+        for (k, &m) in members.iter().enumerate() {
+            let at = path[&m];
+            let i = m as usize;
+            consider((at.0 + self.groups.db[i], at.1 + self.groups.dc[i]), Part::Block(m));
+            let (db, dc) = self.forest.increment(m).unwrap_or((0.0, 0.0));
+            prefix = (prefix.0 + db, prefix.1 + dc);
+            consider(prefix, Part::Prefix(k + 1));
+            path.extend(self.forest.children(m).iter().map(|&c| (c, (at.0 + db, at.1 + dc))));
+        }
+        let chosen: Vec<u32> = match best?.1 {
+            Part::Prefix(k) => members[..k].to_vec(),
+            Part::Block(m) => {
+                self.split_ancestors(m, &mut split);
+                self.groups.members(m).collect()
+            }
+        };
+        for m in chosen {
+            split[m as usize] = true;
+        }
+        Some(split)
+    }
+
+    /// Marks the strict ancestors of `v` split.
+    fn split_ancestors(&self, v: u32, split: &mut [bool]) {
         let mut a = self.forest.node(v).parent;
         while let Some(p) = a {
             split[p as usize] = true;
             a = self.forest.node(p).parent;
         }
-        for m in self.groups.members(v) {
-            split[m as usize] = true;
-        }
-        let greedy = (std::mem::replace(&mut self.split, split), self.mu);
-        let (benefit_d, cost_d) = drawn_sums(self.forest, &self.split);
-        let mu = self.levels.level_for_budget(self.budget_ms - cost_d);
-        let better = cost_d <= self.budget_ms
-            && benefit_d + self.levels.benefit(mu)
-                > drawn_sums(self.forest, &greedy.0).0 + self.levels.benefit(greedy.1);
-        if better {
-            self.mu = mu;
-        } else {
-            self.split = greedy.0;
-        }
-        better
     }
 }

@@ -177,10 +177,13 @@ proptest! {
         big_cost in 5.0f64..100.0,
         big_ratio in 0.2f64..1.0,
         dud in 0.0f64..0.05,
+        fork in prop::collection::vec((0.3f64..0.8, 0.2f64..3.0), 0..3),
     ) {
         // Small increments worth slightly more per ms than one big one that
-        // fills the whole budget (the knapsack trap), plus a non-convex
-        // chain: a split worth almost nothing that opens a valuable one.
+        // fills the whole budget (the knapsack trap), a non-convex chain (a
+        // split worth almost nothing that opens a valuable one), and a fork:
+        // a split worth nothing that opens branches each of which fits with
+        // it, while their convexified group together may not.
         let mut nodes = vec![];
         let root = |nodes: &mut Vec<Node>| { nodes.push(Node { parent: None, benefit: 0.0, cost_ms: 0.0 }); nodes.len() as u32 - 1 };
         for (b, c) in &small {
@@ -193,8 +196,17 @@ proptest! {
         nodes.push(Node { parent: Some(r), benefit: dud, cost_ms: 1.0 });
         let mid = nodes.len() as u32 - 1;
         nodes.push(Node { parent: Some(mid), benefit: 50.0 * big_ratio, cost_ms: 2.0 });
-        let forest = Forest::new(nodes).unwrap();
         let budget = big_cost;
+        let head = root(&mut nodes);
+        let stem_ms = 0.05 * budget / fork.len().max(1) as f64;
+        for (share, value) in &fork {
+            nodes.push(Node { parent: Some(head), benefit: 0.0, cost_ms: stem_ms });
+            let stem = nodes.len() as u32 - 1;
+            for _ in 0..2 {
+                nodes.push(Node { parent: Some(stem), benefit: value * share * budget / 2.0, cost_ms: share * budget / 2.0 });
+            }
+        }
+        let forest = Forest::new(nodes).unwrap();
         let sel = optimize(&forest, &[], &Settings::budget(budget));
         let best = exact(&forest, &[], Smooth::default(), budget);
         prop_assert!(feasible(&sel, budget));
@@ -220,6 +232,27 @@ fn convexified_increments_see_past_a_worthless_split() {
     let sel = optimize(&forest, &[], &Settings::budget(2.0));
     assert_eq!(sel.benefit, 100.1);
     assert!(sel.split[0] && sel.split[1]);
+}
+
+#[test]
+fn the_alternative_takes_the_part_of_a_group_that_fits() {
+    // Splitting 0 opens 1 and 2, each of whose splits fits with it (6.5 ms)
+    // but not both (12 ms). The greedy takes 7's split first and is blocked
+    // by the group {0, 2, 1}; the alternative tried the whole group only.
+    let forest = forest_of(&[
+        (None, 0.0, 0.0),
+        (Some(0), 0.0, 0.5),
+        (Some(0), 0.0, 0.5),
+        (Some(1), 5.0, 3.0),
+        (Some(1), 5.0, 3.0),
+        (Some(2), 5.01, 3.0),
+        (Some(2), 5.01, 3.0),
+        (None, 0.0, 0.0),
+        (Some(7), 0.9, 0.5),
+    ]);
+    let sel = optimize(&forest, &[], &Settings::budget(10.0));
+    assert!(sel.alternative);
+    assert_eq!(sel.benefit, 10.02, "{:?}", sel.split);
 }
 
 #[test]
