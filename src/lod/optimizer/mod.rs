@@ -24,12 +24,15 @@
 //!   on forks of two branches (tested), but with three, a branch left out
 //!   of the group can be what the optimum takes besides the greedy's
 //!   increments, and the answer falls below half.
-//! - **An upper bound.** At the same moment the greedy state lies on the
-//!   path of the fractional optimum, and no discrete increment left is
-//!   worth more per ms than the blocked one, so the discrete benefit so far
-//!   plus the best split of the remaining budget between the continuous
-//!   curve and increments at that slope bounds every feasible answer
-//!   ([`Selection::upper_bound`]).
+//! - **An upper bound.** At the same moment the blocked increment's value
+//!   (or the continuous level, if higher) prices a millisecond at `λ`:
+//!   `λ·T` plus the best benefit less priced cost over the cuts (one
+//!   bottom-up pass) and over the continuous curve bounds every feasible
+//!   answer (Lagrangian duality; [`Selection::upper_bound`]). Where no
+//!   discrete increment left is worth more per ms than the blocked one, the
+//!   greedy state lies on the path of the fractional optimum and the bound
+//!   is that optimum's value; splits that lose both benefit and time, which
+//!   the greedy never undoes, only make it less tight.
 //!
 //! If the roots alone (the coarsest representation) cost more than the
 //! budget they are still drawn, nothing else is, and the overrun is
@@ -335,16 +338,25 @@ impl<'a> Run<'a> {
         (gain > 0.0).then_some(mu)
     }
 
-    /// No feasible answer beats the current discrete state plus the best
-    /// split of the remaining budget between the continuous variables (their
-    /// exact concave curve) and discrete increments worth `value` per ms,
-    /// when no discrete increment left is worth more than `value` (the
-    /// Lagrangian bound of the fractional problem).
+    /// The better bound ([`Run::bound_at`]) of two prices: that of the
+    /// discrete increment worth `value` per ms, and the continuous level
+    /// the budget left allows. When no increment left is worth more than
+    /// `value`, the greedy state lies on the fractional optimum's path and
+    /// the higher of the two gives that optimum's value.
     fn bound_now(&self, value: f64) -> f64 {
-        let available = self.budget_ms - self.cost_d;
-        let mu = value.max(self.levels.level_for_budget(available));
-        let rest = (available - self.levels.cost_ms(mu)).max(0.0);
-        self.benefit_d + self.levels.benefit(mu) + value.max(0.0) * rest
+        let level = self.levels.level_for_budget(self.budget_ms - self.cost_d);
+        self.bound_at(value.max(0.0)).min(self.bound_at(level))
+    }
+
+    /// No feasible answer beats `λ·T` plus the best `b − λ·c` of the cuts
+    /// and of the continuous variables, for any price `λ ≥ 0` per ms
+    /// (Lagrangian duality, whatever the signs of the increments); ∞ for
+    /// an infinite price or a NaN sum.
+    fn bound_at(&self, lambda: f64) -> f64 {
+        let spend = |ms: f64| if lambda == 0.0 { 0.0 } else { lambda * ms };
+        let continuous = self.levels.benefit(lambda) - spend(self.levels.cost_ms(lambda));
+        let bound = spend(self.budget_ms) + self.forest.best_priced(lambda) + continuous;
+        if lambda.is_finite() && !bound.is_nan() { bound } else { f64::INFINITY }
     }
 
     /// A blocked group's head alone, if that is worth something: offered
@@ -459,8 +471,7 @@ impl<'a> Run<'a> {
     /// The bound when stopped early with nothing blocked yet.
     fn open_bound(&mut self, benefit: f64) -> f64 {
         let discrete = self.heap.peek().map_or(0.0, |e| e.value);
-        let bound = self.bound_now(discrete).max(benefit);
-        if bound.is_nan() { f64::INFINITY } else { bound }
+        self.bound_now(discrete).max(benefit)
     }
 
     /// The half-optimality alternative to the greedy blocked at group `v`
