@@ -146,6 +146,11 @@ fn drawn_sums(forest: &Forest, split: &[bool]) -> (f64, f64) {
     drawn(forest, split).fold((0.0, 0.0), |(b, c), i| (b + forest.node(i).benefit, c + forest.node(i).cost_ms))
 }
 
+/// Whether `deadline` has passed.
+fn late(deadline: Option<Instant>) -> bool {
+    deadline.is_some_and(|d| Instant::now() >= d)
+}
+
 /// Maximises benefit under the budget over the nodes of `forest` and the
 /// `continuous` variables.
 pub fn optimize(forest: &Forest, continuous: &[Continuous], settings: &Settings) -> Selection {
@@ -279,7 +284,7 @@ impl<'a> Run<'a> {
 
     fn past(&self, deadline: Option<Instant>) -> bool {
         // Instant::now costs ~20 ns: look every 64 iterations.
-        self.iterations.is_multiple_of(64) && deadline.is_some_and(|d| Instant::now() >= d)
+        self.iterations.is_multiple_of(64) && late(deadline)
     }
 
     fn why_done(&self) -> Stop {

@@ -460,3 +460,20 @@ fn the_upper_bound_holds_over_splits_that_lose_benefit_and_time() {
     let best = exact(&forest, &[], Smooth::default(), budget);
     assert!(sel.upper_bound >= best * (1.0 - 1e-9), "bound {} < {best}", sel.upper_bound);
 }
+
+#[test]
+fn exchanges_stop_at_the_limits() {
+    let (forest, budget) = exchanging_instance();
+    let free = Settings::budget(budget);
+    // The greedy to its budget stop, then the exchanges under `settings`:
+    // their stop, and whether they changed the split.
+    let exchange = |settings: &Settings| {
+        let mut run = Run::new(&forest, Levels::new(&[], free.smooth), &free);
+        assert_eq!(run.greedy(&free), Stop::Budget);
+        let split = run.split.clone();
+        (run.exchange(settings, Stop::Budget), split != run.split)
+    };
+    assert_eq!(exchange(&free), (Stop::Budget, true), "an exchange is made");
+    assert_eq!(exchange(&Settings { deadline: Some(Instant::now()), ..free }), (Stop::Limit, false));
+    assert_eq!(exchange(&Settings { max_iterations: 1, ..free }), (Stop::Limit, false));
+}
