@@ -56,7 +56,7 @@ pub struct BudgetFlight {
     current: Option<Selected>,
     /// A cut that coarsens the current one, drawn once the tiles it
     /// replaces have morphed onto its coarser tiles.
-    pending: Option<Pending>,
+    pending: Option<Selected>,
     /// Flight time of the last request.
     requested_s: f64,
     frames: usize,
@@ -148,10 +148,10 @@ impl BudgetFlight {
         if self.morphs.as_ref().is_none_or(Morphs::settled)
             && let Some(p) = self.pending.take()
         {
-            self.current = Some(p.selected);
+            self.current = Some(p);
         }
         if let Some(done) = self.worker.take(stale) {
-            self.offer(done, t_s);
+            self.offer(done);
         }
         if !self.worker.busy() && t_s >= self.requested_s + self.look.tau_s {
             let ground = |lon, lat| self.selector.lowest_ground_m(lon, lat);
@@ -237,10 +237,9 @@ impl BudgetFlight {
     /// coarser tile (over `τ`); the frame's [`Self::morph_tile`]s follow.
     pub fn morphs(&mut self, t_s: f64, drawn: &[TileId]) -> Vec<Morphing> {
         self.pairs.next_frame();
-        let next: Option<Vec<TileId>> = self.pending.as_ref().map(|p| ids(&p.selected));
-        let since_s = self.pending.as_ref().map_or(t_s, |p| p.since_s);
+        let next: Option<Vec<TileId>> = self.pending.as_ref().map(ids);
         let Some(morphs) = &mut self.morphs else { return Vec::new() };
-        morphs.update(t_s, drawn, next.as_deref().map(|n| (n, since_s)))
+        morphs.update(t_s, drawn, next.as_deref())
     }
 
     /// `tile` prepared to be drawn morphing with `from`, kept while the
@@ -251,17 +250,17 @@ impl BudgetFlight {
 
     /// A finished selection: drawn at once unless, geomorphing, it
     /// coarsens the cut drawn: then it is held while the tiles it replaces
-    /// morph down (a newer one replaces it there, the morphs keep their
-    /// start).
-    fn offer(&mut self, next: Selected, t_s: f64) {
+    /// morph down (a newer one replaces it there; [`Morphs`] sends back up
+    /// the tiles it no longer coarsens).
+    fn offer(&mut self, next: Selected) {
         let Some(current) = &self.current else {
             self.current = Some(next);
             return;
         };
         if let Some(p) = &mut self.pending {
-            p.selected = next;
+            *p = next;
         } else if self.morphs.is_some() && coarsens(current, &next) {
-            self.pending = Some(Pending { selected: next, since_s: t_s });
+            self.pending = Some(next);
         } else {
             self.current = Some(next);
         }
@@ -323,12 +322,6 @@ pub struct Observed {
     pub features: CostFeatures,
     /// The model's prediction for it, before the frame corrected the model.
     pub model_ms: f64,
-}
-
-/// A cut waiting for downmorphs, and when they began.
-struct Pending {
-    selected: Selected,
-    since_s: f64,
 }
 
 fn ids(s: &Selected) -> Vec<TileId> {
