@@ -155,7 +155,8 @@ impl BudgetFlight {
         }
         if !self.worker.busy() && t_s >= self.requested_s + self.look.tau_s {
             let ground = |lon, lat| self.selector.lowest_ground_m(lon, lat);
-            let (cameras, cone) = ahead::ahead(&self.predictor, camera, t_s, &self.look, &ground);
+            let (cameras, cone) =
+                ahead::ahead(&self.predictor, camera, t_s, ahead::stages(self.morphs.is_some()), &self.look, &ground);
             let trees = self.tree_items(&cameras);
             let (model, budget, steps) = (self.model(), self.aimed(), self.steps.clone());
             let request = Request { cameras, cone: Some(cone), trees, model, budget, steps };
