@@ -54,8 +54,9 @@ pub struct BudgetFlight {
     worker: Worker,
     /// The cut drawn now.
     current: Option<Selected>,
-    /// A cut that coarsens the current one, drawn once the tiles it
-    /// replaces have morphed onto its coarser tiles.
+    /// A cut held while the morphs it would break run: drawn once the
+    /// tiles it coarsens have morphed onto its coarser tiles and those it
+    /// refines have stopped morphing.
     pending: Option<Selected>,
     /// Flight time of the last request.
     requested_s: f64,
@@ -250,9 +251,10 @@ impl BudgetFlight {
     }
 
     /// A finished selection: drawn at once unless, geomorphing, it
-    /// coarsens the cut drawn: then it is held while the tiles it replaces
-    /// morph down (a newer one replaces it there; [`Morphs`] sends back up
-    /// the tiles it no longer coarsens).
+    /// coarsens the cut drawn or refines a tile still morphing: then it is
+    /// held while the tiles it replaces morph down, or finish morphing (a
+    /// newer one replaces it there; [`Morphs`] sends back up the tiles it
+    /// no longer coarsens).
     fn offer(&mut self, next: Selected) {
         let Some(current) = &self.current else {
             self.current = Some(next);
@@ -260,7 +262,9 @@ impl BudgetFlight {
         };
         if let Some(p) = &mut self.pending {
             *p = next;
-        } else if self.morphs.is_some() && coarsens(current, &next) {
+        } else if let Some(m) = &self.morphs
+            && (coarsens(current, &next) || m.refines_morphing(&ids(&next)))
+        {
             self.pending = Some(next);
         } else {
             self.current = Some(next);
@@ -400,6 +404,28 @@ mod tests {
         assert!(!f.worker.busy() && f.requested_s == 0.0);
         f.frame(1.0, &camera(10.07));
         assert_eq!(f.requested_s, 1.0);
+    }
+
+    /// `s` with its `k`th tile replaced by its children (last).
+    fn refined(s: &Selected, k: usize) -> Selected {
+        let mut s = s.clone();
+        let tile = s.cut.tiles.remove(k);
+        s.cut.tiles.extend(tile.id.children().map(|id| Choice { id, ..tile }));
+        s
+    }
+
+    #[test]
+    fn a_cut_refining_a_tile_still_morphing_is_held() {
+        let mut f = flight();
+        let first = f.frame(0.0, &camera(10.05));
+        f.morphs(0.0, &ids(&first));
+        let finer = refined(&first, 0);
+        f.offer(finer.clone());
+        assert!(f.pending.is_none(), "nothing morphs: drawn at once");
+        f.morphs(0.1, &ids(&finer));
+        // A child of the tile refined, morphing up from it, refined again.
+        f.offer(refined(&finer, finer.cut.tiles.len() - 1));
+        assert!(f.pending.is_some(), "held while its parent morphs");
     }
 
     /// A frame whose every pixel took `steps` view-ray steps.

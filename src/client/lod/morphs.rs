@@ -23,6 +23,11 @@
 //! cut replaced by another moves only the tiles whose fate changed: those
 //! the new one no longer coarsens glide back up to their own surface,
 //! those only it coarsens start down from that frame.
+//!
+//! A refinement of a tile still morphing waits too: the flight holds the
+//! cut until that morph is done ([`Morphs::refines_morphing`]), since a
+//! finer tile starts from its drawn ancestor's own surface, which is the
+//! surface drawn only then (001 §4.4 morphs through one level at a time).
 
 use super::super::tile::{NODATA_M, TileData, TileError, TilePayload};
 use crate::grid::{TileGrid, TileId};
@@ -64,8 +69,9 @@ impl Morphs {
     }
 
     /// The cut drawn at `t_s`: which of its tiles morph, and how far.
-    /// `coarser`, the next cut, held until its downmorphs are done.
-    pub fn update(&mut self, t_s: f64, cut: &[TileId], coarser: Option<&[TileId]>) -> Vec<Morphing> {
+    /// `next`, the next cut, held until the tiles it coarsens have morphed
+    /// down and those it refines have stopped morphing.
+    pub fn update(&mut self, t_s: f64, cut: &[TileId], next: Option<&[TileId]>) -> Vec<Morphing> {
         for &id in cut.iter().filter(|id| !self.drawn.contains(id)) {
             if let Some(coarse) = ancestors(id).find(|a| self.drawn.contains(a)) {
                 let mut track = MorphTrack::new(coarse.level as u8, self.tau_s);
@@ -75,12 +81,14 @@ impl Morphs {
         }
         self.drawn = cut.iter().copied().collect();
         self.settled = true;
-        self.downmorph(cut, coarser.unwrap_or_default(), t_s);
+        let next = next.unwrap_or_default();
+        self.downmorph(cut, next, t_s);
         self.active.retain(|id, m| {
             m.track.prune(t_s);
             self.drawn.contains(id)
                 && (m.track.level_at(t_s) < f64::from(id.level) || !m.track.transitions().is_empty())
         });
+        self.settled &= !self.refines_morphing(next);
         let mut out: Vec<Morphing> = self
             .active
             .iter()
@@ -95,10 +103,18 @@ impl Morphs {
         out
     }
 
-    /// Whether the downmorphs of the last cut drawn were all complete (the
-    /// next cut may be drawn: its coarse tiles lie where they ended).
+    /// Whether the downmorphs of the last cut drawn were all complete and
+    /// no tile the next cut refines was morphing (the next cut may be
+    /// drawn: its coarse tiles lie where they ended, its fine ones start
+    /// from their ancestors' own surfaces).
     pub fn settled(&self) -> bool {
         self.settled
+    }
+
+    /// Whether `next` refines a tile that is morphing.
+    pub fn refines_morphing(&self, next: &[TileId]) -> bool {
+        let refined: HashSet<TileId> = next.iter().flat_map(|&id| ancestors(id)).collect();
+        self.active.keys().any(|id| refined.contains(id))
     }
 
     /// Sends each tile of `cut` that `next` coarsens down to its ancestor
@@ -463,5 +479,25 @@ mod tests {
             m.update(1.7, &cut, Some(&second)).into_iter().partition(|x| x.tile.parent() == Some(sibling));
         assert!(at(&theirs, &nephews, 0.5) && at(&mine, &children, 0.0) && !m.settled(), "{theirs:?}");
         assert!(at(&m.update(2.2, &cut, Some(&second)), &cut, 0.0) && m.settled());
+    }
+
+    #[test]
+    fn a_cut_refining_a_tile_still_morphing_waits_for_it() {
+        // Regression: grandchildren drawn while their parent morphed up
+        // from its own parent started from the parent's own surface, not
+        // the one drawn (a jump of 1 − w times their difference).
+        let (children, parent, ..) = family();
+        let grandchildren = children[0].children();
+        let next = [&grandchildren[..], &children[1..]].concat();
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &[parent], None);
+        m.update(0.25, &children, None);
+        assert!(m.refines_morphing(&next));
+        m.update(0.5, &children, Some(&next));
+        assert!(!m.settled(), "held while the children morph up");
+        m.update(1.25, &children, Some(&next));
+        assert!(m.settled() && !m.refines_morphing(&next));
+        let up = m.update(1.3, &next, None);
+        assert!(at(&up, &grandchildren, 0.0) && up.iter().all(|x| x.from == children[0]), "{up:?}");
     }
 }
