@@ -132,8 +132,15 @@ impl Morphs {
 
     /// `id` reaches `coarse`'s level within `τ` of the first frame that asks
     /// (001: before the switch; an upmorph in the same interval collapses
-    /// with it); asked again, its morph goes on.
+    /// with it); asked again, its morph goes on. A tile blends with one
+    /// coarser surface at a time: morphing with another ancestor's, it
+    /// first returns to its own (the held cut waits).
     fn coarsen(&mut self, id: TileId, coarse: TileId, t_s: f64) {
+        if self.active.get(&id).is_some_and(|m| m.coarse != coarse) {
+            self.restore(id, t_s);
+            self.settled = false;
+            return;
+        }
         let tau_s = self.tau_s;
         let m =
             self.active.entry(id).or_insert_with(|| Track { coarse, track: MorphTrack::new(id.level as u8, tau_s) });
@@ -499,5 +506,31 @@ mod tests {
         assert!(m.settled() && !m.refines_morphing(&next));
         let up = m.update(1.3, &next, None);
         assert!(at(&up, &grandchildren, 0.0) && up.iter().all(|x| x.from == children[0]), "{up:?}");
+    }
+
+    #[test]
+    fn a_tile_keeps_the_coarser_surface_it_morphs_with() {
+        // Regression: asked for another ancestor mid-morph, it blended with
+        // that one's surface from the next frame (a jump).
+        let (children, parent, ..) = family();
+        let grandparent = parent.parent().unwrap();
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &children, None);
+        m.update(0.5, &children, Some(&[parent]));
+        let back = m.update(1.0, &children, Some(&[grandparent]));
+        assert!(at(&back, &children, 0.5) && back.iter().all(|x| x.from == parent), "{back:?}");
+        assert!(at(&m.update(1.5, &children, Some(&[grandparent])), &children, 0.75) && !m.settled());
+        // Back on its own surface at 2 s, it starts down to the grandparent.
+        for t in [2.0, 2.5] {
+            assert!(m.update(t, &children, Some(&[grandparent])).is_empty());
+        }
+        let down = m.update(3.0, &children, Some(&[grandparent]));
+        assert!(at(&down, &children, 0.5) && down.iter().all(|x| x.from == grandparent), "{down:?}");
+        // Morphing up from the grandparent, coarsened to the parent.
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &[grandparent], None);
+        m.update(0.25, &children, None);
+        let up = m.update(0.5, &children, Some(&[parent]));
+        assert!(up.iter().all(|x| x.from == grandparent) && !m.settled(), "{up:?}");
     }
 }
