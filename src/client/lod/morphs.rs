@@ -451,7 +451,8 @@ mod tests {
     fn at(morphing: &[Morphing], tiles: &[TileId], weight: f64) -> bool {
         let mut drawn: Vec<TileId> = morphing.iter().map(|m| m.tile).collect();
         let mut tiles = tiles.to_vec();
-        (drawn.sort(), tiles.sort());
+        drawn.sort();
+        tiles.sort();
         drawn == tiles && morphing.iter().all(|m| (m.weight - weight).abs() < 1e-12)
     }
 
