@@ -10,10 +10,14 @@
 //! - an **upmorph** (to a finer level) runs *during* the target interval, so
 //!   the expensive level is not drawn before its budget is granted.
 //!
-//! **Collapse rule**: if an upmorph was scheduled for an interval and the
-//! next selection asks for a downmorph, which falls in that same interval,
-//! the two become one morph over it, from the level valid at its beginning
-//! to the level required at its end.
+//! A morph asked for while another runs or is still to come starts from
+//! the level the track has when it begins: it cuts the one in progress
+//! short there and replaces those that would begin later, so the level
+//! never jumps, however the selections' times jitter. This gives the
+//! **collapse rule**: if an upmorph was scheduled for an interval and the
+//! next selection asks for a downmorph, which falls in (about) that same
+//! interval, the two become one morph over it, from the level valid at its
+//! beginning to the level required at its end.
 //!
 //! A jump of several levels morphs through them in turn within `τ` (001
 //! §4.4): the level moves linearly, and at fractional level `λ` the mesh of
@@ -23,11 +27,12 @@
 //! vertex (bilinear between its samples). At an integer level the two
 //! meshes describe the same surface, so switching meshes moves no vertex.
 //!
-//! Invariants: transitions are sorted, do not overlap, each starts from the
-//! level the previous one reached, and lasts exactly `τ`.
+//! Invariants: transitions are sorted by start and change the level; each
+//! starts from the level the track has at its start, and lasts `τ` unless
+//! the next one begins first and cuts it short.
 
 /// One scheduled geomorph: the level goes linearly from `from` to `to`
-/// over `[start_s, start_s + τ]`.
+/// over `[start_s, start_s + τ]`, or until the next transition begins.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Transition {
     /// Start, seconds.
@@ -42,7 +47,7 @@ pub struct Transition {
 #[derive(Clone, Debug, PartialEq)]
 pub struct MorphTrack {
     tau_s: f64,
-    /// The level before the first transition.
+    /// The level while no transition is scheduled.
     settled: f64,
     transitions: Vec<Transition>,
 }
@@ -66,60 +71,52 @@ impl MorphTrack {
 
     /// The (fractional) level at time `t_s`.
     pub fn level_at(&self, t_s: f64) -> f64 {
-        let mut level = self.settled;
-        for tr in &self.transitions {
+        for (i, tr) in self.transitions.iter().enumerate() {
             if t_s <= tr.start_s {
-                return level;
+                return tr.from;
             }
-            if t_s < tr.start_s + self.tau_s {
+            if t_s < self.end_s(i) {
                 return tr.from + (tr.to - tr.from) * ((t_s - tr.start_s) / self.tau_s);
             }
-            level = tr.to;
         }
-        level
+        self.target()
     }
 
-    /// A selection asks for `level` during `[target_s, target_s + τ)`.
+    /// The level the track ends at.
+    pub fn target(&self) -> f64 {
+        self.transitions.last().map_or(self.settled, |tr| tr.to)
+    }
+
+    /// When transition `i` ends: after `τ`, or where the next one begins.
+    fn end_s(&self, i: usize) -> f64 {
+        let end_s = self.transitions[i].start_s + self.tau_s;
+        self.transitions.get(i + 1).map_or(end_s, |next| end_s.min(next.start_s))
+    }
+
+    /// A selection asks for `level` during `[target_s, target_s + τ)`: a
+    /// downmorph over the interval before, an upmorph over that one.
     pub fn request(&mut self, level: u8, target_s: f64) {
         let want = f64::from(level);
-        let planned = self.level_at(target_s);
-        if want < planned {
-            self.downmorph(want, target_s - self.tau_s);
-        } else if want > planned {
-            self.schedule(Transition { start_s: target_s, from: planned, to: want });
+        match want < self.level_at(target_s) {
+            true => self.schedule(target_s - self.tau_s, want),
+            false => self.schedule(target_s, want),
         }
     }
 
-    /// A downmorph over `[start_s, start_s + τ]`, collapsing with an
-    /// upmorph already there.
-    fn downmorph(&mut self, want: f64, start_s: f64) {
-        let clash = self.transitions.iter().position(|tr| tr.start_s == start_s && tr.to > tr.from);
-        match clash {
-            Some(i) => {
-                let from = self.transitions[i].from;
-                self.transitions.truncate(i);
-                if from != want {
-                    self.transitions.push(Transition { start_s, from, to: want });
-                }
-            }
-            None => {
-                let from = self.level_at(start_s);
-                self.schedule(Transition { start_s, from, to: want });
-            }
+    /// A morph to `to` from `start_s`, from the level the track has then:
+    /// what begins from `start_s` on is dropped, what runs then is cut short.
+    fn schedule(&mut self, start_s: f64, to: f64) {
+        let from = self.level_at(start_s);
+        self.transitions.retain(|t| t.start_s < start_s);
+        if from != to {
+            self.transitions.push(Transition { start_s, from, to });
         }
-    }
-
-    /// Appends `tr`, dropping anything scheduled from its start on.
-    fn schedule(&mut self, tr: Transition) {
-        self.transitions.retain(|t| t.start_s + self.tau_s <= tr.start_s);
-        self.transitions.push(tr);
     }
 
     /// Forgets transitions finished by `t_s`.
     pub fn prune(&mut self, t_s: f64) {
-        while let Some(tr) = self.transitions.first().copied().filter(|tr| tr.start_s + self.tau_s <= t_s) {
-            self.settled = tr.to;
-            self.transitions.remove(0);
+        while !self.transitions.is_empty() && self.end_s(0) <= t_s {
+            self.settled = self.transitions.remove(0).to;
         }
     }
 }

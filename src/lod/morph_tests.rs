@@ -161,3 +161,25 @@ fn odd_inputs_stay_finite() {
     assert_eq!(mesh_and_weight(3.0), (3, 1.0));
     assert_eq!(mesh_and_weight(2.25), (3, 0.25));
 }
+
+/// The largest change of the track's level between frames 1 ms apart.
+fn largest_step(track: &MorphTrack) -> f64 {
+    let level = |f: i32| track.level_at(f64::from(f) * 1e-3);
+    (0..20_000).map(|f| (level(f + 1) - level(f)).abs()).fold(0.0, f64::max)
+}
+
+#[test]
+fn a_request_during_a_morph_continues_from_where_it_is() {
+    // The next selection's target comes `gap` after the last (jitter): the
+    // morph in progress was dropped and the level jumped to where it would
+    // have been, going on up, on down, or turning back (the collapse).
+    for (start, first, second, gap) in [(4, 5, 6, 0.8), (6, 4, 2, 0.8), (4, 6, 3, 1.2)] {
+        let mut track = MorphTrack::new(start, TAU);
+        track.request(first, 5.0);
+        track.request(second, 5.0 + gap * TAU);
+        // Four levels in τ are the steepest these morphs may go.
+        let step = largest_step(&track);
+        assert!(step <= 4.0 * 1e-3 / TAU, "{start} → {first} → {second}: {step} in 1 ms, {:?}", track.transitions());
+        assert_eq!(track.level_at(5.0 + (gap + 1.0) * TAU), f64::from(second));
+    }
+}

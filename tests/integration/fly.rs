@@ -243,7 +243,7 @@ fn a_flight_under_a_frame_budget_reports_its_predicted_frame_time() {
     // A budget no frame can meet: the coarsest tiles, the overrun reported.
     let tight = flight("0.001", "tight", &[]);
     // A budget every frame meets: refined as far as the GPU cache allows
-    // (geomorphing, which changes no cut).
+    // (geomorphing).
     let loose = flight("100000", "loose", &["--geomorph"]);
     for row in tight.iter().chain(&loose) {
         assert!(number(row, "predicted_ms") > 0.0 && number(row, "selection_ms") >= 0.0, "{row:?}");

@@ -54,9 +54,10 @@ pub struct BudgetFlight {
     worker: Worker,
     /// The cut drawn now.
     current: Option<Selected>,
-    /// A cut that coarsens the current one, drawn once the tiles it
-    /// replaces have morphed onto its coarser tiles.
-    pending: Option<Pending>,
+    /// A cut held while the morphs it would break run: drawn once the
+    /// tiles it coarsens have morphed onto its coarser tiles and those it
+    /// refines have stopped morphing.
+    pending: Option<Selected>,
     /// Flight time of the last request.
     requested_s: f64,
     frames: usize,
@@ -148,14 +149,15 @@ impl BudgetFlight {
         if self.morphs.as_ref().is_none_or(Morphs::settled)
             && let Some(p) = self.pending.take()
         {
-            self.current = Some(p.selected);
+            self.current = Some(p);
         }
         if let Some(done) = self.worker.take(stale) {
-            self.offer(done, t_s);
+            self.offer(done);
         }
         if !self.worker.busy() && t_s >= self.requested_s + self.look.tau_s {
             let ground = |lon, lat| self.selector.lowest_ground_m(lon, lat);
-            let (cameras, cone) = ahead::ahead(&self.predictor, camera, t_s, &self.look, &ground);
+            let (cameras, cone) =
+                ahead::ahead(&self.predictor, camera, t_s, ahead::stages(self.morphs.is_some()), &self.look, &ground);
             let trees = self.tree_items(&cameras);
             let (model, budget, steps) = (self.model(), self.aimed(), self.steps.clone());
             let request = Request { cameras, cone: Some(cone), trees, model, budget, steps };
@@ -237,10 +239,9 @@ impl BudgetFlight {
     /// coarser tile (over `τ`); the frame's [`Self::morph_tile`]s follow.
     pub fn morphs(&mut self, t_s: f64, drawn: &[TileId]) -> Vec<Morphing> {
         self.pairs.next_frame();
-        let next: Option<Vec<TileId>> = self.pending.as_ref().map(|p| ids(&p.selected));
-        let since_s = self.pending.as_ref().map_or(t_s, |p| p.since_s);
+        let next: Option<Vec<TileId>> = self.pending.as_ref().map(ids);
         let Some(morphs) = &mut self.morphs else { return Vec::new() };
-        morphs.update(t_s, drawn, next.as_deref().map(|n| (n, since_s)))
+        morphs.update(t_s, drawn, next.as_deref())
     }
 
     /// `tile` prepared to be drawn morphing with `from`, kept while the
@@ -250,18 +251,21 @@ impl BudgetFlight {
     }
 
     /// A finished selection: drawn at once unless, geomorphing, it
-    /// coarsens the cut drawn: then it is held while the tiles it replaces
-    /// morph down (a newer one replaces it there, the morphs keep their
-    /// start).
-    fn offer(&mut self, next: Selected, t_s: f64) {
+    /// coarsens the cut drawn or refines a tile still morphing: then it is
+    /// held while the tiles it replaces morph down, or finish morphing (a
+    /// newer one replaces it there; [`Morphs`] sends back up the tiles it
+    /// no longer coarsens).
+    fn offer(&mut self, next: Selected) {
         let Some(current) = &self.current else {
             self.current = Some(next);
             return;
         };
         if let Some(p) = &mut self.pending {
-            p.selected = next;
-        } else if self.morphs.is_some() && coarsens(current, &next) {
-            self.pending = Some(Pending { selected: next, since_s: t_s });
+            *p = next;
+        } else if let Some(m) = &self.morphs
+            && (coarsens(current, &next) || m.refines_morphing(&ids(&next)))
+        {
+            self.pending = Some(next);
         } else {
             self.current = Some(next);
         }
@@ -323,12 +327,6 @@ pub struct Observed {
     pub features: CostFeatures,
     /// The model's prediction for it, before the frame corrected the model.
     pub model_ms: f64,
-}
-
-/// A cut waiting for downmorphs, and when they began.
-struct Pending {
-    selected: Selected,
-    since_s: f64,
 }
 
 fn ids(s: &Selected) -> Vec<TileId> {
@@ -406,6 +404,28 @@ mod tests {
         assert!(!f.worker.busy() && f.requested_s == 0.0);
         f.frame(1.0, &camera(10.07));
         assert_eq!(f.requested_s, 1.0);
+    }
+
+    /// `s` with its `k`th tile replaced by its children (last).
+    fn refined(s: &Selected, k: usize) -> Selected {
+        let mut s = s.clone();
+        let tile = s.cut.tiles.remove(k);
+        s.cut.tiles.extend(tile.id.children().map(|id| Choice { id, ..tile }));
+        s
+    }
+
+    #[test]
+    fn a_cut_refining_a_tile_still_morphing_is_held() {
+        let mut f = flight();
+        let first = f.frame(0.0, &camera(10.05));
+        f.morphs(0.0, &ids(&first));
+        let finer = refined(&first, 0);
+        f.offer(finer.clone());
+        assert!(f.pending.is_none(), "nothing morphs: drawn at once");
+        f.morphs(0.1, &ids(&finer));
+        // A child of the tile refined, morphing up from it, refined again.
+        f.offer(refined(&finer, finer.cut.tiles.len() - 1));
+        assert!(f.pending.is_some(), "held while its parent morphs");
     }
 
     /// A frame whose every pixel took `steps` view-ray steps.

@@ -19,7 +19,15 @@
 //! Coarsening is a downmorph, run *before* the switch (001's asymmetry):
 //! the flight holds a cut that coarsens back for `τ` while the tiles it
 //! replaces glide onto the surface of their coarser tile in it, and draws
-//! it once a frame has shown them all there ([`Morphs::settled`]).
+//! it once a frame has shown them all there ([`Morphs::settled`]). A held
+//! cut replaced by another moves only the tiles whose fate changed: those
+//! the new one no longer coarsens glide back up to their own surface,
+//! those only it coarsens start down from that frame.
+//!
+//! A refinement of a tile still morphing waits too: the flight holds the
+//! cut until that morph is done ([`Morphs::refines_morphing`]), since a
+//! finer tile starts from its drawn ancestor's own surface, which is the
+//! surface drawn only then (001 §4.4 morphs through one level at a time).
 
 use super::super::tile::{NODATA_M, TileData, TileError, TilePayload};
 use crate::grid::{TileGrid, TileId};
@@ -61,10 +69,9 @@ impl Morphs {
     }
 
     /// The cut drawn at `t_s`: which of its tiles morph, and how far.
-    /// `coarser`, the next cut and when it was offered, starts downmorphs
-    /// of the tiles it coarsens, over `τ` from then (001: before the
-    /// switch; an upmorph in the same interval collapses with it).
-    pub fn update(&mut self, t_s: f64, cut: &[TileId], coarser: Option<(&[TileId], f64)>) -> Vec<Morphing> {
+    /// `next`, the next cut, held until the tiles it coarsens have morphed
+    /// down and those it refines have stopped morphing.
+    pub fn update(&mut self, t_s: f64, cut: &[TileId], next: Option<&[TileId]>) -> Vec<Morphing> {
         for &id in cut.iter().filter(|id| !self.drawn.contains(id)) {
             if let Some(coarse) = ancestors(id).find(|a| self.drawn.contains(a)) {
                 let mut track = MorphTrack::new(coarse.level as u8, self.tau_s);
@@ -74,14 +81,14 @@ impl Morphs {
         }
         self.drawn = cut.iter().copied().collect();
         self.settled = true;
-        if let Some((next, since_s)) = coarser {
-            self.downmorph(cut, next, since_s + self.tau_s, t_s);
-        }
+        let next = next.unwrap_or_default();
+        self.downmorph(cut, next, t_s);
         self.active.retain(|id, m| {
             m.track.prune(t_s);
             self.drawn.contains(id)
                 && (m.track.level_at(t_s) < f64::from(id.level) || !m.track.transitions().is_empty())
         });
+        self.settled &= !self.refines_morphing(next);
         let mut out: Vec<Morphing> = self
             .active
             .iter()
@@ -96,26 +103,59 @@ impl Morphs {
         out
     }
 
-    /// Whether the downmorphs of the last cut drawn were all complete (the
-    /// next cut may be drawn: its coarse tiles lie where they ended).
+    /// Whether the downmorphs of the last cut drawn were all complete and
+    /// no tile the next cut refines was morphing (the next cut may be
+    /// drawn: its coarse tiles lie where they ended, its fine ones start
+    /// from their ancestors' own surfaces).
     pub fn settled(&self) -> bool {
         self.settled
     }
 
-    /// Requests each tile of `cut` that `next` coarsens to reach its
-    /// ancestor there by `target_s`.
-    fn downmorph(&mut self, cut: &[TileId], next: &[TileId], target_s: f64, t_s: f64) {
+    /// Whether `next` refines a tile that is morphing.
+    pub fn refines_morphing(&self, next: &[TileId]) -> bool {
+        let refined: HashSet<TileId> = next.iter().flat_map(|&id| ancestors(id)).collect();
+        self.active.keys().any(|id| refined.contains(id))
+    }
+
+    /// Sends each tile of `cut` that `next` coarsens down to its ancestor
+    /// there, and each heading down that `next` no longer coarsens (the
+    /// held cut was replaced) back up to its own level.
+    fn downmorph(&mut self, cut: &[TileId], next: &[TileId], t_s: f64) {
         let next: HashSet<TileId> = next.iter().copied().collect();
         for &id in cut {
-            let Some(coarse) = ancestors(id).find(|a| next.contains(a)) else { continue };
-            let tau_s = self.tau_s;
-            let m = self
-                .active
-                .entry(id)
-                .or_insert_with(|| Track { coarse, track: MorphTrack::new(id.level as u8, tau_s) });
-            m.coarse = coarse;
-            m.track.request(coarse.level as u8, target_s);
-            self.settled &= m.track.level_at(t_s) <= f64::from(coarse.level);
+            match ancestors(id).find(|a| next.contains(a)) {
+                Some(coarse) => self.coarsen(id, coarse, t_s),
+                None => self.restore(id, t_s),
+            }
+        }
+    }
+
+    /// `id` reaches `coarse`'s level within `τ` of the first frame that asks
+    /// (001: before the switch; an upmorph in the same interval collapses
+    /// with it); asked again, its morph goes on. A tile blends with one
+    /// coarser surface at a time: morphing with another ancestor's, it
+    /// first returns to its own (the held cut waits).
+    fn coarsen(&mut self, id: TileId, coarse: TileId, t_s: f64) {
+        if self.active.get(&id).is_some_and(|m| m.coarse != coarse) {
+            self.restore(id, t_s);
+            self.settled = false;
+            return;
+        }
+        let tau_s = self.tau_s;
+        let m =
+            self.active.entry(id).or_insert_with(|| Track { coarse, track: MorphTrack::new(id.level as u8, tau_s) });
+        m.coarse = coarse;
+        m.track.request(coarse.level as u8, t_s + tau_s);
+        self.settled &= m.track.level_at(t_s) <= f64::from(coarse.level);
+    }
+
+    /// `id` back up to its own level over `τ` from `t_s`, if it is heading
+    /// down.
+    fn restore(&mut self, id: TileId, t_s: f64) {
+        if let Some(m) = self.active.get_mut(&id)
+            && m.track.target() < f64::from(id.level)
+        {
+            m.track.request(id.level as u8, t_s);
         }
     }
 }
@@ -366,12 +406,12 @@ mod tests {
         // The next cut coarsens back to the parent, offered at 0.5 s: the
         // children glide onto its surface over [0.5, 1.5] s.
         let next = [parent];
-        assert!(m.update(0.5, &children, Some((&next, 0.5))).is_empty(), "not started");
+        assert!(m.update(0.5, &children, Some(&next)).is_empty(), "not started");
         assert!(!m.settled());
-        let halfway = m.update(1.0, &children, Some((&next, 0.5)));
+        let halfway = m.update(1.0, &children, Some(&next));
         assert_eq!(halfway.len(), 4);
         assert!(halfway.iter().all(|x| x.from == parent && (x.weight - 0.5).abs() < 1e-12), "{halfway:?}");
-        let done = m.update(1.5, &children, Some((&next, 0.5)));
+        let done = m.update(1.5, &children, Some(&next));
         assert!(done.iter().all(|x| x.weight == 0.0) && done.len() == 4, "on the parent's surface: {done:?}");
         assert!(m.settled());
         // The switch: the parent is drawn with its own heights, which is
@@ -393,9 +433,105 @@ mod tests {
         // parent's surface; no weight ever leaves it.
         let next = [parent];
         for t in [0.5, 0.8, 1.2, 1.5] {
-            let w = m.update(t, &children, Some((&next, 0.5)));
+            let w = m.update(t, &children, Some(&next));
             assert!(w.len() == 4 && w.iter().all(|x| x.weight == 0.0), "{t}: {w:?}");
         }
         assert!(m.settled());
+    }
+
+    /// Four tiles of level 10, their parent, a sibling of the parent and
+    /// that sibling's children.
+    fn family() -> (Vec<TileId>, TileId, TileId, Vec<TileId>) {
+        let parent = grid().tile_containing(10.1, 46.35, 10).parent().unwrap();
+        let sibling = parent.parent().unwrap().children().into_iter().find(|&t| t != parent).unwrap();
+        (parent.children().to_vec(), parent, sibling, sibling.children().to_vec())
+    }
+
+    /// Whether `morphing` is `tiles` at `weight`.
+    fn at(morphing: &[Morphing], tiles: &[TileId], weight: f64) -> bool {
+        let mut drawn: Vec<TileId> = morphing.iter().map(|m| m.tile).collect();
+        let mut tiles = tiles.to_vec();
+        drawn.sort();
+        tiles.sort();
+        drawn == tiles && morphing.iter().all(|m| (m.weight - weight).abs() < 1e-12)
+    }
+
+    #[test]
+    fn tiles_a_replaced_held_cut_no_longer_coarsens_glide_back_up() {
+        // Regression: they stayed on the parent's surface for good.
+        let (children, parent, ..) = family();
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &children, None);
+        m.update(0.5, &children, Some(&[parent]));
+        // Halfway down, the held cut is replaced by one keeping them.
+        let back = m.update(1.0, &children, Some(&children));
+        assert!(at(&back, &children, 0.5), "{back:?}");
+        let back = m.update(1.5, &children, Some(&children));
+        assert!(at(&back, &children, 0.75) && m.settled(), "{back:?}");
+        assert!(m.update(2.0, &children, None).is_empty(), "back on their own surface");
+    }
+
+    #[test]
+    fn tiles_only_a_replacing_held_cut_coarsens_start_down_then() {
+        // Regression: their downmorph began when the first held cut came,
+        // so they jumped from their own surface to weight 0.3.
+        let (children, parent, sibling, nephews) = family();
+        let cut = [children.as_slice(), &nephews].concat();
+        let (first, second) = ([&[parent][..], &nephews].concat(), [parent, sibling]);
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &cut, None);
+        m.update(0.5, &cut, Some(&first));
+        let morphing = m.update(1.2, &cut, Some(&second));
+        assert!(at(&morphing, &children, 0.3), "{morphing:?}");
+        let (theirs, mine): (Vec<Morphing>, Vec<Morphing>) =
+            m.update(1.7, &cut, Some(&second)).into_iter().partition(|x| x.tile.parent() == Some(sibling));
+        assert!(at(&theirs, &nephews, 0.5) && at(&mine, &children, 0.0) && !m.settled(), "{theirs:?}");
+        assert!(at(&m.update(2.2, &cut, Some(&second)), &cut, 0.0) && m.settled());
+    }
+
+    #[test]
+    fn a_cut_refining_a_tile_still_morphing_waits_for_it() {
+        // Regression: grandchildren drawn while their parent morphed up
+        // from its own parent started from the parent's own surface, not
+        // the one drawn (a jump of 1 − w times their difference).
+        let (children, parent, ..) = family();
+        let grandchildren = children[0].children();
+        let next = [&grandchildren[..], &children[1..]].concat();
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &[parent], None);
+        m.update(0.25, &children, None);
+        assert!(m.refines_morphing(&next));
+        m.update(0.5, &children, Some(&next));
+        assert!(!m.settled(), "held while the children morph up");
+        m.update(1.25, &children, Some(&next));
+        assert!(m.settled() && !m.refines_morphing(&next));
+        let up = m.update(1.3, &next, None);
+        assert!(at(&up, &grandchildren, 0.0) && up.iter().all(|x| x.from == children[0]), "{up:?}");
+    }
+
+    #[test]
+    fn a_tile_keeps_the_coarser_surface_it_morphs_with() {
+        // Regression: asked for another ancestor mid-morph, it blended with
+        // that one's surface from the next frame (a jump).
+        let (children, parent, ..) = family();
+        let grandparent = parent.parent().unwrap();
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &children, None);
+        m.update(0.5, &children, Some(&[parent]));
+        let back = m.update(1.0, &children, Some(&[grandparent]));
+        assert!(at(&back, &children, 0.5) && back.iter().all(|x| x.from == parent), "{back:?}");
+        assert!(at(&m.update(1.5, &children, Some(&[grandparent])), &children, 0.75) && !m.settled());
+        // Back on its own surface at 2 s, it starts down to the grandparent.
+        for t in [2.0, 2.5] {
+            assert!(m.update(t, &children, Some(&[grandparent])).is_empty());
+        }
+        let down = m.update(3.0, &children, Some(&[grandparent]));
+        assert!(at(&down, &children, 0.5) && down.iter().all(|x| x.from == grandparent), "{down:?}");
+        // Morphing up from the grandparent, coarsened to the parent.
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &[grandparent], None);
+        m.update(0.25, &children, None);
+        let up = m.update(0.5, &children, Some(&[parent]));
+        assert!(up.iter().all(|x| x.from == grandparent) && !m.settled(), "{up:?}");
     }
 }

@@ -125,6 +125,24 @@ impl Forest {
         let (b, c) = kids.iter().fold((0.0, 0.0), |(b, c), &k| (b + self.node(k).benefit, c + self.node(k).cost_ms));
         Some((b - n.benefit, c - n.cost_ms))
     }
+
+    /// The most `Σ (benefit − λ·cost)` over the nodes a cut can draw, for a
+    /// price `λ ≥ 0` per ms: bottom-up, each node keeps the better of itself
+    /// and its children's best. With `λ·T` added it bounds the benefit of
+    /// every cut within budget `T`, whatever the signs of the increments.
+    pub fn best_priced(&self, lambda: f64) -> f64 {
+        let priced = |n: &Node| if lambda == 0.0 { n.benefit } else { n.benefit - lambda * n.cost_ms };
+        let mut best = vec![0.0; self.len()];
+        for v in (0..self.len()).rev() {
+            let kids = self.children(v as u32);
+            let own = priced(&self.nodes[v]);
+            best[v] = match kids.is_empty() {
+                true => own,
+                false => own.max(kids.iter().map(|&c| best[c as usize]).sum()),
+            };
+        }
+        self.roots.iter().map(|&r| best[r as usize]).sum()
+    }
 }
 
 /// Value of an increment, total over all signs: free gains are worth +∞,

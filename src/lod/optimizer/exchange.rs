@@ -4,13 +4,16 @@
 //! (a tile split that costs a fifth of the budget); trading the last small
 //! increments for one of them recovers it. Each exchange strictly increases
 //! the benefit and keeps the selection feasible, and there are at most
-//! [`ROUNDS`] of them over [`CANDIDATES`]² pairs, so the work stays bounded.
+//! [`ROUNDS`] of them over [`CANDIDATES`]² pairs, so the work stays bounded;
+//! the iteration and time limits stop them too (the time limit is looked at
+//! before each decrement candidate's pairs).
 //!
 //! Invariant: only a split node with no split child is undone, so the
 //! selection stays a cut of the hierarchy; what replaces it must still be
 //! available afterwards (its parent split).
 
-use super::{Entry, Run, Settings, Stop};
+use super::{Entry, Run, Settings, Stop, late};
+use std::time::Instant;
 
 /// Exchanges per optimisation, at most.
 const ROUNDS: usize = 8;
@@ -35,7 +38,10 @@ impl Run<'_> {
             if stop != Stop::Budget || self.remaining_ms() < 0.0 {
                 break;
             }
-            let Some(swap) = self.best_swap() else { break };
+            if self.iterations >= settings.max_iterations || late(settings.deadline) {
+                return Stop::Limit;
+            }
+            let Some(swap) = self.best_swap(settings.deadline) else { break };
             self.iterations += 1;
             self.undo(swap.out);
             for e in swap.take {
@@ -54,14 +60,15 @@ impl Run<'_> {
 
     /// The best exchange: for each decrement candidate, each dropped
     /// increment (or none) first, then greedily what still fits among the
-    /// other dropped increments and those the first one makes available.
-    fn best_swap(&self) -> Option<Swap> {
+    /// other dropped increments and those the first one makes available;
+    /// the best found by the `deadline`, if it passes.
+    fn best_swap(&self, deadline: Option<Instant>) -> Option<Swap> {
         let mut dropped: Vec<Entry> = self.dropped.iter().copied().filter(|e| self.available(e)).collect();
         dropped.sort_by(|a, b| b.cmp(a));
         dropped.truncate(CANDIDATES);
         let base = self.levels.benefit(self.mu);
         let mut best: Option<Swap> = None;
-        for out in self.undoable() {
+        for out in self.undoable().into_iter().take_while(|_| !late(deadline)) {
             let (hb, hc) = self.forest.increment(out).unwrap_or((0.0, 0.0));
             for first in dropped.iter().copied().map(Some).chain([None]) {
                 let room = self.budget_ms - (self.cost_d - hc);
@@ -79,7 +86,9 @@ impl Run<'_> {
     /// `first` (if it fits and does not hang below `out`), then the best of
     /// `others` and of what `first` makes available, each if it fits and
     /// gains more than the continuous variables would make of its time: the
-    /// increments taken, the room left and the benefit gained.
+    /// increments taken, the room left and the benefit gained; `None` if
+    /// `first` does not fit or the room ends below 0 (undoing a split that
+    /// saved time can cost more than the budget left).
     fn fill(&self, out: u32, first: Option<Entry>, others: &[Entry], mut room: f64) -> Option<(Vec<Entry>, f64, f64)> {
         let below_out = |e: &Entry| self.forest.node(e.node).parent == Some(out);
         let mut take = Vec::new();
@@ -121,13 +130,7 @@ impl Run<'_> {
                 take.push(e);
             }
         }
-        Some((take, room, gain))
-    }
-
-    /// Whether `e` can still be applied: its head is unsplit and its parent
-    /// split (or it is a root).
-    fn available(&self, e: &Entry) -> bool {
-        !self.split[e.node as usize] && self.forest.node(e.node).parent.is_none_or(|p| self.split[p as usize])
+        (room >= 0.0).then_some((take, room, gain))
     }
 
     /// The most recently split nodes with no split child (Mason and Blake's

@@ -16,13 +16,23 @@
 //!   alternative "its ancestors and it alone" is remembered; the better of
 //!   that and the greedy answer is at least half the optimum whenever that
 //!   alternative fits the budget and increments add benefit (Mason and
-//!   Blake's bound, via the fractional relaxation).
-//! - **An upper bound.** At the same moment the greedy state lies on the
-//!   path of the fractional optimum, and no discrete increment left is
-//!   worth more per ms than the blocked one, so the discrete benefit so far
-//!   plus the best split of the remaining budget between the continuous
-//!   curve and increments at that slope bounds every feasible answer
-//!   ([`Selection::upper_bound`]).
+//!   Blake's bound, via the fractional relaxation). A convexified group can
+//!   be larger than the budget where each of its splits fits; then the
+//!   alternative is the best part of it that fits: a prefix in the order
+//!   Horn's merging built it, or one member's own block with its
+//!   ancestors. That is a heuristic, with no bound proven: it keeps half
+//!   on forks of two branches (tested), but with three, a branch left out
+//!   of the group can be what the optimum takes besides the greedy's
+//!   increments, and the answer falls below half.
+//! - **An upper bound.** At the same moment the blocked increment's value
+//!   (or the continuous level, if higher) prices a millisecond at `λ`:
+//!   `λ·T` plus the best benefit less priced cost over the cuts (one
+//!   bottom-up pass) and over the continuous curve bounds every feasible
+//!   answer (Lagrangian duality; [`Selection::upper_bound`]). Where no
+//!   discrete increment left is worth more per ms than the blocked one, the
+//!   greedy state lies on the path of the fractional optimum and the bound
+//!   is that optimum's value; splits that lose both benefit and time, which
+//!   the greedy never undoes, only make it less tight.
 //!
 //! If the roots alone (the coarsest representation) cost more than the
 //! budget they are still drawn, nothing else is, and the overrun is
@@ -39,7 +49,7 @@ pub use discrete::{Forest, Node};
 
 use super::model::Smooth;
 use discrete::{Groups, ratio};
-use std::collections::BinaryHeap;
+use std::collections::{BinaryHeap, HashMap};
 use std::time::Instant;
 
 /// Bad optimiser input.
@@ -136,6 +146,11 @@ fn drawn_sums(forest: &Forest, split: &[bool]) -> (f64, f64) {
     drawn(forest, split).fold((0.0, 0.0), |(b, c), i| (b + forest.node(i).benefit, c + forest.node(i).cost_ms))
 }
 
+/// Whether `deadline` has passed.
+fn late(deadline: Option<Instant>) -> bool {
+    deadline.is_some_and(|d| Instant::now() >= d)
+}
+
 /// Maximises benefit under the budget over the nodes of `forest` and the
 /// `continuous` variables.
 pub fn optimize(forest: &Forest, continuous: &[Continuous], settings: &Settings) -> Selection {
@@ -169,6 +184,14 @@ impl Ord for Entry {
     fn cmp(&self, o: &Entry) -> std::cmp::Ordering {
         self.value.total_cmp(&o.value).then(o.node.cmp(&self.node))
     }
+}
+
+/// Which part of a blocked group the half-optimality alternative splits.
+enum Part {
+    /// Its first members in merge order.
+    Prefix(usize),
+    /// A member's own block, with the member's ancestors.
+    Block(u32),
 }
 
 /// The optimiser's state.
@@ -261,7 +284,7 @@ impl<'a> Run<'a> {
 
     fn past(&self, deadline: Option<Instant>) -> bool {
         // Instant::now costs ~20 ns: look every 64 iterations.
-        self.iterations.is_multiple_of(64) && deadline.is_some_and(|d| Instant::now() >= d)
+        self.iterations.is_multiple_of(64) && late(deadline)
     }
 
     fn why_done(&self) -> Stop {
@@ -276,9 +299,15 @@ impl<'a> Run<'a> {
     /// continuous level it needs: the current one, or a higher one that
     /// frees the room (continuous variables are divisible, so they give way
     /// to a discrete step that is worth more than what they lose). Blocked
-    /// groups are dropped; their head alone is offered instead.
+    /// groups are dropped; their head alone is offered instead. Entries an
+    /// exchange made stale (applied since, or below an undone split) are
+    /// discarded.
     fn best_fitting(&mut self) -> Option<(Entry, f64)> {
         while let Some(e) = self.heap.peek().copied() {
+            if !self.available(&e) {
+                self.heap.pop();
+                continue;
+            }
             let (db, dc) = self.delta(&e);
             if !crate::lod::positive(e.value) || !(db > 0.0 || dc < 0.0) {
                 self.heap.clear();
@@ -314,16 +343,25 @@ impl<'a> Run<'a> {
         (gain > 0.0).then_some(mu)
     }
 
-    /// No feasible answer beats the current discrete state plus the best
-    /// split of the remaining budget between the continuous variables (their
-    /// exact concave curve) and discrete increments worth `value` per ms,
-    /// when no discrete increment left is worth more than `value` (the
-    /// Lagrangian bound of the fractional problem).
+    /// The better bound ([`Run::bound_at`]) of two prices: that of the
+    /// discrete increment worth `value` per ms, and the continuous level
+    /// the budget left allows. When no increment left is worth more than
+    /// `value`, the greedy state lies on the fractional optimum's path and
+    /// the higher of the two gives that optimum's value.
     fn bound_now(&self, value: f64) -> f64 {
-        let available = self.budget_ms - self.cost_d;
-        let mu = value.max(self.levels.level_for_budget(available));
-        let rest = (available - self.levels.cost_ms(mu)).max(0.0);
-        self.benefit_d + self.levels.benefit(mu) + value.max(0.0) * rest
+        let level = self.levels.level_for_budget(self.budget_ms - self.cost_d);
+        self.bound_at(value.max(0.0)).min(self.bound_at(level))
+    }
+
+    /// No feasible answer beats `λ·T` plus the best `b − λ·c` of the cuts
+    /// and of the continuous variables, for any price `λ ≥ 0` per ms
+    /// (Lagrangian duality, whatever the signs of the increments); ∞ for
+    /// an infinite price or a NaN sum.
+    fn bound_at(&self, lambda: f64) -> f64 {
+        let spend = |ms: f64| if lambda == 0.0 { 0.0 } else { lambda * ms };
+        let continuous = self.levels.benefit(lambda) - spend(self.levels.cost_ms(lambda));
+        let bound = spend(self.budget_ms) + self.forest.best_priced(lambda) + continuous;
+        if lambda.is_finite() && !bound.is_nan() { bound } else { f64::INFINITY }
     }
 
     /// A blocked group's head alone, if that is worth something: offered
@@ -339,6 +377,12 @@ impl<'a> Run<'a> {
                 self.dropped.push(alone);
             }
         }
+    }
+
+    /// Whether `e` can still be applied: its head is unsplit and its parent
+    /// split (or it is a root).
+    fn available(&self, e: &Entry) -> bool {
+        !self.split[e.node as usize] && self.forest.node(e.node).parent.is_none_or(|p| self.split[p as usize])
     }
 
     fn continuous_slope(&self) -> Option<f64> {
@@ -432,33 +476,74 @@ impl<'a> Run<'a> {
     /// The bound when stopped early with nothing blocked yet.
     fn open_bound(&mut self, benefit: f64) -> f64 {
         let discrete = self.heap.peek().map_or(0.0, |e| e.value);
-        let bound = self.bound_now(discrete).max(benefit);
-        if bound.is_nan() { f64::INFINITY } else { bound }
+        self.bound_now(discrete).max(benefit)
     }
 
-    /// The half-optimality alternative: the roots, the ancestors of `v`
-    /// split one by one, and `v`'s group. Adopted if it fits and is better.
+    /// The half-optimality alternative to the greedy blocked at group `v`
+    /// ([`Run::alternative`]), adopted if it is better.
     fn try_alternative(&mut self, v: u32) -> bool {
+        let Some(split) = self.alternative(v) else { return false };
+        let greedy = drawn_sums(self.forest, &self.split).0 + self.levels.benefit(self.mu);
+        let (benefit_d, cost_d) = drawn_sums(self.forest, &split);
+        let mu = self.levels.level_for_budget(self.budget_ms - cost_d);
+        let better = cost_d <= self.budget_ms && benefit_d + self.levels.benefit(mu) > greedy;
+        if better {
+            self.split = split;
+            self.mu = mu;
+        }
+        better
+    }
+
+    /// The split of the alternative to the greedy blocked at group `v`,
+    /// the part of the group that fits and gains the most with the
+    /// continuous variables taking the rest (the whole group may not fit
+    /// where part of it does): a prefix of its members in merge order, or
+    /// one member's own block (the group it headed when merged), each with
+    /// its ancestors. Every such part is a cut: a member's parent is a
+    /// member before it or an ancestor of `v`. `None` if none fits.
+    fn alternative(&self, v: u32) -> Option<Vec<bool>> {
+        let members: Vec<u32> = self.groups.members(v).collect();
         let mut split = vec![false; self.forest.len()];
+        self.split_ancestors(v, &mut split);
+        let base = drawn_sums(self.forest, &split);
+        let mut best: Option<(f64, Part)> = None;
+        let mut consider = |(b, c): (f64, f64), part: Part| {
+            let total = b + self.levels.benefit(self.levels.level_for_budget(self.budget_ms - c));
+            if c <= self.budget_ms && best.as_ref().is_none_or(|(t, _)| total > *t) {
+                best = Some((total, part));
+            }
+        };
+        // The sums with each member's ancestors split, and with a prefix.
+        let mut path = HashMap::from([(v, base)]);
+        let mut prefix = base;
+        for (k, &m) in members.iter().enumerate() {
+            let at = path[&m];
+            let i = m as usize;
+            consider((at.0 + self.groups.db[i], at.1 + self.groups.dc[i]), Part::Block(m));
+            let (db, dc) = self.forest.increment(m).unwrap_or((0.0, 0.0));
+            prefix = (prefix.0 + db, prefix.1 + dc);
+            consider(prefix, Part::Prefix(k + 1));
+            path.extend(self.forest.children(m).iter().map(|&c| (c, (at.0 + db, at.1 + dc))));
+        }
+        let chosen: Vec<u32> = match best?.1 {
+            Part::Prefix(k) => members[..k].to_vec(),
+            Part::Block(m) => {
+                self.split_ancestors(m, &mut split);
+                self.groups.members(m).collect()
+            }
+        };
+        for m in chosen {
+            split[m as usize] = true;
+        }
+        Some(split)
+    }
+
+    /// Marks the strict ancestors of `v` split.
+    fn split_ancestors(&self, v: u32, split: &mut [bool]) {
         let mut a = self.forest.node(v).parent;
         while let Some(p) = a {
             split[p as usize] = true;
             a = self.forest.node(p).parent;
         }
-        for m in self.groups.members(v) {
-            split[m as usize] = true;
-        }
-        let greedy = (std::mem::replace(&mut self.split, split), self.mu);
-        let (benefit_d, cost_d) = drawn_sums(self.forest, &self.split);
-        let mu = self.levels.level_for_budget(self.budget_ms - cost_d);
-        let better = cost_d <= self.budget_ms
-            && benefit_d + self.levels.benefit(mu)
-                > drawn_sums(self.forest, &greedy.0).0 + self.levels.benefit(greedy.1);
-        if better {
-            self.mu = mu;
-        } else {
-            self.split = greedy.0;
-        }
-        better
     }
 }

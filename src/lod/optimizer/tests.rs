@@ -120,6 +120,11 @@ fn depth_of(nodes: &[Node], mut i: usize) -> usize {
     d
 }
 
+/// A forest from `(parent, benefit, cost_ms)` rows.
+fn forest_of(rows: &[(Option<u32>, f64, f64)]) -> Forest {
+    Forest::new(rows.iter().map(|&(parent, benefit, cost_ms)| Node { parent, benefit, cost_ms }).collect()).unwrap()
+}
+
 /// Cases per property (and fixed seeds of the random instances): 300, or
 /// `SYLVA_LOD_CASES` for a longer search.
 fn cases() -> u32 {
@@ -172,10 +177,13 @@ proptest! {
         big_cost in 5.0f64..100.0,
         big_ratio in 0.2f64..1.0,
         dud in 0.0f64..0.05,
+        fork in prop::collection::vec((0.3f64..0.8, 0.2f64..3.0), 0..3),
     ) {
         // Small increments worth slightly more per ms than one big one that
-        // fills the whole budget (the knapsack trap), plus a non-convex
-        // chain: a split worth almost nothing that opens a valuable one.
+        // fills the whole budget (the knapsack trap), a non-convex chain (a
+        // split worth almost nothing that opens a valuable one), and a fork:
+        // a split worth nothing that opens branches each of which fits with
+        // it, while their convexified group together may not.
         let mut nodes = vec![];
         let root = |nodes: &mut Vec<Node>| { nodes.push(Node { parent: None, benefit: 0.0, cost_ms: 0.0 }); nodes.len() as u32 - 1 };
         for (b, c) in &small {
@@ -188,8 +196,17 @@ proptest! {
         nodes.push(Node { parent: Some(r), benefit: dud, cost_ms: 1.0 });
         let mid = nodes.len() as u32 - 1;
         nodes.push(Node { parent: Some(mid), benefit: 50.0 * big_ratio, cost_ms: 2.0 });
-        let forest = Forest::new(nodes).unwrap();
         let budget = big_cost;
+        let head = root(&mut nodes);
+        let stem_ms = 0.05 * budget / fork.len().max(1) as f64;
+        for (share, value) in &fork {
+            nodes.push(Node { parent: Some(head), benefit: 0.0, cost_ms: stem_ms });
+            let stem = nodes.len() as u32 - 1;
+            for _ in 0..2 {
+                nodes.push(Node { parent: Some(stem), benefit: value * share * budget / 2.0, cost_ms: share * budget / 2.0 });
+            }
+        }
+        let forest = Forest::new(nodes).unwrap();
         let sel = optimize(&forest, &[], &Settings::budget(budget));
         let best = exact(&forest, &[], Smooth::default(), budget);
         prop_assert!(feasible(&sel, budget));
@@ -215,6 +232,27 @@ fn convexified_increments_see_past_a_worthless_split() {
     let sel = optimize(&forest, &[], &Settings::budget(2.0));
     assert_eq!(sel.benefit, 100.1);
     assert!(sel.split[0] && sel.split[1]);
+}
+
+#[test]
+fn the_alternative_takes_the_part_of_a_group_that_fits() {
+    // Splitting 0 opens 1 and 2, each of whose splits fits with it (6.5 ms)
+    // but not both (12 ms). The greedy takes 7's split first and is blocked
+    // by the group {0, 2, 1}; the alternative tried the whole group only.
+    let forest = forest_of(&[
+        (None, 0.0, 0.0),
+        (Some(0), 0.0, 0.5),
+        (Some(0), 0.0, 0.5),
+        (Some(1), 5.0, 3.0),
+        (Some(1), 5.0, 3.0),
+        (Some(2), 5.01, 3.0),
+        (Some(2), 5.01, 3.0),
+        (None, 0.0, 0.0),
+        (Some(7), 0.9, 0.5),
+    ]);
+    let sel = optimize(&forest, &[], &Settings::budget(10.0));
+    assert!(sel.alternative);
+    assert_eq!(sel.benefit, 10.02, "{:?}", sel.split);
 }
 
 #[test]
@@ -340,4 +378,102 @@ fn parents_must_come_first() {
     assert_eq!(Forest::new(nodes).unwrap_err(), LodError::ParentAfterChild { node: 0, parent: 1 });
     let looped = vec![Node { parent: Some(0), benefit: 1.0, cost_ms: 1.0 }];
     assert!(Forest::new(looped).is_err());
+}
+
+/// An instance on which an exchange undoes 0's split and takes 1's, then
+/// 3's, which 1 opens.
+fn exchanging_instance() -> (Forest, f64) {
+    let forest = forest_of(&[
+        (None, 0.5469239471139316, 0.4594792327275998),
+        (None, 0.16176975419084982, 0.27292652428633873),
+        (Some(0), 1.3367224309052932, 0.6029250822155918),
+        (Some(1), 0.5817401614372553, 1.2681007491879956),
+        (Some(3), 0.8489283481992361, 0.5133750205103131),
+        (Some(3), 0.7376661422780353, 1.569053386010419),
+        (Some(4), 2.1237040983072286, 1.0662633101850394),
+        (Some(5), 0.8639932277557765, 0.4339855238299229),
+    ]);
+    (forest, 1.779111252466815)
+}
+
+#[test]
+fn a_group_an_exchange_opens_and_takes_is_not_applied_again() {
+    // 3 was also offered to the heap when 1 was applied, and the greedy
+    // then applied it a second time (1.96 ms).
+    let (forest, budget) = exchanging_instance();
+    let sel = optimize(&forest, &[], &Settings::budget(budget));
+    assert!(feasible(&sel, budget), "{} > {budget}", sel.cost_ms);
+    assert!(sel.benefit >= 0.5 * exact(&forest, &[], Smooth::default(), budget));
+}
+
+#[test]
+fn an_exchange_does_not_undo_a_time_saving_split_it_has_no_room_for() {
+    // Splitting 5 alone loses benefit and saves time (its group, with 9,
+    // gains both). After one exchange undid 9's split, the next undid 5's
+    // for its benefit, with no room for the 1.04 ms it gives back: 6.35 ms.
+    let forest = forest_of(&[
+        (None, 0.5851299370361258, 0.47309685978665866),
+        (None, 0.6839380336061618, 0.5710193633597809),
+        (None, 1.7899956308758627, 0.6247585212177713),
+        (Some(0), 7.370040280666403, 1.3685399049836142),
+        (Some(1), 4.044751054770041, 2.198444939206387),
+        (Some(1), 6.934983655611227, 1.3676147203138025),
+        (Some(3), 3.7434715758584893, 1.247473546092847),
+        (Some(4), 8.041393502244938, 1.1378757086353264),
+        (Some(4), 6.069064726873882, 1.8487094979353411),
+        (Some(5), 0.4457231528448069, 0.32517901530743215),
+        (Some(8), 2.8613000269441646, 1.198497453871937),
+        (Some(8), 1.6195173435890775, 0.498613071990929),
+        (Some(8), 2.0322689652331083, 2.0419718257228485),
+        (Some(9), 7.196220958217331, 0.9381779598777502),
+    ]);
+    let budget = 5.742489373228253;
+    let sel = optimize(&forest, &[], &Settings::budget(budget));
+    assert!(feasible(&sel, budget), "{} > {budget}", sel.cost_ms);
+}
+
+#[test]
+fn the_upper_bound_holds_over_splits_that_lose_benefit_and_time() {
+    // Splitting 3 loses 0.09 and saves 1.39 ms: worth taking at the
+    // blocked increment's price, which the bound (taking the greedy state
+    // as the priced optimum) ignored: 35.61 against an optimum of 36.31.
+    let forest = forest_of(&[
+        (None, 0.4855541374602559, 0.21583095789062995),
+        (None, 0.5884380367406195, 0.8257138213341695),
+        (None, 0.820421825619613, 0.23975813614699898),
+        (Some(1), 1.6971566956812223, 2.125050372709926),
+        (Some(1), 0.0, 0.21849293149924193),
+        (Some(2), 1.2136351781802501, 0.6022533208440644),
+        (Some(2), 7.4636824105304855, 0.4737245049499453),
+        (Some(2), 1.0000070518454207, 0.4501866962571282),
+        (Some(3), 1.6092752765397966, 0.7336049449645659),
+        (Some(5), 3.9889756283478595, 1.0304022434832723),
+        (Some(6), 6.340796135139665, 0.30121634309649364),
+        (Some(6), 7.737582704100543, 1.0976876689376627),
+        (Some(6), 8.41863347217658, 1.0069205589353185),
+        (Some(7), 3.9282680215342625, 1.6194125176203016),
+        (Some(7), 0.0, 2.045175559362718),
+        (Some(7), 3.8004633073745464, 1.431957109224565),
+    ]);
+    let budget = 10.016351883840867;
+    let sel = optimize(&forest, &[], &Settings::budget(budget));
+    let best = exact(&forest, &[], Smooth::default(), budget);
+    assert!(sel.upper_bound >= best * (1.0 - 1e-9), "bound {} < {best}", sel.upper_bound);
+}
+
+#[test]
+fn exchanges_stop_at_the_limits() {
+    let (forest, budget) = exchanging_instance();
+    let free = Settings::budget(budget);
+    // The greedy to its budget stop, then the exchanges under `settings`:
+    // their stop, and whether they changed the split.
+    let exchange = |settings: &Settings| {
+        let mut run = Run::new(&forest, Levels::new(&[], free.smooth), &free);
+        assert_eq!(run.greedy(&free), Stop::Budget);
+        let split = run.split.clone();
+        (run.exchange(settings, Stop::Budget), split != run.split)
+    };
+    assert_eq!(exchange(&free), (Stop::Budget, true), "an exchange is made");
+    assert_eq!(exchange(&Settings { deadline: Some(Instant::now()), ..free }), (Stop::Limit, false));
+    assert_eq!(exchange(&Settings { max_iterations: 1, ..free }), (Stop::Limit, false));
 }
