@@ -190,7 +190,7 @@ fn open_dem(
 /// Which revision of Sylva's products a cached tile holds: change it with
 /// any change to the code that changes some tile's bytes, so that caches
 /// seeded before it are not served beside tiles made after it.
-const PRODUCT_REVISION: &str = "2026-12-08: one overview per spacing around the globe; Web Mercator worlds read across 180°; float32 nodata matched as GDAL does; GDAL scale, offset and feet applied; decimated classes read where they lie";
+const PRODUCT_REVISION: &str = "2026-12-09: a GeoTIFF's vertical CRS gives its unit and direction (EPSG:6360 US feet, depths)";
 
 /// A key that changes with anything that changes a tile's bytes: every
 /// setting, the size and time of every source file, and the products'
