@@ -1,7 +1,8 @@
 //! HTTP responses for tiles and errors: entity tags with `304 Not Modified`,
-//! `Cache-Control`, `Server-Timing`, the 16-bit quantization of PNG16 and
-//! BIL16 bodies in `X-Sylva-Scale` / `X-Sylva-Offset`, and status codes by
-//! who is at fault.
+//! a byte range of a body (`206 Partial Content`, as GDAL's `/vsicurl/`
+//! reads a remote GeoTIFF), `Cache-Control`, `Server-Timing`, the 16-bit
+//! quantization of PNG16 and BIL16 bodies in `X-Sylva-Scale` /
+//! `X-Sylva-Offset`, and status codes by who is at fault.
 
 use super::ServeError;
 use super::service::Tile;
@@ -20,7 +21,8 @@ pub struct TileMeta {
     pub max_age_s: u64,
 }
 
-/// 200 with the tile, 304 if the client has it, 404 (no body) for a tile
+/// 200 with the tile, 206 with the one byte range asked for (416 for a
+/// range outside it), 304 if the client has it, 404 (no body) for a tile
 /// without data.
 pub fn tile(t: &Tile, meta: &TileMeta, request: &HeaderMap) -> Response {
     if t.bytes.is_empty() {
@@ -45,7 +47,36 @@ pub fn tile(t: &Tile, meta: &TileMeta, request: &HeaderMap) -> Response {
         return (StatusCode::NOT_MODIFIED, headers).into_response();
     }
     insert(&mut headers, header::CONTENT_TYPE, meta.mime);
-    (StatusCode::OK, headers, Body::from(t.bytes.clone())).into_response()
+    insert(&mut headers, header::ACCEPT_RANGES, "bytes");
+    let len = t.bytes.len();
+    match byte_range(request, len) {
+        None => (StatusCode::OK, headers, Body::from(t.bytes.clone())).into_response(),
+        Some(Some(range)) => {
+            insert(&mut headers, header::CONTENT_RANGE, &format!("bytes {}-{}/{len}", range.start(), range.end()));
+            (StatusCode::PARTIAL_CONTENT, headers, Body::from(t.bytes.slice(range))).into_response()
+        }
+        Some(None) => {
+            insert(&mut headers, header::CONTENT_RANGE, &format!("bytes */{len}"));
+            (StatusCode::RANGE_NOT_SATISFIABLE, headers).into_response()
+        }
+    }
+}
+
+/// The one byte range of a `len`-byte body a request asks for: `None` for
+/// the whole body (no `Range`, one that is not in bytes, several ranges, or
+/// an `If-Range`, which the weak entity tags cannot validate), `Some(None)`
+/// for a range outside it.
+fn byte_range(request: &HeaderMap, len: usize) -> Option<Option<std::ops::RangeInclusive<usize>>> {
+    let asked = request.get(header::RANGE)?.to_str().ok()?;
+    if request.contains_key(header::IF_RANGE) {
+        return None;
+    }
+    // A header that is no byte range (another unit) is ignored.
+    match http_range_header::parse_range_header(asked).ok()?.validate(len as u64) {
+        Ok(ranges) if ranges.len() == 1 => Some(Some(*ranges[0].start() as usize..=*ranges[0].end() as usize)),
+        Ok(_) => None,
+        Err(_) => Some(None),
+    }
 }
 
 /// The weak comparison of two entity tags (RFC 9110 §8.8.3.2), which

@@ -37,11 +37,16 @@ fn reference(dir: &TempDir) -> Vec<f32> {
     bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
 }
 
-/// The float32 samples of a GeoTIFF, decoded with the `tiff` crate.
+/// The float32 samples of a map's GeoTIFF, decoded with the `tiff` crate.
 fn tiff_values(path: &Path) -> Vec<f32> {
+    tiff_of_side(path, SIDE)
+}
+
+/// The float32 samples of a `side²` GeoTIFF.
+fn tiff_of_side(path: &Path, side: usize) -> Vec<f32> {
     let file = std::fs::File::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut decoder = tiff::decoder::Decoder::new(std::io::BufReader::new(file)).unwrap();
-    assert_eq!(decoder.dimensions().unwrap(), (SIDE as u32, SIDE as u32), "{}", path.display());
+    assert_eq!(decoder.dimensions().unwrap(), (side as u32, side as u32), "{}", path.display());
     match decoder.read_image().unwrap() {
         tiff::decoder::DecodingResult::F32(v) => v,
         _ => panic!("{}: not float32", path.display()),
@@ -197,4 +202,21 @@ fn gdal_locationinfo_reads_the_heights_under_a_point() {
         .unwrap_or_else(|| panic!("no dem value in:\n{report}"));
     assert!((500.0..4000.0).contains(&dem), "{dem}");
     assert!(report.contains("<sylva:class>"), "the surface class is named:\n{report}");
+}
+
+#[test]
+fn gdal_opens_a_served_geotiff_by_its_url() {
+    // GDAL's `/vsicurl/` (QGIS's raster layer from a URL) reads byte
+    // ranges (regression: "Range downloading not supported by this server").
+    let dir = TempDir::new("client-gdal-vsicurl");
+    let server = Server::start(None, &dir.join("cache"));
+    let b = common::demo().bounds;
+    let t = common::demo().tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), 11);
+    let path = format!("/tiles/dem/{}/{}/{}_{}.tif", t.level, t.row, t.row, t.col);
+    let direct = dir.join("direct.tif");
+    std::fs::write(&direct, server.get(&path).body).unwrap();
+    let out = dir.join("vsicurl.tif");
+    let url = format!("/vsicurl/{}{path}", server.base);
+    run(Command::new("gdal_translate").args(["-q", &url]).arg(&out), "gdal_translate");
+    assert_eq!(tiff_of_side(&out, 513), tiff_of_side(&direct, 513));
 }

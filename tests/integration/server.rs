@@ -446,6 +446,31 @@ fn tiles_carry_etags_cache_control_timing_and_gzip() {
 }
 
 #[test]
+fn a_byte_range_of_a_tile_is_served() {
+    let dir = TempDir::new("srv-range");
+    let server = Server::start(None, &dir.join("cache"));
+    let t = demo_tile();
+    let path = format!("/tiles/dem/{}/{}/{}_{}.tif", t.level, t.row, t.row, t.col);
+    let whole = server.get(&path);
+    assert_eq!(whole.header("accept-ranges"), Some("bytes"));
+    let len = whole.body.len();
+    let range = |asked: &str, extra: &[(&str, &str)]| server.get_with(&path, &[&[("Range", asked)], extra].concat());
+    let head = range("bytes=0-99", &[]);
+    assert_eq!((head.status, head.header("content-range")), (206, Some(format!("bytes 0-99/{len}").as_str())));
+    assert_eq!(head.body, whole.body[..100]);
+    let tail = range("bytes=-10", &[]);
+    assert_eq!((tail.status, &tail.body[..]), (206, &whole.body[len - 10..]));
+    let past = range(&format!("bytes={len}-"), &[]);
+    assert_eq!((past.status, past.header("content-range")), (416, Some(format!("bytes */{len}").as_str())));
+    // Another unit, several ranges or an If-Range: the whole body.
+    for (asked, extra) in [("items=0-5", None), ("bytes=0-9,20-29", None), ("bytes=0-9", Some(("If-Range", "W/\"x\"")))]
+    {
+        let reply = range(asked, extra.as_slice());
+        assert_eq!((reply.status, reply.body.len()), (200, len), "{asked}");
+    }
+}
+
+#[test]
 fn xyz_tiles_are_terrarium_heights() {
     let dir = TempDir::new("srv-xyz");
     let server = Server::start(None, &dir.join("cache"));
