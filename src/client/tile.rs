@@ -38,11 +38,12 @@ const EDGE_SAMPLES: f64 = 1e-6;
 /// Height of nodata texels: below this is no surface.
 pub const NODATA_M: f32 = -1.0e30;
 
-/// Heights a tile may hold, metres: Earth's deepest trench and highest
-/// summit with its canopy, and a margin. Anything else a source delivers
-/// (an infinity, GDAL's float32 nodata left unflagged) is nodata: one such
+/// Heights a tile may hold, metres: ten times Earth's relief (−11 to
+/// +9 km; synthetic scenes scaled to a 1,000 km tile reach ±50 km), where
+/// `f32` still resolves 8 mm. Anything else a source delivers (an
+/// infinity, GDAL's float32 nodata left unflagged) is nodata: one such
 /// sample would raise the tile's frame to it and its bounds to infinity.
-pub const PLAUSIBLE_M: std::ops::RangeInclusive<f32> = -12_000.0..=12_000.0;
+pub const PLAUSIBLE_M: std::ops::RangeInclusive<f32> = -100_000.0..=100_000.0;
 
 /// What a tile source delivers for one tile: `(N + 2B)²` samples per
 /// layer, row 0 at the north (the server's order), NaN for nodata.
@@ -551,7 +552,7 @@ pub(crate) mod tests {
         let id = grid.tile_containing(10.2, 46.4, 12);
         let mut payload = ramp(&grid, id, 2);
         let size = 37;
-        let spikes = [(f32::INFINITY, 5), (3.0e38, 6), (f32::MIN, 7), (-20_000.0, 8)];
+        let spikes = [(f32::INFINITY, 5), (3.0e38, 6), (f32::MIN, 7), (-200_000.0, 8)];
         for (v, k) in spikes {
             payload.cem[k * size + 10] = v;
             payload.dem[k * size + 11] = v;

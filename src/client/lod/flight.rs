@@ -56,8 +56,11 @@ pub struct BudgetFlight {
     current: Option<Selected>,
     /// A cut held while the morphs it would break run: drawn once the
     /// tiles it coarsens have morphed onto its coarser tiles and those it
-    /// refines have stopped morphing.
+    /// refines have stopped morphing, or [`MAX_HOLD`] periods after a cut
+    /// was first held (newer selections replace it and start morphs anew).
     pending: Option<Selected>,
+    /// Flight time a cut was first held since the last one was drawn.
+    held_s: f64,
     /// Flight time of the last request.
     requested_s: f64,
     frames: usize,
@@ -103,6 +106,7 @@ impl BudgetFlight {
             predictor: PathPredictor::new(WINDOW),
             current: None,
             pending: None,
+            held_s: 0.0,
             requested_s: f64::NEG_INFINITY,
             frames: 0,
             morphs: geomorph.then(|| Morphs::new(look.tau_s)),
@@ -145,14 +149,18 @@ impl BudgetFlight {
         // A selection looks τ ahead of its request: a frame later than that
         // (frames farther apart than τ) is past the views the cut in hand
         // was made for, and waits for one made now.
-        let stale = t_s > self.requested_s + self.look.tau_s;
-        if self.morphs.as_ref().is_none_or(Morphs::settled)
+        // Half a period of slack: the frame that starts the next request
+        // comes about τ after the last one, a little more or less.
+        let tau = self.look.tau_s;
+        let stale = t_s > self.requested_s + STALE_PERIODS * tau;
+        let held_too_long = t_s >= self.held_s + MAX_HOLD * tau;
+        if (held_too_long || self.morphs.as_ref().is_none_or(Morphs::settled))
             && let Some(p) = self.pending.take()
         {
             self.current = Some(p);
         }
         if let Some(done) = self.worker.take(stale) {
-            self.offer(done);
+            self.offer(done, t_s);
         }
         if !self.worker.busy() && t_s >= self.requested_s + self.look.tau_s {
             let ground = |lon, lat| self.selector.lowest_ground_m(lon, lat);
@@ -255,7 +263,7 @@ impl BudgetFlight {
     /// held while the tiles it replaces morph down, or finish morphing (a
     /// newer one replaces it there; [`Morphs`] sends back up the tiles it
     /// no longer coarsens).
-    fn offer(&mut self, next: Selected) {
+    fn offer(&mut self, next: Selected, t_s: f64) {
         let Some(current) = &self.current else {
             self.current = Some(next);
             return;
@@ -266,6 +274,7 @@ impl BudgetFlight {
             && (coarsens(current, &next) || m.refines_morphing(&ids(&next)))
         {
             self.pending = Some(next);
+            self.held_s = t_s;
         } else {
             self.current = Some(next);
         }
@@ -328,6 +337,18 @@ pub struct Observed {
     /// The model's prediction for it, before the frame corrected the model.
     pub model_ms: f64,
 }
+
+/// Periods after the last request past which a frame is stale: its views
+/// are past those the cut in hand was selected for, and it waits for a cut
+/// selected for it.
+const STALE_PERIODS: f64 = 1.5;
+
+/// Periods a cut is held at most for the morphs it would break: the newer
+/// selections that replace it start morphs of their own, and without a
+/// limit a flight that keeps coarsening would draw the old, finer cut (over
+/// the budget) for good. At the limit the held cut is drawn, its morphs
+/// cut short.
+const MAX_HOLD: f64 = 2.0;
 
 fn ids(s: &Selected) -> Vec<TileId> {
     s.cut.tiles.iter().map(|c| c.id).collect()
@@ -420,12 +441,31 @@ mod tests {
         let first = f.frame(0.0, &camera(10.05));
         f.morphs(0.0, &ids(&first));
         let finer = refined(&first, 0);
-        f.offer(finer.clone());
+        f.offer(finer.clone(), 0.0);
         assert!(f.pending.is_none(), "nothing morphs: drawn at once");
         f.morphs(0.1, &ids(&finer));
         // A child of the tile refined, morphing up from it, refined again.
-        f.offer(refined(&finer, finer.cut.tiles.len() - 1));
+        let held = refined(&finer, finer.cut.tiles.len() - 1);
+        f.offer(held.clone(), 0.1);
         assert!(f.pending.is_some(), "held while its parent morphs");
+        // Held for at most two periods (regression: newer selections
+        // replacing it could hold the old cut for good).
+        f.morphs(0.5, &ids(&finer));
+        f.requested_s = 1.0;
+        assert_eq!(ids(&f.frame(1.0, &camera(10.05))), ids(&finer), "still held");
+        f.requested_s = 2.0;
+        assert_eq!(ids(&f.frame(2.1, &camera(10.05))), ids(&held), "drawn at the limit");
+    }
+
+    #[test]
+    fn the_frame_that_starts_a_selection_does_not_wait_for_it() {
+        // Regression: a frame a hair over τ after the last request (float
+        // times of frames τ apart) was taken for a stale one and waited for
+        // the selection it had just started, every other frame or so.
+        let mut f = flight();
+        f.frame(0.0, &camera(10.05));
+        f.frame(1.0 + 1e-9, &camera(10.06));
+        assert!(f.worker.busy() && f.requested_s == 1.0 + 1e-9);
     }
 
     /// A frame whose every pixel took `steps` view-ray steps.
