@@ -234,6 +234,7 @@ impl TileStore {
                 }
             }
             if let Some(e) = failed {
+                self.evict();
                 return Err(e);
             }
         }

@@ -3,7 +3,9 @@
 //! ModelPixelScale/ModelTiepoint or ModelTransformation tags and the CRS from
 //! the GeoKey directory (EPSG codes, geographic or projected). Stored values
 //! become heights as GDAL's per-band scale and offset (the GDAL_METADATA tag)
-//! and the vertical unit (feet to metres) say.
+//! and the vertical CRS or unit (feet to metres, depths to heights) say. A
+//! compression the decoder cannot undo, or a chunk past the end of the
+//! file, is refused when the file is opened.
 //!
 //! Blocks are the file's own strips or tiles, decoded once into the block
 //! cache. The decoder sits behind a mutex; decoding is short next to what is
@@ -71,9 +73,9 @@ impl TiffFile {
         if w == 0 || h == 0 || cw == 0 || ch == 0 || bands == 0 {
             return Err(bad(format!("empty image ({w}×{h}, {bands} bands, chunks {cw}×{ch})")));
         }
-        check_compression(&mut dec).map_err(bad)?;
+        let compressed = check_compression(&mut dec).map_err(bad)?;
         let length = std::fs::metadata(path).map_err(|source| SourceError::Open { path: path.into(), source })?.len();
-        check_chunks(&mut dec, length).map_err(bad)?;
+        check_chunks(&mut dec, length, compressed).map_err(bad)?;
         let tf = TiffFile {
             path: path.into(),
             decoder: Mutex::new(dec),
@@ -182,12 +184,17 @@ fn to_f32(data: DecodingResult, nodata: Option<f64>) -> Option<Vec<f32>> {
 }
 
 /// Refuses, when the file is opened and not at its first read, a
-/// compression the decoder cannot undo, naming it.
-fn check_compression(dec: &mut Decoder<BufReader<File>>) -> Result<(), String> {
+/// compression the decoder cannot undo, naming it; else whether the file is
+/// compressed.
+fn check_compression(dec: &mut Decoder<BufReader<File>>) -> Result<bool, String> {
     let code = dec.find_tag_unsigned::<u16>(Tag::Compression).map_err(|e| e.to_string())?.unwrap_or(1);
     let name = match code {
-        // None, LZW, JPEG, Deflate (and its old code), PackBits, CCITT Group 4, Zstandard.
-        1 | 5 | 7 | 8 | 32946 | 32773 | 4 | 50000 => return Ok(()),
+        1 => return Ok(false),
+        // LZW, JPEG, Deflate (and its old code), PackBits, CCITT Group 4, Zstandard.
+        5 | 7 | 8 | 32946 | 32773 | 4 | 50000 => return Ok(true),
+        2 => "CCITT RLE",
+        3 => "CCITT Group 3",
+        6 => "old-style JPEG",
         34712 => "JPEG 2000",
         34887 => "LERC",
         34925 => "LZMA",
@@ -200,14 +207,18 @@ fn check_compression(dec: &mut Decoder<BufReader<File>>) -> Result<(), String> {
     ))
 }
 
-/// Refuses a file cut short: every chunk must lie within its `length` bytes.
-fn check_chunks(dec: &mut Decoder<BufReader<File>>, length: u64) -> Result<(), String> {
+/// Refuses a file cut short: every chunk must lie within its `length` bytes
+/// (uncompressed, only its first byte: the decoder reads the rows it needs,
+/// and libtiff and GDAL accept a last strip whose stated size runs past the
+/// end).
+fn check_chunks(dec: &mut Decoder<BufReader<File>>, length: u64, compressed: bool) -> Result<(), String> {
     let tiled = dec.find_tag(Tag::TileOffsets).map_err(|e| e.to_string())?.is_some();
     let (offsets, counts) =
         if tiled { (Tag::TileOffsets, Tag::TileByteCounts) } else { (Tag::StripOffsets, Tag::StripByteCounts) };
     let offsets = dec.get_tag_u64_vec(offsets).map_err(|e| e.to_string())?;
     let counts = dec.get_tag_u64_vec(counts).map_err(|e| e.to_string())?;
-    match offsets.iter().zip(&counts).position(|(o, c)| o.saturating_add(*c) > length) {
+    let stated = |c: u64| if compressed { c } else { c.min(1) };
+    match offsets.iter().zip(&counts).position(|(o, c)| o.saturating_add(stated(*c)) > length) {
         Some(i) => Err(format!("truncated: chunk {i} lies past the end of its {length} bytes")),
         None => Ok(()),
     }
@@ -360,7 +371,7 @@ mod tests {
     }
 
     /// A 4 × 2 UInt16 GeoTIFF (values 0, 100, …, 700) in EPSG:4326 with
-    /// `metadata` and, if given, a VerticalUnitsGeoKey.
+    /// `metadata` and, if given, the vertical GeoKey `(key, value)`.
     fn stored(name: &str, metadata: Option<&str>, vertical: Option<(u16, u16)>) -> PathBuf {
         use tiff::encoder::{TiffEncoder, colortype};
         let path = std::env::temp_dir().join(format!("sylva-geotiff-{}-{name}.tif", std::process::id()));
@@ -442,9 +453,9 @@ mod tests {
             err.contains("sylva-geotiff") && err.contains("compressed with LERC (TIFF compression 34887)"),
             "{err}"
         );
-        // A strip of 65535 bytes in a file of a few hundred, as if cut short.
+        // A strip at byte 65535 of a file of a few hundred, as if cut short.
         let cut = stored("cut", None, None);
-        patch_tag(&cut, 279, u16::MAX);
+        patch_tag(&cut, 273, u16::MAX);
         let err = first_row(&cut).expect_err("cut short").to_string();
         assert!(err.contains("truncated: chunk 0 lies past the end of its"), "{err}");
     }

@@ -1,6 +1,6 @@
 //! HTTP for sources and clients: GETs with a timeout, retried a bounded
 //! number of times with exponential backoff where a retry may succeed (a
-//! network error, a timeout, 408, 429, a 5xx but 501 and 505; not a refusal
+//! network error, a timeout, 408, 425, 429, a 5xx but 501 and 505; not a refusal
 //! such as 400 or 403); after repeated failures a circuit breaker fails
 //! requests at once for a cool-down, so a dead server costs no waiting.
 //! Bodies are read up to a size limit, a larger one is an error; 404 is "no
@@ -103,8 +103,10 @@ impl Link {
                     let tried = attempt + 1;
                     tracing::warn!(url, attempt = format!("{tried} of {}", self.retries + 1), error = %problem, "request failed");
                     last = format!("{problem} (after {tried} attempt{})", if tried == 1 { "" } else { "s" });
+                    // A refusal says the server answers: no reason to
+                    // open the breaker on it.
                     if !retry {
-                        break;
+                        return Err(fail(last));
                     }
                 }
             }
@@ -189,5 +191,12 @@ mod tests {
             assert!(err.contains(said), "{head}: {err}");
             assert_eq!(count.load(Ordering::SeqCst), tries, "{head}");
         }
+        // Nor do refusals open the breaker: the server answers.
+        let (url, count) = answering("HTTP/1.1 400 Bad Request\r\nContent-Length: 0");
+        let link = Link::new(&LinkSettings { breaker_failures: 1, ..settings });
+        for _ in 0..3 {
+            assert!(link.fetch(&url).unwrap_err().to_string().contains("HTTP 400"));
+        }
+        assert_eq!(count.load(Ordering::SeqCst), 3);
     }
 }
