@@ -52,6 +52,13 @@ use discrete::{Groups, ratio};
 use std::collections::{BinaryHeap, HashMap};
 use std::time::Instant;
 
+/// How far from the greedy's own prices the tightest bound is looked for
+/// ([`Run::least_bound`]), times either way.
+const PRICE_SPAN: f64 = 100.0;
+/// Golden-section steps of that search: the price found within 1.1 % of
+/// the span's logarithm.
+const PRICE_STEPS: usize = 14;
+
 /// Bad optimiser input.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum LodError {
@@ -350,7 +357,37 @@ impl<'a> Run<'a> {
     /// the higher of the two gives that optimum's value.
     fn bound_now(&self, value: f64) -> f64 {
         let level = self.levels.level_for_budget(self.budget_ms - self.cost_d);
-        self.bound_at(value.max(0.0)).min(self.bound_at(level))
+        let (a, b) = (value.max(0.0), level);
+        self.bound_at(a).min(self.bound_at(b)).min(self.least_bound(if a.is_finite() { a.min(b) } else { b }))
+    }
+
+    /// The least [`Run::bound_at`] over prices within [`PRICE_SPAN`] times
+    /// `lambda` either way: every price bounds, and `bound_at` is convex in
+    /// the price (so unimodal in its logarithm), so a golden-section search
+    /// finds the tightest near the greedy's own prices, which alone can
+    /// bound loosely where increments are far from convex. ∞ for a price
+    /// that is not positive and finite.
+    fn least_bound(&self, lambda: f64) -> f64 {
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return f64::INFINITY;
+        }
+        let at = |t: f64| self.bound_at(t.exp());
+        let golden = (5f64.sqrt() - 1.0) / 2.0;
+        let (mut lo, mut hi) = (lambda.ln() - PRICE_SPAN.ln(), lambda.ln() + PRICE_SPAN.ln());
+        let (mut a, mut b) = (hi - golden * (hi - lo), lo + golden * (hi - lo));
+        let (mut fa, mut fb) = (at(a), at(b));
+        for _ in 0..PRICE_STEPS {
+            if fa <= fb {
+                (hi, b, fb) = (b, a, fa);
+                a = hi - golden * (hi - lo);
+                fa = at(a);
+            } else {
+                (lo, a, fa) = (a, b, fb);
+                b = lo + golden * (hi - lo);
+                fb = at(b);
+            }
+        }
+        fa.min(fb)
     }
 
     /// No feasible answer beats `λ·T` plus the best `b − λ·c` of the cuts
