@@ -28,11 +28,13 @@
 //!   (or the continuous level, if higher) prices a millisecond at `λ`:
 //!   `λ·T` plus the best benefit less priced cost over the cuts (one
 //!   bottom-up pass) and over the continuous curve bounds every feasible
-//!   answer (Lagrangian duality; [`Selection::upper_bound`]). Where no
-//!   discrete increment left is worth more per ms than the blocked one, the
-//!   greedy state lies on the path of the fractional optimum and the bound
-//!   is that optimum's value; splits that lose both benefit and time, which
-//!   the greedy never undoes, only make it less tight.
+//!   answer (Lagrangian duality; [`Selection::upper_bound`]), and so does
+//!   every other price: the bound reported is the least found within 100×
+//!   of these prices. Where no discrete increment left is worth more per ms
+//!   than the blocked one, the greedy state lies on the path of the
+//!   fractional optimum and the bound is that optimum's value; splits that
+//!   lose both benefit and time, which the greedy never undoes, only make
+//!   it less tight.
 //!
 //! If the roots alone (the coarsest representation) cost more than the
 //! budget they are still drawn, nothing else is, and the overrun is
