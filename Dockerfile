@@ -8,6 +8,7 @@ COPY Cargo.toml Cargo.lock ./
 COPY .cargo ./.cargo
 COPY src ./src
 COPY assets ./assets
+COPY examples ./examples
 RUN cargo build --release --locked --no-default-features --features server --bin sylva
 
 FROM debian:bookworm-slim
