@@ -48,7 +48,9 @@ struct Tile {
     // place among the frame's draws + 1, shadow steps (the tile's ray-casting quality), morph layer + 1 (0: the
     // tile does not morph).
     flags: vec4<u32>,
-    // highest CEM over all texels, halo included (local m), unused x3.
+    // highest CEM over all texels, halo included (local m); how far from
+    // the tile's edge the crack filler is drawn (samples; the largest float when
+    // the mesh is drawn plain); unused x2.
     texels: vec4<f32>,
     // weight of the tile's own heights against its morph layer's, unused x3.
     morph: vec4<f32>,

@@ -179,9 +179,14 @@ fn fs_plain(in: PlainVertexOut) -> PlainOut {
 }
 
 // The terrain mesh's fragment: map colour, lit by the sun, or discarded on
-// a cell without data.
+// a cell without data and, under a ray-cast tile, away from its edge.
 fn plain_fragment(in: PlainVertexOut) -> PlainOut {
     let s = in.sample;
+    // A crack filler only beside the tile's edge, where cracks open.
+    let last = tile.grid.w - 1.0;
+    if min(min(s.x, s.y), min(last - s.x, last - s.y)) > tile.texels.y {
+        discard;
+    }
     let c = clamp(vec2<i32>(floor(s)), vec2<i32>(0), vec2<i32>(i32(tile.grid.w) - 2));
     let f = clamp(s - vec2<f32>(c), vec2<f32>(0.0), vec2<f32>(1.0));
     let c00 = colour_at(c.x, c.y);

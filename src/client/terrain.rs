@@ -11,7 +11,8 @@
 //! a crack (`render::uniforms::needs_filler`: their rectangle misplaces the
 //! true trapezoidal tile by half the one-cell overlap or more — coarse tiles
 //! at high latitudes, and always at the poles): there the crack shows this
-//! mesh instead of the sky.
+//! mesh instead of the sky. As a filler it is drawn only in a band beside
+//! the tile's edge, where cracks open (`render::uniforms`).
 
 use super::frame::TileFrame;
 use super::hull::{self, QUAD_SAMPLES};

@@ -17,13 +17,15 @@
 //!   maximum mipmap covers exactly those `N + 1` cells: cell `m` has its
 //!   south-west corner at sample `m − 1`.
 //! - **Nodata** is [`NODATA_M`], far below any surface: cells with a nodata
-//!   corner hold no surface, and bound nothing.
+//!   corner hold no surface, and bound nothing. A sample without data in
+//!   one layer (ground, CEM or class) has none in any.
 
 use super::frame::TileFrame;
 use super::globe::Geodetic;
 use super::hull::Hull;
 use super::terrain::TerrainMesh;
 use crate::cem::accel::{MaxMipmap, ZONE_FAR, ZONE_NEAR};
+use crate::cem::surface::NODATA;
 use crate::grid::{TileGrid, TileId};
 use crate::raster::Raster;
 use crate::raster::morphology::dilate;
@@ -69,10 +71,20 @@ pub fn plausible(v: f32) -> f32 {
 }
 
 impl TilePayload {
-    /// The payload with heights outside [`PLAUSIBLE_M`] made nodata.
-    fn plausible(mut self) -> TilePayload {
-        for v in self.cem.iter_mut().chain(&mut self.dem) {
-            *v = plausible(*v);
+    /// The payload with heights outside [`PLAUSIBLE_M`] made nodata, and
+    /// every sample that is nodata in one layer made nodata in all (the
+    /// server's rule: no ground, no class), so the ray casters, which read
+    /// the heights, and the plain mesh, which reads the class, agree on
+    /// holes. The layers must be of one length.
+    fn consistent(mut self) -> TilePayload {
+        for k in 0..self.cem.len() {
+            let (cem, dem) = (plausible(self.cem[k]), plausible(self.dem[k]));
+            let none = cem.is_nan() || dem.is_nan() || self.surface[k] == NODATA;
+            (self.cem[k], self.dem[k]) = if none { (f32::NAN, f32::NAN) } else { (cem, dem) };
+            if none {
+                self.surface[k] = NODATA;
+                self.colour[k][3] = 0;
+            }
         }
         self
     }
@@ -164,7 +176,7 @@ impl TileData {
         if halo == 0 {
             return Err(TileError::NoHalo(id));
         }
-        let payload = payload.plausible();
+        let payload = payload.consistent();
         let flat = TileFrame::new(grid, id);
         let base = base_height(&payload.cem);
         let frame = flat.raised(base);
@@ -562,10 +574,15 @@ pub(crate) mod tests {
         assert_eq!(t.base_m, good.base_m);
         let (lo, hi) = t.range.heights_m;
         assert!((1000.0..1200.0).contains(&lo) && (1000.0..1200.0).contains(&hi), "{lo} {hi}");
+        // A sample without data in one layer has none in any: its ground,
+        // its CEM and its class (which the plain mesh reads) agree.
         for (_, k) in spikes {
             let row = size - 1 - k;
-            assert_eq!(t.texels[row * size + 10][0], NODATA_M);
-            assert_eq!(t.texels[row * size + 11][1], NODATA_M);
+            for x in [10, 11] {
+                assert_eq!(t.texels[row * size + x][..2], [NODATA_M; 2]);
+                assert_eq!(t.surface[row * size + x], NODATA);
+                assert_eq!(t.colour[row * size + x][3], 0);
+            }
         }
     }
 

@@ -432,8 +432,10 @@ fn the_linear_march_misses_are_measured() {
 
 /// Builds the same scene (heights and camera in units of the tile's width)
 /// on tile `id`: payload heights have the ellipsoid's drop taken out, so
-/// every level sees one flat-frame scene, scaled.
-fn scaled_scene(grid: &TileGrid, id: TileId) -> (TileData, Camera) {
+/// every level sees one flat-frame scene, scaled. Heights more than
+/// `nodata_beyond` tile widths from the ellipsoid are nodata (in the heights
+/// alone, as a source that flags nothing else would send them).
+fn scaled_scene(grid: &TileGrid, id: TileId, nodata_beyond: f64) -> (TileData, Camera) {
     let halo = 4;
     let frame = sylva::client::frame::TileFrame::new(grid, id);
     let width = frame.spacing_m.x * (grid.samples() - 1) as f64;
@@ -447,8 +449,9 @@ fn scaled_scene(grid: &TileGrid, id: TileId) -> (TileData, Camera) {
             let forest = (u * 13.0).sin() * (v * 11.0).cos() > 0.2;
             let canopy = if forest { width * 0.012 } else { 0.0 };
             let drop = drops[(size - 1 - y) * size + x];
-            p.dem.push((ground - drop) as f32);
-            p.cem.push((ground + canopy - drop) as f32);
+            let none = (ground + canopy - drop).abs() > nodata_beyond * width;
+            p.dem.push(if none { f32::NAN } else { (ground - drop) as f32 });
+            p.cem.push(if none { f32::NAN } else { (ground + canopy - drop) as f32 });
             p.surface.push(forest as u8);
             let c = sylva::encode::relief::base_colour(forest as u8, None).map(|v| v as u8);
             p.colour.push([c[0], c[1], c[2], 255]);
@@ -477,8 +480,8 @@ fn deep_zoom_renders_the_scene_of_a_coarse_tile() {
     let grid = small_grid();
     let coarse = TileId::new(2, 10, 20);
     let deep = TileId::new(22, (10 * 2 + 1) << 19, 27_787_264);
-    let (tile_a, cam_a) = scaled_scene(&grid, coarse);
-    let (tile_b, cam_b) = scaled_scene(&grid, deep);
+    let (tile_a, cam_a) = scaled_scene(&grid, coarse, f64::INFINITY);
+    let (tile_b, cam_b) = scaled_scene(&grid, deep, f64::INFINITY);
     let apart = (tile_a.frame.origin_ecef - tile_b.frame.origin_ecef).length();
     assert!((5.7e6..6.1e6).contains(&apart), "{apart} m apart (6,000 km along the parallel)");
     let flat = settings(Traversal::Exact, None);
@@ -497,6 +500,32 @@ fn deep_zoom_renders_the_scene_of_a_coarse_tile() {
     let d = reference::compare(&b.gpu.colour, &b.gpu.view_z_m, &coarse_as_image);
     assert!(coarse_as_image.view_z_m.iter().filter(|&&z| z > 0.0).count() > 5000);
     assert_close("level 22 against level 2", &d);
+}
+
+#[test]
+fn nodata_shows_the_sky_at_every_level() {
+    // Regression: where a coarse tile's flat frame needs the crack filler
+    // under it (a level-2 tile, 1,000 km), the filler drew ground at the
+    // tile's lowest height over samples whose heights were nodata but whose
+    // class was not (3,599 pixels the reference leaves to the sky), and,
+    // seen through the holes, lowered under the ground beside them (866).
+    // It is now drawn only within its band beside the tile's edge (2.6
+    // samples here), where cracks open; holes inside that band still show
+    // it (33 pixels, 0.27 %, at level 2: 9 km of flat-frame error).
+    let grid = small_grid();
+    let ids = [TileId::new(2, 10, 20), TileId::new(12, 10 << 10, 20 << 10), TileId::new(22, 21 << 19, 27_787_264)];
+    for id in ids {
+        let (tile, camera) = scaled_scene(&grid, id, 0.012);
+        let both = render_both(std::slice::from_ref(&tile), &camera, &settings(Traversal::Exact, None));
+        let (hits, sky) = (both.cpu.view_z_m.iter().filter(|&&z| z > 0.0).count(), both.cpu.view_z_m.len());
+        assert!((2000..sky - 4000).contains(&hits), "level {}: holes and ground in view ({hits} hits)", id.level);
+        let (name, d) = (format!("level {} with holes", id.level), &both.departure);
+        assert_eq!(needs_filler(&tile), id.level == 2, "{name}: the coarse tile alone needs the filler");
+        match id.level {
+            2 => assert!(d.misses == 0 && d.extras as f64 <= 0.005 * d.pixels as f64, "{name}: {d:?}"),
+            _ => assert_close(&name, d),
+        }
+    }
 }
 
 /// Terrain defined on the sphere (from the ECEF direction), continuous

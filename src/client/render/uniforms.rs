@@ -55,7 +55,8 @@ pub struct TileUniform {
     pub index: [i32; 4],
     /// Draw mode, draw index + 1, shadow steps, morph layer + 1 (0: none).
     pub flags: [u32; 4],
-    /// Highest CEM over all texels (the halo too).
+    /// Highest CEM over all texels (the halo too); how far from the
+    /// tile's edge the crack filler is drawn, samples (`f32::MAX` when drawn plain).
     pub texels: [f32; 4],
     /// Morph weight of the tile's own heights (against the coarser
     /// surface in its morph layer), unused × 3.
@@ -179,7 +180,12 @@ impl TileUniform {
             ],
             index: [tile.halo as i32, tile.size as i32, slot as i32, tile.mip.levels() as i32 - 1],
             flags: [mode as u32, draw + 1, shadow_steps, morph.map_or(0, |(layer, _)| layer + 1)],
-            texels: [tile.range.texels_max_m, 0.0, 0.0, 0.0],
+            texels: [
+                tile.range.texels_max_m,
+                if mode == DrawMode::Plain { f32::MAX } else { filler_band_samples(tile) },
+                0.0,
+                0.0,
+            ],
             morph: [morph.map_or(1.0, |(_, weight)| weight), 0.0, 0.0, 0.0],
             splats: [splats.start, splats.len() as u32, 0, 0],
             screen: screen_rect(camera, tile),
@@ -195,6 +201,16 @@ impl TileUniform {
 /// three times as much.
 fn filler_drop_m(tile: &TileData) -> f32 {
     (tile.range.mesh_error_m as f64 + 3.0 * tile.flat_error_m() + 0.01 * tile.frame.spacing_m.min_element()) as f32
+}
+
+/// How far from the tile's edge cracks can open, samples: a crack lies
+/// where the flat frame misplaces the true edge, within its error of it,
+/// and the tile's box reaches one cell beyond its edge samples; one cell
+/// more for safety. Inside that band the ray-cast surface covers the
+/// filler, except through nodata holes, where the filler would stand in
+/// for ground there is none of.
+fn filler_band_samples(tile: &TileData) -> f32 {
+    (tile.flat_error_m() / tile.frame.spacing_m.min_element() + 2.0) as f32
 }
 
 /// Whether a ray-cast tile needs its terrain mesh beneath it to fill cracks
