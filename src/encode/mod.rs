@@ -8,6 +8,7 @@
 //! error is stated, not hidden. Nodata (NaN) never reaches a file as NaN: it
 //! becomes the format's nodata value.
 
+pub mod data_picture;
 pub mod geotiff;
 pub mod relief;
 pub mod terrarium;

@@ -59,7 +59,7 @@ pub fn encode_colours(surface: &Raster<u8>, map: Option<&[Raster<f32>]>) -> Resu
 }
 
 /// Colours of surface classes when there is no map.
-fn class_colour(class: u8) -> [f32; 3] {
+pub(super) fn class_colour(class: u8) -> [f32; 3] {
     match SurfaceType::from_id(class) {
         Some(SurfaceType::Forest) => [96.0, 140.0, 80.0],
         Some(SurfaceType::Water) => [120.0, 170.0, 220.0],
@@ -119,7 +119,7 @@ pub fn grey(heights: &Raster<f32>, cell_m: f64, max_m: f32) -> Result<Vec<u8>, E
 /// Lambertian shade in [0, 1] at `(x, y)` of `cem` from Horn's 3×3 gradient;
 /// a neighbour without data counts as level with the centre (so the edge
 /// of the data is shaded, not lost), a centre without data gives NaN.
-fn shade(cem: &Raster<f32>, x: usize, y: usize, (dx, dy): (f64, f64)) -> f32 {
+pub(super) fn shade(cem: &Raster<f32>, x: usize, y: usize, (dx, dy): (f64, f64)) -> f32 {
     let centre = cem.get(x, y);
     if centre.is_nan() {
         return f32::NAN;

@@ -22,6 +22,9 @@ pub enum Encoding {
     Terrarium,
     /// An RGBA PNG picture: the relief preview or the map colours.
     Rgba,
+    /// A data layer drawn as an RGBA PNG picture ([`encode::data_picture`]):
+    /// what a picture format (JPEG) answers for a data layer.
+    Picture,
 }
 
 impl Encoding {
@@ -32,6 +35,7 @@ impl Encoding {
             Encoding::Data(Format::Bil32) => "bil32",
             Encoding::Data(Format::Png16) | Encoding::Terrarium | Encoding::Rgba => "png",
             Encoding::Data(Format::Tiff) => "tif",
+            Encoding::Picture => "picture.png",
         }
     }
 
@@ -39,7 +43,7 @@ impl Encoding {
     pub fn mime(self) -> &'static str {
         match self {
             Encoding::Data(f) => f.mime(),
-            Encoding::Terrarium | Encoding::Rgba => "image/png",
+            Encoding::Terrarium | Encoding::Rgba | Encoding::Picture => "image/png",
         }
     }
 }
@@ -163,6 +167,7 @@ pub fn compute(region: &Region, product: &Product) -> Result<Computed, ProduceEr
         MapLayer::Relief if region.dem.may_cover(&grid) => relief(region, &grid),
         MapLayer::Relief => Ok(Computed::absent(Stats::default())),
         MapLayer::Colour => colour(region, &grid),
+        MapLayer::Data(layer) if product.encoding() == Encoding::Picture => data_picture(region, &grid, layer),
         MapLayer::Data(layer) => {
             let (samples, stats) = samples(region, &grid, layer)?;
             encode_samples(region, &grid, layer, product.encoding(), samples.as_ref(), stats)
@@ -239,6 +244,18 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
     let relief = encode::relief::Relief { cem, surface: &surface, map: map.as_deref(), spacing_m: &spacing_m };
     let bytes = encode::relief::encode(&relief)?;
     Ok(Computed { bytes, uniform: false, stats: products.stats, encode: start.elapsed() })
+}
+
+/// A data layer drawn as a picture: its samples with one of margin, for
+/// shading.
+fn data_picture(region: &Region, grid: &SampleGrid, layer: Layer) -> Result<Computed, ProduceError> {
+    let (samples, stats) = samples(region, &grid.grown(1), layer)?;
+    let Some(samples) = samples.filter(|s| !s.view().all_nodata()) else {
+        return Ok(Computed::absent(stats));
+    };
+    let start = Instant::now();
+    let bytes = encode::data_picture::encode(layer, &samples, &row_spacings_m(grid))?;
+    Ok(Computed { bytes, uniform: false, stats, encode: start.elapsed() })
 }
 
 /// Ground distance between columns and between rows at each row of `grid`,

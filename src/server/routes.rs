@@ -219,10 +219,14 @@ async fn tile(
     headers: &HeaderMap,
 ) -> Result<Response, ServeError> {
     let layer = parse_layer(layer)?;
-    if layer.is_picture() {
-        let format = picture_extension(layer, ext)?;
+    let picture = match layer.is_picture() {
+        true => Some((picture_extension(layer, ext)?, Encoding::Rgba)),
+        // A data layer in JPEG is a picture of it.
+        false => PictureFormat::of_extension(ext).filter(|&f| f == PictureFormat::Jpeg).map(|f| (f, Encoding::Picture)),
+    };
+    if let Some((format, encoding)) = picture {
         tile_exists(state, id)?;
-        let t = state.tiles.get(Product::Tile { layer, id, halo, encoding: Encoding::Rgba }).await?;
+        let t = state.tiles.get(Product::Tile { layer, id, halo, encoding }).await?;
         return picture_tile(state, layer, t, format, headers).await;
     }
     let encoding = match ext.to_ascii_lowercase().as_str() {
@@ -231,7 +235,9 @@ async fn tile(
         "png" => Encoding::Data(Format::Png16),
         "tif" | "tiff" => Encoding::Data(Format::Tiff),
         other => {
-            return Err(ServeError::BadRequest(format!("tile extension .{other}: use bil, bil32, png or tif")));
+            return Err(ServeError::BadRequest(format!(
+                "tile extension .{other}: use bil, bil32, png, tif or jpg (a picture)"
+            )));
         }
     };
     tile_exists(state, id)?;

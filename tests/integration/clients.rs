@@ -165,25 +165,38 @@ fn the_shipped_gdal_description_reads_the_demo_heights() {
     );
 }
 
-/// GDAL's plain `WMS:` URL of the demo's relief (no service description).
-fn plain_relief_url(server: &Server) -> String {
-    let query = "SERVICE=WMS&VERSION=1.1.1&REQUEST=GetMap&LAYERS=relief&SRS=EPSG:4326&BBOX=10.0,46.3,10.25,46.45";
+/// GDAL's plain `WMS:` URL of a layer over the demo (no service description).
+fn plain_url(server: &Server, layer: &str) -> String {
+    let query =
+        format!("SERVICE=WMS&VERSION=1.1.1&REQUEST=GetMap&LAYERS={layer}&SRS=EPSG:4326&BBOX=10.0,46.3,10.25,46.45");
     format!("WMS:{}/wms?{query}", server.base)
 }
 
+/// GDAL's plain `WMS:` URL of the demo's relief.
+fn plain_relief_url(server: &Server) -> String {
+    plain_url(server, "relief")
+}
+
 #[test]
-fn gdal_reads_the_relief_from_a_plain_wms_url_in_its_default_jpeg() {
+fn gdal_reads_every_layer_from_a_plain_wms_url_in_its_default_jpeg() {
+    // Regression: a data layer in JPEG was refused, so each of GDAL's
+    // subdatasets but the pictures failed to open.
     let dir = TempDir::new("client-gdal-jpeg");
     let server = Server::start(None, &dir.join("cache"));
-    let url = plain_relief_url(&server);
-    let out = dir.join("relief.png");
-    run(Command::new("gdal_translate").args(["-q", "-outsize", "256", "154"]).arg(&url).arg(&out), "gdal_translate");
-    let relief = image::open(&out).unwrap();
-    assert_eq!(relief.color(), image::ColorType::Rgb8, "GDAL reads three 8-bit bands");
-    let grey: Vec<f64> = relief.into_luma8().pixels().map(|p| f64::from(p.0[0])).collect();
-    let mean = grey.iter().sum::<f64>() / grey.len() as f64;
-    let sd = (grey.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / grey.len() as f64).sqrt();
-    assert!((60.0..200.0).contains(&mean) && sd > 15.0, "a shaded map, not a blank: mean {mean:.0}, sd {sd:.0}");
+    for layer in ["relief", "dem", "cem", "canopy", "surface"] {
+        let out = dir.join(&format!("{layer}.png"));
+        let url = plain_url(&server, layer);
+        run(
+            Command::new("gdal_translate").args(["-q", "-outsize", "256", "154"]).arg(&url).arg(&out),
+            "gdal_translate",
+        );
+        let picture = image::open(&out).unwrap();
+        assert_eq!(picture.color(), image::ColorType::Rgb8, "{layer}: GDAL reads three 8-bit bands");
+        let grey: Vec<f64> = picture.into_luma8().pixels().map(|p| f64::from(p.0[0])).collect();
+        let mean = grey.iter().sum::<f64>() / grey.len() as f64;
+        let sd = (grey.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / grey.len() as f64).sqrt();
+        assert!((40.0..220.0).contains(&mean) && sd > 10.0, "{layer}: a map, not a blank: mean {mean:.0}, sd {sd:.0}");
+    }
 }
 
 #[test]

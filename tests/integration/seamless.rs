@@ -122,7 +122,15 @@ fn relief(region: &Region, product: Product) -> RgbaImage {
 
 /// The relief of tile `id` with `halo`.
 fn relief_tile(region: &Region, id: TileId, halo: usize) -> RgbaImage {
-    relief(region, Product::Tile { layer: MapLayer::Relief, id, halo, encoding: Encoding::Rgba })
+    picture_tile(region, RELIEF, id, halo)
+}
+
+/// The relief picture.
+const RELIEF: (MapLayer, Encoding) = (MapLayer::Relief, Encoding::Rgba);
+
+/// The picture `(layer, encoding)` of tile `id` with `halo`.
+fn picture_tile(region: &Region, (layer, encoding): (MapLayer, Encoding), id: TileId, halo: usize) -> RgbaImage {
+    relief(region, Product::Tile { layer, id, halo, encoding })
 }
 
 /// The `w × h` pixels of `img` from `(x, y)`.
@@ -138,16 +146,16 @@ fn assert_same_pixels(a: &RgbaImage, b: &RgbaImage, what: &str) {
     }
 }
 
-/// Tile `t`'s relief agrees with its east and north neighbours' on the
+/// Tile `t`'s picture agrees with its east and north neighbours' on the
 /// shared column and row.
-fn check_relief_neighbours(region: &Region, t: TileId) {
+fn check_picture_neighbours(region: &Region, picture: (MapLayer, Encoding), t: TileId) {
     let n = region.tiles.samples();
     let (a, east, north) = (
-        relief_tile(region, t, 0),
-        relief_tile(region, TileId::new(t.level, t.row, t.col + 1), 0),
-        relief_tile(region, TileId::new(t.level, t.row + 1, t.col), 0),
+        picture_tile(region, picture, t, 0),
+        picture_tile(region, picture, TileId::new(t.level, t.row, t.col + 1), 0),
+        picture_tile(region, picture, TileId::new(t.level, t.row + 1, t.col), 0),
     );
-    let what = |side| format!("{} relief {t}: {side} edge", region.name);
+    let what = |side| format!("{} {} {t}: {side} edge", region.name, picture.0.name());
     assert_same_pixels(&pixels(&a, n - 1, 0, 1, n), &pixels(&east, 0, 0, 1, n), &what("east"));
     assert_same_pixels(&pixels(&a, 0, 0, n, 1), &pixels(&north, 0, n - 1, n, 1), &what("north"));
 }
@@ -160,10 +168,25 @@ fn relief_neighbours_share_edge_pixels_exactly() {
     let demo = common::demo();
     let b = demo.bounds;
     for level in [9, 11, 13] {
-        check_relief_neighbours(
-            &demo,
-            demo.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), level),
-        );
+        let t = demo.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), level);
+        check_picture_neighbours(&demo, RELIEF, t);
+    }
+}
+
+#[test]
+fn pictures_of_data_layers_share_edge_pixels_exactly() {
+    // What JPEG answers for a data layer: heights shaded with a margin, so
+    // neighbours need no common range and still agree.
+    let demo = common::demo();
+    let b = demo.bounds;
+    let t = demo.tiles.tile_containing(0.5 * (b.west + b.east), 0.5 * (b.south + b.north), 11);
+    for layer in [Layer::Dem, Layer::Cem, Layer::Canopy, Layer::Cover, Layer::Surface, Layer::Max32] {
+        let picture = (MapLayer::Data(layer), Encoding::Picture);
+        check_picture_neighbours(&demo, picture, t);
+        let img = picture_tile(&demo, picture, t, 0);
+        let levels: std::collections::HashSet<[u8; 4]> = img.pixels().map(|p| p.0).collect();
+        let least = if layer == Layer::Surface { 2 } else { 50 };
+        assert!(levels.len() >= least, "{}: a picture, not a blank ({} colours)", layer.name(), levels.len());
     }
 }
 
@@ -188,7 +211,7 @@ fn relief_tiles_equal_windows_of_a_relief_build() {
 #[test]
 fn rmnp_relief_neighbours_share_edge_pixels_exactly() {
     // The tiles of the audit that found the north–south seam.
-    check_relief_neighbours(&common::region("examples/rmnp.toml"), TileId::new(12, 14830, 8452));
+    check_picture_neighbours(&common::region("examples/rmnp.toml"), RELIEF, TileId::new(12, 14830, 8452));
 }
 
 #[test]

@@ -199,7 +199,7 @@ fn every_data_layer_has_no_data_where_the_ground_has_none() {
 }
 
 #[test]
-fn pictures_are_offered_in_jpeg_on_their_background() {
+fn every_layer_is_offered_in_jpeg_on_its_background() {
     let dir = TempDir::new("srv-jpeg");
     let server = Server::start(None, &dir.join("cache"));
     let jpeg = |path: &str| {
@@ -229,6 +229,26 @@ fn pictures_are_offered_in_jpeg_on_their_background() {
     assert_eq!(jpeg(&format!("/tiles/relief/{}/{}/{}_{}.jpg", t.level, t.row, t.row, t.col)).dimensions(), (513, 513));
     let trees = format!("{relief}&FORMAT=image/jpeg&EXCEPTIONS=INIMAGE").replace("LAYERS=relief", "LAYERS=trees");
     assert_eq!(jpeg(&trees).dimensions(), (100, 50), "an in-image exception in JPEG");
+    // A data layer in JPEG (GDAL's WMS driver asks for it unless told
+    // otherwise) is a picture of it: heights shaded grey, classes in
+    // colour, no data on white; by tile too.
+    let dem = jpeg(&format!("{relief}&FORMAT=image/jpeg").replace("LAYERS=relief", "LAYERS=dem"));
+    assert!(near(dem.get_pixel(0, 0).0, [255, 255, 255], 3), "no data: white");
+    let inside: Vec<[u8; 3]> =
+        (x0..x1).flat_map(|x| (y0..y1).map(move |y| (x, y))).map(|(x, y)| dem.get_pixel(x, y).0).collect();
+    assert!(inside.iter().all(|p| p[0].abs_diff(p[1]) <= 3 && p[1].abs_diff(p[2]) <= 3), "heights are grey");
+    let (lo, hi) = inside.iter().fold((255, 0), |(lo, hi), p| (p[0].min(lo), p[0].max(hi)));
+    assert!(hi - lo > 60, "shaded slopes: grey from {lo} to {hi}");
+    let surface = jpeg(&format!("{relief}&FORMAT=image/jpeg").replace("LAYERS=relief", "LAYERS=surface"));
+    assert!(
+        (x0..x1).any(|x| {
+            let [r, g, b] = surface.get_pixel(x, 25).0;
+            g > r + 20 && g > b
+        }),
+        "forest is green"
+    );
+    let tile = format!("/tiles/cem/{}/{}/{}_{}.jpg", t.level, t.row, t.row, t.col);
+    assert_eq!(jpeg(&tile).dimensions(), (513, 513));
 }
 
 #[test]
@@ -365,7 +385,7 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
         ("/xyz/dem/12/-1/0.png", "x must be a whole number"),
         ("/tiles/relief/3/1/1_1.gif", ".png or .jpg"),
         (
-            "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/jpeg",
+            "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=relief&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=application/bil16",
             "InvalidFormat",
         ),
         (

@@ -183,21 +183,25 @@ fn abstract_of(layer: MapLayer, s: &Service) -> String {
         MapLayer::Colour => return format!("The map colours, unshaded. {picture}"),
         MapLayer::Relief => return format!("Hillshade of the combined elevation map over the map colours. {picture}"),
     };
-    let (units, png_nodata) = match l {
+    let (units, png_nodata, jpeg) = match l {
         crate::cem::Layer::Surface => {
             return "Class id (0 plain, 1 forest, 2 water, 3 rock, 4 ice, 5 built, 255 nodata), the id itself in \
-                    every format: image/png 16-bit grey, application/bil16 int16, application/bil32 float32, \
-                    image/tiff 8-bit."
+                    every data format: image/png 16-bit grey, application/bil16 int16, application/bil32 float32, \
+                    image/tiff 8-bit. image/jpeg: a picture, a colour per class."
                 .into();
         }
-        crate::cem::Layer::Cover => ("cover fraction", "no nodata code: read bil or tiff to tell no data from 0"),
-        _ => ("metres", "code 0 is nodata"),
+        crate::cem::Layer::Cover => {
+            ("cover fraction", "no nodata code: read bil or tiff to tell no data from 0", "grey, black 0 to white 1")
+        }
+        crate::cem::Layer::Canopy => ("metres", "code 0 is nodata", "grey, black 0 m to white 30 m"),
+        _ => ("metres", "code 0 is nodata", "shaded grey"),
     };
     let (bil16, png16) = encode::quantizations(l, s.heights_16);
     format!(
         "Values in {units}. image/png: 16-bit grey, value = {} + {} * code ({png_nodata}). \
          application/bil16: little-endian int16, value = {} + {} * code, nodata -32768. \
-         application/bil32 and image/tiff: float32, nodata -32768.",
+         application/bil32 and image/tiff: float32, nodata -32768. image/jpeg: a picture, {jpeg}, on BGCOLOR \
+         (white) where there is no data.",
         png16.offset, png16.scale, bil16.offset, bil16.scale
     )
 }
@@ -271,7 +275,7 @@ mod tests {
         assert!(attr(2, "minx") < -1.1e7 && attr(2, "miny") > 4.8e6);
         assert!(xml.contains("-500.15 + 0.15 * code"));
         let abstracts = doc.descendants().filter(|n| n.has_tag_name("Abstract")).filter_map(|n| n.text());
-        assert!(abstracts.clone().any(|t| t.contains("the id itself in every format")));
+        assert!(abstracts.clone().any(|t| t.contains("the id itself in every data format")));
         assert!(abstracts.into_iter().all(|t| !t.contains("  ")), "abstracts read as single-spaced prose");
     }
 }

@@ -27,12 +27,12 @@ pub fn blank(
     background: Option<[u8; 3]>,
 ) -> Vec<u8> {
     let (w, h) = (grid.width(), grid.height());
-    let MapLayer::Data(layer) = layer else {
+    // A data layer in JPEG is a picture of it ([`crate::encode::data_picture`]).
+    let (MapLayer::Data(layer), false) = (layer, format == MapFormat::Jpeg) else {
         let picture = format.picture().unwrap_or(PictureFormat::Png);
         return picture::encode(&picture::filled(w * h, background), w, h, background, picture).unwrap_or_default();
     };
     let f = match format {
-        // A data layer is never asked for in JPEG (the request is refused).
         MapFormat::Png | MapFormat::Jpeg => Format::Png16,
         MapFormat::Bil16 => Format::Bil16,
         MapFormat::Bil32 => Format::Bil32,

@@ -103,7 +103,7 @@ async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<
         MapFormat::Tiff => Encoding::Data(Format::Tiff),
         MapFormat::Bil16 => Encoding::Data(Format::Bil16),
         MapFormat::Bil32 => Encoding::Data(Format::Bil32),
-        MapFormat::Jpeg => return Err(ServeError::BadRequest("JPEG is offered for the pictures only".into())),
+        MapFormat::Jpeg => Encoding::Picture,
     };
     let meta = TileMeta { mime: map.format.mime(), ..meta(state, map.layer, encoding) };
     let tiles = &state.region().tiles;
@@ -121,7 +121,7 @@ async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<
         let blank = super::service::Tile::new(body, "blank".into());
         return Ok(respond::tile(&blank, &meta, headers));
     }
-    let tile = match map.format.picture().filter(|_| map.layer.is_picture()) {
+    let tile = match map.format.picture().filter(|_| matches!(encoding, Encoding::Rgba | Encoding::Picture)) {
         Some(format) => picture::answer(&state.tiles, tile, map.background, format).await?,
         None => tile,
     };
@@ -131,7 +131,7 @@ async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<
 /// The image stitched from cached BIL32 tiles, when its pixel centres lie on
 /// a level's lattice and it needs at most [`MAX_STITCHED_TILES`] tiles.
 async fn stitched(state: &AppState, map: &GetMap, encoding: Encoding) -> Result<Option<Vec<u8>>, ServeError> {
-    let MapLayer::Data(layer) = map.layer else { return Ok(None) };
+    let (MapLayer::Data(layer), Encoding::Data(format)) = (map.layer, encoding) else { return Ok(None) };
     let tiles = &state.region().tiles;
     let Some((level, gx, top)) = tiles.lattice_position(&map.grid) else { return Ok(None) };
     let n1 = (tiles.samples() - 1) as i64;
@@ -152,7 +152,6 @@ async fn stitched(state: &AppState, map: &GetMap, encoding: Encoding) -> Result<
             paste(&mut out, &tile.bytes, n1, (col * n1 - gx, top - (row + 1) * n1));
         }
     }
-    let Encoding::Data(format) = encoding else { return Ok(None) };
     // BIL32 carries nodata as −32768.
     let bytes = match layer {
         Layer::Surface => {

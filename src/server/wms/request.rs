@@ -59,12 +59,9 @@ impl MapLayer {
     }
 
     /// Whether GetMap offers the layer in `format`: pictures in PNG and
-    /// JPEG, data in any format but JPEG.
+    /// JPEG, data in any format (in JPEG, a picture of it).
     pub fn offered_in(self, format: MapFormat) -> bool {
-        match self.is_picture() {
-            true => format.picture().is_some(),
-            false => format != MapFormat::Jpeg,
-        }
+        !self.is_picture() || format.picture().is_some()
     }
 
     /// The layer with this name (any case).
@@ -111,7 +108,8 @@ pub enum MapFormat {
     Png,
     /// `image/tiff`: float32 GeoTIFF.
     Tiff,
-    /// `image/jpeg`: pictures only (`relief`, `colour`), on their background.
+    /// `image/jpeg`: pictures (`relief`, `colour`, and data layers drawn
+    /// as pictures), on their background.
     Jpeg,
 }
 
@@ -319,10 +317,7 @@ pub(super) fn get_map(params: &Params, version: Version, limits: Limits) -> Resu
     let map = map_part(params, version, limits)?;
     let layer = map.layer;
     if !layer.offered_in(map.format) {
-        let why = match layer.is_picture() {
-            true => format!("{} is a picture: ask for image/png or image/jpeg", layer.name()),
-            false => format!("{} is data: JPEG is offered for the pictures (relief, colour)", layer.name()),
-        };
+        let why = format!("{} is a picture: ask for image/png or image/jpeg", layer.name());
         return Err(Exception::new(Code::InvalidFormat, why).locator("FORMAT"));
     }
     Ok(map)
@@ -608,7 +603,7 @@ mod tests {
         };
         assert_eq!(blank("dem", "image/png"), Some(Some(MapLayer::Data(Layer::Dem))));
         assert_eq!(blank("relief", "image/png"), Some(Some(MapLayer::Relief)));
-        assert_eq!(blank("dem", "image/jpeg"), Some(None));
+        assert_eq!(blank("dem", "image/jpeg"), Some(Some(MapLayer::Data(Layer::Dem))));
         assert_eq!(blank("relief", "application/bil16"), Some(None));
     }
 
