@@ -222,7 +222,7 @@ fn choose(
     };
     let selected = lod.frame(t_s, camera);
     let ids: Vec<_> = selected.cut.tiles.iter().map(|c| c.id).collect();
-    let mut tiles = store.get_cut(source, &ids)?;
+    let mut tiles = store.get_cut(source, &lod.held_cut(&ids))?;
     let drawn: Vec<_> = tiles.iter().map(|t| t.id()).collect();
     let morphing = lod.morphs(t_s, &drawn);
     let mut weights = vec![1.0; tiles.len()];

@@ -252,6 +252,15 @@ impl BudgetFlight {
         morphs.update(t_s, drawn, next.as_deref())
     }
 
+    /// The tiles to draw for `cut`: as selected, but tiles under a drawn
+    /// tile still morphing wait for its morph ([`Morphs::hold_under_morphing`]).
+    pub fn held_cut(&self, cut: &[TileId]) -> Vec<TileId> {
+        match &self.morphs {
+            Some(m) => m.hold_under_morphing(cut),
+            None => cut.to_vec(),
+        }
+    }
+
     /// `tile` prepared to be drawn morphing with `from`, kept while the
     /// morph lasts.
     pub fn morph_tile(&mut self, grid: &TileGrid, tile: &TileData, from: &TileData) -> Arc<TileData> {

@@ -27,7 +27,9 @@
 //! A refinement of a tile still morphing waits too: the flight holds the
 //! cut until that morph is done ([`Morphs::refines_morphing`]), since a
 //! finer tile starts from its drawn ancestor's own surface, which is the
-//! surface drawn only then (001 §4.4 morphs through one level at a time).
+//! surface drawn only then (001 §4.4 morphs through one level at a time);
+//! so do tiles that arrive under a stand-in still morphing
+//! ([`Morphs::hold_under_morphing`]).
 
 use super::super::tile::{NODATA_M, TileData, TileError, TilePayload};
 use crate::grid::{TileGrid, TileId};
@@ -109,6 +111,22 @@ impl Morphs {
     /// from their ancestors' own surfaces).
     pub fn settled(&self) -> bool {
         self.settled
+    }
+
+    /// `cut` with each tile not drawn last whose nearest drawn ancestor is
+    /// still morphing replaced by that ancestor (once). A finer tile starts
+    /// from its ancestor's own surface, drawn only when the ancestor's
+    /// morph is done: a tile that arrives under a stand-in still morphing
+    /// (the ancestor drawn while it loaded) waits that long, at most `τ`.
+    pub fn hold_under_morphing(&self, cut: &[TileId]) -> Vec<TileId> {
+        let held = |id: TileId| {
+            let drawn = (!self.drawn.contains(&id)).then(|| ancestors(id).find(|a| self.drawn.contains(a)));
+            drawn.flatten().filter(|a| self.active.contains_key(a)).unwrap_or(id)
+        };
+        let mut out: Vec<TileId> = cut.iter().map(|&id| held(id)).collect();
+        out.sort_unstable();
+        out.dedup();
+        out
     }
 
     /// Whether `next` refines a tile that is morphing.
@@ -393,6 +411,29 @@ mod tests {
         // A tile with no coarser one drawn before does not morph.
         let far = grid().tile_containing(12.0, 47.0, 8);
         assert!(m.update(1.5, &[far], None).is_empty());
+    }
+
+    #[test]
+    fn tiles_arriving_under_a_morphing_stand_in_wait_for_its_morph() {
+        // Regression: the selection refined the grandparent to the
+        // grandchildren; the parent stood in while they loaded, morphing
+        // from the grandparent. Grandchildren loaded mid-morph started from
+        // the parent's own surface while it was drawn blended: a jump of
+        // (1 − w)·Δ.
+        let child = grid().tile_containing(10.1, 46.35, 10);
+        let (parent, grandparent) = (child.parent().unwrap(), child.parent().unwrap().parent().unwrap());
+        let children = parent.children().to_vec();
+        let mut m = Morphs::new(1.0);
+        m.update(0.0, &[grandparent], None);
+        assert_eq!(m.hold_under_morphing(&children), children, "nothing morphs: as selected");
+        m.update(0.25, &[parent], None);
+        assert_eq!(m.hold_under_morphing(&children), vec![parent], "the stand-in morphs: held");
+        let elsewhere = TileId::new(10, 0, 0);
+        assert_eq!(m.hold_under_morphing(&[parent, elsewhere]), vec![parent, elsewhere]);
+        m.update(1.25, &[parent], None);
+        assert_eq!(m.hold_under_morphing(&children), children, "its morph done: drawn, from its own surface");
+        let arrived = m.update(1.3, &children, None);
+        assert!(arrived.iter().all(|x| x.from == parent && x.weight == 0.0), "{arrived:?}");
     }
 
     #[test]
