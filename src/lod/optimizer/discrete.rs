@@ -126,6 +126,34 @@ impl Forest {
         Some((b - n.benefit, c - n.cost_ms))
     }
 
+    /// Per node: whether some cut within `budget_ms` splits it (its own
+    /// children and every ancestor's drawn, the rest of the forest at its
+    /// cheapest). The cheapest drawing of each subtree is found bottom-up,
+    /// then the cheapest cut splitting each node top-down; both passes are
+    /// exact whatever the signs of the increments. A node no cut affords is
+    /// never split, so the optimiser treats it as a leaf: the increments it
+    /// would make available only mislead the greedy, whose groups would
+    /// count benefit no feasible answer reaches.
+    pub fn splittable(&self, budget_ms: f64) -> Vec<bool> {
+        let mut cheapest: Vec<f64> = self.nodes.iter().map(|n| n.cost_ms).collect();
+        for v in (0..self.len()).rev() {
+            let kids = self.children(v as u32);
+            if !kids.is_empty() {
+                cheapest[v] = cheapest[v].min(kids.iter().map(|&c| cheapest[c as usize]).sum());
+            }
+        }
+        let below = |v: u32| self.children(v).iter().map(|&c| cheapest[c as usize]).sum::<f64>();
+        let all: f64 = self.roots.iter().map(|&r| cheapest[r as usize]).sum();
+        // The cheapest cut splitting v and its ancestors: never below its
+        // parent's, as a subtree's cheapest drawing is at most its children's.
+        let mut split_ms = vec![f64::INFINITY; self.len()];
+        for v in 0..self.len() as u32 {
+            let above = self.node(v).parent.map_or(all, |p| split_ms[p as usize]);
+            split_ms[v as usize] = above - cheapest[v as usize] + below(v);
+        }
+        (0..self.len()).map(|v| !self.children(v as u32).is_empty() && split_ms[v] <= budget_ms).collect()
+    }
+
     /// The most `Σ (benefit − λ·cost)` over the nodes a cut can draw, for a
     /// price `λ ≥ 0` per ms: bottom-up, each node keeps the better of itself
     /// and its children's best. With `λ·T` added it bounds the benefit of
@@ -170,25 +198,35 @@ pub(crate) struct Groups {
     /// Members of the group headed by `v`: `v`, `next[v]`, … up to `tail[v]`.
     pub next: Vec<u32>,
     pub tail: Vec<u32>,
+    /// Whether the node heads a group: it has children and some cut within
+    /// the budget splits it ([`Forest::splittable`]).
+    pub heads: Vec<bool>,
+    /// Whether some node with children heads none (the budget rules it out).
+    pub pruned: bool,
 }
 
 impl Groups {
-    /// Horn's merging, bottom-up (children have higher indices).
-    pub fn new(forest: &Forest) -> Groups {
+    /// Horn's merging, bottom-up (children have higher indices), over the
+    /// nodes some cut within `budget_ms` splits.
+    pub fn new(forest: &Forest, budget_ms: f64) -> Groups {
         let n = forest.len();
+        let heads = forest.splittable(budget_ms);
+        let pruned = (0..n).any(|v| !heads[v] && !forest.children(v as u32).is_empty());
         let mut g = Groups {
             db: vec![0.0; n],
             dc: vec![0.0; n],
             value: vec![f64::NEG_INFINITY; n],
             next: vec![NONE; n],
             tail: (0..n as u32).collect(),
+            heads,
+            pruned,
         };
         let mut heap = Leftist::new(n);
         for v in (0..n as u32).rev() {
-            let Some((mut db, mut dc)) = forest.increment(v) else { continue };
+            let Some((mut db, mut dc)) = forest.increment(v).filter(|_| g.heads[v as usize]) else { continue };
             let mut candidates = NONE;
             for &c in forest.children(v) {
-                if !forest.children(c).is_empty() {
+                if g.heads[c as usize] {
                     candidates = heap.meld(candidates, c, &g.value);
                 }
             }

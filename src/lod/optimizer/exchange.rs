@@ -104,13 +104,11 @@ impl Run<'_> {
             take.push(f);
             let opened = self.members(&f).flat_map(|m| self.forest.children(m).iter().copied());
             let members: Vec<u32> = self.members(&f).collect();
-            pool.extend(
-                opened.filter(|c| !members.contains(c) && !self.forest.children(*c).is_empty()).map(|c| Entry {
-                    value: self.groups.value[c as usize],
-                    node: c,
-                    alone: false,
-                }),
-            );
+            pool.extend(opened.filter(|c| !members.contains(c) && self.groups.heads[*c as usize]).map(|c| Entry {
+                value: self.groups.value[c as usize],
+                node: c,
+                alone: false,
+            }));
             pool.sort_by(|a, b| b.cmp(a));
         }
         // What the continuous variables would make of `room`.

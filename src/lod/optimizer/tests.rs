@@ -215,6 +215,95 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(cases()))]
+
+    /// Open (see the module doc of `optimizer`): forks of three or more
+    /// branches, each a zero-benefit stem whose split opens one or two
+    /// tiles, behind a zero-benefit chain, beside small increments worth
+    /// more per ms. Their convexified group can exceed the budget while
+    /// each branch fits; the optimum then mixes branches with the small
+    /// increments, and the answer can fall below half (fuzzing found 0.42).
+    /// Failures are rare: `SYLVA_LOD_CASES=20000 … -- --ignored forks_of`
+    /// finds one.
+    #[test]
+    #[ignore = "open: groups larger than the budget break the half bound"]
+    fn forks_of_three_or_more_branches_keep_half_the_optimum(
+        small in prop::collection::vec((0.5f64..4.0, 1.0f64..3.0), 1..3),
+        chain in prop::collection::vec(0.0f64..1.0, 0..2),
+        branches in prop::collection::vec((0.0f64..1.5, prop::collection::vec((0.5f64..7.0, 0.3f64..0.6), 1..3)), 3..5),
+    ) {
+        let mut rows = vec![];
+        for (c, value) in &small {
+            rows.push((None, 0.0, 0.0));
+            rows.push((Some(rows.len() as u32 - 1), c * value, *c));
+        }
+        rows.push((None, 0.0, 0.0));
+        for c in &chain {
+            rows.push((Some(rows.len() as u32 - 1), 0.0, *c));
+        }
+        let head = rows.len() as u32 - 1;
+        let mut stems = vec![];
+        for (stem_ms, _) in &branches {
+            rows.push((Some(head), 0.0, *stem_ms));
+            stems.push(rows.len() as u32 - 1);
+        }
+        for (stem, (_, tiles)) in stems.iter().zip(&branches) {
+            for (c, value) in tiles {
+                rows.push((Some(*stem), c * value, *c));
+            }
+        }
+        let forest = forest_of(&rows);
+        let sel = optimize(&forest, &[], &Settings::budget(10.0));
+        let best = exact(&forest, &[], Smooth::default(), 10.0);
+        prop_assert!(feasible(&sel, 10.0));
+        prop_assert!(sel.benefit >= 0.5 * best, "{} < half of {best}", sel.benefit);
+    }
+}
+
+#[test]
+fn a_split_no_cut_affords_does_not_hide_the_rest_of_its_group() {
+    // Splitting 1 opens a tile worth 57 that no cut within 3 ms draws; it
+    // was merged into the root's group, which blocked, and the split of 2
+    // (6 for 1 ms) was never taken: 0 against 6.
+    let forest = forest_of(&[
+        (None, 0.0, 0.0),
+        (Some(0), 0.0, 0.0),
+        (Some(0), 0.0, 0.0),
+        (Some(1), 57.0, 4.0),
+        (Some(2), 6.0, 1.0),
+    ]);
+    let sel = optimize(&forest, &[], &Settings::budget(3.0));
+    assert_eq!(sel.benefit, 6.0, "{:?}", sel.split);
+    assert!(!sel.split[1]);
+}
+
+#[test]
+#[ignore = "open: groups larger than the budget break the half bound"]
+fn a_three_branch_fork_larger_than_the_budget_keeps_half_the_optimum() {
+    // Splitting 2 opens three stems; its group {2, 4, 5} (5 for 11 ms) is
+    // larger than the budget. The greedy takes 0's split (3 for 2 ms) and
+    // is blocked by the group; the alternative's parts of it are worth 3
+    // at most, and 3's split (0.4 for 1 ms, left out of the group) is in
+    // neither. The optimum splits 0, 2, 3 and 4 (6.4 for 10 ms); the
+    // answer is 3.
+    let forest = forest_of(&[
+        (None, 0.0, 0.0),
+        (Some(0), 3.0, 2.0),
+        (None, 0.0, 0.0),
+        (Some(2), 0.0, 0.0),
+        (Some(2), 0.0, 0.0),
+        (Some(2), 0.0, 1.0),
+        (Some(3), 0.4, 1.0),
+        (Some(4), 1.0, 3.0),
+        (Some(4), 2.0, 3.0),
+        (Some(5), 2.0, 5.0),
+    ]);
+    let sel = optimize(&forest, &[], &Settings::budget(10.0));
+    let best = exact(&forest, &[], Smooth::default(), 10.0);
+    assert!(sel.benefit >= 0.5 * best, "{} < half of {best}", sel.benefit);
+}
+
 #[test]
 fn convexified_increments_see_past_a_worthless_split() {
     // Splitting the root is worth 0.1 for 1 ms, but opens a split worth 100
@@ -393,7 +482,9 @@ fn exchanging_instance() -> (Forest, f64) {
         (Some(4), 2.1237040983072286, 1.0662633101850394),
         (Some(5), 0.8639932277557765, 0.4339855238299229),
     ]);
-    (forest, 1.779111252466815)
+    // At 1.78 ms (where it was found) no cut affords 4's split and the
+    // greedy needs no exchange.
+    (forest, 2.0)
 }
 
 #[test]
