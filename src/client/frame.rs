@@ -158,24 +158,28 @@ impl TileFrame {
     /// at the corners, plus the tilt of the local vertical at the corners
     /// times the height.
     pub fn flat_error_m(&self, max_abs_height_m: f64) -> f64 {
-        let n1 = (self.samples - 1) as f64;
         let mut worst: f64 = 0.0;
-        for (i, j) in [
-            (0.0, 0.0),
-            (n1, 0.0),
-            (0.0, n1),
-            (n1, n1),
-            (n1 / 2.0, 0.0),
-            (n1 / 2.0, n1),
-            (0.0, n1 / 2.0),
-            (n1, n1 / 2.0),
-        ] {
+        for (i, j) in self.rim() {
             let truth = self.ellipsoid_local(i, j);
             let flat = self.local_xy(i, j);
             let tilt = self.normal_local(i, j).truncate().length();
             worst = worst.max((truth.truncate() - flat).length() + tilt * max_abs_height_m);
         }
         worst
+    }
+
+    /// The largest angle between the ellipsoid's normal and the frame's up
+    /// over the tile (largest on its rim), radians.
+    pub fn max_tilt_rad(&self) -> f64 {
+        self.rim().iter().map(|&(i, j)| self.normal_local(i, j).truncate().length().min(1.0).asin()).fold(0.0, f64::max)
+    }
+
+    /// Where the flat frame departs most from the ellipsoid: the tile's
+    /// corners and its edges' midpoints, as sample coordinates.
+    fn rim(&self) -> [(f64, f64); 8] {
+        let n1 = (self.samples - 1) as f64;
+        let mid = n1 / 2.0;
+        [(0.0, 0.0), (n1, 0.0), (0.0, n1), (n1, n1), (mid, 0.0), (mid, n1), (0.0, mid), (n1, mid)]
     }
 }
 

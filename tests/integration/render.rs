@@ -507,11 +507,11 @@ fn nodata_shows_the_sky_at_every_level() {
     // Regression: where a coarse tile's flat frame needs the crack filler
     // under it (a level-2 tile, 1,000 km), the filler drew ground at the
     // tile's lowest height over samples whose heights were nodata but whose
-    // class was not (3,599 pixels the reference leaves to the sky), and,
-    // seen through the holes, lowered under the ground beside them (866).
-    // It is now drawn only within its band beside the tile's edge (2.6
-    // samples here), where cracks open; holes inside that band still show
-    // it (33 pixels, 0.27 %, at level 2: 9 km of flat-frame error).
+    // class was not: 3,599 pixels the reference leaves to the sky. The
+    // filler, lowered under the ground, still shows through holes within
+    // its band beside the tile's edge, which this slanting view of a tile
+    // with 9 km of flat-frame error makes the whole tile: 866 pixels here
+    // (a steeper view narrows the band; finer tiles need no filler).
     let grid = small_grid();
     let ids = [TileId::new(2, 10, 20), TileId::new(12, 10 << 10, 20 << 10), TileId::new(22, 21 << 19, 27_787_264)];
     for id in ids {
@@ -522,7 +522,7 @@ fn nodata_shows_the_sky_at_every_level() {
         let (name, d) = (format!("level {} with holes", id.level), &both.departure);
         assert_eq!(needs_filler(&tile), id.level == 2, "{name}: the coarse tile alone needs the filler");
         match id.level {
-            2 => assert!(d.misses == 0 && d.extras as f64 <= 0.005 * d.pixels as f64, "{name}: {d:?}"),
+            2 => assert!(d.misses == 0 && d.extras <= 1000, "{name}: {d:?}"),
             _ => assert_close(&name, d),
         }
     }
@@ -593,9 +593,31 @@ fn coarse_tiles_at_a_pole_are_drawn_plain_in_their_true_place() {
 /// The tiles the quadtree selects for `camera` over `bounds`, built from
 /// the globe terrain.
 fn selected(grid: &TileGrid, bounds: sylva::grid::BBox, camera: &Camera) -> Vec<TileData> {
-    let rule = sylva::client::quadtree::LodRule { max_error_px: 2.0, max_level: 16 };
-    let selection = sylva::client::quadtree::select(grid, &bounds, camera, &|_| Some((-500.0, 2500.0)), &rule);
-    selection.tiles.iter().map(|s| synthetic(grid, s.id, 8, &globe_terrain)).collect()
+    selected_at_most(grid, bounds, camera, usize::MAX)
+}
+
+/// As [`selected`], coarser until at most `max_tiles` tiles.
+fn selected_at_most(grid: &TileGrid, bounds: sylva::grid::BBox, camera: &Camera, max_tiles: usize) -> Vec<TileData> {
+    let mut max_error_px = 2.0;
+    loop {
+        let rule = sylva::client::quadtree::LodRule { max_error_px, max_level: 16 };
+        let selection = sylva::client::quadtree::select(grid, &bounds, camera, &|_| Some((-500.0, 2500.0)), &rule);
+        if selection.tiles.len() <= max_tiles {
+            return selection.tiles.iter().map(|s| synthetic(grid, s.id, 8, &globe_terrain)).collect();
+        }
+        max_error_px *= 1.5;
+    }
+}
+
+/// Where the ray through pixel `(x, y)` of `camera` first meets the
+/// ellipsoid, if it does (the ellipsoid scaled to a sphere along its axis).
+fn ellipsoid_hit(camera: &Camera, x: u32, y: u32) -> Option<Geodetic> {
+    let squash = DVec3::new(1.0, 1.0, 1.0 / (1.0 - globe::E2).sqrt());
+    let (o, d) = (camera.position_ecef * squash, camera.ray_dir(x, y) * squash);
+    let (a, b, c) = (d.dot(d), o.dot(d), o.dot(o) - globe::A_M * globe::A_M);
+    let disc = b * b - a * c;
+    let t = (-b - disc.max(0.0).sqrt()) / a;
+    (disc >= 0.0 && t > 0.0).then(|| Geodetic::from_ecef(camera.position_ecef + camera.ray_dir(x, y) * t))
 }
 
 /// The ground fills a view looking down: no crack on the GPU, nothing the
@@ -656,6 +678,33 @@ fn the_antimeridian_and_the_poles_have_no_seams() {
         // Without them this view shows the sky through cracks (the test fails).
         assert!(tiles.iter().any(needs_filler), "{name}: crack fillers under the tiles at the pole");
         assert_whole_view(name, &tiles, &camera);
+    }
+}
+
+#[test]
+fn oblique_views_near_a_pole_show_no_crack() {
+    // Regression (review): the crack filler, drawn only within the flat
+    // frame's error of its tile's edge, let rays that crossed a crack at a
+    // slant meet nothing beyond: 58, 12 and 4 pixels of sky where these
+    // views show ground.
+    let grid = small_grid();
+    let cap = sylva::grid::BBox { west: -180.0, south: 60.0, east: 180.0, north: 90.0 };
+    for (lat, height_m, pitch) in [(80.0, 3_000_000.0, -60.0), (84.0, 1_000_000.0, -50.0), (87.0, 200_000.0, -30.0)] {
+        let camera = Camera::looking(Geodetic::new(0.0, lat, height_m), 0.0, pitch, 40.0, (128, 128));
+        let tiles = selected_at_most(&grid, cap, &camera, 250);
+        assert!(tiles.iter().any(needs_filler), "{lat}°: crack fillers under the tiles");
+        let refs: Vec<&TileData> = tiles.iter().collect();
+        let settings = settings(Traversal::Exact, None);
+        for pass in PASSES {
+            let out =
+                with_renderer_in(pass, 65, 8, |r| r.render(&camera, &refs, &settings, Readback::All).expect("fits"));
+            let (w, h) = (camera.width_px, camera.height_px);
+            let ground = |x, y| ellipsoid_hit(&camera, x, y).is_some_and(|g| g.lat_deg > cap.south + 1.0);
+            let sky = (0..w * h).filter(|k| out.view_z_m[*k as usize] <= 0.0 && ground(k % w, k / w)).count();
+            let shown = out.view_z_m.iter().filter(|&&z| z > 0.0).count();
+            assert!(shown > 4000, "{lat}°, {pass:?}: the view shows ground ({shown} pixels)");
+            assert_eq!(sky, 0, "{lat}°, {pass:?}: sky through cracks");
+        }
     }
 }
 

@@ -182,7 +182,7 @@ impl TileUniform {
             flags: [mode as u32, draw + 1, shadow_steps, morph.map_or(0, |(layer, _)| layer + 1)],
             texels: [
                 tile.range.texels_max_m,
-                if mode == DrawMode::Plain { f32::MAX } else { filler_band_samples(tile) },
+                if mode == DrawMode::Plain { f32::MAX } else { filler_band_samples(tile, cam) },
                 0.0,
                 0.0,
             ],
@@ -203,14 +203,25 @@ fn filler_drop_m(tile: &TileData) -> f32 {
     (tile.range.mesh_error_m as f64 + 3.0 * tile.flat_error_m() + 0.01 * tile.frame.spacing_m.min_element()) as f32
 }
 
-/// How far from the tile's edge cracks can open, samples: a crack lies
-/// where the flat frame misplaces the true edge, within its error of it,
-/// and the tile's box reaches one cell beyond its edge samples; one cell
-/// more for safety. Inside that band the ray-cast surface covers the
-/// filler, except through nodata holes, where the filler would stand in
-/// for ground there is none of.
-fn filler_band_samples(tile: &TileData) -> f32 {
-    (tile.flat_error_m() / tile.frame.spacing_m.min_element() + 2.0) as f32
+/// How far from the tile's edge the crack filler is drawn, samples, for a
+/// camera at `cam` in the tile frame. A crack lies within the flat frame's
+/// error of the true edge; a ray through it goes on under the surface
+/// beside it and meets the filler, lowered by [`filler_drop_m`], within
+/// `drop / tan θ` beyond it, θ the shallowest angle below the horizon at
+/// which the camera sees the tile's top (the frame's, less the tilt of the
+/// local vertical); then one cell of the box's overlap and one for safety.
+/// Further in, the ray-cast surface hides the filler everywhere but
+/// through nodata holes, where it would stand in for ground there is none
+/// of. A camera not above the tile's top needs it everywhere.
+fn filler_band_samples(tile: &TileData, cam: DVec3) -> f32 {
+    let top = bounds(tile)[1].z;
+    let far = corners(tile).iter().map(|c| (c.truncate() - cam.truncate()).length()).fold(0.0, f64::max);
+    let theta = ((cam.z - top) / far).atan() - tile.frame.max_tilt_rad();
+    if theta.is_nan() || theta <= 0.0 {
+        return f32::MAX;
+    }
+    let band_m = tile.flat_error_m() + f64::from(filler_drop_m(tile)) / theta.tan();
+    (band_m / tile.frame.spacing_m.min_element() + 2.0).min(f64::from(f32::MAX)) as f32
 }
 
 /// Whether a ray-cast tile needs its terrain mesh beneath it to fill cracks
