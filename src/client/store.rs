@@ -279,8 +279,8 @@ impl TileStore {
         std::iter::successors(id.parent(), TileId::parent).find(|a| self.tiles.contains_key(a))
     }
 
-    /// The tile `id` if held, marked used this frame.
-    fn touch(&mut self, id: TileId) -> Option<Arc<TileData>> {
+    /// The tile `id` if held, marked used this frame (loading nothing).
+    pub fn touch(&mut self, id: TileId) -> Option<Arc<TileData>> {
         let e = self.tiles.get_mut(&id)?;
         e.last_used = self.clock;
         Some(e.tile.clone())

@@ -189,6 +189,15 @@ impl Flight {
     }
 }
 
+/// A cut's tiles with those under a tile still morphing held back
+/// ([`BudgetFlight::held_cut`]): that tile is drawn instead, if the store
+/// still holds it (the store loads and keeps the cut as selected).
+fn held_back(store: &mut TileStore, lod: &BudgetFlight, tiles: Vec<Arc<TileData>>) -> Vec<Arc<TileData>> {
+    let held = lod.held_cut(&tiles.iter().map(|t| t.id()).collect::<Vec<_>>());
+    let find = |store: &mut TileStore, id| tiles.iter().find(|t| t.id() == id).cloned().or_else(|| store.touch(id));
+    held.into_iter().map(|id| find(store, id)).collect::<Option<Vec<_>>>().unwrap_or(tiles)
+}
+
 /// The tiles of one frame and how they were chosen.
 struct Chosen {
     tiles: Vec<Arc<TileData>>,
@@ -222,7 +231,8 @@ fn choose(
     };
     let selected = lod.frame(t_s, camera);
     let ids: Vec<_> = selected.cut.tiles.iter().map(|c| c.id).collect();
-    let mut tiles = store.get_cut(source, &lod.held_cut(&ids))?;
+    let cut = store.get_cut(source, &ids)?;
+    let mut tiles = held_back(store, lod, cut);
     let drawn: Vec<_> = tiles.iter().map(|t| t.id()).collect();
     let morphing = lod.morphs(t_s, &drawn);
     let mut weights = vec![1.0; tiles.len()];

@@ -117,7 +117,8 @@ impl Morphs {
     /// still morphing replaced by that ancestor (once). A finer tile starts
     /// from its ancestor's own surface, drawn only when the ancestor's
     /// morph is done: a tile that arrives under a stand-in still morphing
-    /// (the ancestor drawn while it loaded) waits that long, at most `τ`.
+    /// (the ancestor drawn while it loaded) waits that long, `τ` unless a
+    /// held cut sends the ancestor back up or down meanwhile.
     pub fn hold_under_morphing(&self, cut: &[TileId]) -> Vec<TileId> {
         let held = |id: TileId| {
             let drawn = (!self.drawn.contains(&id)).then(|| ancestors(id).find(|a| self.drawn.contains(a)));

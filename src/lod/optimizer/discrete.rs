@@ -126,6 +126,16 @@ impl Forest {
         Some((b - n.benefit, c - n.cost_ms))
     }
 
+    /// Per node: whether its split, or a split below it, adds benefit.
+    fn adds_benefit(&self) -> Vec<bool> {
+        let mut adds = vec![false; self.len()];
+        for v in (0..self.len() as u32).rev() {
+            let own = self.increment(v).is_some_and(|(db, _)| db > 0.0);
+            adds[v as usize] = own || self.children(v).iter().any(|&c| adds[c as usize]);
+        }
+        adds
+    }
+
     /// Per node: whether some cut within `budget_ms` splits it (its own
     /// children and every ancestor's drawn, the rest of the forest at its
     /// cheapest). The cheapest drawing of each subtree is found bottom-up,
@@ -190,7 +200,7 @@ pub(crate) fn ratio(db: f64, dc: f64) -> f64 {
 /// The convexified increments: one group per node with children.
 #[derive(Clone, Debug)]
 pub(crate) struct Groups {
-    /// Group sums, valid for nodes with children.
+    /// Group sums, valid for group heads.
     pub db: Vec<f64>,
     pub dc: Vec<f64>,
     /// `ratio(db, dc)` of the group headed by the node.
@@ -201,7 +211,8 @@ pub(crate) struct Groups {
     /// Whether the node heads a group: it has children and some cut within
     /// the budget splits it ([`Forest::splittable`]).
     pub heads: Vec<bool>,
-    /// Whether some node with children heads none (the budget rules it out).
+    /// Whether the budget rules out a split that, or a split below which,
+    /// adds benefit (so the optimiser cannot reach full resolution).
     pub pruned: bool,
 }
 
@@ -211,7 +222,8 @@ impl Groups {
     pub fn new(forest: &Forest, budget_ms: f64) -> Groups {
         let n = forest.len();
         let heads = forest.splittable(budget_ms);
-        let pruned = (0..n).any(|v| !heads[v] && !forest.children(v as u32).is_empty());
+        let adds = forest.adds_benefit();
+        let pruned = (0..n).any(|v| !heads[v] && adds[v]);
         let mut g = Groups {
             db: vec![0.0; n],
             dc: vec![0.0; n],

@@ -279,6 +279,19 @@ fn a_split_no_cut_affords_does_not_hide_the_rest_of_its_group() {
 }
 
 #[test]
+fn a_split_ruled_out_that_adds_nothing_leaves_full_resolution() {
+    // Splitting 1 costs more than the budget: the answer is at full
+    // resolution where that split adds nothing, and stopped by the budget
+    // where it adds something.
+    let stop = |child_benefit: f64| {
+        let forest = forest_of(&[(None, 0.0, 0.0), (Some(0), 1.0, 1.0), (Some(1), child_benefit, 9.0)]);
+        optimize(&forest, &[], &Settings::budget(3.0)).stop
+    };
+    assert_eq!(stop(0.5), Stop::FullResolution);
+    assert_eq!(stop(2.0), Stop::Budget);
+}
+
+#[test]
 #[ignore = "open: groups larger than the budget break the half bound"]
 fn a_three_branch_fork_larger_than_the_budget_keeps_half_the_optimum() {
     // Splitting 2 opens three stems; its group {2, 4, 5} (5 for 11 ms) is
