@@ -6,7 +6,7 @@
 use super::picture::{self, PictureFormat};
 use super::request::{MapFormat, MapLayer};
 use crate::cem::Layer;
-use crate::encode::{self, Format, Quantization, Samples};
+use crate::encode::{self, Quantization, Samples};
 use crate::grid::SampleGrid;
 use crate::raster::Raster;
 use ab_glyph::{Font, FontRef, PxScale, ScaleFont, point};
@@ -28,15 +28,9 @@ pub fn blank(
 ) -> Vec<u8> {
     let (w, h) = (grid.width(), grid.height());
     // A data layer in JPEG is a picture of it ([`crate::encode::data_picture`]).
-    let (MapLayer::Data(layer), false) = (layer, format == MapFormat::Jpeg) else {
+    let (MapLayer::Data(layer), Some(f)) = (layer, format.data()) else {
         let picture = format.picture().unwrap_or(PictureFormat::Png);
         return picture::encode(&picture::filled(w * h, background), w, h, background, picture).unwrap_or_default();
-    };
-    let f = match format {
-        MapFormat::Png | MapFormat::Jpeg => Format::Png16,
-        MapFormat::Bil16 => Format::Bil16,
-        MapFormat::Bil32 => Format::Bil32,
-        MapFormat::Tiff => Format::Tiff,
     };
     let encoded = match layer {
         Layer::Surface => {

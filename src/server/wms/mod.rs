@@ -23,7 +23,7 @@ use crate::raster::{Raster, Window};
 use axum::extract::{RawQuery, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use request::{ExceptionStyle, GetMap, Limits, MapFormat, MapLayer, Reply, Request};
+use request::{ExceptionStyle, GetMap, Limits, MapLayer, Reply, Request};
 use std::sync::Arc;
 
 /// Most tiles a GetMap is stitched from; larger requests are computed directly.
@@ -97,13 +97,10 @@ fn endpoint(state: &AppState, headers: &HeaderMap) -> String {
 }
 
 async fn get_map(state: &AppState, map: &GetMap, headers: &HeaderMap) -> Result<Response, ServeError> {
-    let encoding = match map.format {
+    let encoding = match map.format.data() {
         _ if map.layer.is_picture() => Encoding::Rgba,
-        MapFormat::Png => Encoding::Data(Format::Png16),
-        MapFormat::Tiff => Encoding::Data(Format::Tiff),
-        MapFormat::Bil16 => Encoding::Data(Format::Bil16),
-        MapFormat::Bil32 => Encoding::Data(Format::Bil32),
-        MapFormat::Jpeg => Encoding::Picture,
+        Some(format) => Encoding::Data(format),
+        None => Encoding::Picture,
     };
     let meta = TileMeta { mime: map.format.mime(), ..meta(state, map.layer, encoding) };
     let tiles = &state.region().tiles;

@@ -135,6 +135,19 @@ impl MapFormat {
         }
     }
 
+    /// The data encoding a data layer is answered in: `None` for JPEG,
+    /// which answers a picture of it.
+    pub fn data(self) -> Option<crate::encode::Format> {
+        use crate::encode::Format;
+        match self {
+            MapFormat::Png => Some(Format::Png16),
+            MapFormat::Tiff => Some(Format::Tiff),
+            MapFormat::Bil16 => Some(Format::Bil16),
+            MapFormat::Bil32 => Some(Format::Bil32),
+            MapFormat::Jpeg => None,
+        }
+    }
+
     /// The picture encoding of PNG and JPEG.
     pub fn picture(self) -> Option<PictureFormat> {
         match self {
