@@ -233,11 +233,11 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
     let (Some(cem), Some(surface)) = (&products.cem, &products.surface) else {
         return Err(EncodeError("relief needs the CEM and the surface".into()).into());
     };
-    if cem.all_nodata() {
+    let inner = Window::new(1, 1, grid.width(), grid.height());
+    if cem.crop(inner, f32::NAN).all_nodata() {
         return Ok(Computed::absent(products.stats));
     }
     let map = crate::produce::map_colours(region, grid)?;
-    let inner = Window::new(1, 1, grid.width(), grid.height());
     let surface = surface.crop(inner, cem::surface::NODATA);
     let start = Instant::now();
     let spacing_m = row_spacings_m(grid);
@@ -250,12 +250,22 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
 /// shading.
 fn data_picture(region: &Region, grid: &SampleGrid, layer: Layer) -> Result<Computed, ProduceError> {
     let (samples, stats) = samples(region, &grid.grown(1), layer)?;
-    let Some(samples) = samples.filter(|s| !s.view().all_nodata()) else {
+    let Some(samples) = samples.filter(|s| !within_margin(s, grid).view().all_nodata()) else {
         return Ok(Computed::absent(stats));
     };
     let start = Instant::now();
     let bytes = encode::data_picture::encode(layer, &samples, &row_spacings_m(grid))?;
     Ok(Computed { bytes, uniform: false, stats, encode: start.elapsed() })
+}
+
+/// The samples of `grid` within samples computed with a margin of one
+/// (a picture with no data of its own is absent, whatever its margin holds).
+fn within_margin(samples: &LayerSamples, grid: &SampleGrid) -> LayerSamples {
+    let inner = Window::new(1, 1, grid.width(), grid.height());
+    match samples {
+        LayerSamples::Float(r) => LayerSamples::Float(r.crop(inner, f32::NAN)),
+        LayerSamples::Class(r) => LayerSamples::Class(r.crop(inner, cem::surface::NODATA)),
+    }
 }
 
 /// Ground distance between columns and between rows at each row of `grid`,

@@ -174,6 +174,42 @@ fn relief_neighbours_share_edge_pixels_exactly() {
 }
 
 #[test]
+fn a_picture_without_data_of_its_own_is_absent() {
+    // Its shading margin may reach the data; the picture would be empty
+    // (a white JPEG where a client expects no tile).
+    let demo = common::demo();
+    let b = demo.bounds;
+    let lat = 0.5 * (b.south + b.north);
+    let step = 1e-4;
+    let grid_west_of = |east_lon: f64, n: usize| {
+        let east = east_lon + 0.5 * step;
+        BBox { west: east - n as f64 * step, south: lat - 0.5 * step, east, north: lat + 0.5 * step }
+            .area_grid(n, 1)
+            .unwrap()
+    };
+    let has_data = |grid: &SampleGrid| {
+        products::samples(&demo, grid, Layer::Dem).unwrap().0.is_some_and(|s| !s.view().all_nodata())
+    };
+    // The west edge of the data along the row, by bisection.
+    let (mut inside, mut outside) = (0.5 * (b.west + b.east), b.west - 1.0);
+    assert!(has_data(&grid_west_of(inside, 1)) && !has_data(&grid_west_of(outside, 1)));
+    while inside - outside > 0.01 * step {
+        let mid = 0.5 * (inside + outside);
+        if has_data(&grid_west_of(mid, 1)) { inside = mid } else { outside = mid }
+    }
+    // Eight samples ending just west of it: no data of their own, the
+    // margin's east column on the data.
+    let grid = grid_west_of(outside - 0.5 * step, 8);
+    assert!(!has_data(&grid) && has_data(&grid.grown(1)), "the margin alone reaches the data");
+    for (layer, encoding) in
+        [RELIEF, (MapLayer::Data(Layer::Dem), Encoding::Picture), (MapLayer::Data(Layer::Surface), Encoding::Picture)]
+    {
+        let product = Product::Image { layer, grid, encoding };
+        assert!(products::compute(&demo, &product).unwrap().bytes.is_empty(), "{}: absent", layer.name());
+    }
+}
+
+#[test]
 fn pictures_of_data_layers_share_edge_pixels_exactly() {
     // What JPEG answers for a data layer: heights shaded with a margin, so
     // neighbours need no common range and still agree.
