@@ -22,6 +22,7 @@ use crate::client::store::TileStore;
 use crate::client::tile;
 use crate::client::tile::TileData;
 use crate::client::trees;
+use crate::grid::TileId;
 use crate::lod::model::CostModel;
 use glam::DVec3;
 use std::collections::BTreeMap;
@@ -193,7 +194,11 @@ impl Flight {
 /// ([`BudgetFlight::held_cut`]): that tile is drawn instead, if the store
 /// still holds it (the store loads and keeps the cut as selected).
 fn held_back(store: &mut TileStore, lod: &BudgetFlight, tiles: Vec<Arc<TileData>>) -> Vec<Arc<TileData>> {
-    let held = lod.held_cut(&tiles.iter().map(|t| t.id()).collect::<Vec<_>>());
+    let ids: Vec<TileId> = tiles.iter().map(|t| t.id()).collect();
+    let held = lod.held_cut(&ids);
+    if held == ids {
+        return tiles;
+    }
     let find = |store: &mut TileStore, id| tiles.iter().find(|t| t.id() == id).cloned().or_else(|| store.touch(id));
     held.into_iter().map(|id| find(store, id)).collect::<Option<Vec<_>>>().unwrap_or(tiles)
 }

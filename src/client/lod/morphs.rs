@@ -114,7 +114,8 @@ impl Morphs {
     }
 
     /// `cut` with each tile not drawn last whose nearest drawn ancestor is
-    /// still morphing replaced by that ancestor (once). A finer tile starts
+    /// still morphing replaced by that ancestor (once, in the place of the
+    /// first tile it replaces; the cut as it is when none is). A finer tile starts
     /// from its ancestor's own surface, drawn only when the ancestor's
     /// morph is done: a tile that arrives under a stand-in still morphing
     /// (the ancestor drawn while it loaded) waits that long, `τ` unless a
@@ -124,10 +125,8 @@ impl Morphs {
             let drawn = (!self.drawn.contains(&id)).then(|| ancestors(id).find(|a| self.drawn.contains(a)));
             drawn.flatten().filter(|a| self.active.contains_key(a)).unwrap_or(id)
         };
-        let mut out: Vec<TileId> = cut.iter().map(|&id| held(id)).collect();
-        out.sort_unstable();
-        out.dedup();
-        out
+        let mut seen = HashSet::new();
+        cut.iter().map(|&id| held(id)).filter(|&id| seen.insert(id)).collect()
     }
 
     /// Whether `next` refines a tile that is morphing.
@@ -430,7 +429,7 @@ mod tests {
         m.update(0.25, &[parent], None);
         assert_eq!(m.hold_under_morphing(&children), vec![parent], "the stand-in morphs: held");
         let elsewhere = TileId::new(10, 0, 0);
-        assert_eq!(m.hold_under_morphing(&[parent, elsewhere]), vec![parent, elsewhere]);
+        assert_eq!(m.hold_under_morphing(&[elsewhere, parent]), vec![elsewhere, parent]);
         m.update(1.25, &[parent], None);
         assert_eq!(m.hold_under_morphing(&children), children, "its morph done: drawn, from its own surface");
         let arrived = m.update(1.3, &children, None);
