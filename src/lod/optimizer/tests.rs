@@ -131,6 +131,11 @@ fn cases() -> u32 {
     std::env::var("SYLVA_LOD_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(300)
 }
 
+/// Whether `benefit` is within the knapsack programme's share of `best`.
+fn within_epsilon(benefit: f64, best: f64) -> bool {
+    benefit >= (1.0 - super::knapsack::EPSILON) * best * (1.0 - 1e-12)
+}
+
 fn feasible(sel: &Selection, budget_ms: f64) -> bool {
     sel.cost_ms <= budget_ms * (1.0 + 1e-9) + 1e-12
 }
@@ -152,7 +157,7 @@ fn random_small_instances_reach_95_percent_of_the_optimum() {
     // Fixed seeds, so the test cannot flake; `lod_quality_survey` runs more.
     for seed in 0..cases() {
         let q = quality(u64::from(seed));
-        assert!(q >= 0.95, "seed {seed}: {q}");
+        assert!(within_epsilon(q, 1.0), "seed {seed}: {q}");
     }
 }
 
@@ -172,7 +177,7 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(cases()))]
 
     #[test]
-    fn adversarial_instances_keep_half_the_optimum(
+    fn adversarial_instances_reach_95_percent_of_the_optimum(
         small in prop::collection::vec((0.1f64..10.0, 0.1f64..5.0), 1..5),
         big_cost in 5.0f64..100.0,
         big_ratio in 0.2f64..1.0,
@@ -210,7 +215,7 @@ proptest! {
         let sel = optimize(&forest, &[], &Settings::budget(budget));
         let best = exact(&forest, &[], Smooth::default(), budget);
         prop_assert!(feasible(&sel, budget));
-        prop_assert!(sel.benefit >= 0.5 * best, "{} < half of {best}", sel.benefit);
+        prop_assert!(within_epsilon(sel.benefit, best), "{} against {best}", sel.benefit);
         prop_assert!(sel.upper_bound >= best * (1.0 - 1e-9));
     }
 }
@@ -218,17 +223,14 @@ proptest! {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(cases()))]
 
-    /// Open (see the module doc of `optimizer`): forks of three or more
-    /// branches, each a zero-benefit stem whose split opens one or two
-    /// tiles, behind a zero-benefit chain, beside small increments worth
-    /// more per ms. Their convexified group can exceed the budget while
-    /// each branch fits; the optimum then mixes branches with the small
-    /// increments, and the answer can fall below half (fuzzing found 0.42).
-    /// Failures are rare: `SYLVA_LOD_CASES=20000 … -- --ignored forks_of`
-    /// finds one.
+    /// Forks of three or more branches, each a zero-benefit stem whose
+    /// split opens one or two tiles, behind a zero-benefit chain, beside
+    /// small increments worth more per ms. Their convexified group can
+    /// exceed the budget while each branch fits; the optimum then mixes
+    /// branches with the small increments, and the greedy alone fell to
+    /// 0.42 of it in fuzzing.
     #[test]
-    #[ignore = "open: groups larger than the budget break the half bound"]
-    fn forks_of_three_or_more_branches_keep_half_the_optimum(
+    fn forks_of_three_or_more_branches_reach_95_percent_of_the_optimum(
         small in prop::collection::vec((0.5f64..4.0, 1.0f64..3.0), 1..3),
         chain in prop::collection::vec(0.0f64..1.0, 0..2),
         branches in prop::collection::vec((0.0f64..1.5, prop::collection::vec((0.5f64..7.0, 0.3f64..0.6), 1..3)), 3..5),
@@ -257,7 +259,40 @@ proptest! {
         let sel = optimize(&forest, &[], &Settings::budget(10.0));
         let best = exact(&forest, &[], Smooth::default(), 10.0);
         prop_assert!(feasible(&sel, 10.0));
-        prop_assert!(sel.benefit >= 0.5 * best, "{} < half of {best}", sel.benefit);
+        prop_assert!(within_epsilon(sel.benefit, best), "{} against {best}", sel.benefit);
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(cases()))]
+
+    /// The programme's frontier: each state's splits sum to the state, and
+    /// every cut within the budget has a state no dearer and at most the
+    /// slack worse.
+    #[test]
+    fn the_knapsack_frontier_covers_every_cut(seed in 0u64..1 << 40, share in 1e-3f64..0.3) {
+        let (forest, _, budget) = tile_instance(seed);
+        let slack = share * (0..forest.len() as u32).map(|v| forest.node(v).benefit).sum::<f64>();
+        let roots = drawn_sums(&forest, &vec![false; forest.len()]);
+        let limits = knapsack::Limits { slack, room_ms: budget - roots.1, max_states: usize::MAX, deadline: None };
+        let frontier = knapsack::frontier(&forest, &forest.splittable(budget), &limits).unwrap();
+        for state in &frontier.states {
+            let mut split = vec![false; forest.len()];
+            frontier.taken(state).for_each(|v| split[v as usize] = true);
+            let (b, c) = drawn_sums(&forest, &split);
+            prop_assert!((b - roots.0 - state.benefit).abs() < 1e-9 && (c - roots.1 - state.cost_ms).abs() < 1e-9);
+        }
+        let mut uncovered = 0;
+        enumerate(&forest, 0, &mut vec![false; forest.len()], &mut |split| {
+            let (b, c) = drawn_sums(&forest, split);
+            let covered = |s: &knapsack::State| {
+                roots.1 + s.cost_ms <= c + 1e-9 && roots.0 + s.benefit >= b - slack - 1e-9
+            };
+            if c <= budget && !frontier.states.iter().any(covered) {
+                uncovered += 1;
+            }
+        });
+        prop_assert_eq!(uncovered, 0);
     }
 }
 
@@ -292,14 +327,13 @@ fn a_split_ruled_out_that_adds_nothing_leaves_full_resolution() {
 }
 
 #[test]
-#[ignore = "open: groups larger than the budget break the half bound"]
-fn a_three_branch_fork_larger_than_the_budget_keeps_half_the_optimum() {
+fn a_three_branch_fork_larger_than_the_budget_reaches_the_optimum() {
     // Splitting 2 opens three stems; its group {2, 4, 5} (5 for 11 ms) is
     // larger than the budget. The greedy takes 0's split (3 for 2 ms) and
-    // is blocked by the group; the alternative's parts of it are worth 3
-    // at most, and 3's split (0.4 for 1 ms, left out of the group) is in
-    // neither. The optimum splits 0, 2, 3 and 4 (6.4 for 10 ms); the
-    // answer is 3.
+    // is blocked by the group; the best parts of the group with their
+    // ancestors are worth 3 at most, and 3's split (0.4 for 1 ms, left out
+    // of the group) is in none. The optimum splits 0, 2, 3 and 4 (6.4 for
+    // 10 ms); the greedy's answer was 3.
     let forest = forest_of(&[
         (None, 0.0, 0.0),
         (Some(0), 3.0, 2.0),
@@ -314,7 +348,8 @@ fn a_three_branch_fork_larger_than_the_budget_keeps_half_the_optimum() {
     ]);
     let sel = optimize(&forest, &[], &Settings::budget(10.0));
     let best = exact(&forest, &[], Smooth::default(), 10.0);
-    assert!(sel.benefit >= 0.5 * best, "{} < half of {best}", sel.benefit);
+    assert!(within_epsilon(sel.benefit, best), "{} against {best}", sel.benefit);
+    assert_eq!(sel.answer, Answer::Knapsack);
 }
 
 #[test]
@@ -337,10 +372,11 @@ fn convexified_increments_see_past_a_worthless_split() {
 }
 
 #[test]
-fn the_alternative_takes_the_part_of_a_group_that_fits() {
+fn the_knapsack_takes_the_part_of_a_group_that_fits() {
     // Splitting 0 opens 1 and 2, each of whose splits fits with it (6.5 ms)
     // but not both (12 ms). The greedy takes 7's split first and is blocked
-    // by the group {0, 2, 1}; the alternative tried the whole group only.
+    // by the group {0, 2, 1}: 0.9. The optimum splits 0, 2 and 7 (10.92);
+    // one branch is as good up to the programme's rounding.
     let forest = forest_of(&[
         (None, 0.0, 0.0),
         (Some(0), 0.0, 0.5),
@@ -353,12 +389,14 @@ fn the_alternative_takes_the_part_of_a_group_that_fits() {
         (Some(7), 0.9, 0.5),
     ]);
     let sel = optimize(&forest, &[], &Settings::budget(10.0));
-    assert!(sel.alternative);
-    assert_eq!(sel.benefit, 10.02, "{:?}", sel.split);
+    assert_eq!(sel.answer, Answer::Knapsack);
+    assert!(sel.benefit >= 10.9, "{} {:?}", sel.benefit, sel.split);
+    assert!(sel.split[0] && sel.split[1] != sel.split[2] && sel.split[7]);
+    assert!(sel.upper_bound >= 10.92 && sel.upper_bound <= 10.92 / (1.0 - 0.05) + 1e-9, "{}", sel.upper_bound);
 }
 
 #[test]
-fn the_alternative_rescues_the_knapsack_trap() {
+fn the_knapsack_programme_rescues_the_knapsack_trap() {
     // Three small increments worth 2 per ms come first; the big one worth 1
     // per ms no longer fits, and no single exchange makes room for it.
     let mut nodes = vec![];
@@ -368,7 +406,7 @@ fn the_alternative_rescues_the_knapsack_trap() {
     }
     let forest = Forest::new(nodes).unwrap();
     let sel = optimize(&forest, &[], &Settings::budget(100.0));
-    assert!(sel.alternative);
+    assert_eq!(sel.answer, Answer::Knapsack);
     assert_eq!(sel.benefit, 100.0);
 }
 
