@@ -72,17 +72,37 @@ fn vs_plain(v: TerrainIn) -> PlainVertexOut {
     return PlainVertexOut(frame.proj * view, v.sample, -view.z);
 }
 
-// The ray's parameter interval inside the cast box, in sample space.
-fn cast_box(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
+// Where a ray crosses the cast box's slabs, in sample space: the
+// parameters at which it enters (.near) and leaves (.far) each of x, y, z.
+struct Slabs {
+    near: vec3<f32>,
+    far: vec3<f32>,
+};
+
+fn slabs(o: vec3<f32>, d: vec3<f32>) -> Slabs {
     let n = tile.grid.w;
     let lo = vec3<f32>(-1.0, -1.0, tile.range.x);
     let hi = vec3<f32>(n, n, tile.range.y);
     let inv = 1.0 / d;
     let a = (lo - o) * inv;
     let b = (hi - o) * inv;
-    let near = min(a, b);
-    let far = max(a, b);
-    return vec2<f32>(max(max(near.x, near.y), near.z), min(min(far.x, far.y), far.z));
+    return Slabs(min(a, b), max(a, b));
+}
+
+// The ray's parameter interval inside the cast box, in sample space.
+fn cast_box(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
+    let s = slabs(o, d);
+    return vec2<f32>(max(max(s.near.x, s.near.y), s.near.z), min(min(s.far.x, s.far.y), s.far.z));
+}
+
+// Whether the view ray along `dir` comes down through the cast box from
+// its top to its bottom: it crossed every height of the tile over its
+// footprint, so a ray that met no ground there passed a cell without data.
+fn falls_through(dir: vec3<f32>) -> bool {
+    let s = slabs(to_samples(tile.camera.xyz), vec3<f32>(dir.xy / tile.grid.xy, dir.z));
+    let enters_top = s.near.z >= max(s.near.x, s.near.y) && s.near.z >= 0.0;
+    let leaves_bottom = s.far.z <= min(s.far.x, s.far.y);
+    return dir.z < 0.0 && enters_top && leaves_bottom && s.near.z <= s.far.z;
 }
 
 fn to_samples(p: vec3<f32>) -> vec3<f32> {
@@ -179,12 +199,17 @@ fn fs_plain(in: PlainVertexOut) -> PlainOut {
 }
 
 // The terrain mesh's fragment: map colour, lit by the sun, or discarded on
-// a cell without data and, under a ray-cast tile, away from its edge.
+// a cell without data and, under a ray-cast tile, away from its edge and
+// where the ray came down through the tile's box without meeting ground.
 fn plain_fragment(in: PlainVertexOut) -> PlainOut {
     let s = in.sample;
-    // A crack filler only beside the tile's edge, where cracks open.
+    // A crack filler only beside the tile's edge, where cracks open, and
+    // never under a hole: a ray through a crack passes beside the box.
     let last = tile.grid.w - 1.0;
     if min(min(s.x, s.y), min(last - s.x, last - s.y)) > tile.texels.y {
+        discard;
+    }
+    if tile.flags.x == MODE_HULL && falls_through(pixel_ray(in.clip.xy)) {
         discard;
     }
     let c = clamp(vec2<i32>(floor(s)), vec2<i32>(0), vec2<i32>(i32(tile.grid.w) - 2));

@@ -507,11 +507,11 @@ fn nodata_shows_the_sky_at_every_level() {
     // Regression: where a coarse tile's flat frame needs the crack filler
     // under it (a level-2 tile, 1,000 km), the filler drew ground at the
     // tile's lowest height over samples whose heights were nodata but whose
-    // class was not: 3,599 pixels the reference leaves to the sky. The
-    // filler, lowered under the ground, still shows through holes within
-    // its band beside the tile's edge, which this slanting view of a tile
-    // with 9 km of flat-frame error makes the whole tile: 866 pixels here
-    // (a steeper view narrows the band; finer tiles need no filler).
+    // class was not: 3,599 pixels the reference leaves to the sky. Then
+    // the filler, lowered under the ground, still showed through holes
+    // within its band beside the tile's edge, which this slanting view of a
+    // tile with 9 km of flat-frame error makes the whole tile: 866 pixels,
+    // until rays that come down through the tile's box were kept from it.
     let grid = small_grid();
     let ids = [TileId::new(2, 10, 20), TileId::new(12, 10 << 10, 20 << 10), TileId::new(22, 21 << 19, 27_787_264)];
     for id in ids {
@@ -521,10 +521,7 @@ fn nodata_shows_the_sky_at_every_level() {
         assert!((2000..sky - 4000).contains(&hits), "level {}: holes and ground in view ({hits} hits)", id.level);
         let (name, d) = (format!("level {} with holes", id.level), &both.departure);
         assert_eq!(needs_filler(&tile), id.level == 2, "{name}: the coarse tile alone needs the filler");
-        match id.level {
-            2 => assert!(d.misses == 0 && d.extras <= 1000, "{name}: {d:?}"),
-            _ => assert_close(&name, d),
-        }
+        assert_close(&name, d);
     }
 }
 
