@@ -126,6 +126,11 @@ impl Forest {
         Some((b - n.benefit, c - n.cost_ms))
     }
 
+    /// Whether every node's cost is finite (a NaN cost counts as ∞).
+    pub fn costs_finite(&self) -> bool {
+        self.nodes.iter().all(|n| n.cost_ms.is_finite())
+    }
+
     /// Per node: whether its split, or a split below it, adds benefit.
     fn adds_benefit(&self) -> Vec<bool> {
         let mut adds = vec![false; self.len()];
@@ -138,30 +143,55 @@ impl Forest {
 
     /// Per node: whether some cut within `budget_ms` splits it (its own
     /// children and every ancestor's drawn, the rest of the forest at its
-    /// cheapest). The cheapest drawing of each subtree is found bottom-up,
-    /// then the cheapest cut splitting each node top-down; both passes are
-    /// exact whatever the signs of the increments. A node no cut affords is
-    /// never split, so the optimiser treats it as a leaf: the increments it
-    /// would make available only mislead the greedy, whose groups would
-    /// count benefit no feasible answer reaches.
+    /// cheapest). A node no cut affords is never
+    /// split, so the optimiser treats it as a leaf: the increments it would
+    /// make available only mislead the greedy, whose groups would count
+    /// benefit no feasible answer reaches.
     pub fn splittable(&self, budget_ms: f64) -> Vec<bool> {
-        let mut cheapest: Vec<f64> = self.nodes.iter().map(|n| n.cost_ms).collect();
-        for v in (0..self.len()).rev() {
-            let kids = self.children(v as u32);
-            if !kids.is_empty() {
-                cheapest[v] = cheapest[v].min(kids.iter().map(|&c| cheapest[c as usize]).sum());
+        let (_, split) = self.cut_costs();
+        (0..self.len()).map(|v| !self.children(v as u32).is_empty() && split[v].ms <= budget_ms).collect()
+    }
+
+    /// The most benefit of a cut within `budget_ms` that draws one node's
+    /// children and the rest of the forest at its cheapest: a lower bound
+    /// of the optimum.
+    pub fn best_cheapest_cut(&self, budget_ms: f64) -> f64 {
+        let (cheapest, split) = self.cut_costs();
+        let mut best = f64::NEG_INFINITY;
+        for v in (0..self.len() as u32).filter(|&v| !self.children(v).is_empty()) {
+            let mut cut = split[v as usize];
+            for &c in self.children(v) {
+                cut = cut.minus(cheapest[c as usize]).plus(Drawing::of(self.node(c)));
+            }
+            if cut.ms <= budget_ms {
+                best = best.max(cut.benefit);
             }
         }
-        let below = |v: u32| self.children(v).iter().map(|&c| cheapest[c as usize]).sum::<f64>();
-        let all: f64 = self.roots.iter().map(|&r| cheapest[r as usize]).sum();
-        // The cheapest cut splitting v and its ancestors: never below its
-        // parent's, as a subtree's cheapest drawing is at most its children's.
-        let mut split_ms = vec![f64::INFINITY; self.len()];
-        for v in 0..self.len() as u32 {
-            let above = self.node(v).parent.map_or(all, |p| split_ms[p as usize]);
-            split_ms[v as usize] = above - cheapest[v as usize] + below(v);
+        best
+    }
+
+    /// Per node, the cheapest drawing of its subtree, and the cheapest cut
+    /// splitting it (and so its ancestors): bottom-up, then top-down; both
+    /// exact whatever the signs of the increments.
+    fn cut_costs(&self) -> (Vec<Drawing>, Vec<Drawing>) {
+        let mut cheapest: Vec<Drawing> = self.nodes.iter().map(Drawing::of).collect();
+        for v in (0..self.len()).rev() {
+            let kids = self.children(v as u32);
+            let below = kids.iter().fold(Drawing::NONE, |d, &c| d.plus(cheapest[c as usize]));
+            if !kids.is_empty() && below.ms < cheapest[v].ms {
+                cheapest[v] = below;
+            }
         }
-        (0..self.len()).map(|v| !self.children(v as u32).is_empty() && split_ms[v] <= budget_ms).collect()
+        let all = self.roots.iter().fold(Drawing::NONE, |d, &r| d.plus(cheapest[r as usize]));
+        // Never below its parent's, as a subtree's cheapest drawing is at
+        // most its children's.
+        let mut split = vec![Drawing::NONE; self.len()];
+        for v in 0..self.len() as u32 {
+            let above = self.node(v).parent.map_or(all, |p| split[p as usize]);
+            let below = self.children(v).iter().fold(Drawing::NONE, |d, &c| d.plus(cheapest[c as usize]));
+            split[v as usize] = above.minus(cheapest[v as usize]).plus(below);
+        }
+        (cheapest, split)
     }
 
     /// The most `Σ (benefit − λ·cost)` over the nodes a cut can draw, for a
@@ -180,6 +210,29 @@ impl Forest {
             };
         }
         self.roots.iter().map(|&r| best[r as usize]).sum()
+    }
+}
+
+/// The cost and benefit of drawing some nodes.
+#[derive(Clone, Copy, Debug)]
+struct Drawing {
+    ms: f64,
+    benefit: f64,
+}
+
+impl Drawing {
+    const NONE: Drawing = Drawing { ms: 0.0, benefit: 0.0 };
+
+    fn of(node: &Node) -> Drawing {
+        Drawing { ms: node.cost_ms, benefit: node.benefit }
+    }
+
+    fn plus(self, o: Drawing) -> Drawing {
+        Drawing { ms: self.ms + o.ms, benefit: self.benefit + o.benefit }
+    }
+
+    fn minus(self, o: Drawing) -> Drawing {
+        Drawing { ms: self.ms - o.ms, benefit: self.benefit - o.benefit }
     }
 }
 

@@ -17,10 +17,10 @@
 //! no dearer, and each of a cut's at most `n` positions drops it once at
 //! most. So the best state is within `n·K` of the best cut, whatever the
 //! signs of the increments, and with `K = ε·LB / n` for a lower bound `LB`
-//! of the optimum it is at least `(1 − ε)` of it. The list lengths are at
-//! most the number of multiples of `K` up to the optimum, `n / ε` times its
-//! ratio to `LB`, so the work is `O(n²/ε)` where `LB` is within a constant
-//! of the optimum; it stops at [`MAX_STATES`] or the deadline.
+//! of the optimum it is at least `(1 − ε)` of it. A list holds at most one
+//! state per multiple of `K` between its least and its most benefit; where
+//! those lie within a constant of the optimum that is `O(n/ε)` states, and
+//! the work `O(n²/ε)`. It stops at [`MAX_STATES`] or the deadline.
 //!
 //! Invariants: `F[j]` lives only while a position still reads it (its
 //! predecessor and the nodes whose subtree ends before `j`: a path, so at
@@ -85,7 +85,18 @@ struct Items {
 }
 
 impl Items {
-    fn new(forest: &Forest, splittable: &[bool]) -> Items {
+    fn new(forest: &Forest, splittable: &[bool], room_ms: f64) -> Items {
+        // A node that costs ∞ (a NaN cost) counts as dearer than any cut
+        // without it and the whole room, so increments stay finite and no
+        // cut that draws it fits.
+        let finite_ms: f64 = (0..forest.len() as u32).map(|v| forest.node(v).cost_ms).filter(|c| c.is_finite()).sum();
+        let dear_ms = 2.0 * (finite_ms + room_ms.abs()) + 1.0;
+        let cost = |v: u32| forest.node(v).cost_ms.min(dear_ms);
+        let increment = |v: u32| {
+            let kids = forest.children(v).iter();
+            let benefit: f64 = kids.clone().map(|&c| forest.node(c).benefit).sum();
+            (benefit - forest.node(v).benefit, kids.map(|&c| cost(c)).sum::<f64>() - cost(v))
+        };
         let mut items = Items { nodes: vec![], end: vec![], increment: vec![] };
         let mut position = vec![u32::MAX; forest.len()];
         let mut stack: Vec<u32> = forest.roots().iter().rev().copied().collect();
@@ -93,7 +104,7 @@ impl Items {
             if splittable[v as usize] {
                 position[v as usize] = items.nodes.len() as u32;
                 items.nodes.push(v);
-                items.increment.push(forest.increment(v).unwrap_or((0.0, 0.0)));
+                items.increment.push(increment(v));
                 stack.extend(forest.children(v).iter().rev());
             }
         }
@@ -124,9 +135,12 @@ impl Items {
 /// Every cut's benefit and cost above the roots', up to `limits.slack` of
 /// benefit, over the splits `splittable` marks; `None` past the limits.
 pub(super) fn frontier(forest: &Forest, splittable: &[bool], limits: &Limits) -> Option<Frontier> {
-    let items = Items::new(forest, splittable);
+    let items = Items::new(forest, splittable, limits.room_ms);
     let n = items.nodes.len();
     let grain = limits.slack / n.max(1) as f64;
+    if !grain.is_normal() || !limits.room_ms.is_finite() {
+        return None;
+    }
     // Later splits may save time: a state this much over the room may
     // still come back within it.
     let savings: f64 = items.increment.iter().map(|&(_, dc)| (-dc).max(0.0)).sum();
@@ -193,8 +207,10 @@ where
 /// runs where the greedy's is not within it of the upper bound.
 pub(super) const EPSILON: f64 = 0.05;
 
-/// States the programme keeps at most (16 bytes of links each).
-const MAX_STATES: usize = 1 << 22;
+/// States the programme keeps at most (24 bytes each while their list
+/// lives, and 8 bytes of chain link for each taken split): some 25 ms of
+/// work on this machine's cores.
+const MAX_STATES: usize = 1 << 20;
 
 impl Run<'_> {
     /// Runs the programme for an answer worth `benefit` and adopts its best
@@ -203,9 +219,9 @@ impl Run<'_> {
     /// proves: its best total plus its slack. `None` past its limits, or
     /// where nothing is worth anything.
     pub(super) fn knapsack(&mut self, benefit: f64, deadline: Option<Instant>) -> Option<(bool, f64)> {
-        // The optimum is at least the answer, and at least the children of
-        // any split some cut affords (benefits are never negative).
-        let lower = benefit.max(self.widest_split());
+        // The optimum is at least the answer, and at least any cut that
+        // fits.
+        let lower = benefit.max(self.forest.best_cheapest_cut(self.budget_ms));
         if !(lower > 0.0 && lower.is_finite()) {
             return None;
         }
@@ -213,7 +229,7 @@ impl Run<'_> {
         let limits =
             Limits { slack: EPSILON * lower, room_ms: self.budget_ms - roots_ms, max_states: MAX_STATES, deadline };
         let frontier = frontier(self.forest, &self.groups.heads, &limits)?;
-        let (state, total) = self.best_state(&frontier)?;
+        let (state, total) = self.best_state(&frontier, deadline)?;
         let mut split = vec![false; self.forest.len()];
         for v in frontier.taken(&state) {
             split[v as usize] = true;
@@ -222,23 +238,20 @@ impl Run<'_> {
     }
 
     /// Takes `split`, with the continuous variables spending what it
-    /// leaves, if that fits and beats the current answer.
+    /// leaves, if that fits and beats the current answer (or that answer,
+    /// the roots alone, does not fit).
     fn adopt_if_better(&mut self, split: Vec<bool>) -> bool {
-        let current = self.total_benefit();
+        let (current, current_ms) = drawn_sums(self.forest, &self.split);
+        let current = current + self.levels.benefit(self.mu);
         let (benefit_d, cost_d) = drawn_sums(self.forest, &split);
         let mu = self.levels.level_for_budget(self.budget_ms - cost_d);
-        let better = cost_d <= self.budget_ms && benefit_d + self.levels.benefit(mu) > current;
+        let beats = benefit_d + self.levels.benefit(mu) > current || current_ms > self.budget_ms;
+        let better = cost_d <= self.budget_ms && beats;
         if better {
             self.split = split;
             self.mu = mu;
         }
         better
-    }
-
-    /// The most benefit the children of one affordable split have.
-    fn widest_split(&self) -> f64 {
-        let children = |v: u32| self.forest.children(v).iter().map(|&c| self.forest.node(c).benefit).sum::<f64>();
-        (0..self.forest.len() as u32).filter(|&v| self.groups.heads[v as usize]).map(children).fold(0.0, f64::max)
     }
 
     /// Benefit and cost of the roots.
@@ -254,14 +267,17 @@ impl Run<'_> {
     /// is worked out only where the last level worked out does not rule it
     /// out (at level `μ` the continuous benefit of `R` ms is at most
     /// `b(μ) + μ·(R − c(μ))`, by duality).
-    fn best_state(&self, frontier: &Frontier) -> Option<(State, f64)> {
+    fn best_state(&self, frontier: &Frontier, deadline: Option<Instant>) -> Option<(State, f64)> {
         let (roots_benefit, roots_ms) = self.roots_sums();
         let room = |s: &State| self.budget_ms - roots_ms - s.cost_ms;
         let fits = frontier.states.partition_point(|s| room(s) >= 0.0);
         let most = self.levels.benefit(self.levels.level_for_budget(room(frontier.states.first()?)));
         let mut best: Option<(State, f64)> = None;
         let mut level = f64::INFINITY;
-        for s in frontier.states[..fits].iter().rev() {
+        for (k, s) in frontier.states[..fits].iter().rev().enumerate() {
+            if k % 64 == 63 && super::late(deadline) {
+                return None;
+            }
             let reach = |continuous: f64| roots_benefit + s.benefit + continuous;
             if let Some((_, t)) = best {
                 if reach(most) <= t {

@@ -149,8 +149,8 @@ pub struct Selection {
 pub enum Answer {
     /// The greedy increments and exchanges.
     Greedy,
-    /// The tree knapsack programme (module `knapsack`), run where neither of
-    /// the others is worth half the upper bound.
+    /// The tree knapsack programme (module `knapsack`), run where the
+    /// greedy's answer is below 95 % of the upper bound.
     Knapsack,
 }
 
@@ -306,9 +306,13 @@ impl<'a> Run<'a> {
         self.iterations.is_multiple_of(64) && late(deadline)
     }
 
+    /// Full resolution, unless something was blocked, ruled out, or left
+    /// to the continuous variables, or a node costs ∞ (its increments are
+    /// worth nothing to the greedy, though splitting it may be worth much).
     fn why_done(&self) -> Stop {
         let saturated = self.levels.slope(self.mu).is_none();
-        match self.first_block.is_none() && !self.groups.pruned && saturated {
+        let priced = self.forest.costs_finite();
+        match self.first_block.is_none() && !self.groups.pruned && saturated && priced {
             true => Stop::FullResolution,
             false => Stop::Budget,
         }

@@ -410,6 +410,36 @@ fn the_knapsack_programme_rescues_the_knapsack_trap() {
     assert_eq!(sel.benefit, 100.0);
 }
 
+#[test]
+fn a_split_whose_children_no_cut_draws_does_not_coarsen_the_programme() {
+    // The knapsack trap beside a root whose child (worth 1e6) costs more
+    // than the budget, though a cut splitting both is free: counted as a
+    // lower bound of the optimum, its benefit made the programme's rounding
+    // too coarse to tell 6 from 100.
+    let mut rows = vec![];
+    for (b, c) in [(2.0, 1.0), (2.0, 1.0), (2.0, 1.0), (100.0, 100.0)] {
+        rows.push((None, 0.0, 0.0));
+        rows.push((Some(rows.len() as u32 - 1), b, c));
+    }
+    rows.extend([(None, 0.0, 0.0), (Some(8), 1e6, 1e7), (Some(9), 0.0, 0.0)]);
+    let sel = optimize(&forest_of(&rows), &[], &Settings::budget(100.0));
+    assert_eq!(sel.benefit, 100.0, "{:?}", sel.split);
+}
+
+#[test]
+fn a_node_of_unknown_cost_is_split_past_and_bounded() {
+    // Node 1 costs ∞ (or NaN): no cut may draw it, but splitting it draws
+    // a child worth 10 for 1 ms. The greedy saw an increment worth nothing
+    // and stopped at "full resolution" with a bound of 0; the programme's
+    // sums went NaN.
+    for dear in [f64::INFINITY, f64::NAN] {
+        let forest = forest_of(&[(None, 0.0, 0.0), (Some(0), 0.0, dear), (Some(1), 10.0, 1.0)]);
+        let sel = optimize(&forest, &[], &Settings::budget(5.0));
+        assert_eq!((sel.benefit, sel.cost_ms), (10.0, 1.0), "{dear}: {:?}", sel.split);
+        assert!(sel.upper_bound >= 10.0 && sel.stop == Stop::Budget, "{dear}: {sel:?}");
+    }
+}
+
 /// One root with four children of cost 1 and the given continuous variables.
 fn small_scene(vars_cost: f64) -> (Forest, Vec<Continuous>) {
     let mut nodes = vec![Node { parent: None, benefit: 10.0, cost_ms: 1.0 }];
