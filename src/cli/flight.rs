@@ -192,7 +192,8 @@ pub struct RenderArgs {
     /// Tile selection.
     #[arg(long, value_enum, default_value_t = Lod::Sse)]
     lod: Lod,
-    /// Frame budget of `--lod budget`, ms [default: 33].
+    /// Frame budget of `--lod budget`, ms [default: 33]; also the most a
+    /// selection may take (then it keeps its best answer so far).
     #[arg(long, value_parser = super::positive("milliseconds"))]
     budget_ms: Option<f64>,
     /// Frames between selections of `--lod budget` (the selection

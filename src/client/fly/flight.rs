@@ -27,7 +27,7 @@ use crate::lod::model::CostModel;
 use glam::DVec3;
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// How the camera of a flight moves: what a budget flight's selections
 /// look ahead by.
@@ -121,7 +121,8 @@ impl Flight {
                     budget_ms,
                     max_tiles: renderer.cache_slots() as usize,
                     shadows: motion.shadows,
-                    deadline: None,
+                    // A selection never takes longer than the frame it is for.
+                    time_limit: Duration::try_from_secs_f64(budget_ms / 1e3).ok(),
                 };
                 let look = lookahead(select_every, &motion);
                 Some(BudgetFlight::new(selector, budget, look, prior, options.geomorph).map_err(FlyError::Thread)?)

@@ -57,7 +57,7 @@ use crate::grid::TileId;
 use crate::lod::model::{CostFeatures, CostModel, Smooth, group_weight};
 use crate::lod::optimizer::{Continuous, Forest, Levels, Node, Selection, Settings, Stop, optimize};
 use crate::lod::split::Item;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Most shadow samples per hit (the renderer's default is 10).
 pub const MAX_SHADOW_STEPS: u32 = 30;
@@ -84,8 +84,9 @@ pub struct Budget {
     pub max_tiles: usize,
     /// Whether the sun is on (else shadows cost and give nothing).
     pub shadows: bool,
-    /// When the optimiser must stop.
-    pub deadline: Option<Instant>,
+    /// How long one optimisation may run (the optimiser's own time limit;
+    /// it then returns its best feasible answer so far).
+    pub time_limit: Option<Duration>,
 }
 
 /// A tile to draw and its quality.
@@ -232,8 +233,8 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
     let mut continuous = regions.variables(candidates, model);
     continuous.extend(trees.iter().map(|(t, px)| tree_variable(t, *px, model)));
     let run = |budget_ms: f64| {
-        let selection =
-            optimize(&forest, &continuous, &Settings { deadline: budget.deadline, ..Settings::budget(budget_ms) });
+        let deadline = budget.time_limit.map(|t| Instant::now() + t);
+        let selection = optimize(&forest, &continuous, &Settings { deadline, ..Settings::budget(budget_ms) });
         let drawn: Vec<u32> = selection.drawn(&forest).collect();
         (selection, drawn)
     };
@@ -524,7 +525,7 @@ mod tests {
     const MODEL: CostModel = CostModel { constants_ms: [1.0, 0.05, 0.5, 0.5, 0.0, 0.0, 0.0, 0.0] };
 
     fn budget(ms: f64, shadows: bool) -> Budget {
-        Budget { budget_ms: ms, max_tiles: 256, shadows, deadline: None }
+        Budget { budget_ms: ms, max_tiles: 256, shadows, time_limit: None }
     }
 
     #[test]
@@ -550,6 +551,16 @@ mod tests {
         let full = f64::from(MAX_SHADOW_STEPS) * f.raycast_mpx_steps / VIEW_STEPS;
         assert!(f.shadow_mpx_steps > 0.95 * full && f.shadow_mpx_steps <= full * (1.0 + 1e-9), "{f:?}");
         assert!(rich.tiles.len() > choose(&c, &[], &MODEL, &budget(3.0, true)).tiles.len());
+    }
+
+    #[test]
+    fn a_time_limit_stops_each_selection_with_a_cut_that_fits() {
+        let c = demo_candidates();
+        let limited = Budget { time_limit: Some(Duration::ZERO), ..budget(12.0, true) };
+        let cut = choose(&c, &[], &MODEL, &limited);
+        assert_eq!(cut.stop, Some(Stop::Limit));
+        assert!(!cut.tiles.is_empty() && cut.predicted_ms <= 12.0 + 1e-9, "{}", cut.predicted_ms);
+        assert_ne!(choose(&c, &[], &MODEL, &budget(12.0, true)).stop, Some(Stop::Limit));
     }
 
     #[test]

@@ -387,7 +387,7 @@ mod tests {
             trees: None,
             max_level: 14,
         };
-        let budget = Budget { budget_ms: 8.0, max_tiles: 256, shadows: true, deadline: None };
+        let budget = Budget { budget_ms: 8.0, max_tiles: 256, shadows: true, time_limit: None };
         let look = Lookahead { tau_s: 1.0, limits: MotionLimits { max_speed_mps: 100.0, max_turn_radps: 0.1 } };
         BudgetFlight::new(selector, budget, look, CostModel::default(), true).unwrap()
     }
