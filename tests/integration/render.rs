@@ -514,12 +514,12 @@ fn nodata_shows_the_sky_at_every_level() {
     // until rays that come down through the tile's box were kept from it.
     let grid = small_grid();
     let ids = [TileId::new(2, 10, 20), TileId::new(12, 10 << 10, 20 << 10), TileId::new(22, 21 << 19, 27_787_264)];
-    for id in ids {
+    for (id, pass) in ids.into_iter().flat_map(|id| PASSES.map(|pass| (id, pass))) {
         let (tile, camera) = scaled_scene(&grid, id, 0.012);
-        let both = render_both(std::slice::from_ref(&tile), &camera, &settings(Traversal::Exact, None));
+        let both = render_both_in(pass, std::slice::from_ref(&tile), &camera, &settings(Traversal::Exact, None));
         let (hits, sky) = (both.cpu.view_z_m.iter().filter(|&&z| z > 0.0).count(), both.cpu.view_z_m.len());
         assert!((2000..sky - 4000).contains(&hits), "level {}: holes and ground in view ({hits} hits)", id.level);
-        let (name, d) = (format!("level {} with holes", id.level), &both.departure);
+        let (name, d) = (format!("level {} with holes, {pass:?}", id.level), &both.departure);
         assert_eq!(needs_filler(&tile), id.level == 2, "{name}: the coarse tile alone needs the filler");
         assert_close(&name, d);
     }
