@@ -98,10 +98,14 @@ fn cast_box(o: vec3<f32>, d: vec3<f32>) -> vec2<f32> {
 // Whether the view ray along `dir` comes down through the cast box from
 // its top to its bottom: it crossed every height of the tile over its
 // footprint, so a ray that met no ground there passed a cell without data.
+// Where a side is crossed within float error of the top or the bottom (the
+// parameters are measured from the camera, far from a coarse tile), it is
+// taken to be crossed: the filler stays.
 fn falls_through(dir: vec3<f32>) -> bool {
     let s = slabs(to_samples(tile.camera.xyz), vec3<f32>(dir.xy / tile.grid.xy, dir.z));
-    let enters_top = s.near.z >= max(s.near.x, s.near.y) && s.near.z >= 0.0;
-    let leaves_bottom = s.far.z <= min(s.far.x, s.far.y);
+    let margin = 1.0e-5 * abs(s.far.z);
+    let enters_top = s.near.z >= max(s.near.x, s.near.y) + margin && s.near.z >= 0.0;
+    let leaves_bottom = s.far.z + margin <= min(s.far.x, s.far.y);
     return dir.z < 0.0 && enters_top && leaves_bottom && s.near.z <= s.far.z;
 }
 
