@@ -233,7 +233,7 @@ fn relief(region: &Region, grid: &SampleGrid) -> Result<Computed, ProduceError> 
     let (Some(cem), Some(surface)) = (&products.cem, &products.surface) else {
         return Err(EncodeError("relief needs the CEM and the surface".into()).into());
     };
-    let inner = Window::new(1, 1, grid.width(), grid.height());
+    let inner = own_samples(grid);
     if cem.crop(inner, f32::NAN).all_nodata() {
         return Ok(Computed::absent(products.stats));
     }
@@ -258,10 +258,16 @@ fn data_picture(region: &Region, grid: &SampleGrid, layer: Layer) -> Result<Comp
     Ok(Computed { bytes, uniform: false, stats, encode: start.elapsed() })
 }
 
+/// Where the samples of `grid` lie within samples computed with a margin of
+/// one.
+fn own_samples(grid: &SampleGrid) -> Window {
+    Window::new(1, 1, grid.width(), grid.height())
+}
+
 /// The samples of `grid` within samples computed with a margin of one
 /// (a picture with no data of its own is absent, whatever its margin holds).
 fn within_margin(samples: &LayerSamples, grid: &SampleGrid) -> LayerSamples {
-    let inner = Window::new(1, 1, grid.width(), grid.height());
+    let inner = own_samples(grid);
     match samples {
         LayerSamples::Float(r) => LayerSamples::Float(r.crop(inner, f32::NAN)),
         LayerSamples::Class(r) => LayerSamples::Class(r.crop(inner, cem::surface::NODATA)),

@@ -143,10 +143,10 @@ impl Forest {
 
     /// Per node: whether some cut within `budget_ms` splits it (its own
     /// children and every ancestor's drawn, the rest of the forest at its
-    /// cheapest). A node no cut affords is never
-    /// split, so the optimiser treats it as a leaf: the increments it would
-    /// make available only mislead the greedy, whose groups would count
-    /// benefit no feasible answer reaches.
+    /// cheapest). A node no cut affords is never split, so the optimiser
+    /// treats it as a leaf: the increments it would make available only
+    /// mislead the greedy, whose groups would count benefit no feasible
+    /// answer reaches.
     pub fn splittable(&self, budget_ms: f64) -> Vec<bool> {
         let (_, split) = self.cut_costs();
         (0..self.len()).map(|v| !self.children(v as u32).is_empty() && split[v].ms <= budget_ms).collect()
@@ -175,11 +175,13 @@ impl Forest {
     /// exact whatever the signs of the increments.
     fn cut_costs(&self) -> (Vec<Drawing>, Vec<Drawing>) {
         let mut cheapest: Vec<Drawing> = self.nodes.iter().map(Drawing::of).collect();
+        // Per node, its children at their cheapest.
+        let mut below = vec![Drawing::NONE; self.len()];
         for v in (0..self.len()).rev() {
             let kids = self.children(v as u32);
-            let below = kids.iter().fold(Drawing::NONE, |d, &c| d.plus(cheapest[c as usize]));
-            if !kids.is_empty() && below.ms < cheapest[v].ms {
-                cheapest[v] = below;
+            below[v] = kids.iter().fold(Drawing::NONE, |d, &c| d.plus(cheapest[c as usize]));
+            if !kids.is_empty() && below[v].ms < cheapest[v].ms {
+                cheapest[v] = below[v];
             }
         }
         let all = self.roots.iter().fold(Drawing::NONE, |d, &r| d.plus(cheapest[r as usize]));
@@ -188,8 +190,7 @@ impl Forest {
         let mut split = vec![Drawing::NONE; self.len()];
         for v in 0..self.len() as u32 {
             let above = self.node(v).parent.map_or(all, |p| split[p as usize]);
-            let below = self.children(v).iter().fold(Drawing::NONE, |d, &c| d.plus(cheapest[c as usize]));
-            split[v as usize] = above.minus(cheapest[v as usize]).plus(below);
+            split[v as usize] = above.minus(cheapest[v as usize]).plus(below[v as usize]);
         }
         (cheapest, split)
     }

@@ -108,13 +108,12 @@ impl Items {
                 stack.extend(forest.children(v).iter().rev());
             }
         }
-        // Subtree sizes, children after their parents: a split's parent is
-        // always splittable too (no cut splits a child more cheaply).
+        // Subtree sizes, children after their parents: an item's parent is
+        // an item, as the walk goes down only from items.
         let mut size = vec![1u32; items.nodes.len()];
         for i in (0..items.nodes.len()).rev() {
-            let parent = forest.node(items.nodes[i]).parent.map(|p| position[p as usize]);
-            if let Some(at) = parent.filter(|&at| at != u32::MAX) {
-                size[at as usize] += size[i];
+            if let Some(p) = forest.node(items.nodes[i]).parent {
+                size[position[p as usize] as usize] += size[i];
             }
         }
         items.end = size.iter().enumerate().map(|(i, s)| i as u32 + s).collect();
@@ -225,11 +224,11 @@ impl Run<'_> {
         if !(lower > 0.0 && lower.is_finite()) {
             return None;
         }
-        let (_, roots_ms) = self.roots_sums();
+        let roots = drawn_sums(self.forest, &vec![false; self.forest.len()]);
         let limits =
-            Limits { slack: EPSILON * lower, room_ms: self.budget_ms - roots_ms, max_states: MAX_STATES, deadline };
+            Limits { slack: EPSILON * lower, room_ms: self.budget_ms - roots.1, max_states: MAX_STATES, deadline };
         let frontier = frontier(self.forest, &self.groups.heads, &limits)?;
-        let (state, total) = self.best_state(&frontier, deadline)?;
+        let (state, total) = self.best_state(&frontier, roots, deadline)?;
         let mut split = vec![false; self.forest.len()];
         for v in frontier.taken(&state) {
             split[v as usize] = true;
@@ -254,21 +253,16 @@ impl Run<'_> {
         better
     }
 
-    /// Benefit and cost of the roots.
-    fn roots_sums(&self) -> (f64, f64) {
-        let roots = self.forest.roots().iter().map(|&r| self.forest.node(r));
-        roots.fold((0.0, 0.0), |(b, c), n| (b + n.benefit, c + n.cost_ms))
-    }
-
-    /// The state of `frontier` within the budget whose total, with the
+    /// The state of `frontier` within the budget whose total (with the
+    /// roots' benefit and cost `roots`), with the
     /// continuous variables spending what it leaves, is highest. States
     /// are looked at from the most beneficial down, while the continuous
     /// variables' most could still lift one above the best so far; a state
     /// is worked out only where the last level worked out does not rule it
     /// out (at level `μ` the continuous benefit of `R` ms is at most
     /// `b(μ) + μ·(R − c(μ))`, by duality).
-    fn best_state(&self, frontier: &Frontier, deadline: Option<Instant>) -> Option<(State, f64)> {
-        let (roots_benefit, roots_ms) = self.roots_sums();
+    fn best_state(&self, frontier: &Frontier, roots: (f64, f64), deadline: Option<Instant>) -> Option<(State, f64)> {
+        let (roots_benefit, roots_ms) = roots;
         let room = |s: &State| self.budget_ms - roots_ms - s.cost_ms;
         let fits = frontier.states.partition_point(|s| room(s) >= 0.0);
         let most = self.levels.benefit(self.levels.level_for_budget(room(frontier.states.first()?)));

@@ -327,7 +327,7 @@ fn a_split_ruled_out_that_adds_nothing_leaves_full_resolution() {
 }
 
 #[test]
-fn a_three_branch_fork_larger_than_the_budget_reaches_the_optimum() {
+fn a_three_branch_fork_larger_than_the_budget_reaches_95_percent_of_the_optimum() {
     // Splitting 2 opens three stems; its group {2, 4, 5} (5 for 11 ms) is
     // larger than the budget. The greedy takes 0's split (3 for 2 ms) and
     // is blocked by the group; the best parts of the group with their
