@@ -44,8 +44,10 @@
 //! knapsack programme").
 //!
 //! If the roots alone (the coarsest representation) cost more than the
-//! budget they are still drawn, nothing else is, and the overrun is
-//! reported.
+//! budget they are still drawn, nothing dearer is, and the overrun is
+//! reported: the search runs under the roots' cost instead, so its answer
+//! and its bound are those of the cuts no dearer than the coarsest (the
+//! bound of an infeasible budget would be meaningless).
 
 pub mod continuous;
 pub mod discrete;
@@ -131,7 +133,8 @@ pub struct Selection {
     pub cost_ms: f64,
     /// Predicted cost beyond the budget (only when the roots alone exceed it).
     pub overrun_ms: f64,
-    /// No feasible selection has more benefit than this.
+    /// No selection within the budget (or, when the roots overrun it, no
+    /// dearer than the roots) has more benefit than this.
     pub upper_bound: f64,
     /// The continuous slope level at the end: benefit per ms of the last
     /// unit; ∞ when no continuous variable got any, 0 when all are at full
@@ -218,7 +221,10 @@ struct Run<'a> {
     forest: &'a Forest,
     groups: Groups,
     levels: Levels,
+    /// The budget searched: the one asked, or the roots' cost if more.
     budget_ms: f64,
+    /// The budget asked (not negative), which an overrun is measured from.
+    asked_ms: f64,
     split: Vec<bool>,
     heap: BinaryHeap<Entry>,
     benefit_d: f64,
@@ -237,12 +243,15 @@ struct Run<'a> {
 
 impl<'a> Run<'a> {
     fn new(forest: &'a Forest, levels: Levels, settings: &Settings) -> Run<'a> {
-        let budget_ms = if settings.budget_ms > 0.0 { settings.budget_ms } else { 0.0 };
+        let asked_ms = if settings.budget_ms > 0.0 { settings.budget_ms } else { 0.0 };
+        let roots_ms: f64 = forest.roots().iter().map(|&r| forest.node(r).cost_ms).sum();
+        let budget_ms = if roots_ms.is_finite() { asked_ms.max(roots_ms) } else { asked_ms };
         let mut run = Run {
             forest,
             groups: Groups::new(forest, budget_ms),
             levels,
             budget_ms,
+            asked_ms,
             split: vec![false; forest.len()],
             heap: BinaryHeap::new(),
             benefit_d: 0.0,
@@ -526,7 +535,7 @@ impl<'a> Run<'a> {
             split: self.split,
             benefit,
             cost_ms,
-            overrun_ms: (cost_ms - self.budget_ms).max(0.0),
+            overrun_ms: (cost_ms - self.asked_ms).max(0.0),
             upper_bound: upper_bound.max(benefit),
             level: self.mu,
             stop,

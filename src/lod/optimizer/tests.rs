@@ -497,7 +497,22 @@ fn a_budget_below_the_coarsest_still_draws_it_and_reports_the_overrun() {
         assert!(sel.overrun_ms > 0.0);
         assert_eq!(sel.resolutions, vec![0.0; 3]);
         assert_eq!(sel.stop, Stop::Budget);
+        // Nothing no dearer than the roots is worth much more: the bound is
+        // theirs, not that of a budget no cut meets (146).
+        assert!(sel.benefit >= 0.95 * sel.upper_bound, "{budget}: bound {}", sel.upper_bound);
     }
+}
+
+#[test]
+fn a_cut_cheaper_than_the_roots_is_drawn_when_they_overrun() {
+    // Four children cheaper together than their parent and worth more.
+    let mut nodes = vec![Node { parent: None, benefit: 10.0, cost_ms: 2.0 }];
+    nodes.extend((0..4).map(|_| Node { parent: Some(0), benefit: 4.0, cost_ms: 0.3 }));
+    let forest = Forest::new(nodes).unwrap();
+    let sel = optimize(&forest, &[], &Settings::budget(1.0));
+    assert_eq!(sel.drawn(&forest).collect::<Vec<_>>(), vec![1, 2, 3, 4]);
+    assert!((sel.cost_ms - 1.2).abs() < 1e-12 && (sel.overrun_ms - 0.2).abs() < 1e-12, "{sel:?}");
+    assert!((sel.upper_bound - 16.0).abs() < 1e-9, "{sel:?}");
 }
 
 #[test]
