@@ -24,7 +24,7 @@ pub enum Code {
     InvalidParameterValue,
     /// Request type not supported.
     OperationNotSupported,
-    /// GetFeatureInfo's pixel is off the map (1.3.0).
+    /// GetFeatureInfo's pixel is off the map (1.3.0 only).
     InvalidPoint,
     /// The server failed (no standard code; reported without one).
     NoApplicableCode,

@@ -439,6 +439,34 @@ fn in_image_and_blank_exceptions_are_images() {
     let img = image::load_from_memory(&dem.body).unwrap();
     assert!(matches!(&img, image::DynamicImage::ImageLuma16(_)), "{:?}", img.color());
     assert!(img.to_luma16().pixels().all(|p| p.0[0] == 0));
+    // A key given twice still gets the image asked for (regression: a report).
+    let twice = server.get(&format!("{}&EXCEPTIONS=INIMAGE&layers=cem", q.replace("trees", "relief")));
+    assert_eq!((twice.status, twice.header("content-type")), (200, Some("image/png")), "{}", twice.text());
+    let ambiguous = server.get(&format!("{q}&EXCEPTIONS=INIMAGE&exceptions=XML"));
+    assert_eq!(ambiguous.status, 400, "an ambiguous style is the report");
+}
+
+#[test]
+fn a_blank_geotiff_lies_where_the_map_was_asked_for() {
+    let dir = TempDir::new("srv-blank-tiff");
+    let server = Server::start(None, &dir.join("cache"));
+    let q = "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:3857&BBOX=1118760,5836600,1130000,5844700&WIDTH=64&HEIGHT=48&FORMAT=image/tiff";
+    let map = server.get(&format!("{q}&STYLES="));
+    let blank = server.get(&format!("{q}&STYLES=bogus&EXCEPTIONS=BLANK"));
+    assert_eq!((map.status, blank.status, blank.header("content-type")), (200, 200, Some("image/tiff")));
+    // Tie point, pixel scale and GeoKeys: those of the map (regression:
+    // a box of 0–1° in EPSG:4326, whatever was asked for).
+    let georef = |tiff: &[u8]| {
+        let mut decoder = tiff::decoder::Decoder::new(std::io::Cursor::new(tiff.to_vec())).unwrap();
+        let mut tag = |code| decoder.get_tag_f64_vec(tiff::tags::Tag::Unknown(code)).unwrap();
+        let (tie, scale) = (tag(33922), tag(33550));
+        (tie, scale, decoder.get_tag_u16_vec(tiff::tags::Tag::Unknown(34735)).unwrap())
+    };
+    assert_eq!(georef(&blank.body), georef(&map.body));
+    // A box that does not parse places no GeoTIFF: the report.
+    let nowhere = server.get(&format!("{q}&STYLES=&EXCEPTIONS=BLANK").replace("BBOX=1118760", "BBOX=x"));
+    assert_eq!(nowhere.status, 400, "{}", nowhere.text());
+    assert!(nowhere.text().contains("ServiceExceptionReport"));
 }
 
 #[test]

@@ -135,6 +135,10 @@ fn an_upstream_that_hangs_or_fails_gives_a_timely_exception_and_the_server_stays
             "{behaviour}: the open breaker waited {:?}",
             start.elapsed()
         );
+        // A map that asks for in-image exceptions gets one, with the status.
+        let picture =
+            proxy.get(&get_map.replace("dem", "relief").replace("image/tiff", "image/png&EXCEPTIONS=INIMAGE"));
+        assert_eq!((picture.status, picture.header("content-type")), (502, Some("image/png")), "{behaviour}");
         assert_eq!(proxy.get("/health").status, 200, "{behaviour}: still up");
     }
 }

@@ -113,10 +113,14 @@ pub(super) fn parse(params: &Params, version: Version, limits: Limits) -> Result
             Exception::new(Code::InvalidParameterValue, format!("FEATURE_COUNT={count}: need a whole number above 0"));
         return Err(e.locator("FEATURE_COUNT"));
     }
-    let (x_key, y_key) = if version == Version::V130 { ("I", "J") } else { ("X", "Y") };
+    // InvalidPoint is 1.3.0's code; 1.1.1 has none for it.
+    let ((x_key, y_key), off) = match version {
+        Version::V130 => (("I", "J"), Code::InvalidPoint),
+        Version::V111 => (("X", "Y"), Code::InvalidParameterValue),
+    };
     let pixel = (
-        coordinate(params, [x_key, "I", "X"], map.grid.width())?,
-        coordinate(params, [y_key, "J", "Y"], map.grid.height())?,
+        coordinate(params, [x_key, "I", "X"], map.grid.width(), off)?,
+        coordinate(params, [y_key, "J", "Y"], map.grid.height(), off)?,
     );
     Ok(FeatureInfo { map, layers, pixel, format })
 }
@@ -132,14 +136,17 @@ fn shows(layer: MapLayer) -> Vec<Layer> {
 
 /// The pixel coordinate under the first of `keys` given, below `len` (the
 /// map's width or height); a fraction, which some web clients send, is the
-/// pixel it falls in.
-fn coordinate(params: &Params, keys: [&'static str; 3], len: usize) -> Result<usize, Exception> {
+/// pixel it falls in. Off the map is exception `off`.
+fn coordinate(params: &Params, keys: [&'static str; 3], len: usize, off: Code) -> Result<usize, Exception> {
     let Some((key, text)) = keys.into_iter().find_map(|k| params.get(k).map(|v| (k, v))) else {
         return Err(Exception::new(Code::MissingParameterValue, format!("{} is missing", keys[0])));
     };
-    text.trim().parse::<f64>().ok().filter(|v| (0.0..len as f64).contains(v)).map(|v| v.floor() as usize).ok_or_else(
-        || Exception::new(Code::InvalidPoint, format!("{key}={text}: need a pixel 0 to {}", len - 1)).locator(key),
-    )
+    text.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| (0.0..len as f64).contains(v))
+        .map(|v| v.floor() as usize)
+        .ok_or_else(|| Exception::new(off, format!("{key}={text}: need a pixel 0 to {}", len - 1)).locator(key))
 }
 
 /// The one-sample grid of the pixel asked for.
@@ -262,7 +269,7 @@ mod tests {
 
     fn parsed(query: &str) -> Result<FeatureInfo, Exception> {
         let params = Params::new(query);
-        parse(&params, request::version_of(query), LIMITS)
+        parse(&params, request::reply_of(query, LIMITS).version, LIMITS)
     }
 
     #[test]
@@ -292,6 +299,9 @@ mod tests {
         assert_eq!(code("&QUERY_LAYERS=dem&I=10&J=0"), Code::InvalidPoint);
         assert_eq!(code("&QUERY_LAYERS=dem&I=-1&J=0"), Code::InvalidPoint);
         assert_eq!(code("&QUERY_LAYERS=dem&I=NaN&J=0"), Code::InvalidPoint);
+        let old = BASE.replace("VERSION=1.3.0", "VERSION=1.1.1").replace("CRS=", "SRS=");
+        let in_111 = parsed(&format!("{old}&QUERY_LAYERS=dem&X=10&Y=0")).unwrap_err();
+        assert_eq!(in_111.code, Code::InvalidParameterValue, "1.1.1 has no InvalidPoint");
         let fraction = parsed(&format!("{BASE}&QUERY_LAYERS=dem&I=9.7&J=0.2")).unwrap();
         assert_eq!(fraction.pixel, (9, 0), "the pixel a fraction falls in");
         assert_eq!(code("&QUERY_LAYERS=dem&I=0"), Code::MissingParameterValue);

@@ -32,8 +32,9 @@ const MAX_STITCHED_TILES: usize = 16;
 /// Answers a WMS request.
 pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuery, headers: HeaderMap) -> Response {
     let limits = Limits { max_side: state.settings.max_size };
-    match request::parse(query.as_deref().unwrap_or(""), limits) {
-        Err((e, reply)) => exception(&e, reply, &state),
+    let query = query.as_deref().unwrap_or("");
+    match request::parse(query, limits) {
+        Err((e, reply)) => exception(&e, *reply, &state),
         Ok(Request::GetCapabilities(version)) => {
             let url = endpoint(&state, &headers);
             let r = state.region();
@@ -47,27 +48,44 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
             let (mime, body) = capabilities::document(&service, version);
             ([(header::CONTENT_TYPE, mime)], body).into_response()
         }
-        Ok(Request::GetMap(map)) => answer(&state, map.version, get_map(&state, &map, &headers).await),
-        Ok(Request::GetFeatureInfo(info)) => answer(&state, info.map.version, feature_info(&state, &info).await),
+        Ok(Request::GetMap(map)) => answer(&state, query, get_map(&state, &map, &headers).await),
+        Ok(Request::GetFeatureInfo(info)) => answer(&state, query, feature_info(&state, &info).await),
     }
 }
 
-/// A GetMap's or GetFeatureInfo's answer, or its failure as a report.
-fn answer(state: &AppState, version: request::Version, result: Result<Response, ServeError>) -> Response {
-    let reply = Reply { version, style: ExceptionStyle::Xml, image: None, background: None, layer: None };
-    match result {
-        Ok(response) => response,
-        Err(ServeError::BadRequest(m)) => {
+/// A GetMap's or GetFeatureInfo's answer to `query`, or its failure as the
+/// query asks exceptions to be answered.
+fn answer(state: &AppState, query: &str, result: Result<Response, ServeError>) -> Response {
+    let Err(e) = result else { return result.unwrap_or_else(|e| e.into_response()) };
+    let reply = request::reply_of(query, Limits { max_side: state.settings.max_size });
+    match e {
+        ServeError::BadRequest(m) => {
             exception(&Exception::new(super::exception::Code::InvalidParameterValue, m), reply, state)
         }
-        // The server's or an upstream's failure: still a report, with the status.
-        Err(e) => {
-            let (status, mut headers, message) = e.parts();
-            let (mime, body) = Exception::new(super::exception::Code::NoApplicableCode, message).report(version);
-            headers.insert(header::CONTENT_TYPE, axum::http::HeaderValue::from_static(mime));
-            (status, headers, body).into_response()
+        // The server's or an upstream's failure, with its status.
+        e => {
+            let (status, headers, message) = e.parts();
+            failure(state, reply, (status, headers), message)
         }
     }
+}
+
+/// A request that could not be answered for `message` (the server's or an
+/// upstream's failure, a timeout), with `status` and `headers`: a report, or
+/// an image where a GetMap asks for in-image or blank exceptions.
+pub fn failure(
+    state: &AppState,
+    reply: Reply,
+    (status, mut headers): (StatusCode, HeaderMap),
+    message: String,
+) -> Response {
+    let e = Exception::new(super::exception::Code::NoApplicableCode, message);
+    let (mime, body) = image(&e, &reply, state).unwrap_or_else(|| {
+        let (mime, text) = e.report(reply.version);
+        (mime, text.into_bytes())
+    });
+    headers.insert(header::CONTENT_TYPE, axum::http::HeaderValue::from_static(mime));
+    (status, headers, body).into_response()
 }
 
 /// The values of the queried layers at the pixel, computed on the pool.
@@ -177,38 +195,43 @@ fn paste(out: &mut Raster<f32>, bil32: &[u8], n1: i64, (x0, y0): (i64, i64)) {
     out.paste(&tile, local, common.x as usize, common.y as usize);
 }
 
-/// An exception answered as the request asked: a report (400), or an image.
+/// A bad request's exception answered as the request asked: a report
+/// (400), or an image.
 fn exception(e: &Exception, reply: Reply, state: &AppState) -> Response {
-    let picture = reply.image.and_then(|(_, _, format)| format.picture());
-    match (reply.style, reply.image, picture) {
-        (ExceptionStyle::InImage, Some((w, h, format)), Some(picture)) => {
-            ([(header::CONTENT_TYPE, format.mime())], inimage::message(&e.to_string(), w, h, reply.background, picture))
-                .into_response()
+    match image(e, &reply, state) {
+        Some((mime, body)) => ([(header::CONTENT_TYPE, mime)], body).into_response(),
+        None => {
+            let (mime, body) = e.report(reply.version);
+            (StatusCode::BAD_REQUEST, [(header::CONTENT_TYPE, mime)], body).into_response()
         }
-        (ExceptionStyle::InImage | ExceptionStyle::Blank, Some((w, h, format)), _) => {
-            let grid = crate::grid::BBox { west: 0.0, south: 0.0, east: 1.0, north: 1.0 }.area_grid(w, h);
-            match grid {
-                Ok(g) => {
-                    // The request did not parse: nodata in the layer and
-                    // format asked for (a picture of its background).
-                    let layer = reply.layer.unwrap_or(match format.picture() {
-                        Some(_) => MapLayer::Relief,
-                        None => MapLayer::Data(Layer::Dem),
-                    });
-                    (
-                        [(header::CONTENT_TYPE, format.mime())],
-                        inimage::blank(&g, layer, format, state.region().heights_16, reply.background),
-                    )
-                        .into_response()
-                }
-                Err(_) => report(e, reply),
-            }
-        }
-        _ => report(e, reply),
     }
 }
 
-fn report(e: &Exception, reply: Reply) -> Response {
-    let (mime, body) = e.report(reply.version);
-    (StatusCode::BAD_REQUEST, [(header::CONTENT_TYPE, mime)], body).into_response()
+/// The image that replaces the map for an in-image or blank exception, and
+/// its type: the message drawn on a picture, or nodata in the layer and
+/// format asked for (a picture of its background), where the request asks
+/// for one and it can be made.
+fn image(e: &Exception, reply: &Reply, state: &AppState) -> Option<(&'static str, Vec<u8>)> {
+    let (w, h, format) = reply.image?;
+    let body = match (reply.style, format.picture()) {
+        (ExceptionStyle::Xml, _) => return None,
+        (ExceptionStyle::InImage, Some(picture)) => inimage::message(&e.to_string(), w, h, reply.background, picture),
+        _ => {
+            let grid = reply.place.or_else(|| unplaced(w, h, format))?;
+            let layer = reply.layer.unwrap_or(match format.picture() {
+                Some(_) => MapLayer::Relief,
+                None => MapLayer::Data(Layer::Dem),
+            });
+            inimage::blank(&grid, layer, format, state.region().heights_16, reply.background)
+        }
+    };
+    Some((format.mime(), body))
+}
+
+/// A grid of `w × h` pixels anywhere, for a blank image whose box did not
+/// parse, in a format that does not say where it lies (a GeoTIFF would say
+/// it wrongly: the report instead).
+fn unplaced(w: usize, h: usize, format: request::MapFormat) -> Option<crate::grid::SampleGrid> {
+    let anywhere = crate::grid::BBox { west: 0.0, south: 0.0, east: 1.0, north: 1.0 };
+    (format != request::MapFormat::Tiff).then(|| anywhere.area_grid(w, h).ok()).flatten()
 }

@@ -224,14 +224,47 @@ pub struct Reply {
     /// The layer asked for, if it is served and offered in the format: what
     /// a blank reply is blank in.
     pub layer: Option<MapLayer>,
+    /// Where the image lies, if its CRS and box parse: what a blank GeoTIFF
+    /// is georeferenced to.
+    pub place: Option<SampleGrid>,
+}
+
+impl Reply {
+    /// A report in `version`'s form.
+    pub fn xml(version: Version) -> Reply {
+        Reply { version, style: ExceptionStyle::Xml, image: None, background: None, layer: None, place: None }
+    }
+}
+
+/// How a failure to answer `query` is answered (a report unless it is a
+/// GetMap that asks for in-image or blank exceptions).
+pub fn reply_of(query: &str, limits: Limits) -> Reply {
+    let params = Params::new(query);
+    reply_for(&params, negotiate(&params), limits)
+}
+
+fn reply_for(params: &Params, version: Version, limits: Limits) -> Reply {
+    let mut reply = Reply::xml(version);
+    let request = params.get("REQUEST").unwrap_or("").to_ascii_lowercase();
+    if !matches!(request.as_str(), "getmap" | "map") {
+        return reply;
+    }
+    // An ambiguous style is no style: the report.
+    let ambiguous = params.conflict().is_some_and(|(key, _)| key == "EXCEPTIONS");
+    reply.style = exception_style(params.get("EXCEPTIONS").filter(|_| !ambiguous));
+    reply.image = image_of(params, limits);
+    reply.background = background(params, reply.image.map(|(_, _, f)| f)).unwrap_or(None);
+    reply.layer = layer_of(params, reply.image.map(|(_, _, f)| f));
+    reply.place = reply.image.and_then(|(w, h, _)| place_of(params, version, w, h));
+    reply
 }
 
 /// Parses a query string.
-pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)> {
+pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Box<Reply>)> {
     let params = Params::new(query);
     let version = negotiate(&params);
-    let mut reply = Reply { version, style: ExceptionStyle::Xml, image: None, background: None, layer: None };
-    let fail = |e: Exception, reply: Reply| Err((e, reply));
+    let reply = Box::new(reply_for(&params, version, limits));
+    let fail = |e: Exception, reply: Box<Reply>| Err((e, reply));
     if let Some((key, message)) = params.conflict() {
         return fail(Exception::new(Code::InvalidParameterValue, message).locator(key), reply);
     }
@@ -246,23 +279,12 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Reply)>
     };
     match request.to_ascii_lowercase().as_str() {
         "getcapabilities" | "capabilities" => Ok(Request::GetCapabilities(version)),
-        "getmap" | "map" => {
-            reply.style = exception_style(params.get("EXCEPTIONS"));
-            reply.image = image_of(&params, limits);
-            reply.background = background(&params, reply.image.map(|(_, _, f)| f)).unwrap_or(None);
-            reply.layer = layer_of(&params, reply.image.map(|(_, _, f)| f));
-            get_map(&params, version, limits).map(Request::GetMap).map_err(|e| (e, reply))
-        }
+        "getmap" | "map" => get_map(&params, version, limits).map(Request::GetMap).map_err(|e| (e, reply)),
         "getfeatureinfo" | "feature_info" => {
             super::info::parse(&params, version, limits).map(Request::GetFeatureInfo).map_err(|e| (e, reply))
         }
         other => fail(Exception::new(Code::OperationNotSupported, format!("REQUEST={other} is not supported")), reply),
     }
-}
-
-/// The version a query string is answered in.
-pub fn version_of(query: &str) -> Version {
-    negotiate(&Params::new(query))
 }
 
 /// The version answered (WMS 1.3.0 §6.2.4): below 1.3.0 the highest known
@@ -319,6 +341,11 @@ fn image_of(params: &Params, limits: Limits) -> Option<(usize, usize, MapFormat)
     (fits(w) && fits(h)).then_some((w, h, f))
 }
 
+/// The pixel grid of a `width × height` image, if its CRS and box parse.
+fn place_of(params: &Params, version: Version, width: usize, height: usize) -> Option<SampleGrid> {
+    grid(numbers(params.get("BBOX")?).ok()?, crs_of(params, version).ok()?, version, width, height).ok()
+}
+
 /// The one layer `LAYERS` names, if it is served and offered in `format`.
 fn layer_of(params: &Params, format: Option<MapFormat>) -> Option<MapLayer> {
     let (layer, format) = (MapLayer::parse(params.get("LAYERS")?.trim())?, format?);
@@ -355,14 +382,7 @@ pub(super) fn map_part(params: &Params, version: Version, limits: Limits) -> Res
         _ => return Err(Exception::new(Code::InvalidParameterValue, "one layer per request").locator("LAYERS")),
     };
     check_styles(params.get("STYLES"))?;
-    let crs_key = if version == Version::V130 { "CRS" } else { "SRS" };
-    let crs_text = params.get(crs_key).or(params.get(if crs_key == "CRS" { "SRS" } else { "CRS" }));
-    let crs_text =
-        crs_text.ok_or_else(|| Exception::new(Code::MissingParameterValue, format!("{crs_key} is missing")))?;
-    let crs = RequestCrs::parse(crs_text).ok_or_else(|| {
-        let code = if version == Version::V130 { Code::InvalidCrs } else { Code::InvalidSrs };
-        Exception::new(code, format!("{crs_text} is not offered (EPSG:4326, CRS:84, EPSG:3857)")).locator(crs_key)
-    })?;
+    let crs = crs_of(params, version)?;
     let format_text = required("FORMAT")?;
     let format = MapFormat::parse(format_text).ok_or_else(|| {
         Exception::new(Code::InvalidFormat, format!("format {format_text:?} is not offered")).locator("FORMAT")
@@ -372,6 +392,18 @@ pub(super) fn map_part(params: &Params, version: Version, limits: Limits) -> Res
     let grid = grid(bbox, crs, version, width, height)?;
     let background = background(params, Some(format))?;
     Ok(GetMap { version, layer, crs, grid, format, background })
+}
+
+/// The CRS asked for: `CRS` in 1.3.0, `SRS` in 1.1.1 (either is read).
+fn crs_of(params: &Params, version: Version) -> Result<RequestCrs, Exception> {
+    let crs_key = if version == Version::V130 { "CRS" } else { "SRS" };
+    let crs_text = params.get(crs_key).or(params.get(if crs_key == "CRS" { "SRS" } else { "CRS" }));
+    let crs_text =
+        crs_text.ok_or_else(|| Exception::new(Code::MissingParameterValue, format!("{crs_key} is missing")))?;
+    RequestCrs::parse(crs_text).ok_or_else(|| {
+        let code = if version == Version::V130 { Code::InvalidCrs } else { Code::InvalidSrs };
+        Exception::new(code, format!("{crs_text} is not offered (EPSG:4326, CRS:84, EPSG:3857)")).locator(crs_key)
+    })
 }
 
 /// `TRANSPARENT` (`FALSE` unless given) and `BGCOLOR` (`0xRRGGBB`, white
@@ -597,13 +629,14 @@ mod tests {
         let Err((e, reply)) = parse(q, LIMITS) else { panic!() };
         assert_eq!(e.code, Code::LayerNotDefined);
         assert_eq!(
-            reply,
+            *reply,
             Reply {
                 version: Version::V111,
                 style: ExceptionStyle::InImage,
                 image: Some((8, 4, MapFormat::Png)),
                 background: Some([255, 255, 255]),
                 layer: None,
+                place: BBox { west: 0.0, south: 0.0, east: 1.0, north: 1.0 }.area_grid(8, 4).ok(),
             }
         );
         // A blank reply is blank in the layer asked for where it is offered
