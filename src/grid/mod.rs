@@ -252,13 +252,25 @@ impl TileGrid {
     /// `(N + 2B)²` samples, row 0 at the north.
     pub fn tile_samples(&self, tile: TileId, halo: usize) -> SampleGrid {
         let n1 = (self.samples - 1) as i64;
-        let step = self.spacing_deg(tile.level);
         let len = self.samples as usize + 2 * halo;
         let top = (tile.row as i64 + 1) * n1 + halo as i64;
-        SampleGrid {
-            lon: Axis::degrees(-180.0, step, tile.col as i64 * n1 - halo as i64, len),
-            lat: Axis::degrees(-90.0, -step, -top, len),
-        }
+        self.lattice_window(tile.level, (tile.col as i64 * n1 - halo as i64, top), (len, len))
+    }
+
+    /// `width × height` samples of a level's lattice, the north-west one at
+    /// global column `gx` and row `top` (counted north from the south pole).
+    fn lattice_window(&self, level: u32, (gx, top): (i64, i64), (width, height): (usize, usize)) -> SampleGrid {
+        let step = self.spacing_deg(level);
+        SampleGrid { lon: Axis::degrees(-180.0, step, gx, width), lat: Axis::degrees(-90.0, -step, -top, height) }
+    }
+
+    /// A grid whose samples are lattice points, as the lattice computes
+    /// them (the same positions to float rounding, but the very ones the
+    /// tiles have, so its values are the tiles' to the bit); `None` if some
+    /// sample is not one.
+    pub fn on_lattice(&self, grid: &SampleGrid) -> Option<SampleGrid> {
+        let (level, gx, top) = self.lattice_position(grid)?;
+        Some(self.lattice_window(level, (gx, top), (grid.width(), grid.height())))
     }
 
     /// Where a grid's samples fall on a level's lattice: the level and the

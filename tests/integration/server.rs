@@ -607,17 +607,34 @@ fn get_maps_on_the_tile_lattice_come_from_the_tile_cache() {
             assert_eq!(image[y * 600 + x].to_bits(), expected.to_bits(), "pixel ({x}, {y})");
         }
     }
-    // GetFeatureInfo on the stitched map gives its values.
-    for (x, y) in [(0, 0), (599, 599), (257, 300)] {
-        let info =
-            wms(west, south, 600).replace("GetMap", "GetFeatureInfo") + &format!("&QUERY_LAYERS=cem&I={x}&J={y}");
-        let text = server.get(&info).text();
-        assert!(text.contains(&format!("cem = {:.2} m", image[y * 600 + x])), "({x}, {y}): {text}");
+    // GetFeatureInfo on the stitched map gives its values, to the bit.
+    for (x, y) in [(0, 0), (599, 599), (257, 300), (256, 343)] {
+        let info = wms(west, south, 600).replace("GetMap", "GetFeatureInfo")
+            + &format!("&QUERY_LAYERS=cem&I={x}&J={y}&INFO_FORMAT=application/json");
+        let doc: serde_json::Value = serde_json::from_str(&server.get(&info).text()).unwrap();
+        let value = doc["features"][0]["properties"]["value"].as_f64();
+        assert_eq!(value, Some(f64::from(image[y * 600 + x])), "({x}, {y}): {doc}");
     }
     // A GetMap whose pixel centres are exactly one tile's samples is that tile.
     let whole = server.get(&wms(sector.min_lon - 0.5 * s, sector.min_lat - 0.5 * s, 513));
     assert!(bil32(&whole.body) == quad[0][0]);
     assert_eq!(server.metric("sylva_tile_computations_total"), 4.0);
+}
+
+#[test]
+fn get_feature_info_at_a_corner_of_four_tiles_is_the_map_to_the_bit() {
+    // Regression: the pixel, computed alone at the map's own positions,
+    // was 2 ulp from the tiles' value the map is stitched from.
+    let dir = TempDir::new("srv-corner");
+    let server = Server::start(None, &dir.join("cache"));
+    let q = "/wms?SERVICE=WMS&VERSION=1.3.0&LAYERS=canopy&STYLES=&CRS=CRS:84&WIDTH=100&HEIGHT=80\
+             &BBOX=10.105688095092773,46.38731575012207,10.109121322631836,46.39006233215332";
+    let map = bil32(&server.get(&format!("{q}&REQUEST=GetMap&FORMAT=application/bil32")).body);
+    let info = format!(
+        "{q}&REQUEST=GetFeatureInfo&FORMAT=image/png&QUERY_LAYERS=canopy&I=50&J=40&INFO_FORMAT=application/json"
+    );
+    let doc: serde_json::Value = serde_json::from_str(&server.get(&info).text()).unwrap();
+    assert_eq!(doc["features"][0]["properties"]["value"].as_f64(), Some(f64::from(map[40 * 100 + 50])), "{doc}");
 }
 
 #[test]
