@@ -175,6 +175,9 @@ impl TileService {
                 None
             }
         };
+        // Empty, and instantly so again: not worth a cache entry (which any
+        // client could otherwise add without end).
+        let off_data = product.grid(&self.region).is_ok_and(|g| !self.region.dem.may_cover(&g));
         let computed = match (self.compute(product).await, stale) {
             (Ok(c), _) => c,
             // The upstream failed: the stale tile is better than none.
@@ -189,6 +192,9 @@ impl TileService {
         };
         let uniform = computed.uniform;
         let tile = Arc::new(tile_of(computed));
+        if off_data && tile.bytes.is_empty() {
+            return Ok(tile);
+        }
         let (store, key, bytes) = (self.store.clone(), key.to_string(), tile.bytes.clone());
         let written = tokio::task::spawn_blocking(move || flight::save(&*store, &key, &bytes, uniform))
             .await

@@ -281,9 +281,12 @@ fn world_wind_tiles_have_n_squared_samples_and_neighbours_share_edges() {
     assert!(relief.status == 200 && relief.header("content-type") == Some("image/png"), "{}", relief.text());
     let halo = server.get(&format!("/tiles/cem/{}/{}/{}_{}.bil32?halo=8", t.level, t.row, t.row, t.col));
     assert_eq!(halo.body.len(), (n + 16) * (n + 16) * 4);
-    // Far from the region there is nothing: 404 with no body.
+    // Far from the region there is nothing: 404 with no body, and no cache
+    // entry (regression: any client could add them without end).
     let absent = server.get("/tiles/cem/11/10/10_10.bil");
     assert_eq!((absent.status, absent.body.len()), (404, 0));
+    let entries = crate::seed::walk(&dir.join("cache"));
+    assert!(!entries.iter().any(|p| p.to_string_lossy().contains("10_10")), "{entries:?}");
 }
 
 #[test]
