@@ -6,9 +6,10 @@
 //! Shared entries (uniform tiles) are one file under their content key and a
 //! relative symbolic link per tile; a link's own time is its entry's time.
 //! Locks are files `{key}.lock` created exclusively, holding the holder's
-//! token; one older than its expiry is taken over.
+//! token; one older than its expiry, or whose holder died on this machine
+//! ([`super::holder`]), is taken over.
 
-use super::{CacheError, Lock, Lookup, Stored, TileStore, envelope};
+use super::{CacheError, Lock, Lookup, Stored, TileStore, envelope, holder};
 use std::fs;
 use std::io::{self, Write};
 use std::path::{Component, Path, PathBuf};
@@ -67,6 +68,11 @@ impl DirStore {
         }
         result.map_err(|e| CacheError::io(&path, e))
     }
+
+    /// The lock file of `key`.
+    fn lock_path(&self, key: &str) -> PathBuf {
+        self.path(&format!("{key}.lock"))
+    }
 }
 
 impl TileStore for DirStore {
@@ -104,31 +110,28 @@ impl TileStore for DirStore {
     }
 
     fn try_lock(&self, key: &str, ttl: Duration) -> Result<Option<Lock>, CacheError> {
-        let path = self.path(&format!("{key}.lock"));
-        let lock = Lock { key: key.to_string(), token: super::token() };
-        // Twice at most: a second time after removing an expired lock.
+        let path = self.lock_path(key);
+        let lock = Lock { key: key.to_string(), token: holder::token() };
+        // Twice at most: a second time after removing an abandoned lock.
         for _ in 0..2 {
             match create_exclusive(&path, &lock.token) {
                 Ok(()) => return Ok(Some(lock)),
                 Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {}
                 Err(e) => return Err(CacheError::io(&path, e)),
             }
-            let age = fs::metadata(&path).and_then(|m| m.modified()).ok().and_then(|t| t.elapsed().ok());
-            match age {
-                Some(age) if age > ttl => {
-                    // Expired: its holder died or overran. (Two takers racing
-                    // here may both compute the tile; the bytes are the same.)
-                    let _ = fs::remove_file(&path);
-                }
+            if !abandoned(&path, ttl) {
                 // Held, or released just now: ask again later.
-                _ => return Ok(None),
+                return Ok(None);
             }
+            // (Two takers racing here may both compute the tile; the bytes
+            // are the same.)
+            let _ = fs::remove_file(&path);
         }
         Ok(None)
     }
 
     fn unlock(&self, lock: &Lock) -> Result<(), CacheError> {
-        let path = self.path(&format!("{}.lock", lock.key));
+        let path = self.lock_path(&lock.key);
         match fs::read_to_string(&path) {
             Ok(token) if token == lock.token => fs::remove_file(&path).map_err(|e| CacheError::io(&path, e)),
             Ok(_) => Ok(()),
@@ -140,6 +143,15 @@ impl TileStore for DirStore {
     fn describe(&self) -> String {
         format!("directory {}", self.root.display())
     }
+}
+
+/// True if the holder of the lock at `path` is gone: it died on this
+/// machine, or the lock expired (its holder died elsewhere, or overran).
+/// False while it is held, or if it was released just now.
+fn abandoned(path: &Path, ttl: Duration) -> bool {
+    let Ok(token) = fs::read_to_string(path) else { return false };
+    let age = fs::metadata(path).and_then(|m| m.modified()).ok().and_then(|t| t.elapsed().ok());
+    holder::died(&token) || age.is_some_and(|age| age > ttl)
 }
 
 /// Creates `path` only if it does not exist, holding `token`.
@@ -250,6 +262,36 @@ mod tests {
         std::thread::sleep(Duration::from_millis(20));
         let third = s.try_lock("v1/a.bil", Duration::from_millis(1)).unwrap().expect("expired");
         assert_ne!(second.token, third.token);
+        fs::remove_dir_all(s.root()).unwrap();
+    }
+
+    /// A lock file on `key` holding `token`, as a holder left it.
+    fn left_lock(s: &DirStore, key: &str, token: &str) -> Lock {
+        fs::create_dir_all(s.path(key).parent().unwrap()).unwrap();
+        fs::write(s.lock_path(key), token).unwrap();
+        Lock { key: key.into(), token: token.into() }
+    }
+
+    #[test]
+    fn a_lock_whose_holder_died_on_this_machine_is_taken_at_once() {
+        // Regression: a seed resumed after a SIGKILL waited out the TTL on
+        // every lock the dead seeder held.
+        let s = store("dead-holder");
+        let ttl = Duration::from_secs(3600);
+        let here = holder::machine().unwrap();
+        let (dead, alive) = (holder::tests::dead_pid(), std::process::id());
+        let namespace = here.rsplit(':').next().unwrap();
+        for (token, taken) in [
+            (format!("{here}:{dead}:0:0"), true),
+            (format!("{here}:{alive}:0:0"), false),
+            (format!("another-host:{namespace}:{dead}:0:0"), false),
+            ("killed-seeder".to_string(), false),
+        ] {
+            left_lock(&s, "v1/a.bil", &token);
+            let lock = s.try_lock("v1/a.bil", ttl).unwrap();
+            assert_eq!(lock.is_some(), taken, "{token}");
+            let _ = fs::remove_file(s.lock_path("v1/a.bil"));
+        }
         fs::remove_dir_all(s.root()).unwrap();
     }
 }

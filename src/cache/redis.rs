@@ -121,7 +121,7 @@ impl TileStore for RedisStore {
     }
 
     fn try_lock(&self, key: &str, ttl: Duration) -> Result<Option<Lock>, CacheError> {
-        let lock = Lock { key: key.to_string(), token: super::token() };
+        let lock = Lock { key: key.to_string(), token: super::holder::token() };
         let ms = ttl.as_millis().clamp(1, u128::from(u32::MAX)) as u64;
         let set = self.with(|c| {
             redis::cmd("SET")

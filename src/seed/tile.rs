@@ -74,7 +74,8 @@ pub struct Seeder<'a> {
 
 /// Busy answers (~2 s of pauses) after which a wait for another's lock is
 /// explained: a tile takes 5–50 ms, so a lock held this long is most likely
-/// left by a seeder that was interrupted, and expires only after the TTL.
+/// left by a seeder that died on another machine (one that died on this one
+/// is taken at once), and expires only after the TTL.
 const LONG_WAIT_PAUSES: u32 = 8;
 
 impl Seeder<'_> {
@@ -212,7 +213,7 @@ impl Seeder<'_> {
         let ttl = self.lock_ttl.as_secs_f64();
         self.wait_notice.call_once(|| {
             crate::outputs::say(format_args!(
-                "sylva seed: waiting for {key}, locked by another seeder or server; an interrupted seed leaves its locks, which expire {ttl:.0} s after they were taken ([tile_cache] lock_ttl_s)"
+                "sylva seed: waiting for {key}, locked by another seeder or server (a lock left by one that died on another machine expires {ttl:.0} s after it was taken: [tile_cache] lock_ttl_s)"
             ));
         });
     }
