@@ -95,12 +95,14 @@ pub trait TileStore: Send + Sync {
     /// Reads and checks an entry.
     fn get(&self, key: &str) -> Result<Lookup, CacheError>;
 
-    /// Writes an entry whole.
-    fn put(&self, key: &str, payload: &[u8]) -> Result<(), CacheError>;
+    /// Writes the entry of `lock`'s key whole, by the lock's holder (whose
+    /// token names the directory backend's temporary file, so that whoever
+    /// takes the lock over from a holder that died removes it).
+    fn put(&self, lock: &Lock, payload: &[u8]) -> Result<(), CacheError>;
 
     /// Writes `payload` once under the content key `blob` (if it is not
-    /// there already) and makes `key` refer to it.
-    fn put_shared(&self, key: &str, blob: &str, payload: &[u8]) -> Result<(), CacheError>;
+    /// there already) and makes `lock`'s key refer to it.
+    fn put_shared(&self, lock: &Lock, blob: &str, payload: &[u8]) -> Result<(), CacheError>;
 
     /// Takes the lock of `key` for at most `ttl`, unless another holder has
     /// it (`None`): a lock is taken over once it has expired, or at once

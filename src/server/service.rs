@@ -12,7 +12,7 @@ use super::metrics::{CacheResult, Metrics};
 use super::pool::Pool;
 use super::products::{self, Computed, Product};
 use crate::cache::flight::{self, Claim};
-use crate::cache::{Lookup, TileStore};
+use crate::cache::{Lock, Lookup, TileStore};
 use crate::cem::Stage;
 use crate::region::Region;
 use bytes::Bytes;
@@ -146,7 +146,7 @@ impl TileService {
                     attempt += 1;
                 }
                 Claim::Compute { lock, found } => {
-                    let result = self.fill(&key, product, found).await;
+                    let result = self.fill(&lock, product, found).await;
                     let store = self.store.clone();
                     let unlocked = tokio::task::spawn_blocking(move || store.unlock(&lock).map_err(|e| e.to_string()))
                         .await
@@ -161,9 +161,9 @@ impl TileService {
         }
     }
 
-    /// Computes and stores a tile this process holds the lock of; `found` is
-    /// what the cache held (served, stale, if the upstream fails).
-    async fn fill(&self, key: &str, product: Product, found: Lookup) -> Result<Arc<Tile>, ServeError> {
+    /// Computes and stores the tile of `lock`, which this process holds;
+    /// `found` is what the cache held (served, stale, if the upstream fails).
+    async fn fill(&self, lock: &Lock, product: Product, found: Lookup) -> Result<Arc<Tile>, ServeError> {
         let stale = match found {
             Lookup::Hit(stored) => Some(stored),
             Lookup::Corrupt => {
@@ -189,8 +189,8 @@ impl TileService {
         };
         let uniform = computed.uniform;
         let tile = Arc::new(tile_of(computed));
-        let (store, key, bytes) = (self.store.clone(), key.to_string(), tile.bytes.clone());
-        let written = tokio::task::spawn_blocking(move || flight::save(&*store, &key, &bytes, uniform))
+        let (store, lock, bytes) = (self.store.clone(), lock.clone(), tile.bytes.clone());
+        let written = tokio::task::spawn_blocking(move || flight::save(&*store, &lock, &bytes, uniform))
             .await
             .map_err(ServeError::internal)?;
         if let Err(e) = written {

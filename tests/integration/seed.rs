@@ -1,9 +1,9 @@
 //! `sylva seed` as an operator runs it: seeded tiles are the server's cache
 //! hits, byte for byte; dry runs count what a seed writes and polygons prune
 //! it; a seeder killed with SIGKILL resumes to the same cache (and its dry
-//! run counts what is left), and a wait for a lock it left is explained; one
-//! stopped with Ctrl-C leaves no lock; a second job on the same progress
-//! file is refused; a
+//! run counts what is left) with no temporary file of the killed one left,
+//! and a wait for a lock it left is explained; one stopped with Ctrl-C
+//! leaves no lock; a second job on the same progress file is refused; a
 //! source that fails for some tiles gets them retried, listed and re-run
 //! from the list; uniform tiles are stored once; bad input is named.
 
@@ -279,6 +279,9 @@ fn a_seeder_killed_mid_run_resumes_to_the_same_cache() {
     assert!(resumed == expected, "the resumed cache differs from an uninterrupted run");
     let made = count(&summary, "tile files made");
     assert!(made < expected.len() as u64, "the resumed run remade everything: {summary}");
+    let names = walk(&cache).into_iter().filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()));
+    let temporaries: Vec<String> = names.filter(|n| n.starts_with('.') && n.ends_with(".tmp")).collect();
+    assert!(temporaries.is_empty(), "the killed seeder's temporaries were left: {temporaries:?}");
 }
 
 #[test]
