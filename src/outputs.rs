@@ -125,19 +125,26 @@ fn destination(path: &Path) -> Result<PathBuf, OutputError> {
 }
 
 /// A hidden name beside `path` that this process gives no other file:
-/// `.NAME.PID.N.SUFFIX`, NAME cut to 200 bytes so that a name
-/// near the file system's 255-byte limit still has a sibling.
+/// `.NAME.PID.N.SUFFIX` ([`sibling_tagged`]).
 pub fn sibling_name(path: &Path, suffix: &str) -> PathBuf {
     static COUNT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let n = COUNT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
-    let cut = (0..=SIBLING_NAME_BYTES.min(name.len())).rev().find(|&i| name.is_char_boundary(i)).unwrap_or(0);
-    path.with_file_name(format!(".{}.{}.{n}.{suffix}", &name[..cut], std::process::id()))
+    sibling_tagged(path, &format!("{}.{n}", std::process::id()), suffix)
 }
 
-/// Most bytes of a name kept in its sibling's: room for the process id,
-/// the count and the suffix within 255.
-const SIBLING_NAME_BYTES: usize = 200;
+/// A hidden name beside `path`: `.NAME.TAG.SUFFIX`, NAME cut (at a
+/// character boundary) so that a name near the file system's limit still
+/// has a sibling.
+pub fn sibling_tagged(path: &Path, tag: &str, suffix: &str) -> PathBuf {
+    let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
+    let room = NAME_BYTES.saturating_sub(tag.len() + suffix.len() + 3);
+    let cut = (0..=room.min(name.len())).rev().find(|&i| name.is_char_boundary(i)).unwrap_or(0);
+    path.with_file_name(format!(".{}.{tag}.{suffix}", &name[..cut]))
+}
+
+/// The longest file name, in bytes, of the usual file systems (ext4, XFS,
+/// NFS, APFS: `NAME_MAX`).
+const NAME_BYTES: usize = 255;
 
 /// A new file beside `path` that no other file has the name of (created
 /// here, so nothing existing is written over), open for writing.

@@ -1,14 +1,21 @@
 //! The directory backend: one file per entry at `{root}/{key}`, written to a
-//! unique temporary name in the same directory and renamed into place, so
-//! readers (other threads, other processes sharing the directory, over NFS
-//! too) see either the old file or the whole new one.
+//! temporary name unique to its writer and renamed into place, so readers
+//! (other threads, other processes sharing the directory, over NFS too) see
+//! either the old file or the whole new one.
 //!
 //! Shared entries (uniform tiles) are one file under their content key and a
 //! relative symbolic link per tile; a link's own time is its entry's time.
 //! Locks are files `{key}.lock` created exclusively, holding the holder's
-//! token; one older than its expiry is taken over.
+//! token; one older than its expiry, or whose holder died on this machine
+//! ([`super::holder`]), is taken over.
+//!
+//! A lock's holder writes only through its temporary file
+//! `.{name}.{token}.tmp` beside the key's file (a shared entry's file too,
+//! renamed from there into its own directory), so the one temporary a
+//! holder killed mid-write leaves is removed by whoever takes its lock over,
+//! without listing a directory.
 
-use super::{CacheError, Lock, Lookup, Stored, TileStore, envelope};
+use super::{CacheError, Lock, Lookup, Stored, TileStore, envelope, holder};
 use std::fs;
 use std::io::{self, Write};
 use std::path::{Component, Path, PathBuf};
@@ -54,20 +61,65 @@ impl DirStore {
         self.root.join(key)
     }
 
-    /// Runs `make` on a temporary name beside `key`'s file, then renames it
-    /// into place (the temporary is removed if anything fails).
-    fn replace(&self, key: &str, make: impl FnOnce(&Path) -> io::Result<()>) -> Result<(), CacheError> {
+    /// Writes `payload` and its trailer to `key`'s file, through `lock`'s
+    /// temporary file.
+    fn write(&self, lock: &Lock, key: &str, payload: &[u8]) -> Result<(), CacheError> {
+        self.replace(lock, key, |tmp| {
+            let mut file = fs::File::create(tmp)?;
+            file.write_all(payload)?;
+            file.write_all(&envelope::trailer(payload))
+        })
+    }
+
+    /// Runs `make` on `lock`'s temporary file, then renames it to `key`'s
+    /// file (the temporary is removed if anything fails).
+    fn replace(&self, lock: &Lock, key: &str, make: impl FnOnce(&Path) -> io::Result<()>) -> Result<(), CacheError> {
         let path = self.path(key);
-        let dir = path.parent().ok_or_else(|| CacheError::io(&path, io::Error::other("no parent directory")))?;
-        fs::create_dir_all(dir).map_err(|e| CacheError::io(dir, e))?;
-        let tmp = crate::outputs::sibling_name(&path, "tmp");
+        let tmp = self.scratch(lock);
+        for file in [&path, &tmp] {
+            let dir = file.parent().ok_or_else(|| CacheError::io(file, io::Error::other("no parent directory")))?;
+            fs::create_dir_all(dir).map_err(|e| CacheError::io(dir, e))?;
+        }
         let result = make(&tmp).and_then(|()| fs::rename(&tmp, &path));
         if result.is_err() {
             let _ = fs::remove_file(&tmp);
         }
         result.map_err(|e| CacheError::io(&path, e))
     }
+
+    /// The temporary file of `lock`'s holder: `.{name}.{token}.tmp` beside
+    /// the locked key's file, the token's characters kept to a safe set and
+    /// its length bounded (a token read back from a damaged lock file may
+    /// be anything).
+    fn scratch(&self, lock: &Lock) -> PathBuf {
+        let token: String = lock
+            .token
+            .chars()
+            .take(TOKEN_CHARS)
+            .map(|c| if c.is_ascii_alphanumeric() || c == '.' || c == '-' { c } else { '_' })
+            .collect();
+        crate::outputs::sibling_tagged(&self.path(&lock.key), &token, "tmp")
+    }
+
+    /// The lock file of `key`.
+    fn lock_path(&self, key: &str) -> PathBuf {
+        self.path(&format!("{key}.lock"))
+    }
+
+    /// Removes a lock whose holder is gone, and the temporary file it may
+    /// have left. (Two takers racing here may both compute the tile; the
+    /// bytes are the same. A holder that overran its expiry but still runs
+    /// fails to store its tile, which its taker stores.)
+    fn break_lock(&self, lock: &Lock) {
+        let _ = fs::remove_file(self.scratch(lock));
+        let _ = fs::remove_file(self.lock_path(&lock.key));
+    }
 }
+
+/// Most characters of a token kept in a temporary file's name: a token is
+/// a host name (at most 64), a PID namespace (10 digits), a PID (7), Unix
+/// nanoseconds (19), a count (20) and 4 separators, 124 in all.
+const TOKEN_CHARS: usize = 128;
 
 impl TileStore for DirStore {
     fn get(&self, key: &str) -> Result<Lookup, CacheError> {
@@ -86,49 +138,40 @@ impl TileStore for DirStore {
         })
     }
 
-    fn put(&self, key: &str, payload: &[u8]) -> Result<(), CacheError> {
-        self.replace(key, |tmp| {
-            let mut file = fs::File::create(tmp)?;
-            file.write_all(payload)?;
-            file.write_all(&envelope::trailer(payload))
-        })
+    fn put(&self, lock: &Lock, payload: &[u8]) -> Result<(), CacheError> {
+        self.write(lock, &lock.key, payload)
     }
 
-    fn put_shared(&self, key: &str, blob: &str, payload: &[u8]) -> Result<(), CacheError> {
+    fn put_shared(&self, lock: &Lock, blob: &str, payload: &[u8]) -> Result<(), CacheError> {
         match self.get(blob)? {
             Lookup::Hit(s) if s.bytes == payload => {}
-            _ => self.put(blob, payload)?,
+            _ => self.write(lock, blob, payload)?,
         }
-        let target = relative_target(key, blob);
-        self.replace(key, |tmp| std::os::unix::fs::symlink(&target, tmp))
+        let target = relative_target(&lock.key, blob);
+        self.replace(lock, &lock.key, |tmp| std::os::unix::fs::symlink(&target, tmp))
     }
 
     fn try_lock(&self, key: &str, ttl: Duration) -> Result<Option<Lock>, CacheError> {
-        let path = self.path(&format!("{key}.lock"));
-        let lock = Lock { key: key.to_string(), token: super::token() };
-        // Twice at most: a second time after removing an expired lock.
+        let path = self.lock_path(key);
+        let lock = Lock { key: key.to_string(), token: holder::token() };
+        // Twice at most: a second time after breaking an abandoned lock.
         for _ in 0..2 {
             match create_exclusive(&path, &lock.token) {
                 Ok(()) => return Ok(Some(lock)),
                 Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {}
                 Err(e) => return Err(CacheError::io(&path, e)),
             }
-            let age = fs::metadata(&path).and_then(|m| m.modified()).ok().and_then(|t| t.elapsed().ok());
-            match age {
-                Some(age) if age > ttl => {
-                    // Expired: its holder died or overran. (Two takers racing
-                    // here may both compute the tile; the bytes are the same.)
-                    let _ = fs::remove_file(&path);
-                }
+            match abandoned(&path, ttl) {
+                Some(token) => self.break_lock(&Lock { key: key.to_string(), token }),
                 // Held, or released just now: ask again later.
-                _ => return Ok(None),
+                None => return Ok(None),
             }
         }
         Ok(None)
     }
 
     fn unlock(&self, lock: &Lock) -> Result<(), CacheError> {
-        let path = self.path(&format!("{}.lock", lock.key));
+        let path = self.lock_path(&lock.key);
         match fs::read_to_string(&path) {
             Ok(token) if token == lock.token => fs::remove_file(&path).map_err(|e| CacheError::io(&path, e)),
             Ok(_) => Ok(()),
@@ -140,6 +183,15 @@ impl TileStore for DirStore {
     fn describe(&self) -> String {
         format!("directory {}", self.root.display())
     }
+}
+
+/// The token of the lock at `path` if its holder is gone: it died on this
+/// machine, or the lock expired (its holder died elsewhere, or overran).
+/// `None` while it is held, or if it was released just now.
+fn abandoned(path: &Path, ttl: Duration) -> Option<String> {
+    let token = fs::read_to_string(path).ok()?;
+    let age = fs::metadata(path).and_then(|m| m.modified()).ok().and_then(|t| t.elapsed().ok());
+    (holder::died(&token) || age.is_some_and(|age| age > ttl)).then_some(token)
 }
 
 /// Creates `path` only if it does not exist, holding `token`.
@@ -169,11 +221,17 @@ mod tests {
         DirStore::new(dir)
     }
 
+    /// A lock on `key` as its holder has it (where who holds it does not
+    /// matter, the lock file is not made).
+    fn held(key: &str) -> Lock {
+        Lock { key: key.into(), token: holder::token() }
+    }
+
     #[test]
     fn entries_round_trip_and_damage_is_detected() {
         let s = store("roundtrip");
         assert!(matches!(s.get("v1/cem/1/2/2_3.png").unwrap(), Lookup::Miss));
-        s.put("v1/cem/1/2/2_3.png", b"tile bytes").unwrap();
+        s.put(&held("v1/cem/1/2/2_3.png"), b"tile bytes").unwrap();
         let Lookup::Hit(hit) = s.get("v1/cem/1/2/2_3.png").unwrap() else { panic!() };
         assert_eq!(hit.bytes, b"tile bytes");
         // Truncated, flipped, or foreign files are not served.
@@ -191,7 +249,7 @@ mod tests {
             fs::write(&path, damaged).unwrap();
             assert!(matches!(s.get("v1/cem/1/2/2_3.png").unwrap(), Lookup::Corrupt));
         }
-        s.put("v1/empty", b"").unwrap();
+        s.put(&held("v1/empty"), b"").unwrap();
         assert!(matches!(s.get("v1/empty").unwrap(), Lookup::Hit(Stored { ref bytes, .. }) if bytes.is_empty()));
         fs::remove_dir_all(s.root()).unwrap();
     }
@@ -204,7 +262,7 @@ mod tests {
                 let s = s.clone();
                 std::thread::spawn(move || {
                     for _ in 0..20 {
-                        s.put("v1/x/0/0/0_0.bil", &vec![i as u8; 100_000]).unwrap();
+                        s.put(&held("v1/x/0/0/0_0.bil"), &vec![i as u8; 100_000]).unwrap();
                         assert!(matches!(s.get("v1/x/0/0/0_0.bil").unwrap(), Lookup::Hit(_)));
                     }
                 })
@@ -220,15 +278,17 @@ mod tests {
     fn shared_entries_are_one_file_and_links() {
         let s = store("shared");
         for col in 0..3 {
-            s.put_shared(&format!("v1/dem/5/7/7_{col}.bil"), "v1/uniform/abc.bil", b"sea").unwrap();
+            s.put_shared(&held(&format!("v1/dem/5/7/7_{col}.bil")), "v1/uniform/abc.bil", b"sea").unwrap();
         }
         for col in 0..3 {
             let key = format!("v1/dem/5/7/7_{col}.bil");
             assert!(matches!(s.get(&key).unwrap(), Lookup::Hit(Stored { ref bytes, .. }) if bytes == b"sea"));
             assert!(fs::symlink_metadata(s.path(&key)).unwrap().file_type().is_symlink());
         }
+        // The shared file was written beside the first link and moved.
+        assert_eq!(fs::read_dir(s.path("v1/dem/5/7")).unwrap().count(), 3, "temporaries left");
         // Replacing a link by a plain tile leaves the shared file alone.
-        s.put("v1/dem/5/7/7_0.bil", b"land").unwrap();
+        s.put(&held("v1/dem/5/7/7_0.bil"), b"land").unwrap();
         assert!(
             matches!(s.get("v1/dem/5/7/7_1.bil").unwrap(), Lookup::Hit(Stored { ref bytes, .. }) if bytes == b"sea")
         );
@@ -250,6 +310,62 @@ mod tests {
         std::thread::sleep(Duration::from_millis(20));
         let third = s.try_lock("v1/a.bil", Duration::from_millis(1)).unwrap().expect("expired");
         assert_ne!(second.token, third.token);
+        fs::remove_dir_all(s.root()).unwrap();
+    }
+
+    /// A lock file on `key` holding `token`, as a holder left it.
+    fn left_lock(s: &DirStore, key: &str, token: &str) -> Lock {
+        fs::create_dir_all(s.path(key).parent().unwrap()).unwrap();
+        fs::write(s.lock_path(key), token).unwrap();
+        Lock { key: key.into(), token: token.into() }
+    }
+
+    #[test]
+    fn a_lock_whose_holder_died_on_this_machine_is_taken_at_once() {
+        // Regression: a seed resumed after a SIGKILL waited out the TTL on
+        // every lock the dead seeder held.
+        let s = store("dead-holder");
+        let ttl = Duration::from_secs(3600);
+        let here = holder::machine().unwrap();
+        let (dead, alive) = (holder::tests::dead_pid(), std::process::id());
+        let namespace = here.rsplit(':').next().unwrap();
+        for (token, taken) in [
+            (format!("{here}:{dead}:0:0"), true),
+            (format!("{here}:{alive}:0:0"), false),
+            (format!("another-host:{namespace}:{dead}:0:0"), false),
+            ("killed-seeder".to_string(), false),
+        ] {
+            left_lock(&s, "v1/a.bil", &token);
+            let lock = s.try_lock("v1/a.bil", ttl).unwrap();
+            assert_eq!(lock.is_some(), taken, "{token}");
+            let _ = fs::remove_file(s.lock_path("v1/a.bil"));
+        }
+        fs::remove_dir_all(s.root()).unwrap();
+    }
+
+    #[test]
+    fn the_temporary_file_of_a_holder_killed_mid_write_goes_with_its_lock() {
+        // Regression: a seed killed with SIGKILL while writing left its
+        // temporary file in the cache for good.
+        let s = store("dead-scratch");
+        let here = holder::machine().unwrap();
+        let dead_here = format!("{here}:{}:0:0", holder::tests::dead_pid());
+        // Taken at once (died here) and taken once expired (died elsewhere).
+        for (key, token, ttl) in [
+            ("v1/cem/13/1/1_2.bil", dead_here.as_str(), Duration::from_secs(3600)),
+            ("v1/cem/13/1/1_3.bil", "another-host:1:2:0:0", Duration::from_millis(1)),
+        ] {
+            let dead = left_lock(&s, key, token);
+            fs::write(s.scratch(&dead), b"half a ti").unwrap();
+            std::thread::sleep(Duration::from_millis(20));
+            let taker = s.try_lock(key, ttl).unwrap().expect("abandoned");
+            assert!(!s.scratch(&dead).exists(), "{token}");
+            s.put(&taker, b"tile").unwrap();
+            s.unlock(&taker).unwrap();
+        }
+        let mut names: Vec<_> = fs::read_dir(s.path("v1/cem/13/1")).unwrap().map(|e| e.unwrap().file_name()).collect();
+        names.sort();
+        assert_eq!(names, ["1_2.bil", "1_3.bil"]);
         fs::remove_dir_all(s.root()).unwrap();
     }
 }

@@ -65,16 +65,18 @@ pub fn expired(ttl: Option<Duration>, stored: &Stored) -> bool {
     ttl.is_some_and(|ttl| stored.written.elapsed().is_ok_and(|age| age > ttl))
 }
 
-/// Stores a computed tile under `key`; a `uniform` tile (every sample alike,
-/// so its bytes do not depend on where it is) is stored once per content
-/// under `{version}/uniform/` and linked.
-pub fn save(store: &dyn TileStore, key: &str, bytes: &[u8], uniform: bool) -> Result<(), CacheError> {
+/// Stores a computed tile under the key of `lock` (the caller's, from
+/// [`Claim::Compute`]); a `uniform` tile (every sample alike, so its bytes
+/// do not depend on where it is) is stored once per content under
+/// `{version}/uniform/` and linked.
+pub fn save(store: &dyn TileStore, lock: &Lock, bytes: &[u8], uniform: bool) -> Result<(), CacheError> {
+    let key = &lock.key;
     match (uniform, key.split_once('/'), key.rsplit_once('.')) {
         (true, Some((version, _)), Some((_, ext))) => {
             let blob = format!("{version}/uniform/{:016x}{:08x}.{ext}", super::digest(bytes), bytes.len());
-            store.put_shared(key, &blob, bytes)
+            store.put_shared(lock, &blob, bytes)
         }
-        _ => store.put(key, bytes),
+        _ => store.put(lock, bytes),
     }
 }
 
@@ -95,7 +97,7 @@ mod tests {
             panic!()
         };
         assert!(matches!(claim(&store, "v1/dem/1/1/1_1.bil", &any, ttl).unwrap(), Claim::Busy));
-        save(&store, "v1/dem/1/1/1_1.bil", b"tile", false).unwrap();
+        save(&store, &lock, b"tile", false).unwrap();
         store.unlock(&lock).unwrap();
         assert!(
             matches!(claim(&store, "v1/dem/1/1/1_1.bil", &any, ttl).unwrap(), Claim::Ready(s) if s.bytes == b"tile")
@@ -115,8 +117,11 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("sylva-flight-uniform-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         let store = DirStore::new(&dir);
-        save(&store, "v1/dem/3/1/1_1.bil", &[0u8; 64], true).unwrap();
-        save(&store, "v1/dem/3/1/1_2.bil", &[0u8; 64], true).unwrap();
+        for key in ["v1/dem/3/1/1_1.bil", "v1/dem/3/1/1_2.bil"] {
+            let lock = store.try_lock(key, Duration::from_secs(60)).unwrap().unwrap();
+            save(&store, &lock, &[0u8; 64], true).unwrap();
+            store.unlock(&lock).unwrap();
+        }
         let blobs: Vec<_> = std::fs::read_dir(dir.join("v1/uniform")).unwrap().collect();
         assert_eq!(blobs.len(), 1);
         assert!(matches!(store.get("v1/dem/3/1/1_2.bil").unwrap(), Lookup::Hit(s) if s.bytes == [0u8; 64]));

@@ -10,13 +10,15 @@
 //! are all alike (all sea, all nodata) are stored once under a content key
 //! and linked ([`TileStore::put_shared`]). A lock with an expiry per key
 //! ([`TileStore::try_lock`]) lets processes agree on who computes a tile
-//! ([`flight`]); a holder that dies frees it when it expires.
+//! ([`flight`]); a holder that dies frees it when it expires, or at once
+//! where its lock shows it ran on this machine (`holder.rs`).
 //!
 //! Invariant: no HTTP, no async; callers run it off the async executor.
 
 pub mod dir;
 pub mod envelope;
 pub mod flight;
+pub(crate) mod holder;
 #[cfg(feature = "server")]
 pub mod redis;
 
@@ -93,15 +95,18 @@ pub trait TileStore: Send + Sync {
     /// Reads and checks an entry.
     fn get(&self, key: &str) -> Result<Lookup, CacheError>;
 
-    /// Writes an entry whole.
-    fn put(&self, key: &str, payload: &[u8]) -> Result<(), CacheError>;
+    /// Writes the entry of `lock`'s key whole, by the lock's holder (whose
+    /// token names the directory backend's temporary file, so that whoever
+    /// takes the lock over from a holder that died removes it).
+    fn put(&self, lock: &Lock, payload: &[u8]) -> Result<(), CacheError>;
 
     /// Writes `payload` once under the content key `blob` (if it is not
-    /// there already) and makes `key` refer to it.
-    fn put_shared(&self, key: &str, blob: &str, payload: &[u8]) -> Result<(), CacheError>;
+    /// there already) and makes `lock`'s key refer to it.
+    fn put_shared(&self, lock: &Lock, blob: &str, payload: &[u8]) -> Result<(), CacheError>;
 
     /// Takes the lock of `key` for at most `ttl`, unless another holder has
-    /// it and it has not expired (`None`).
+    /// it (`None`): a lock is taken over once it has expired, or at once
+    /// where the backend knows its holder died (`holder.rs`).
     fn try_lock(&self, key: &str, ttl: Duration) -> Result<Option<Lock>, CacheError>;
 
     /// Releases a lock if it is still this holder's.
@@ -139,15 +144,6 @@ pub fn open(backend: &Backend) -> Result<Arc<dyn TileStore>, CacheError> {
     }
 }
 
-/// A token unique to this process and call (locks name their holder).
-pub(crate) fn token() -> String {
-    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let host = std::env::var("HOSTNAME").unwrap_or_default();
-    let nanos = SystemTime::now().duration_since(SystemTime::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
-    format!("{host}:{}:{nanos}:{n}", std::process::id())
-}
-
 /// A stable 64-bit digest (FNV-1a): ETags and version keys must agree
 /// between processes and builds, which `std`'s hasher does not promise.
 pub fn digest(bytes: &[u8]) -> u64 {
@@ -162,10 +158,5 @@ mod tests {
     fn digests_are_stable() {
         assert_eq!(digest(b""), 0xcbf2_9ce4_8422_2325);
         assert_eq!(digest(b"a"), 0xaf63_dc4c_8601_ec8c);
-    }
-
-    #[test]
-    fn tokens_differ() {
-        assert_ne!(token(), token());
     }
 }

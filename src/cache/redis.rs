@@ -76,6 +76,13 @@ impl RedisStore {
         self.with(|c| redis::cmd("SET").arg(format!("{}{key}", self.prefix)).arg(value).query::<()>(c))
     }
 
+    /// Sets `key` to `payload` in its envelope.
+    fn set_tile(&self, key: &str, payload: &[u8]) -> Result<(), CacheError> {
+        let mut sealed = payload.to_vec();
+        sealed.extend_from_slice(&envelope::trailer(payload));
+        self.set(key, TILE, &sealed)
+    }
+
     fn raw(&self, key: &str) -> Result<Option<Vec<u8>>, CacheError> {
         self.with(|c| redis::cmd("GET").arg(format!("{}{key}", self.prefix)).query::<Option<Vec<u8>>>(c))
     }
@@ -106,22 +113,20 @@ impl TileStore for RedisStore {
         Ok(envelope::open(sealed).map_or(Lookup::Corrupt, |bytes| Lookup::Hit(Stored { bytes, written })))
     }
 
-    fn put(&self, key: &str, payload: &[u8]) -> Result<(), CacheError> {
-        let mut sealed = payload.to_vec();
-        sealed.extend_from_slice(&envelope::trailer(payload));
-        self.set(key, TILE, &sealed)
+    fn put(&self, lock: &Lock, payload: &[u8]) -> Result<(), CacheError> {
+        self.set_tile(&lock.key, payload)
     }
 
-    fn put_shared(&self, key: &str, blob: &str, payload: &[u8]) -> Result<(), CacheError> {
+    fn put_shared(&self, lock: &Lock, blob: &str, payload: &[u8]) -> Result<(), CacheError> {
         match self.get(blob)? {
             Lookup::Hit(s) if s.bytes == payload => {}
-            _ => self.put(blob, payload)?,
+            _ => self.set_tile(blob, payload)?,
         }
-        self.set(key, LINK, blob.as_bytes())
+        self.set(&lock.key, LINK, blob.as_bytes())
     }
 
     fn try_lock(&self, key: &str, ttl: Duration) -> Result<Option<Lock>, CacheError> {
-        let lock = Lock { key: key.to_string(), token: super::token() };
+        let lock = Lock { key: key.to_string(), token: super::holder::token() };
         let ms = ttl.as_millis().clamp(1, u128::from(u32::MAX)) as u64;
         let set = self.with(|c| {
             redis::cmd("SET")

@@ -7,7 +7,8 @@
 //! code (so the bytes are the server's) or, where exact, from its finished
 //! children ([`decimate`]), and stored ([`tile`]). Progress is shown
 //! ([`display`]) and saved for `--resume` ([`progress`]); tiles that still
-//! fail after their retries are listed for `--tiles-from` ([`failed`]).
+//! fail after their retries are listed for `--tiles-from` ([`failed`]); a
+//! job holds both files while it runs, refusing them to another ([`hold`]).
 //! `--shard I/N` seeds one of N disjoint parts; any number of seeders and
 //! servers can share one cache, directory or Redis, and compute each tile
 //! once ([`crate::cache::flight`]).
@@ -19,6 +20,7 @@ pub mod coverage;
 pub mod decimate;
 pub mod display;
 pub mod failed;
+pub mod hold;
 pub mod options;
 pub mod progress;
 pub mod tile;
@@ -63,6 +65,20 @@ pub enum SeedError {
     /// An output file that may not be written.
     #[error(transparent)]
     Output(#[from] crate::outputs::OutputError),
+    /// A progress or failed-tiles file another job holds.
+    #[error(
+        "{} is in use by another seed job ({holder}; it holds {}): run this job in another working directory, or give it its own --progress-file and --failed-file",
+        .file.display(),
+        .lock.display()
+    )]
+    InUse {
+        /// The file.
+        file: std::path::PathBuf,
+        /// Its lock file.
+        lock: std::path::PathBuf,
+        /// The other job, by its PID.
+        holder: String,
+    },
     /// A file of the run.
     #[error("{path}: {source}")]
     Io {
@@ -111,7 +127,8 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     }
     let store = crate::cache::open(&job.config.tile_cache.backend(options.cache_dir.as_deref()))?;
     probe(&*store)?;
-    let (list, progress, failed) = records(&job, options)?;
+    // The holds are kept (not `_`, which would drop them) to the end.
+    let Records { list, progress, failed, holds: _holds } = records(&job, options)?;
     let threads =
         rayon::ThreadPoolBuilder::new().num_threads(options.concurrency).thread_name(|i| format!("sylva-seed-{i}"));
     let pool = threads.build().map_err(|e| SeedError::Usage(format!("--concurrency {}: {e}", options.concurrency)))?;
@@ -150,14 +167,23 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     Ok(Report { text: summary(&job, &*store, counters, started.elapsed(), &list), failed: n })
 }
 
-/// The run's records: the tiles listed by `--tiles-from`, if any, the
-/// progress (resumed or new) and the failed-tiles file (replaced at the end
-/// when it is the list re-run or the run resumes, else emptied).
-fn records(
-    job: &Job,
-    options: &SeedOptions,
-) -> Result<(Option<Vec<failed::Entry>>, Progress, failed::Failed), SeedError> {
+/// The run's records.
+struct Records {
+    /// The tiles listed by `--tiles-from`, if any.
+    list: Option<Vec<failed::Entry>>,
+    /// The progress, resumed or new.
+    progress: Progress,
+    /// The failed-tiles file (replaced at the end when it is the list
+    /// re-run or the run resumes, else emptied).
+    failed: failed::Failed,
+    /// This job's holds on the progress and failed-tiles files.
+    holds: [hold::Hold; 2],
+}
+
+/// The run's records, once this job holds their files.
+fn records(job: &Job, options: &SeedOptions) -> Result<Records, SeedError> {
     let (progress_path, failed_path) = &job.files;
+    let holds = [hold::hold(progress_path)?, hold::hold(failed_path)?];
     // A list is read before the failed-tiles file (perhaps the same) is emptied.
     let list = options.tiles_from.as_deref().map(|p| failed::read(p, &job.region.tiles)).transpose()?;
     let progress = match options.resume && list.is_none() {
@@ -171,7 +197,7 @@ fn records(
         false => failed::Failed::open(failed_path),
     }
     .map_err(|source| SeedError::Io { path: failed_path.clone(), source })?;
-    Ok((list, progress, failed))
+    Ok(Records { list, progress, failed, holds })
 }
 
 /// What an interrupted run tells its operator to do next.

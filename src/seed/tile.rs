@@ -7,7 +7,7 @@
 use super::decimate;
 use super::failed::Entry;
 use crate::cache::flight::{self, Claim};
-use crate::cache::{Stored, TileStore};
+use crate::cache::{Lock, Stored, TileStore};
 use crate::cem::{Layer, LayerSamples, Stats};
 use crate::encode::Format;
 use crate::grid::TileId;
@@ -74,7 +74,8 @@ pub struct Seeder<'a> {
 
 /// Busy answers (~2 s of pauses) after which a wait for another's lock is
 /// explained: a tile takes 5–50 ms, so a lock held this long is most likely
-/// left by a seeder that was interrupted, and expires only after the TTL.
+/// left by a seeder that died on another machine (one that died on this one
+/// is taken at once), and expires only after the TTL.
 const LONG_WAIT_PAUSES: u32 = 8;
 
 impl Seeder<'_> {
@@ -198,7 +199,7 @@ impl Seeder<'_> {
                     busy += 1;
                 }
                 Claim::Compute { lock, .. } => {
-                    let result = self.attempts(key, &mut make);
+                    let result = self.attempts(&lock, &mut make);
                     // A lock not released expires after the TTL; the tile is
                     // made (or failed) all the same.
                     let _ = self.store.unlock(&lock);
@@ -212,15 +213,16 @@ impl Seeder<'_> {
         let ttl = self.lock_ttl.as_secs_f64();
         self.wait_notice.call_once(|| {
             crate::outputs::say(format_args!(
-                "sylva seed: waiting for {key}, locked by another seeder or server; an interrupted seed leaves its locks, which expire {ttl:.0} s after they were taken ([tile_cache] lock_ttl_s)"
+                "sylva seed: waiting for {key}, locked by another seeder or server (a lock left by one that died on another machine expires {ttl:.0} s after it was taken: [tile_cache] lock_ttl_s)"
             ));
         });
     }
 
-    /// Up to `1 + retries` attempts, [`backoff`] apart.
+    /// Up to `1 + retries` attempts, [`backoff`] apart, to make and store
+    /// the file of `lock`'s key.
     fn attempts(
         &self,
-        key: &str,
+        lock: &Lock,
         make: &mut impl FnMut() -> Result<(Vec<u8>, bool, bool), String>,
     ) -> Result<Made, String> {
         let mut last = String::new();
@@ -229,7 +231,7 @@ impl Seeder<'_> {
                 std::thread::sleep(backoff(attempt));
             }
             let saved = make().and_then(|(bytes, uniform, derived)| {
-                flight::save(self.store, key, &bytes, uniform).map_err(|e| e.to_string())?;
+                flight::save(self.store, lock, &bytes, uniform).map_err(|e| e.to_string())?;
                 Ok(if derived { Made::Derived } else { Made::Computed })
             });
             match saved {
@@ -250,7 +252,7 @@ fn backoff(attempt: u32) -> Duration {
 mod tests {
     use super::*;
     use crate::cache::dir::DirStore;
-    use crate::cache::{CacheError, Lock, Lookup, TileStore};
+    use crate::cache::{CacheError, Lookup};
     use std::sync::atomic::AtomicU32;
 
     /// A directory cache whose first `failing` reads and every unlock fail,
@@ -275,11 +277,11 @@ mod tests {
             }
             self.dir.get(key)
         }
-        fn put(&self, key: &str, payload: &[u8]) -> Result<(), CacheError> {
-            self.dir.put(key, payload)
+        fn put(&self, lock: &Lock, payload: &[u8]) -> Result<(), CacheError> {
+            self.dir.put(lock, payload)
         }
-        fn put_shared(&self, key: &str, blob: &str, payload: &[u8]) -> Result<(), CacheError> {
-            self.dir.put_shared(key, blob, payload)
+        fn put_shared(&self, lock: &Lock, blob: &str, payload: &[u8]) -> Result<(), CacheError> {
+            self.dir.put_shared(lock, blob, payload)
         }
         fn try_lock(&self, key: &str, ttl: Duration) -> Result<Option<Lock>, CacheError> {
             self.dir.try_lock(key, ttl)

@@ -12,7 +12,7 @@ use super::metrics::{CacheResult, Metrics};
 use super::pool::Pool;
 use super::products::{self, Computed, Product};
 use crate::cache::flight::{self, Claim};
-use crate::cache::{Lookup, TileStore};
+use crate::cache::{Lock, Lookup, TileStore};
 use crate::cem::Stage;
 use crate::region::Region;
 use bytes::Bytes;
@@ -92,7 +92,10 @@ impl TileService {
     /// image in memory only, where it fits).
     pub async fn get(&self, product: Product) -> Result<Arc<Tile>, ServeError> {
         let version = &self.region.version;
-        let (key, stored) = (product.memory_key(version), product.key(version));
+        // A product off the region's data is empty, and instantly so again:
+        // not worth a cache entry, which any client could add without end.
+        let off_data = product.grid(&self.region).is_ok_and(|g| !self.region.dem.may_cover(&g));
+        let (key, stored) = (product.memory_key(version), product.key(version).filter(|_| !off_data));
         let this = self.clone();
         // In a task of its own, which the request's timeout does not cancel:
         // requests for the same product meanwhile wait for it (an image has
@@ -146,7 +149,7 @@ impl TileService {
                     attempt += 1;
                 }
                 Claim::Compute { lock, found } => {
-                    let result = self.fill(&key, product, found).await;
+                    let result = self.fill(&lock, product, found).await;
                     let store = self.store.clone();
                     let unlocked = tokio::task::spawn_blocking(move || store.unlock(&lock).map_err(|e| e.to_string()))
                         .await
@@ -161,9 +164,9 @@ impl TileService {
         }
     }
 
-    /// Computes and stores a tile this process holds the lock of; `found` is
-    /// what the cache held (served, stale, if the upstream fails).
-    async fn fill(&self, key: &str, product: Product, found: Lookup) -> Result<Arc<Tile>, ServeError> {
+    /// Computes and stores the tile of `lock`, which this process holds;
+    /// `found` is what the cache held (served, stale, if the upstream fails).
+    async fn fill(&self, lock: &Lock, product: Product, found: Lookup) -> Result<Arc<Tile>, ServeError> {
         let stale = match found {
             Lookup::Hit(stored) => Some(stored),
             Lookup::Corrupt => {
@@ -175,9 +178,6 @@ impl TileService {
                 None
             }
         };
-        // Empty, and instantly so again: not worth a cache entry (which any
-        // client could otherwise add without end).
-        let off_data = product.grid(&self.region).is_ok_and(|g| !self.region.dem.may_cover(&g));
         let computed = match (self.compute(product).await, stale) {
             (Ok(c), _) => c,
             // The upstream failed: the stale tile is better than none.
@@ -192,11 +192,8 @@ impl TileService {
         };
         let uniform = computed.uniform;
         let tile = Arc::new(tile_of(computed));
-        if off_data && tile.bytes.is_empty() {
-            return Ok(tile);
-        }
-        let (store, key, bytes) = (self.store.clone(), key.to_string(), tile.bytes.clone());
-        let written = tokio::task::spawn_blocking(move || flight::save(&*store, &key, &bytes, uniform))
+        let (store, lock, bytes) = (self.store.clone(), lock.clone(), tile.bytes.clone());
+        let written = tokio::task::spawn_blocking(move || flight::save(&*store, &lock, &bytes, uniform))
             .await
             .map_err(ServeError::internal)?;
         if let Err(e) = written {

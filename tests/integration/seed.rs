@@ -1,8 +1,9 @@
 //! `sylva seed` as an operator runs it: seeded tiles are the server's cache
 //! hits, byte for byte; dry runs count what a seed writes and polygons prune
 //! it; a seeder killed with SIGKILL resumes to the same cache (and its dry
-//! run counts what is left), and a wait for a lock it left is explained; one
-//! stopped with Ctrl-C leaves no lock; a
+//! run counts what is left) with no temporary file of the killed one left,
+//! and a wait for a lock it left is explained; one stopped with Ctrl-C
+//! leaves no lock; a second job on the same progress file is refused; a
 //! source that fails for some tiles gets them retried, listed and re-run
 //! from the list; uniform tiles are stored once; bad input is named.
 
@@ -279,6 +280,9 @@ fn a_seeder_killed_mid_run_resumes_to_the_same_cache() {
     assert!(resumed == expected, "the resumed cache differs from an uninterrupted run");
     let made = count(&summary, "tile files made");
     assert!(made < expected.len() as u64, "the resumed run remade everything: {summary}");
+    let names = walk(&cache).into_iter().filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()));
+    let temporaries: Vec<String> = names.filter(|n| n.starts_with('.') && n.ends_with(".tmp")).collect();
+    assert!(temporaries.is_empty(), "the killed seeder's temporaries were left: {temporaries:?}");
 }
 
 #[test]
@@ -304,6 +308,30 @@ fn ctrl_c_stops_a_seed_after_its_tiles_in_hand_with_no_lock_left() {
     let resumed = seed(&dir.0, &[&job[..], &["--resume"]].concat());
     ok(&resumed);
     assert!(!String::from_utf8_lossy(&resumed.stderr).contains("waiting for"));
+}
+
+#[test]
+fn a_second_job_on_the_same_progress_file_is_refused_and_the_first_resumes() {
+    // Regression: a second job started in the same directory overwrote the
+    // first one's progress file (and emptied its failed-tiles file), so the
+    // first, interrupted, could no longer resume.
+    let dir = TempDir::new("seed-two-jobs");
+    let config = rmnp_config(&dir, "rmnp.toml", "");
+    let cache = dir.join("cache");
+    let first_job = job_args(&config, &cache, "dem", "6-12", &["--concurrency", "1"]);
+    let first = seed_until_progress(&dir.0, &strs(&first_job), Stdio::piped());
+    let second = seed(&dir.0, &strs(&job_args(&config, &cache, "cem", "6-8", &[])));
+    let err = String::from_utf8_lossy(&second.stderr);
+    let named = ["seed-progress.json is in use", &format!("pid {}", first.id()), "--progress-file"];
+    assert!(!second.status.success() && named.iter().all(|n| err.contains(n)), "{err}");
+    let interrupt = Command::new("kill").args(["-INT", &first.id().to_string()]).status().unwrap();
+    assert!(interrupt.success());
+    let out = first.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
+    ok(&seed(&dir.0, &[&strs(&first_job)[..], &["--resume"]].concat()));
+    let names = std::fs::read_dir(&dir.0).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned());
+    let locks: Vec<String> = names.filter(|n| n.ends_with(".lock")).collect();
+    assert!(locks.is_empty(), "the jobs' lock files were left: {locks:?}");
 }
 
 #[test]

@@ -1,0 +1,84 @@
+//! Who holds a tile lock. A lock's token names the machine it was taken on
+//! (its host name and PID namespace), the process and the call:
+//! `HOST:PIDNS:PID:NANOS:N`. A lock whose holder died on this machine (the
+//! same host and PID namespace, and no process `PID` any more) is known to
+//! be abandoned; a token of another machine, or any token on a machine
+//! whose `/proc` cannot say, proves nothing, and its lock only expires.
+//!
+//! Invariant: a live holder is never declared dead. A reused PID only makes
+//! a dead holder look alive (its lock then expires as any other).
+
+use std::path::Path;
+use std::sync::OnceLock;
+use std::time::SystemTime;
+
+/// A token unique to this process and call, naming this machine and process.
+pub(crate) fn token() -> String {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let nanos = SystemTime::now().duration_since(SystemTime::UNIX_EPOCH).map_or(0, |d| d.as_nanos());
+    format!("{}:{}:{nanos}:{n}", machine().unwrap_or(UNKNOWN), std::process::id())
+}
+
+/// True if `token` names a process of this machine that no longer runs.
+pub(crate) fn died(token: &str) -> bool {
+    let Some(here) = machine() else { return false };
+    let Some(rest) = token.strip_prefix(here).and_then(|r| r.strip_prefix(':')) else { return false };
+    let pid = rest.split(':').next().and_then(|p| p.parse::<u32>().ok()).filter(|&pid| pid > 0);
+    pid.is_some_and(|pid| !Path::new(&format!("/proc/{pid}")).exists())
+}
+
+/// This machine as tokens name it, `HOST:PIDNS`: the host alone would
+/// take two containers that share a host name (`--network host`) but not
+/// their PIDs for one machine. `None` where `/proc` does not say.
+pub(crate) fn machine() -> Option<&'static str> {
+    static MACHINE: OnceLock<Option<String>> = OnceLock::new();
+    MACHINE.get_or_init(read_machine).as_deref()
+}
+
+/// What a token names as its machine where this one's is not known; no
+/// PID namespace is number 0, so it never names a known machine.
+const UNKNOWN: &str = "unknown:0";
+
+fn read_machine() -> Option<String> {
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname").ok()?;
+    // `pid:[4026531836]`.
+    let namespace = std::fs::read_link("/proc/self/ns/pid").ok()?;
+    let namespace: String = namespace.to_string_lossy().chars().filter(char::is_ascii_digit).collect();
+    let host: String =
+        host.trim().chars().map(|c| if c.is_ascii_alphanumeric() || c == '.' || c == '-' { c } else { '_' }).collect();
+    (!host.is_empty() && !namespace.is_empty()).then(|| format!("{host}:{namespace}"))
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    /// A PID that ran on this machine and has ended (a child, reaped).
+    pub(crate) fn dead_pid() -> u32 {
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let pid = child.id();
+        child.wait().unwrap();
+        pid
+    }
+
+    #[test]
+    fn tokens_differ_and_name_a_dead_holder_only_on_this_machine() {
+        assert_ne!(token(), token());
+        let here = machine().expect("Linux says its host name and PID namespace");
+        assert!(token().starts_with(&format!("{here}:{}:", std::process::id())));
+        assert!(!died(&token()), "this process runs");
+        let dead = dead_pid();
+        assert!(died(&format!("{here}:{dead}:0:0")));
+        for alive_or_unknown in [
+            format!("other-host:{}:{dead}:0:0", here.rsplit(':').next().unwrap()),
+            format!("{here}0:{dead}:0:0"),
+            format!("{UNKNOWN}:{dead}:0:0"),
+            format!("{here}:0:0:0"),
+            "killed-seeder".to_string(),
+            String::new(),
+        ] {
+            assert!(!died(&alive_or_unknown), "{alive_or_unknown}");
+        }
+    }
+}
