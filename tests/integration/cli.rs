@@ -162,6 +162,32 @@ fn no_output_overwrites_a_file_the_configuration_reads() {
 }
 
 #[test]
+fn a_file_the_user_may_not_write_is_refused_though_its_directory_is_writable() {
+    // Regression: the new file was renamed over it (a rename needs only the
+    // directory's permission). Root may write any file: as root, the run is
+    // nobody's.
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    use std::os::unix::process::CommandExt;
+    const NOBODY: u32 = 65534;
+    let dir = TempDir::new("cli-read-only");
+    std::fs::set_permissions(&dir.0, std::fs::Permissions::from_mode(0o777)).unwrap();
+    let out_path = dir.join("ro.tif");
+    std::fs::write(&out_path, b"keep").unwrap();
+    std::fs::set_permissions(&out_path, std::fs::Permissions::from_mode(0o444)).unwrap();
+    let mut run = Command::new(env!("CARGO_BIN_EXE_sylva"));
+    run.args(["tile", "--layer", "dem", "--level", "11", "--row", "7758", "--col", "10816", "-o"]).arg(&out_path);
+    if std::fs::metadata(&out_path).unwrap().uid() == 0 {
+        run.uid(NOBODY).gid(NOBODY);
+    }
+    let out = run.output().expect("run sylva");
+    let err = String::from_utf8_lossy(&out.stderr);
+    let refused = out.status.code() == Some(1) && err.contains("ro.tif: cannot write: Permission denied");
+    assert!(refused, "{:?}: {err}", out.status);
+    assert_eq!(std::fs::read(&out_path).unwrap(), b"keep");
+    assert_eq!(std::fs::read_dir(&dir.0).unwrap().count(), 1, "no new file is left beside it");
+}
+
+#[test]
 fn a_reader_gone_away_is_no_error() {
     let (reader, writer) = std::io::pipe().unwrap();
     drop(reader);
