@@ -1,8 +1,9 @@
 //! Output files of the command line: never written over an input, over
-//! each other or over anything but a regular file (a link is written
-//! through), and written whole or not at all (each to a new file of a unique
-//! name beside it first, all renamed into place once every one is written);
-//! and its messages on stderr ([`say`]).
+//! each other, over anything but a regular file (a link is written
+//! through) or over a file the user may not write; a replaced file's
+//! permissions kept; and written whole or not at all (each to a new file of
+//! a unique name beside it first, all renamed into place once every one is
+//! written); and its messages on stderr ([`say`]).
 
 use std::path::{Path, PathBuf};
 
@@ -95,14 +96,24 @@ fn resolve(path: &Path) -> PathBuf {
     }
 }
 
+/// Where an output goes: the file it replaces and, when that file exists,
+/// the permissions its replacement takes.
+struct Destination {
+    /// The path itself, or where its link leads.
+    file: PathBuf,
+    /// The replaced file's permission bits (`None`: a new file, made with
+    /// the process's umask).
+    permissions: Option<std::fs::Permissions>,
+}
+
 /// The file an output replaces: the path itself, or where its link leads
-/// (so the link stays); an error for a directory, a device, a pipe, a socket
-/// or a link to nothing.
-fn destination(path: &Path) -> Result<PathBuf, OutputError> {
+/// (so the link stays); an error for a directory, a device, a pipe, a
+/// socket, a link to nothing, or a file this process may not write.
+fn destination(path: &Path) -> Result<Destination, OutputError> {
     let meta = match std::fs::symlink_metadata(path) {
         // No such file yet (whether its directory is one is checked apart).
         Err(e) if matches!(e.kind(), std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory) => {
-            return Ok(path.to_path_buf());
+            return Ok(Destination { file: path.to_path_buf(), permissions: None });
         }
         Err(source) => return Err(OutputError::Write { path: path.to_path_buf(), source }),
         Ok(meta) => meta,
@@ -119,9 +130,25 @@ fn destination(path: &Path) -> Result<PathBuf, OutputError> {
     };
     match std::fs::metadata(&target) {
         Ok(m) if m.is_dir() => Err(OutputError::Directory(path.to_path_buf())),
-        Ok(m) if m.is_file() => Ok(target),
+        Ok(m) if m.is_file() => replaceable(path, target, &m),
         _ => Err(OutputError::NotRegular(path.to_path_buf())),
     }
+}
+
+/// The existing regular file `file` (output `path`, its metadata `meta`)
+/// as a destination, if this process may write it: a rename needs only the
+/// directory's permission, and would replace a file its user could not
+/// write. The replacement keeps the file's permission bits, as `cp` does,
+/// without set-id and sticky bits (the new file belongs to whoever writes
+/// it, who must not gain them).
+fn replaceable(path: &Path, file: PathBuf, meta: &std::fs::Metadata) -> Result<Destination, OutputError> {
+    use std::os::unix::fs::PermissionsExt;
+    // Opened for writing, not truncated: the kernel says whether this
+    // process may write it (mode, ACLs, a read-only mount, root alike).
+    let opened = std::fs::OpenOptions::new().write(true).open(&file);
+    opened.map_err(|source| OutputError::Write { path: path.to_path_buf(), source })?;
+    let permissions = std::fs::Permissions::from_mode(meta.permissions().mode() & 0o777);
+    Ok(Destination { file, permissions: Some(permissions) })
 }
 
 /// A hidden name beside `path` that this process gives no other file:
@@ -168,9 +195,12 @@ pub fn write_all(files: &[(&Path, &[u8])]) -> Result<(), OutputError> {
     let mut write_one = |path: &Path, bytes: &[u8]| -> Result<(), OutputError> {
         let target = destination(path)?;
         let fail = |source| OutputError::Write { path: path.to_path_buf(), source };
-        let (scratch, mut file) = scratch_beside(&target).map_err(fail)?;
+        let (scratch, mut file) = scratch_beside(&target.file).map_err(fail)?;
         partial().push(scratch.clone());
-        written.push((scratch, target));
+        written.push((scratch, target.file));
+        if let Some(permissions) = target.permissions {
+            file.set_permissions(permissions).map_err(fail)?;
+        }
         // In pieces: a signal that comes during a write(2) to a file waits
         // for it to end, and a second one sent meanwhile merges with it, so
         // one call for hundreds of MB left no room for the second Ctrl-C
@@ -307,6 +337,28 @@ mod tests {
         write_all(&[(&out, b"tif")]).unwrap();
         assert_eq!(std::fs::read(&precious).unwrap(), b"precious");
         assert_eq!(std::fs::read(&out).unwrap(), b"tif");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_replaced_file_keeps_its_permissions_without_set_id_bits() {
+        // Regression: the renamed new file had the umask's 0644 whatever the
+        // replaced file's mode. (A file the user may not write is refused:
+        // tests/integration/cli.rs, as another user.)
+        use std::os::unix::fs::PermissionsExt;
+        let dir = scratch("mode");
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o7777;
+        let (private, shared, fresh) = (dir.join("private.tif"), dir.join("shared.tif"), dir.join("fresh.tif"));
+        for (path, old) in [(&private, 0o600), (&shared, 0o4775)] {
+            std::fs::write(path, b"old").unwrap();
+            std::fs::set_permissions(path, std::fs::Permissions::from_mode(old)).unwrap();
+        }
+        check(&[], &[&private, &shared, &fresh]).unwrap();
+        write_all(&[(&private, b"new"), (&shared, b"new"), (&fresh, b"new")]).unwrap();
+        assert_eq!((mode(&private), mode(&shared)), (0o600, 0o775));
+        let made = std::fs::File::create(dir.join("made")).unwrap().metadata().unwrap().permissions().mode();
+        assert_eq!(mode(&fresh), made & 0o7777, "a new file is made as any other");
+        assert_eq!(std::fs::read(&private).unwrap(), b"new");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

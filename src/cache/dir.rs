@@ -21,6 +21,13 @@ use std::io::{self, Write};
 use std::path::{Component, Path, PathBuf};
 use std::time::{Duration, SystemTime};
 
+/// What failed, as [`CacheError::Io`] says it: making a directory.
+const CREATE_DIR: &str = "create the cache directory";
+/// Reading an entry.
+const READ_ENTRY: &str = "read the cache entry";
+/// Writing an entry.
+const WRITE_ENTRY: &str = "write the cache entry";
+
 /// Encoded tiles in a directory.
 #[derive(Debug)]
 pub struct DirStore {
@@ -42,12 +49,10 @@ impl DirStore {
         let store = DirStore::new(root);
         let root = store.root();
         if root.exists() && !root.is_dir() {
-            return Err(CacheError::io(
-                root,
-                io::Error::other("the tile cache must be a directory, and this is a file"),
-            ));
+            let why = io::Error::other("it must be a directory, and this is a file");
+            return Err(CacheError::io("use the tile cache", root, why));
         }
-        fs::create_dir_all(root).map_err(|e| CacheError::io(root, e))?;
+        fs::create_dir_all(root).map_err(|e| CacheError::io(CREATE_DIR, root, e))?;
         Ok(store)
     }
 
@@ -77,14 +82,15 @@ impl DirStore {
         let path = self.path(key);
         let tmp = self.scratch(lock);
         for file in [&path, &tmp] {
-            let dir = file.parent().ok_or_else(|| CacheError::io(file, io::Error::other("no parent directory")))?;
-            fs::create_dir_all(dir).map_err(|e| CacheError::io(dir, e))?;
+            let no_parent = || CacheError::io(WRITE_ENTRY, file, io::Error::other("no parent directory"));
+            let dir = file.parent().ok_or_else(no_parent)?;
+            fs::create_dir_all(dir).map_err(|e| CacheError::io(CREATE_DIR, dir, e))?;
         }
         let result = make(&tmp).and_then(|()| fs::rename(&tmp, &path));
         if result.is_err() {
             let _ = fs::remove_file(&tmp);
         }
-        result.map_err(|e| CacheError::io(&path, e))
+        result.map_err(|e| CacheError::io(WRITE_ENTRY, &path, e))
     }
 
     /// The temporary file of `lock`'s holder: `.{name}.{token}.tmp` beside
@@ -127,10 +133,10 @@ impl TileStore for DirStore {
         let data = match fs::read(&path) {
             Ok(d) => d,
             Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Lookup::Miss),
-            Err(e) => return Err(CacheError::io(&path, e)),
+            Err(e) => return Err(CacheError::io(READ_ENTRY, &path, e)),
         };
         // A link's own time, not its target's: the entry's time.
-        let meta = fs::symlink_metadata(&path).map_err(|e| CacheError::io(&path, e))?;
+        let meta = fs::symlink_metadata(&path).map_err(|e| CacheError::io(READ_ENTRY, &path, e))?;
         let written = meta.modified().unwrap_or(SystemTime::UNIX_EPOCH);
         Ok(match envelope::open(data) {
             Some(bytes) => Lookup::Hit(Stored { bytes, written }),
@@ -159,7 +165,7 @@ impl TileStore for DirStore {
             match create_exclusive(&path, &lock.token) {
                 Ok(()) => return Ok(Some(lock)),
                 Err(e) if e.kind() == io::ErrorKind::AlreadyExists => {}
-                Err(e) => return Err(CacheError::io(&path, e)),
+                Err(e) => return Err(CacheError::io("create the lock", &path, e)),
             }
             match abandoned(&path, ttl) {
                 Some(token) => self.break_lock(&Lock { key: key.to_string(), token }),
@@ -173,10 +179,12 @@ impl TileStore for DirStore {
     fn unlock(&self, lock: &Lock) -> Result<(), CacheError> {
         let path = self.lock_path(&lock.key);
         match fs::read_to_string(&path) {
-            Ok(token) if token == lock.token => fs::remove_file(&path).map_err(|e| CacheError::io(&path, e)),
+            Ok(token) if token == lock.token => {
+                fs::remove_file(&path).map_err(|e| CacheError::io("remove the lock", &path, e))
+            }
             Ok(_) => Ok(()),
             Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(()),
-            Err(e) => Err(CacheError::io(&path, e)),
+            Err(e) => Err(CacheError::io("read the lock", &path, e)),
         }
     }
 

@@ -62,8 +62,10 @@ pub struct Lock {
 #[derive(Debug, Error)]
 pub enum CacheError {
     /// A file of the directory cache.
-    #[error("{path}: {source}")]
+    #[error("cannot {doing} {path}: {source}")]
     Io {
+        /// What failed, said after "cannot" ("create the cache directory").
+        doing: &'static str,
         /// The file or directory.
         path: PathBuf,
         /// The I/O error.
@@ -83,9 +85,9 @@ pub enum CacheError {
 }
 
 impl CacheError {
-    /// An I/O error on `path`.
-    pub fn io(path: &Path, source: std::io::Error) -> CacheError {
-        CacheError::Io { path: path.to_path_buf(), source }
+    /// An I/O error on `path` while doing `doing` (said after "cannot").
+    pub fn io(doing: &'static str, path: &Path, source: std::io::Error) -> CacheError {
+        CacheError::Io { doing, path: path.to_path_buf(), source }
     }
 }
 

@@ -13,6 +13,7 @@
 //! Invariant: every texel is a finite height ≥ 0.
 
 use super::stats::HeightStats;
+use std::ops::RangeInclusive;
 
 /// First word of an atlas's tag.
 const TAG: &str = "sylva-canopy-proxy";
@@ -68,15 +69,35 @@ impl Layout {
         self.tile_px as f64 * self.cell_m
     }
 
+    /// Texels per tile side, a power of two within: from 8, the smallest
+    /// side that holds [`super::wang::WangParams`]'s 2-texel borders and an
+    /// interior, to 4096 (the 2¹² that `WangParams::tile_px_for` picks at
+    /// most).
+    pub const TILE_PX: RangeInclusive<usize> = 8..=4096;
+    /// Colours per edge (4: 256 combinations).
+    pub const COLOURS: RangeInclusive<usize> = 1..=4;
+    /// Tiles per colour combination.
+    pub const VARIANTS: RangeInclusive<usize> = 1..=8;
+
+    /// An error unless `tile_px` is a power of two in [`Layout::TILE_PX`].
+    pub fn check_tile_px(tile_px: usize) -> Result<(), String> {
+        let (min, max) = Layout::TILE_PX.into_inner();
+        match tile_px.is_power_of_two() && Layout::TILE_PX.contains(&tile_px) {
+            true => Ok(()),
+            false => Err(format!("tiles must be a power of two from {min} to {max} texels across, not {tile_px}")),
+        }
+    }
+
     /// An error unless the layout is usable.
     pub fn check(&self) -> Result<(), String> {
-        if !self.tile_px.is_power_of_two() || !(8..=4096).contains(&self.tile_px) {
-            return Err(format!("tiles must be a power of two from 8 to 4096 texels across, not {}", self.tile_px));
-        }
-        if !(1..=4).contains(&self.colours) || !(1..=8).contains(&self.variants) {
+        Layout::check_tile_px(self.tile_px)?;
+        if !Layout::COLOURS.contains(&self.colours) || !Layout::VARIANTS.contains(&self.variants) {
             return Err(format!(
-                "{} colours and {} variants: 1–4 colours and 1–8 variants",
-                self.colours, self.variants
+                "{} colours and {} variants: colours must be in {:?} and variants in {:?}",
+                self.colours,
+                self.variants,
+                Layout::COLOURS,
+                Layout::VARIANTS
             ));
         }
         if !(self.cell_m > 0.0 && self.cell_m.is_finite()) {

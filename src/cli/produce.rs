@@ -2,7 +2,9 @@
 //! and `info`.
 
 use anyhow::Result;
+use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
+use sylva::canopy::Layout;
 use sylva::cem::Layer;
 use sylva::encode::Format;
 use sylva::grid::{BBox, TileId};
@@ -58,7 +60,7 @@ pub struct TileArgs {
     #[arg(long)]
     col: u64,
     /// Extra samples per side taken from the neighbours.
-    #[arg(long, default_value_t = 0, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(0..=sylva::produce::MAX_HALO as u64))]
+    #[arg(long, default_value_t = 0, value_parser = count_in(0..=sylva::produce::MAX_HALO))]
     halo: usize,
 }
 
@@ -120,16 +122,16 @@ pub struct CanopyArgs {
     #[arg(long)]
     preview: Option<PathBuf>,
     /// `EPSG:code` replacing the files' CRS.
-    #[arg(long)]
-    crs: Option<String>,
-    /// Tile side in texels, a power of two (default: about 64 m).
-    #[arg(long)]
+    #[arg(long, value_parser = sylva::source::crs::parse_epsg)]
+    crs: Option<u32>,
+    /// Tile side in texels, a power of two from 8 to 4096 (default: about 64 m).
+    #[arg(long, value_parser = tile_px)]
     tile_px: Option<usize>,
-    /// Colours per tile edge (1: one periodic tile).
-    #[arg(long, default_value_t = 2)]
+    /// Colours per tile edge, 1 to 4 (1: one periodic tile).
+    #[arg(long, default_value_t = 2, value_parser = count_in(Layout::COLOURS))]
     colours: usize,
-    /// Tiles per colour combination.
-    #[arg(long, default_value_t = 2)]
+    /// Tiles per colour combination, 1 to 8.
+    #[arg(long, default_value_t = 2, value_parser = count_in(Layout::VARIANTS))]
     variants: usize,
 }
 
@@ -146,9 +148,8 @@ impl CanopyArgs {
         let abandon = Abandon::watch();
         outputs::check(&inputs, &targets)?;
         let mut options = sylva::lidar::Options::new(self.las.clone(), self.resolution);
-        options.crs =
-            self.crs.as_deref().map(sylva::source::crs::parse_epsg).transpose().map_err(anyhow::Error::msg)?;
-        (options.tile_px, options.colours, options.variants) = (self.tile_px, self.colours, self.variants);
+        (options.crs, options.tile_px) = (self.crs, self.tile_px);
+        (options.colours, options.variants) = (self.colours, self.variants);
         let (model, set) = sylva::lidar::build(&options)?;
         let mut files = vec![(self.output.as_path(), model.proxy_tiff(&set)?)];
         if let Some(path) = &self.chm {
@@ -193,7 +194,19 @@ fn in_region(region: &Region, area: &BBox, what: &str) -> Result<()> {
 
 /// `--width`, `--height`: 1 to [`sylva::grid::MAX_REQUEST_SIDE`].
 fn side() -> clap::builder::RangedU64ValueParser<usize> {
-    clap::builder::RangedU64ValueParser::<usize>::new().range(1..=sylva::grid::MAX_REQUEST_SIDE as u64)
+    count_in(1..=sylva::grid::MAX_REQUEST_SIDE)
+}
+
+/// An option's parser of a count within `range`.
+fn count_in(range: RangeInclusive<usize>) -> clap::builder::RangedU64ValueParser<usize> {
+    let (min, max) = range.into_inner();
+    clap::builder::RangedU64ValueParser::<usize>::new().range(min as u64..=max as u64)
+}
+
+/// `--tile-px`: a power of two in [`Layout::TILE_PX`].
+fn tile_px(text: &str) -> Result<usize, String> {
+    let px = text.parse::<usize>().map_err(|e| e.to_string())?;
+    Layout::check_tile_px(px).map(|()| px)
 }
 
 /// `--layer`.

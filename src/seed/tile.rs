@@ -264,7 +264,7 @@ mod tests {
 
     impl Flaky {
         fn error(&self) -> CacheError {
-            CacheError::Io { path: "flaky".into(), source: std::io::Error::other("timed out") }
+            CacheError::io("read the cache entry", "flaky".as_ref(), std::io::Error::other("timed out"))
         }
     }
 
@@ -320,7 +320,7 @@ mod tests {
         assert!(matches!(seeder(2).file("a", make), Ok(Made::Computed)));
         store.failing.store(2, Ordering::SeqCst);
         let err = seeder(1).file("b", make).err().unwrap();
-        assert!(err.starts_with("2 attempts failed; last: flaky: timed out"), "{err}");
+        assert!(err.starts_with("2 attempts failed; last: cannot read the cache entry flaky: timed out"), "{err}");
         std::fs::remove_dir_all(&root).ok();
     }
 }

@@ -95,18 +95,26 @@ fn bad_arguments_are_explained() {
     // Options out of their range are usage errors too (exit 2).
     let laz = common::data("lidar_lidR/MixedConifer.laz");
     let tile = ["tile", "--layer", "dem", "-o", x];
+    let canopy = ["canopy", "--las", laz.to_str().unwrap(), "-o", x];
     for (args, why) in [
         (&[&tile[..], &["--level", "99", "--row", "1", "--col", "1"]].concat(), "99 is not in 0..=30"),
         (&[&tile[..], &["--level", "3", "--row", "999", "--col", "1"]].concat(), "tile 3/999/1 does not exist"),
         (&[&tile[..], &["--level", "3", "--row", "1", "--col", "1", "--halo", "99999"]].concat(), "0..=512"),
         (&["build", "--layer", "dem", "--width", "0", "--height", "4", "-o", x][..].to_vec(), "1..=8193"),
-        (&["canopy", "--las", laz.to_str().unwrap(), "--resolution", "0", "-o", x][..].to_vec(), "positive number"),
+        (&[&canopy[..], &["--resolution", "0"]].concat(), "positive number"),
+        // Regression: these blamed the LiDAR file and exited 1, --crs unnamed.
+        (&[&canopy[..], &["--tile-px", "100"]].concat(), "for '--tile-px <TILE_PX>': tiles must be a power of two"),
+        (&[&canopy[..], &["--colours", "0"]].concat(), "for '--colours <COLOURS>': 0 is not in 1..=4"),
+        (&[&canopy[..], &["--colours", "5"]].concat(), "for '--colours <COLOURS>': 5 is not in 1..=4"),
+        (&[&canopy[..], &["--variants", "0"]].concat(), "for '--variants <VARIANTS>': 0 is not in 1..=8"),
+        (&[&canopy[..], &["--crs", "foo"]].concat(), "for '--crs <CRS>': crs \"foo\" is not of the form"),
         (&["serve", "--bind", "notanaddr"][..].to_vec(), "must be HOST:PORT"),
         (&["bench", "raycast", "--only", "nonsense"][..].to_vec(), "the settings: [\"linear 30 + 10\""),
     ] {
         let out = sylva(args);
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(out.status.code() == Some(2) && err.contains(why), "{args:?}: {err}");
+        let blames_input = err.contains("MixedConifer");
+        assert!(out.status.code() == Some(2) && err.contains(why) && !blames_input, "{args:?}: {err}");
     }
     assert!(!dir.join("x.tif").exists());
     let out = sylva(&["info"]);
@@ -159,6 +167,32 @@ fn no_output_overwrites_a_file_the_configuration_reads() {
         );
         assert!(std::fs::read(&dem).unwrap() == bytes, "{args:?} changed the DEM");
     }
+}
+
+#[test]
+fn a_file_the_user_may_not_write_is_refused_though_its_directory_is_writable() {
+    // Regression: the new file was renamed over it (a rename needs only the
+    // directory's permission). Root may write any file: as root, the run is
+    // nobody's.
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    use std::os::unix::process::CommandExt;
+    const NOBODY: u32 = 65534;
+    let dir = TempDir::new("cli-read-only");
+    std::fs::set_permissions(&dir.0, std::fs::Permissions::from_mode(0o777)).unwrap();
+    let out_path = dir.join("ro.tif");
+    std::fs::write(&out_path, b"keep").unwrap();
+    std::fs::set_permissions(&out_path, std::fs::Permissions::from_mode(0o444)).unwrap();
+    let mut run = Command::new(env!("CARGO_BIN_EXE_sylva"));
+    run.args(["tile", "--layer", "dem", "--level", "11", "--row", "7758", "--col", "10816", "-o"]).arg(&out_path);
+    if std::fs::metadata(&out_path).unwrap().uid() == 0 {
+        run.uid(NOBODY).gid(NOBODY);
+    }
+    let out = run.output().expect("run sylva");
+    let err = String::from_utf8_lossy(&out.stderr);
+    let refused = out.status.code() == Some(1) && err.contains("ro.tif: cannot write: Permission denied");
+    assert!(refused, "{:?}: {err}", out.status);
+    assert_eq!(std::fs::read(&out_path).unwrap(), b"keep");
+    assert_eq!(std::fs::read_dir(&dir.0).unwrap().count(), 1, "no new file is left beside it");
 }
 
 #[test]
