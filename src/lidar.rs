@@ -202,6 +202,13 @@ impl Model {
                 set.stats()
             ),
         ]
+        .into_iter()
+        .chain(c.mostly_filled().map(|coarser| {
+            format!(
+                "warning most cells had no point and were filled: a resolution of {coarser:.2} m or coarser gives about one point per cell"
+            )
+        }))
+        .collect::<Vec<_>>()
         .join("\n")
     }
 }

@@ -97,6 +97,17 @@ pub struct Chm {
     pub filled: usize,
 }
 
+impl Chm {
+    /// Where most cells had no point of their own and were filled: a
+    /// cell side with about one point per cell, metres (to warn of a CHM
+    /// that is mostly interpolated, short of [`ChmError::TooFine`]).
+    pub fn mostly_filled(&self) -> Option<f64> {
+        let cells = self.grid.width * self.grid.height;
+        (2 * self.filled > cells && self.points > 0)
+            .then(|| self.grid.cell_m * (cells as f64 / self.points as f64).sqrt())
+    }
+}
+
 /// The CHM of `cloud` on `grid`, or on the grid of `options.cell_m` cells
 /// that covers the cloud.
 pub fn build(cloud: &PointCloud, grid: Option<MetricGrid>, options: &ChmOptions) -> Result<Chm, ChmError> {
@@ -302,7 +313,10 @@ mod tests {
         let ChmError::TooFine { coarser, .. } = err else { panic!("{err}") };
         assert!((0.65..0.75).contains(&coarser), "about one point per cell: {coarser}");
         assert!(err.to_string().contains(&format!("use a resolution of {coarser:.2} m")), "{err}");
-        assert!(build(&stand(true), None, &options(0.1)).is_ok(), "47 cells per point");
+        let fine = build(&stand(true), None, &options(0.1)).expect("47 cells per point");
+        let coarser = fine.mostly_filled().expect("mostly filled: a warning");
+        assert!((0.65..0.75).contains(&coarser), "about one point per cell: {coarser}");
+        assert_eq!(build(&stand(true), None, &options(1.0)).unwrap().mostly_filled(), None);
     }
 
     #[test]
