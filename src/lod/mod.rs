@@ -39,8 +39,9 @@
 //!    draw), `resolutions[k]` per variable (splats for all groups below that
 //!    node, shared in proportion to their capacity; per tree with
 //!    [`splats::distribute`]), the predicted `cost_ms`, `overrun_ms` when
-//!    even the coarsest tiles exceed the budget (they are still drawn),
-//!    `upper_bound` (no selection can beat it) and why it stopped.
+//!    even the cheapest cut exceeds the budget (it, or a cut no dearer, is
+//!    still drawn), `upper_bound` (no selection can beat it) and why it
+//!    stopped.
 //! 5. **Morph** ([`morph`]): keep a [`morph::MorphTrack`] per tile region;
 //!    for the selection's target interval call `request(level, target_s)`;
 //!    each frame draw mesh [`morph::mesh_and_weight`]`(track.level_at(now))`

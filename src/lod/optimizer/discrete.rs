@@ -170,6 +170,12 @@ impl Forest {
         best
     }
 
+    /// What the cheapest cut costs, ms.
+    pub fn cheapest_cut_ms(&self) -> f64 {
+        let (cheapest, _) = self.cut_costs();
+        self.roots.iter().map(|&r| cheapest[r as usize].ms).sum()
+    }
+
     /// Per node, the cheapest drawing of its subtree, and the cheapest cut
     /// splitting it (and so its ancestors): bottom-up, then top-down; both
     /// exact whatever the signs of the increments.

@@ -43,11 +43,13 @@
 //! about 0.05 ms to the optimiser's median (`docs/benchmarks.md`, "A
 //! knapsack programme").
 //!
-//! If the roots alone (the coarsest representation) cost more than the
-//! budget they are still drawn, nothing dearer is, and the overrun is
-//! reported: the search runs under the roots' cost instead, so its answer
-//! and its bound are those of the cuts no dearer than the coarsest (the
-//! bound of an infeasible budget would be meaningless).
+//! If every cut costs more than the budget, the search runs under the
+//! cheapest cut's cost instead, so its answer and its bound are those of
+//! the cuts no dearer than that one (the bound of a budget no cut meets
+//! would be meaningless), and the overrun is reported: the roots (the
+//! coarsest representation) are drawn where they are the cheapest cut.
+//! A greedy that starts from roots dearer than the budget stops at once,
+//! and the knapsack programme looks for a cut within it.
 
 pub mod continuous;
 pub mod discrete;
@@ -131,10 +133,10 @@ pub struct Selection {
     pub benefit: f64,
     /// Total predicted cost, ms.
     pub cost_ms: f64,
-    /// Predicted cost beyond the budget (only when the roots alone exceed it).
+    /// Predicted cost beyond the budget (only when every cut exceeds it).
     pub overrun_ms: f64,
-    /// No selection within the budget (or, when the roots overrun it, no
-    /// dearer than the roots) has more benefit than this.
+    /// No selection within the budget (or, when every cut overruns it, no
+    /// dearer than the cheapest cut) has more benefit than this.
     pub upper_bound: f64,
     /// The continuous slope level at the end: benefit per ms of the last
     /// unit; ∞ when no continuous variable got any, 0 when all are at full
@@ -221,7 +223,8 @@ struct Run<'a> {
     forest: &'a Forest,
     groups: Groups,
     levels: Levels,
-    /// The budget searched: the one asked, or the roots' cost if more.
+    /// The budget searched: the one asked, or the cheapest cut's cost if
+    /// more.
     budget_ms: f64,
     /// The budget asked (not negative), which an overrun is measured from.
     asked_ms: f64,
@@ -244,8 +247,8 @@ struct Run<'a> {
 impl<'a> Run<'a> {
     fn new(forest: &'a Forest, levels: Levels, settings: &Settings) -> Run<'a> {
         let asked_ms = if settings.budget_ms > 0.0 { settings.budget_ms } else { 0.0 };
-        let roots_ms: f64 = forest.roots().iter().map(|&r| forest.node(r).cost_ms).sum();
-        let budget_ms = if roots_ms.is_finite() { asked_ms.max(roots_ms) } else { asked_ms };
+        let floor_ms = forest.cheapest_cut_ms();
+        let budget_ms = if floor_ms.is_finite() { asked_ms.max(floor_ms) } else { asked_ms };
         let mut run = Run {
             forest,
             groups: Groups::new(forest, budget_ms),
@@ -517,7 +520,8 @@ impl<'a> Run<'a> {
             _ => self.open_bound(benefit),
         };
         let mut answer = Answer::Greedy;
-        let vouched = benefit >= (1.0 - knapsack::EPSILON) * upper_bound;
+        let fits = drawn_sums(self.forest, &self.split).1 + self.levels.cost_ms(self.mu) <= self.budget_ms;
+        let vouched = fits && benefit >= (1.0 - knapsack::EPSILON) * upper_bound;
         if stop != Stop::Limit
             && !vouched
             && let Some((better, bound)) = self.knapsack(benefit, deadline)
