@@ -75,14 +75,14 @@ async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Nex
     let query = (route == "wms").then(|| request.uri().query().unwrap_or("").to_string());
     let response = if request.uri().to_string().len() > MAX_URI_BYTES {
         let message = format!("request URI longer than {MAX_URI_BYTES} bytes");
-        refused(&state, query.as_deref(), StatusCode::URI_TOO_LONG, message)
+        refused(query.as_deref(), StatusCode::URI_TOO_LONG, message)
     } else {
         match tokio::time::timeout(timeout, next.run(request)).await {
             Ok(response) => response,
             // Its tile is still computed and cached for the retry.
             Err(_) => {
                 let message = format!("the request took longer than {timeout:?}; retry later");
-                refused(&state, query.as_deref(), StatusCode::SERVICE_UNAVAILABLE, message)
+                refused(query.as_deref(), StatusCode::SERVICE_UNAVAILABLE, message)
             }
         }
     };
@@ -91,16 +91,19 @@ async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Nex
 }
 
 /// A request refused before its handler answered (a 503 is to be retried
-/// in 5 s): for a WMS `query` as it asks exceptions to be answered (a
-/// ServiceExceptionReport in its version, or an image), text elsewhere.
-fn refused(state: &AppState, wms_query: Option<&str>, status: StatusCode, message: String) -> Response {
+/// in 5 s): a ServiceExceptionReport in the version asked for for a WMS
+/// `query` (never an image: a refusal costs nothing), text elsewhere.
+fn refused(wms_query: Option<&str>, status: StatusCode, message: String) -> Response {
     let mut headers = axum::http::HeaderMap::new();
     if status == StatusCode::SERVICE_UNAVAILABLE {
         headers.insert(header::RETRY_AFTER, axum::http::HeaderValue::from_static("5"));
     }
     let Some(query) = wms_query else { return (status, headers, message).into_response() };
-    let reply = super::wms::request::reply_of(query, super::wms::request::Limits { max_side: state.settings.max_size });
-    super::wms::failure(state, reply, (status, headers), message)
+    let version = super::wms::request::version_of(query);
+    let (mime, body) =
+        super::exception::Exception::new(super::exception::Code::NoApplicableCode, message).report(version);
+    headers.insert(header::CONTENT_TYPE, axum::http::HeaderValue::from_static(mime));
+    (status, headers, body).into_response()
 }
 
 fn route_label(path: &str) -> &'static str {

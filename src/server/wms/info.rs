@@ -269,7 +269,7 @@ mod tests {
 
     fn parsed(query: &str) -> Result<FeatureInfo, Exception> {
         let params = Params::new(query);
-        parse(&params, request::reply_of(query, LIMITS).version, LIMITS)
+        parse(&params, request::version_of(query), LIMITS)
     }
 
     #[test]

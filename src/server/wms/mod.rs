@@ -31,7 +31,7 @@ const MAX_STITCHED_TILES: usize = 16;
 
 /// Answers a WMS request.
 pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuery, headers: HeaderMap) -> Response {
-    let limits = Limits { max_side: state.settings.max_size };
+    let limits = limits(&state);
     let query = query.as_deref().unwrap_or("");
     match request::parse(query, limits) {
         Err((e, reply)) => exception(&e, *reply, &state),
@@ -59,6 +59,11 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
     }
 }
 
+/// What a request may ask for.
+fn limits(state: &AppState) -> Limits {
+    Limits { max_side: state.settings.max_size }
+}
+
 /// A map's pixel centres as the tiles' lattice computes them, where they
 /// are lattice points: so a map computed whole, and the pixel a
 /// GetFeatureInfo computes alone, have the values of the tiles a map is
@@ -70,8 +75,11 @@ fn on_lattice(state: &AppState, grid: crate::grid::SampleGrid) -> crate::grid::S
 /// A GetMap's or GetFeatureInfo's answer to `query`, or its failure as the
 /// query asks exceptions to be answered.
 fn answer(state: &AppState, query: &str, result: Result<Response, ServeError>) -> Response {
-    let Err(e) = result else { return result.unwrap_or_else(|e| e.into_response()) };
-    let reply = request::reply_of(query, Limits { max_side: state.settings.max_size });
+    let e = match result {
+        Ok(response) => return response,
+        Err(e) => e,
+    };
+    let reply = request::reply_of(query, limits(state));
     match e {
         ServeError::BadRequest(m) => {
             exception(&Exception::new(super::exception::Code::InvalidParameterValue, m), reply, state)
@@ -85,16 +93,19 @@ fn answer(state: &AppState, query: &str, result: Result<Response, ServeError>) -
 }
 
 /// A request that could not be answered for `message` (the server's or an
-/// upstream's failure, a timeout), with `status` and `headers`: a report, or
-/// an image where a GetMap asks for in-image or blank exceptions.
-pub fn failure(
+/// upstream's failure), with `status` and `headers`: a report, or an image
+/// where a GetMap asks for in-image or blank exceptions. A server too busy
+/// (503) answers the report: shedding load must cost nothing, and an image
+/// may be as large as a map.
+fn failure(
     state: &AppState,
     reply: Reply,
     (status, mut headers): (StatusCode, HeaderMap),
     message: String,
 ) -> Response {
     let e = Exception::new(super::exception::Code::NoApplicableCode, message);
-    let (mime, body) = image(&e, &reply, state).unwrap_or_else(|| {
+    let drawn = (status != StatusCode::SERVICE_UNAVAILABLE).then(|| image(&e, &reply, state)).flatten();
+    let (mime, body) = drawn.unwrap_or_else(|| {
         let (mime, text) = e.report(reply.version);
         (mime, text.into_bytes())
     });

@@ -287,6 +287,11 @@ pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Box<Rep
     }
 }
 
+/// The version a query string is answered in.
+pub fn version_of(query: &str) -> Version {
+    negotiate(&Params::new(query))
+}
+
 /// The version answered (WMS 1.3.0 §6.2.4): below 1.3.0 the highest known
 /// version lower than the one asked for, 1.1.1 (also the lowest known, for
 /// anything older); 1.3.0 from there on, and when none or no number is given.
