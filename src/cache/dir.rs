@@ -7,7 +7,7 @@
 //! relative symbolic link per tile; a link's own time is its entry's time.
 //! Locks are files `{key}.lock` created exclusively, holding the holder's
 //! token; one older than its expiry, or whose holder died on this machine
-//! ([`super::holder`]), is taken over.
+//! (`cache::holder`), is taken over.
 //!
 //! A lock's holder writes only through its temporary file
 //! `.{name}.{token}.tmp` beside the key's file (a shared entry's file too,
@@ -123,9 +123,9 @@ impl DirStore {
 }
 
 /// Most characters of a token kept in a temporary file's name: a token is
-/// a host name (at most 64), a PID namespace (10 digits), a PID (7), Unix
-/// nanoseconds (19), a count (20) and 4 separators, 124 in all.
-const TOKEN_CHARS: usize = 128;
+/// a host name (at most 64), a boot id (12), a PID namespace (10 digits), a
+/// PID (7), Unix nanoseconds (19), a count (20) and 5 separators, 137 in all.
+const TOKEN_CHARS: usize = 140;
 
 impl TileStore for DirStore {
     fn get(&self, key: &str) -> Result<Lookup, CacheError> {
@@ -197,9 +197,11 @@ impl TileStore for DirStore {
 /// machine, or the lock expired (its holder died elsewhere, or overran).
 /// `None` while it is held, or if it was released just now.
 fn abandoned(path: &Path, ttl: Duration) -> Option<String> {
+    use std::os::unix::fs::MetadataExt;
     let token = fs::read_to_string(path).ok()?;
-    let age = fs::metadata(path).and_then(|m| m.modified()).ok().and_then(|t| t.elapsed().ok());
-    (holder::died(&token) || age.is_some_and(|age| age > ttl)).then_some(token)
+    let meta = fs::metadata(path).ok()?;
+    let age = meta.modified().ok().and_then(|t| t.elapsed().ok());
+    (holder::died(&token, meta.uid()) || age.is_some_and(|age| age > ttl)).then_some(token)
 }
 
 /// Creates `path` only if it does not exist, holding `token`.
