@@ -1,7 +1,8 @@
 //! Output files of the command line: never written over an input, over
 //! each other, over anything but a regular file (a link is written
 //! through) or over a file the user may not write; a replaced file's
-//! permissions kept; and written whole or not at all (each to a new file of
+//! permission bits kept (not its owner and group: the new file is its
+//! writer's, with the writer's group); and written whole or not at all (each to a new file of
 //! a unique name beside it first, all renamed into place once every one is
 //! written); and its messages on stderr ([`say`]).
 
@@ -86,7 +87,7 @@ fn directory_of(path: &Path) -> &Path {
 
 /// The absolute path a file has or would have: links and `..` resolved
 /// through its directory when the file does not exist yet.
-fn resolve(path: &Path) -> PathBuf {
+pub(crate) fn resolve(path: &Path) -> PathBuf {
     if let Ok(p) = std::fs::canonicalize(path) {
         return p;
     }

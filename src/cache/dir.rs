@@ -113,12 +113,17 @@ impl DirStore {
     }
 
     /// Removes a lock whose holder is gone, and the temporary file it may
-    /// have left. (Two takers racing here may both compute the tile; the
-    /// bytes are the same. A holder that overran its expiry but still runs
-    /// fails to store its tile, which its taker stores.)
+    /// have left, unless another taker has put its own lock there since.
+    /// (Two takers racing between that look and the removal may both
+    /// compute the tile; the bytes are the same. A holder that overran its
+    /// expiry but still runs fails to store its tile, which its taker
+    /// stores.)
     fn break_lock(&self, lock: &Lock) {
-        let _ = fs::remove_file(self.scratch(lock));
-        let _ = fs::remove_file(self.lock_path(&lock.key));
+        let path = self.lock_path(&lock.key);
+        if fs::read_to_string(&path).is_ok_and(|token| token == lock.token) {
+            let _ = fs::remove_file(self.scratch(lock));
+            let _ = fs::remove_file(&path);
+        }
     }
 }
 

@@ -177,7 +177,7 @@ struct Records {
     /// re-run or the run resumes, else emptied).
     failed: failed::Failed,
     /// This job's holds on the progress and failed-tiles files.
-    holds: [hold::Hold; 2],
+    holds: [Option<hold::Hold>; 2],
 }
 
 /// The run's records, once this job holds their files.
