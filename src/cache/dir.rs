@@ -98,12 +98,7 @@ impl DirStore {
     /// its length bounded (a token read back from a damaged lock file may
     /// be anything).
     fn scratch(&self, lock: &Lock) -> PathBuf {
-        let token: String = lock
-            .token
-            .chars()
-            .take(TOKEN_CHARS)
-            .map(|c| if c.is_ascii_alphanumeric() || c == '.' || c == '-' { c } else { '_' })
-            .collect();
+        let token: String = lock.token.chars().take(TOKEN_CHARS).map(holder::file_safe).collect();
         crate::outputs::sibling_tagged(&self.path(&lock.key), &token, "tmp")
     }
 

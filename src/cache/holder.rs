@@ -37,6 +37,12 @@ pub(crate) fn died(token: &str, owner: u32) -> bool {
     pid.is_some_and(|pid| !Path::new(&format!("/proc/{pid}")).exists())
 }
 
+/// `c`, or `_` where it has no place in a token or a file name (a host
+/// name, or a token read back from a damaged lock file, may hold anything).
+pub(crate) fn file_safe(c: char) -> char {
+    if c.is_ascii_alphanumeric() || c == '.' || c == '-' { c } else { '_' }
+}
+
 /// The user this process runs as (who owns its `/proc` entry).
 fn own_uid() -> Option<u32> {
     use std::os::unix::fs::MetadataExt;
@@ -69,8 +75,7 @@ fn read_machine() -> Option<String> {
     // `pid:[4026531836]`.
     let namespace = std::fs::read_link("/proc/self/ns/pid").ok()?;
     let namespace: String = namespace.to_string_lossy().chars().filter(char::is_ascii_digit).collect();
-    let host: String =
-        host.trim().chars().map(|c| if c.is_ascii_alphanumeric() || c == '.' || c == '-' { c } else { '_' }).collect();
+    let host: String = host.trim().chars().map(file_safe).collect();
     (!host.is_empty() && boot.len() == 12 && !namespace.is_empty()).then(|| format!("{host}:{boot}:{namespace}"))
 }
 
