@@ -2,9 +2,9 @@
 //! each other, over anything but a regular file (a link is written
 //! through) or over a file the user may not write; a replaced file's
 //! permission bits kept (not its owner and group: the new file is its
-//! writer's, with the writer's group); and written whole or not at all (each to a new file of
-//! a unique name beside it first, all renamed into place once every one is
-//! written); and its messages on stderr ([`say`]).
+//! writer's, with the writer's group); and written whole or not at all
+//! (each to a new file of a unique name beside it first, all renamed into
+//! place once every one is written); and its messages on stderr ([`say`]).
 
 use std::path::{Path, PathBuf};
 

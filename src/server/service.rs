@@ -92,17 +92,18 @@ impl TileService {
     /// image in memory only, where it fits).
     pub async fn get(&self, product: Product) -> Result<Arc<Tile>, ServeError> {
         let version = &self.region.version;
-        // A product off the region's data is empty, and instantly so again:
-        // not worth a cache entry, which any client could add without end.
-        let off_data = product.grid(&self.region).is_ok_and(|g| !self.region.dem.may_cover(&g));
-        let (key, stored) = (product.memory_key(version), product.key(version).filter(|_| !off_data));
+        let (key, stored) = (product.memory_key(version), product.key(version));
         let this = self.clone();
         // In a task of its own, which the request's timeout does not cancel:
         // requests for the same product meanwhile wait for it (an image has
         // no lock in the shared cache to meet them there).
         let task = tokio::spawn(async move {
             let load = async {
-                let tile = match stored {
+                // A product off the region's data is empty, and instantly so
+                // again: not worth a cache entry, which any client could add
+                // without end.
+                let off_data = product.grid(&this.region).is_ok_and(|g| !this.region.dem.may_cover(&g));
+                let tile = match stored.filter(|_| !off_data) {
                     Some(stored) => this.load(stored, product).await?,
                     None => Arc::new(tile_of(this.compute(product).await?)),
                 };

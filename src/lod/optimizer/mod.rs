@@ -247,7 +247,9 @@ struct Run<'a> {
 impl<'a> Run<'a> {
     fn new(forest: &'a Forest, levels: Levels, settings: &Settings) -> Run<'a> {
         let asked_ms = if settings.budget_ms > 0.0 { settings.budget_ms } else { 0.0 };
-        let floor_ms = forest.cheapest_cut_ms();
+        // Some cut within the budget unless the roots overrun it.
+        let roots_ms: f64 = forest.roots().iter().map(|&r| forest.node(r).cost_ms).sum();
+        let floor_ms = if roots_ms > asked_ms { forest.cheapest_cut_ms() } else { asked_ms };
         let budget_ms = if floor_ms.is_finite() { asked_ms.max(floor_ms) } else { asked_ms };
         let mut run = Run {
             forest,
@@ -513,14 +515,15 @@ impl<'a> Run<'a> {
     }
 
     fn finish(mut self, stop: Stop, deadline: Option<Instant>) -> Selection {
-        let benefit = self.total_benefit();
+        let (benefit_d, cost_d) = drawn_sums(self.forest, &self.split);
+        let benefit = benefit_d + self.levels.benefit(self.mu);
         let mut upper_bound = match (stop, self.first_block) {
             (_, Some(bound)) => bound.max(benefit),
             (Stop::FullResolution, None) => benefit,
             _ => self.open_bound(benefit),
         };
         let mut answer = Answer::Greedy;
-        let fits = drawn_sums(self.forest, &self.split).1 + self.levels.cost_ms(self.mu) <= self.budget_ms;
+        let fits = cost_d + self.levels.cost_ms(self.mu) <= self.budget_ms;
         let vouched = fits && benefit >= (1.0 - knapsack::EPSILON) * upper_bound;
         if stop != Stop::Limit
             && !vouched
@@ -546,11 +549,6 @@ impl<'a> Run<'a> {
             iterations: self.iterations,
             answer,
         }
-    }
-
-    /// Benefit of the current split and continuous level, summed afresh.
-    fn total_benefit(&self) -> f64 {
-        drawn_sums(self.forest, &self.split).0 + self.levels.benefit(self.mu)
     }
 
     /// The bound when stopped early with nothing blocked yet.

@@ -229,13 +229,6 @@ pub struct Reply {
     pub place: Option<SampleGrid>,
 }
 
-impl Reply {
-    /// A report in `version`'s form.
-    pub fn xml(version: Version) -> Reply {
-        Reply { version, style: ExceptionStyle::Xml, image: None, background: None, layer: None, place: None }
-    }
-}
-
 /// How a failure to answer `query` is answered (a report unless it is a
 /// GetMap that asks for in-image or blank exceptions).
 pub fn reply_of(query: &str, limits: Limits) -> Reply {
@@ -244,7 +237,8 @@ pub fn reply_of(query: &str, limits: Limits) -> Reply {
 }
 
 fn reply_for(params: &Params, version: Version, limits: Limits) -> Reply {
-    let mut reply = Reply::xml(version);
+    let mut reply =
+        Reply { version, style: ExceptionStyle::Xml, image: None, background: None, layer: None, place: None };
     let request = params.get("REQUEST").unwrap_or("").to_ascii_lowercase();
     if !matches!(request.as_str(), "getmap" | "map") {
         return reply;
@@ -259,31 +253,28 @@ fn reply_for(params: &Params, version: Version, limits: Limits) -> Reply {
     reply
 }
 
-/// Parses a query string.
+/// Parses a query string; an exception comes with how to answer it.
 pub fn parse(query: &str, limits: Limits) -> Result<Request, (Exception, Box<Reply>)> {
     let params = Params::new(query);
     let version = negotiate(&params);
-    let reply = Box::new(reply_for(&params, version, limits));
-    let fail = |e: Exception, reply: Box<Reply>| Err((e, reply));
+    request(&params, version, limits).map_err(|e| (e, Box::new(reply_for(&params, version, limits))))
+}
+
+fn request(params: &Params, version: Version, limits: Limits) -> Result<Request, Exception> {
     if let Some((key, message)) = params.conflict() {
-        return fail(Exception::new(Code::InvalidParameterValue, message).locator(key), reply);
+        return Err(Exception::new(Code::InvalidParameterValue, message).locator(key));
     }
     if let Some(service) = params.get("SERVICE").filter(|s| !s.eq_ignore_ascii_case("WMS")) {
-        return fail(
-            Exception::new(Code::InvalidParameterValue, format!("SERVICE={service}: only WMS is served")),
-            reply,
-        );
+        return Err(Exception::new(Code::InvalidParameterValue, format!("SERVICE={service}: only WMS is served")));
     }
     let Some(request) = params.get("REQUEST") else {
-        return fail(Exception::new(Code::MissingParameterValue, "REQUEST is missing"), reply);
+        return Err(Exception::new(Code::MissingParameterValue, "REQUEST is missing"));
     };
     match request.to_ascii_lowercase().as_str() {
         "getcapabilities" | "capabilities" => Ok(Request::GetCapabilities(version)),
-        "getmap" | "map" => get_map(&params, version, limits).map(Request::GetMap).map_err(|e| (e, reply)),
-        "getfeatureinfo" | "feature_info" => {
-            super::info::parse(&params, version, limits).map(Request::GetFeatureInfo).map_err(|e| (e, reply))
-        }
-        other => fail(Exception::new(Code::OperationNotSupported, format!("REQUEST={other} is not supported")), reply),
+        "getmap" | "map" => get_map(params, version, limits).map(Request::GetMap),
+        "getfeatureinfo" | "feature_info" => super::info::parse(params, version, limits).map(Request::GetFeatureInfo),
+        other => Err(Exception::new(Code::OperationNotSupported, format!("REQUEST={other} is not supported"))),
     }
 }
 
