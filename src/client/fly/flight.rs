@@ -359,7 +359,8 @@ fn draw(
         let held = held(renderer, (camera, &draws, &settings), options.hold_ms)?;
         (out.stats.gpu_ms, out.stats.gpu_rays_ms, out.stats.wall_ms) = (held.gpu_ms, held.gpu_rays_ms, held.wall_ms);
     }
-    let choices: Vec<Choice> = draws.iter().map(|d| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps }).collect();
+    let choice = |d: &Draw| Choice { id: d.tile.id(), shadow_steps: d.shadow_steps, morphs: d.morph_weight < 1.0 };
+    let choices: Vec<Choice> = draws.iter().map(choice).collect();
     let steps = FrameSteps::measure(&out.fetches, &out.draws, &choices);
     Ok(Drawn { out, trees, choices, steps })
 }

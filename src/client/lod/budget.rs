@@ -96,6 +96,8 @@ pub struct Choice {
     pub id: TileId,
     /// Shadow samples per hit.
     pub shadow_steps: u32,
+    /// Drawn as a morph pair (priced, or measured, as one: [`super::steps`]).
+    pub morphs: bool,
 }
 
 /// A group of trees as the selection sees it: its block on the tree
@@ -245,6 +247,7 @@ pub fn choose(candidates: &[Candidate], trees: &[(TreeItem, f64)], model: &CostM
         .map(|&i| Choice {
             id: candidates[i as usize].id,
             shadow_steps: regions.steps(i, &forest, candidates, &selection.resolutions),
+            morphs: candidates[i as usize].morphs,
         })
         .collect();
     let groups = group_budgets(trees, &selection.resolutions[regions.heads.len().min(selection.resolutions.len())..]);
@@ -518,6 +521,7 @@ mod tests {
             max_level: 16,
             limit: 100_000,
             steps: &RaySteps::new(VIEW_STEPS),
+            refining: None,
         };
         candidates(&scope).tiles
     }

@@ -33,7 +33,9 @@
 //! are *faded* when some camera sees its canopy fade on its box (the far
 //! fade, or the trees' blend near the camera: [`raycast::Fade::whole`],
 //! the renderer's rule), which the renderer draws with a costlier
-//! pipeline.
+//! pipeline. Under geomorphing a tile finer than the cut drawn *morphs*: it
+//! is drawn as a morph pair through its first interval, its rays priced as
+//! a pair's ([`RaySteps::view`]).
 
 use super::super::camera::Camera;
 use super::super::frame::TileFrame;
@@ -48,6 +50,7 @@ use crate::grid::{BBox, Sector, TileGrid, TileId};
 use crate::lod::model::{Smooth, tile_benefit_seen};
 use crate::lod::predict::Cone;
 use glam::DVec3;
+use std::collections::HashSet;
 
 /// One candidate tile.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -71,6 +74,9 @@ pub struct Candidate {
     /// fade or the trees' blend reaches it), which the renderer draws with
     /// a costlier pipeline than a whole canopy.
     pub faded: bool,
+    /// Whether it refines a tile of the cut drawn, which geomorphing draws
+    /// as a morph pair ([`Scope::refining`]).
+    pub morphs: bool,
 }
 
 /// Where the candidates are looked for and how they are judged.
@@ -99,6 +105,9 @@ pub struct Scope<'a> {
     pub limit: usize,
     /// The rays' fetches measured per tile.
     pub steps: &'a RaySteps,
+    /// Under geomorphing, the cut drawn: a tile below one of its tiles is
+    /// drawn morphing from it.
+    pub refining: Option<&'a HashSet<TileId>>,
 }
 
 /// The candidates, parents before children.
@@ -115,10 +124,14 @@ pub fn candidates(scope: &Scope) -> Candidates {
     let b = &scope.bounds;
     let area = b.sector();
     let (rows, cols) = scope.grid.tiles_on_level(0);
-    let mut stack: Vec<(TileId, Option<u32>)> =
-        (0..rows).flat_map(|r| (0..cols).map(move |c| (TileId::new(0, r, c), None))).collect();
+    // Each tile with its parent among the candidates, and whether it lies
+    // below a tile of the cut drawn (it morphs).
+    let mut stack: Vec<(TileId, Option<u32>, bool)> =
+        (0..rows).flat_map(|r| (0..cols).map(move |c| (TileId::new(0, r, c), None, false))).collect();
     let planes: Vec<[DVec3; 4]> = scope.cameras.iter().map(Camera::side_planes).collect();
-    while let Some((id, parent)) = stack.pop() {
+    let drawn = |id| scope.refining.is_some_and(|cut| cut.contains(&id));
+    while let Some((id, parent, morphs)) = stack.pop() {
+        let below = morphs || drawn(id);
         let sector = scope.grid.sector(id);
         // Strictly: a tile whose edge lies on the area's edge holds data
         // only along that edge, which the tile inside holds too.
@@ -134,18 +147,18 @@ pub fn candidates(scope: &Scope) -> Candidates {
             continue;
         }
         if !drawable(&frame, &scope.bounds) && id.level < scope.max_level {
-            stack.extend(id.children().map(|c| (c, parent)));
+            stack.extend(id.children().map(|c| (c, parent, below)));
             continue;
         }
-        let judged = judge(scope, &frame, (lo, hi), (box_lo, box_hi));
+        let judged = judge(scope, &frame, (lo, hi), (box_lo, box_hi), morphs);
         if judged.too_coarse && id.level < scope.max_level {
-            stack.extend(id.children().map(|c| (c, parent)));
+            stack.extend(id.children().map(|c| (c, parent, below)));
             continue;
         }
         let index = out.tiles.len() as u32;
         out.tiles.push(Candidate { id, parent, ..judged.candidate });
         if judged.refinable && id.level < scope.max_level && out.tiles.len() < scope.limit {
-            stack.extend(id.children().map(|c| (c, Some(index))));
+            stack.extend(id.children().map(|c| (c, Some(index), below)));
         }
     }
     bound_by_children(&mut out.tiles);
@@ -195,14 +208,21 @@ struct Judged {
 }
 
 /// Tile `id` as a candidate (no parent) for the scope's cameras, culled
-/// or not: what a drawn tile costs, measured as candidates are.
-pub fn candidate(scope: &Scope, id: TileId) -> Candidate {
+/// or not, drawn as a morph pair if it `morphs`: what a drawn tile costs,
+/// measured as candidates are.
+pub fn candidate(scope: &Scope, id: TileId, morphs: bool) -> Candidate {
     let (lo, hi) = (scope.range)(id).unwrap_or(UNKNOWN_RANGE_M);
     let frame = TileFrame::new(&scope.grid, id);
-    judge(scope, &frame, (lo, hi), local_box(&frame, lo, hi)).candidate
+    judge(scope, &frame, (lo, hi), local_box(&frame, lo, hi), morphs).candidate
 }
 
-fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi): (DVec3, DVec3)) -> Judged {
+fn judge(
+    scope: &Scope,
+    frame: &TileFrame,
+    (lo, hi): (f64, f64),
+    (box_lo, box_hi): (DVec3, DVec3),
+    morphs: bool,
+) -> Judged {
     let (sector, share) = &inside(&frame.sector, &scope.bounds);
     let spacing = frame.spacing_m.max_element();
     let flat = frame.flat_error_m(lo.abs().max(hi.abs()));
@@ -239,9 +259,10 @@ fn judge(scope: &Scope, frame: &TileFrame, (lo, hi): (f64, f64), (box_lo, box_hi
             benefit: benefit / k,
             seen_px: seen / k,
             ray_px: ray,
-            view_steps: scope.steps.view(frame.id),
-            shadow_fetches: scope.steps.shadow(frame.id),
+            view_steps: scope.steps.view(frame.id, morphs),
+            shadow_fetches: scope.steps.shadow(frame.id, morphs),
             faded,
+            morphs,
         },
         refinable,
         too_coarse,
@@ -346,20 +367,54 @@ mod tests {
         range: &dyn Fn(TileId) -> Option<(f64, f64)>,
     ) -> Candidates {
         let cameras = [camera];
-        let scope = Scope {
+        let steps = RaySteps::new(20.0);
+        candidates(&Scope { bounds, cone, trees, max_level, ..scope(&cameras, range, &steps) })
+    }
+
+    /// The scope of a walk over the demo for `cameras`.
+    fn scope<'a>(
+        cameras: &'a [Camera],
+        range: &'a dyn Fn(TileId) -> Option<(f64, f64)>,
+        steps: &'a RaySteps,
+    ) -> Scope<'a> {
+        Scope {
             grid: TileGrid::new(36.0, 513).unwrap(),
-            bounds,
-            cameras: &cameras,
-            cone,
+            bounds: DEMO,
+            cameras,
+            cone: None,
             fade: (30.0, 0.5, 2.0),
-            trees,
+            trees: None,
             known: &|_| None,
             range,
-            max_level,
+            max_level: 16,
             limit: 100_000,
-            steps: &RaySteps::new(20.0),
-        };
-        candidates(&scope)
+            steps,
+            refining: None,
+        }
+    }
+
+    #[test]
+    fn tiles_below_the_cut_drawn_morph_and_are_priced_as_pairs() {
+        let cameras = [Camera::looking(Geodetic::new(10.1, 46.32, 2500.0), 10.0, -15.0, 60.0, (320, 240))];
+        let range = |_| Some((500.0, 3500.0));
+        let mut steps = RaySteps::new(20.0);
+        // Pairs measured at 1.5 times what they were priced at alone.
+        let sums = super::super::steps::Sums { view: 30, shadow: 0, pixels: 1 };
+        let pair = super::super::steps::Pair { id: TileId::new(3, 0, 0), sums, shadow_steps: 0 };
+        steps.record(&super::super::steps::FrameSteps { pairs: vec![pair], ..Default::default() });
+        let alone = candidates(&scope(&cameras, &range, &steps)).tiles;
+        assert!(alone.iter().all(|t| !t.morphs && t.view_steps == 20.0), "nothing drawn: nothing morphs");
+        // The cut drawn: a tile the candidates refine.
+        let drawn = alone.iter().find(|t| t.id.level == 8 && alone.iter().any(|c| c.id.parent() == Some(t.id)));
+        let cut: HashSet<TileId> = drawn.map(|t| t.id).into_iter().collect();
+        let tiles = candidates(&Scope { refining: Some(&cut), ..scope(&cameras, &range, &steps) }).tiles;
+        assert_eq!(tiles.len(), alone.len(), "the same candidates");
+        let below = |id: TileId| std::iter::successors(id.parent(), TileId::parent).any(|a| cut.contains(&a));
+        for t in &tiles {
+            assert_eq!(t.morphs, below(t.id), "{:?}", t.id);
+            assert_eq!(t.view_steps, if t.morphs { 30.0 } else { 20.0 }, "{:?}", t.id);
+        }
+        assert!(tiles.iter().filter(|t| t.morphs).count() >= 4, "{cut:?}");
     }
 
     #[test]
@@ -577,6 +632,7 @@ mod tests {
             view_steps: 20.0,
             shadow_fetches: 1.0,
             faded: false,
+            morphs: false,
         };
         // A chain around the camera: each tile's plane lies just under the
         // eye (half the screen), its children in view cover little.

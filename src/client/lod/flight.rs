@@ -168,7 +168,8 @@ impl BudgetFlight {
                 ahead::ahead(&self.predictor, camera, t_s, ahead::stages(self.morphs.is_some()), &self.look, &ground);
             let trees = self.tree_items(&cameras);
             let (model, budget, steps) = (self.model(), self.aimed(), self.steps.clone());
-            let request = Request { cameras, cone: Some(cone), trees, model, budget, steps };
+            let refining = self.morphs.as_ref().map(|m| Arc::new(m.drawn().clone()));
+            let request = Request { cameras, cone: Some(cone), trees, model, budget, steps, refining };
             if self.worker.submit(request) {
                 self.requested_s = t_s;
             }
@@ -184,7 +185,8 @@ impl BudgetFlight {
         if self.current.is_none() {
             let cameras = std::slice::from_ref(camera);
             let trees = self.tree_items(cameras);
-            self.current = Some(self.selector.select(cameras, None, &trees, (&model, &self.budget), &self.steps));
+            let pricing = (self.steps.as_ref(), self.morphs.as_ref().map(Morphs::drawn));
+            self.current = Some(self.selector.select(cameras, None, &trees, (&model, &self.budget), pricing));
         }
         self.current.clone().unwrap_or_default()
     }
@@ -467,6 +469,26 @@ mod tests {
     }
 
     #[test]
+    fn selections_price_the_refinements_of_the_cut_drawn_as_morph_pairs() {
+        let mut f = flight();
+        let first = f.frame(0.0, &camera(10.05));
+        assert!(first.cut.tiles.iter().all(|c| !c.morphs), "nothing drawn before: {:?}", first.cut.tiles);
+        f.morphs(0.0, &ids(&first));
+        // Lower, a period later: the next cut refines the one drawn.
+        let low = Camera::looking(Geodetic::new(10.05, 46.33, 1200.0), 0.0, -20.0, 60.0, (160, 120));
+        let next = (0..500).find_map(|_| {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+            let s = f.frame(1.0, &low);
+            (ids(&s) != ids(&first)).then_some(s)
+        });
+        let next = next.expect("a new cut");
+        let drawn: std::collections::HashSet<TileId> = ids(&first).into_iter().collect();
+        let below = |id: TileId| std::iter::successors(id.parent(), TileId::parent).any(|a| drawn.contains(&a));
+        assert!(next.cut.tiles.iter().all(|c| c.morphs == below(c.id)), "{:?}", next.cut.tiles);
+        assert!(next.cut.tiles.iter().any(|c| c.morphs), "it refines: {:?}", next.cut.tiles);
+    }
+
+    #[test]
     fn the_frame_that_starts_a_selection_does_not_wait_for_it() {
         // Regression: a frame a hair over τ after the last request (float
         // times of frames τ apart) was taken for a stale one and waited for
@@ -479,7 +501,7 @@ mod tests {
 
     /// A frame whose every pixel took `steps` view-ray steps.
     fn even(steps: f64) -> FrameSteps {
-        FrameSteps { view: Means { mean: Some(steps), tiles: Vec::new() }, shadow: Means::default() }
+        FrameSteps { view: Means { mean: Some(steps), tiles: Vec::new() }, ..FrameSteps::default() }
     }
 
     #[test]
@@ -505,7 +527,7 @@ mod tests {
         let cam = camera(10.05);
         let mut tiles = f.frame(0.0, &cam).cut.tiles;
         assert!(tiles.len() > 1);
-        assert_eq!(f.steps().view(tiles[0].id), VIEW_STEPS, "before any frame");
+        assert_eq!(f.steps().view(tiles[0].id, false), VIEW_STEPS, "before any frame");
         // Ray pixels: priced at 10⁶ steps, a tile costs its pixels in Mpx·steps.
         let px = |tiles: &[Choice]| f.selector.features(&cam, tiles, &RaySteps::new(1e6)).raycast_mpx_steps;
         tiles.sort_by(|a, b| px(&[*b]).total_cmp(&px(&[*a])));
@@ -517,14 +539,15 @@ mod tests {
         let measured = FrameSteps {
             view: Means { mean: Some(12.0), tiles: vec![(tiles[0].id, 35.0)] },
             shadow: Means { mean: Some(0.5), tiles: vec![(tiles[0].id, 1.6)] },
+            pairs: Vec::new(),
         };
         let features = f.observe(&cam, &tiles, &trees::Drawn::default(), (50.0, &measured)).features;
         let expected = (first * 35.0 + rest * 12.0) / 1e6;
         assert!((features.raycast_mpx_steps / expected - 1.0).abs() < 1e-9, "{features:?} against {expected}");
         let expected = (first * 1.6 + rest * 0.5) * 10.0 / 1e6;
         assert!((features.shadow_mpx_steps / expected - 1.0).abs() < 1e-9, "{features:?} against {expected}");
-        assert_eq!((f.steps().view(tiles[0].id), f.steps().view(tiles[1].id)), (35.0, 12.0));
-        assert_eq!((f.steps().shadow(tiles[0].id), f.steps().shadow(tiles[1].id)), (1.6, 0.5));
+        assert_eq!((f.steps().view(tiles[0].id, false), f.steps().view(tiles[1].id, false)), (35.0, 12.0));
+        assert_eq!((f.steps().shadow(tiles[0].id, false), f.steps().shadow(tiles[1].id, false)), (1.6, 0.5));
     }
 
     #[test]

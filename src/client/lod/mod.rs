@@ -33,11 +33,12 @@ pub mod worker;
 use super::camera::Camera;
 use super::store::Knowledge;
 use super::trees::TreeSettings;
-use crate::grid::{BBox, TileGrid};
+use crate::grid::{BBox, TileGrid, TileId};
 use crate::lod::model::{CostFeatures, CostModel};
 use crate::lod::predict::Cone;
 use budget::{Budget, Choice, Cut, TreeItem};
 use candidates::Scope;
+use std::collections::HashSet;
 use std::time::Instant;
 use steps::RaySteps;
 
@@ -84,17 +85,18 @@ impl Selector {
 
     /// The cut for `cameras` (the cone, if any, widens culling) and the
     /// splat budgets of tree groups `trees` under `budget` with cost
-    /// `model`, tiles' rays priced at `steps`.
+    /// `model`, tiles' rays priced at `steps`, those refining the cut
+    /// `refining` (under geomorphing) as morph pairs.
     pub fn select(
         &self,
         cameras: &[Camera],
         cone: Option<Cone>,
         trees: &[TreeItem],
         (model, budget): (&CostModel, &Budget),
-        steps: &RaySteps,
+        (steps, refining): (&RaySteps, Option<&HashSet<TileId>>),
     ) -> Selected {
         let start = Instant::now();
-        let found = self.with_scope(cameras, cone, steps, candidates::candidates);
+        let found = self.with_scope(cameras, cone, (steps, refining), candidates::candidates);
         let seen: Vec<(TreeItem, f64)> = trees.iter().map(|t| (*t, tree_px(cameras, t))).collect();
         let cut = budget::choose(&found.tiles, &seen, model, budget);
         Selected { cut, candidates: found.tiles.len(), ms: start.elapsed().as_secs_f64() * 1e3 }
@@ -104,10 +106,10 @@ impl Selector {
     /// `steps`, measured as a selection measures its candidates (so
     /// calibrated constants fit predictions).
     pub fn features(&self, camera: &Camera, drawn: &[Choice], steps: &RaySteps) -> CostFeatures {
-        self.with_scope(std::slice::from_ref(camera), None, steps, |scope| {
+        self.with_scope(std::slice::from_ref(camera), None, (steps, None), |scope| {
             drawn
                 .iter()
-                .map(|c| budget::features(&candidates::candidate(scope, c.id), c.shadow_steps))
+                .map(|c| budget::features(&candidates::candidate(scope, c.id, c.morphs), c.shadow_steps))
                 .fold(CostFeatures::default(), |a, f| a.plus(&f))
         })
     }
@@ -116,7 +118,7 @@ impl Selector {
         &self,
         cameras: &[Camera],
         cone: Option<Cone>,
-        steps: &RaySteps,
+        (steps, refining): (&RaySteps, Option<&HashSet<TileId>>),
         f: impl FnOnce(&Scope) -> R,
     ) -> R {
         let known = |id| self.knowledge.get(id);
@@ -133,6 +135,7 @@ impl Selector {
             max_level: self.max_level,
             limit: MAX_CANDIDATES,
             steps,
+            refining,
         })
     }
 }

@@ -15,6 +15,16 @@
 //! not drawn within [`MAX_AGE_FRAMES`], with its nearest ancestor's that
 //! was (refining keeps the view's geometry); else with the mean of the last
 //! frame that cast such rays.
+//!
+//! Under geomorphing a tile that refines the cut drawn is drawn as a morph
+//! pair through its first interval: two surfaces read per height, bounds
+//! enclosing both (in the demo's four-tile view 1.3 times the view and
+//! twice the shadow fetches of the tile alone). Its measures are kept apart
+//! from the tiles' own: a frame's pairs give the ratio of what their rays
+//! took to what they were priced at alone (their ancestors' measures, for
+//! a tile refined), and a tile that will be drawn morphing is priced at its
+//! own measure times the last such ratio ([`RaySteps::view`] with
+//! `morphs`).
 
 use super::budget::Choice;
 use crate::grid::TileId;
@@ -44,6 +54,9 @@ pub struct RaySteps {
     view: PerTile,
     /// Shadow-ray fetches per ray-cast pixel and shadow step.
     shadow: PerTile,
+    /// What the rays of tiles drawn as morph pairs took over what they
+    /// were priced at alone, view and shadow, as last measured.
+    pair: [f64; 2],
     /// Frames recorded.
     frame: u64,
 }
@@ -79,35 +92,57 @@ pub struct FrameSteps {
     pub view: Means,
     /// Shadow rays.
     pub shadow: Means,
+    /// The tiles drawn as morph pairs, apart from the tiles' own measures.
+    pub pairs: Vec<Pair>,
+}
+
+/// The rays of a tile drawn as a morph pair in one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pair {
+    /// The tile.
+    pub id: TileId,
+    /// Its view-ray fetches, shadow-ray fetches and ray-cast pixels.
+    pub sums: Sums,
+    /// Its shadow steps.
+    pub shadow_steps: u32,
 }
 
 /// Per tile: view fetches, shadow fetches, ray-cast pixels.
-#[derive(Clone, Copy, Default)]
-struct Sums {
-    view: u64,
-    shadow: u64,
-    pixels: u64,
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Sums {
+    /// View-ray fetches.
+    pub view: u64,
+    /// Shadow-ray fetches.
+    pub shadow: u64,
+    /// Ray-cast pixels.
+    pub pixels: u64,
 }
 
 impl FrameSteps {
     /// The rays of a frame whose pixels took `fetches` (view-ray fetches,
     /// 0 where no ray was cast; shadow-ray fetches) on the draw `draws`
-    /// names (`k + 1` for draw `k` of `drawn`, 0 for none).
+    /// names (`k + 1` for draw `k` of `drawn`, 0 for none). The frame's
+    /// mean leaves out the pixels of tiles drawn as morph pairs.
     pub fn measure(fetches: &[[u32; 2]], draws: &[u32], drawn: &[Choice]) -> FrameSteps {
         let mut sums = vec![Sums::default(); drawn.len()];
         let (mut total, mut pixels) = (0u64, 0u64);
         for (f, &d) in fetches.iter().zip(draws).filter(|(f, _)| f[0] > 0) {
-            total += u64::from(f[0]);
-            pixels += 1;
-            if let Some(s) = (d as usize).checked_sub(1).and_then(|k| sums.get_mut(k)) {
+            let k = (d as usize).checked_sub(1).filter(|&k| k < drawn.len());
+            if k.is_none_or(|k| !drawn[k].morphs) {
+                total += u64::from(f[0]);
+                pixels += 1;
+            }
+            if let Some(s) = k.map(|k| &mut sums[k]) {
                 (s.view, s.shadow, s.pixels) = (s.view + u64::from(f[0]), s.shadow + u64::from(f[1]), s.pixels + 1);
             }
         }
-        let tiles = || drawn.iter().zip(&sums);
-        let view = tiles().map(|(c, s)| (c.id, s.view, s.pixels)).collect();
-        let shadow = tiles().map(|(c, s)| (c.id, s.shadow, s.pixels * u64::from(c.shadow_steps))).collect();
+        let (pairs, own): (Vec<_>, Vec<_>) = drawn.iter().zip(sums).partition(|(c, _)| c.morphs);
+        let view = own.iter().map(|(c, s)| (c.id, s.view, s.pixels)).collect();
+        let shadow = own.iter().map(|(c, s)| (c.id, s.shadow, s.pixels * u64::from(c.shadow_steps))).collect();
         let (view, shadow) = (Means::of(view, Some((total, pixels))), Means::of(shadow, None));
-        FrameSteps { view, shadow }
+        let pairs = pairs.into_iter().filter(|(_, s)| s.pixels > 0);
+        let pairs = pairs.map(|(c, sums)| Pair { id: c.id, sums, shadow_steps: c.shadow_steps }).collect();
+        FrameSteps { view, shadow, pairs }
     }
 }
 
@@ -126,7 +161,12 @@ impl RaySteps {
     /// Nothing measured yet: every tile's view rays at `view_prior` steps,
     /// its shadow rays at [`SHADOW_FETCHES_PER_STEP`].
     pub fn new(view_prior: f64) -> RaySteps {
-        RaySteps { view: PerTile::new(view_prior), shadow: PerTile::new(SHADOW_FETCHES_PER_STEP), frame: 0 }
+        RaySteps {
+            view: PerTile::new(view_prior),
+            shadow: PerTile::new(SHADOW_FETCHES_PER_STEP),
+            pair: [1.0; 2],
+            frame: 0,
+        }
     }
 
     /// View-ray steps per ray-cast pixel of the last frame that cast rays
@@ -135,24 +175,53 @@ impl RaySteps {
         self.view.mean
     }
 
-    /// View-ray steps per ray-cast pixel to price tile `id` with.
-    pub fn view(&self, id: TileId) -> f64 {
-        self.view.of(id, self.frame)
+    /// View-ray steps per ray-cast pixel to price tile `id` with, drawn
+    /// as a morph pair if it `morphs`.
+    pub fn view(&self, id: TileId, morphs: bool) -> f64 {
+        self.view.of(id, self.frame) * if morphs { self.pair[0] } else { 1.0 }
     }
 
     /// Shadow-ray fetches per ray-cast pixel and shadow step to price tile
-    /// `id` with (at least [`SHADOW_FETCHES_FLOOR`]).
-    pub fn shadow(&self, id: TileId) -> f64 {
-        self.shadow.of(id, self.frame).max(SHADOW_FETCHES_FLOOR)
+    /// `id` with, drawn as a morph pair if it `morphs` (at least
+    /// [`SHADOW_FETCHES_FLOOR`]).
+    pub fn shadow(&self, id: TileId, morphs: bool) -> f64 {
+        let pair = if morphs { self.pair[1] } else { 1.0 };
+        (self.shadow.of(id, self.frame) * pair).max(SHADOW_FETCHES_FLOOR)
     }
 
     /// Records a drawn frame; a frame without ray-cast pixels (or without
-    /// shadow rays) leaves the mean as it was.
+    /// shadow rays, or without morph pairs) leaves the mean (the pairs'
+    /// ratio) as it was.
     pub fn record(&mut self, measured: &FrameSteps) {
+        self.record_pairs(&measured.pairs);
         self.frame += 1;
         self.view.record(&measured.view, self.frame);
         self.shadow.record(&measured.shadow, self.frame);
     }
+
+    /// The ratios of what the `pairs`' rays took to what they were priced
+    /// at alone, before this frame's measures price them.
+    fn record_pairs(&mut self, pairs: &[Pair]) {
+        let (view, shadow) = (&self.view, &self.shadow);
+        let frame = self.frame;
+        let took: f64 = pairs.iter().map(|p| p.sums.view as f64).sum();
+        let priced: f64 = pairs.iter().map(|p| p.sums.pixels as f64 * view.of(p.id, frame)).sum();
+        if let Some(r) = ratio(took, priced) {
+            self.pair[0] = r;
+        }
+        let shadowed = || pairs.iter().filter(|p| p.shadow_steps > 0);
+        let took: f64 = shadowed().map(|p| p.sums.shadow as f64).sum();
+        let steps = |p: &Pair| (p.sums.pixels * u64::from(p.shadow_steps)) as f64;
+        let priced: f64 = shadowed().map(|p| steps(p) * shadow.of(p.id, frame)).sum();
+        if let Some(r) = ratio(took, priced) {
+            self.pair[1] = r;
+        }
+    }
+}
+
+/// `took / priced`, where it is a finite ratio.
+fn ratio(took: f64, priced: f64) -> Option<f64> {
+    (priced > 0.0 && took.is_finite() && priced.is_finite()).then(|| took / priced)
 }
 
 impl PerTile {
@@ -185,13 +254,17 @@ mod tests {
 
     /// A frame of view rays only, `mean` steps over the frame.
     fn view_only(mean: f64, tiles: Vec<(TileId, f64)>) -> FrameSteps {
-        FrameSteps { view: Means { mean: Some(mean), tiles }, shadow: Means::default() }
+        FrameSteps { view: Means { mean: Some(mean), tiles }, ..FrameSteps::default() }
     }
 
     #[test]
     fn a_frame_is_measured_per_tile_over_its_ray_cast_pixels() {
         let ids = [TileId::new(5, 1, 2), TileId::new(5, 1, 3), TileId::new(6, 0, 0)];
-        let drawn = [(ids[0], 2), (ids[1], 0), (ids[2], 5)].map(|(id, shadow_steps)| Choice { id, shadow_steps });
+        let drawn = [(ids[0], 2), (ids[1], 0), (ids[2], 5)].map(|(id, shadow_steps)| Choice {
+            id,
+            shadow_steps,
+            morphs: false,
+        });
         // Pixels: two on the first tile, one on the second (drawn without
         // shadow steps), one plain pixel (no fetches) and one sky pixel; the
         // third tile casts no rays.
@@ -208,7 +281,7 @@ mod tests {
         // ... and priced at the floor: given more steps they may not stop.
         let mut steps = RaySteps::new(20.0);
         steps.record(&m);
-        assert_eq!(steps.shadow(ids[2]), SHADOW_FETCHES_FLOOR);
+        assert_eq!(steps.shadow(ids[2], false), SHADOW_FETCHES_FLOOR);
     }
 
     #[test]
@@ -216,20 +289,48 @@ mod tests {
         let mut steps = RaySteps::new(20.0);
         let coarse = TileId::new(4, 3, 5);
         let near = TileId::new(6, 12, 20);
-        assert_eq!((steps.view(near), steps.shadow(near)), (20.0, SHADOW_FETCHES_PER_STEP), "the priors");
+        assert_eq!((steps.view(near, false), steps.shadow(near, false)), (20.0, SHADOW_FETCHES_PER_STEP), "the priors");
         let shadow = Means { mean: Some(1.5), tiles: vec![(coarse, 1.8)] };
         steps.record(&FrameSteps { shadow, ..view_only(30.0, vec![(coarse, 40.0), (near, 8.0)]) });
-        assert_eq!(steps.view(near), 8.0);
-        assert_eq!(steps.view(coarse), 40.0);
+        assert_eq!(steps.view(near, false), 8.0);
+        assert_eq!(steps.view(coarse, false), 40.0);
         // A descendant of the coarse tile not drawn: its ancestor's steps;
         // through the near one, the near one's.
-        assert_eq!(steps.view(TileId::new(7, 24, 40)), 8.0);
-        assert_eq!(steps.view(TileId::new(5, 6, 11)), 40.0);
+        assert_eq!(steps.view(TileId::new(7, 24, 40), false), 8.0);
+        assert_eq!(steps.view(TileId::new(5, 6, 11), false), 40.0);
         // Elsewhere, and above both: the frame's mean.
-        assert_eq!(steps.view(TileId::new(4, 0, 0)), 30.0);
-        assert_eq!(steps.view(TileId::new(3, 1, 2)), 30.0);
+        assert_eq!(steps.view(TileId::new(4, 0, 0), false), 30.0);
+        assert_eq!(steps.view(TileId::new(3, 1, 2), false), 30.0);
         // Shadow rays likewise: the near tile, drawn without, its ancestor's.
-        assert_eq!((steps.shadow(near), steps.shadow(coarse), steps.shadow(TileId::new(4, 0, 0))), (1.8, 1.8, 1.5));
+        assert_eq!(
+            (steps.shadow(near, false), steps.shadow(coarse, false), steps.shadow(TileId::new(4, 0, 0), false)),
+            (1.8, 1.8, 1.5)
+        );
+    }
+
+    #[test]
+    fn morph_pairs_are_measured_apart_and_price_the_tiles_that_will_morph() {
+        let (coarse, fine) = (TileId::new(5, 1, 2), TileId::new(6, 2, 4));
+        let mut steps = RaySteps::new(20.0);
+        let shadow = Means { mean: Some(1.0), tiles: vec![(coarse, 1.0)] };
+        steps.record(&FrameSteps { shadow, ..view_only(12.0, vec![(coarse, 10.0)]) });
+        assert_eq!((steps.view(fine, true), steps.shadow(fine, true)), (10.0, 1.0), "no pair measured yet");
+        // The fine tile drawn as a pair refining the coarse one: two pixels
+        // of 15 view fetches and 2 shadow steps of 2 fetches each.
+        let drawn = [Choice { id: fine, shadow_steps: 2, morphs: true }];
+        let m = FrameSteps::measure(&[[15, 4], [15, 4], [0, 0]], &[1, 1, 0], &drawn);
+        let sums = Sums { view: 30, shadow: 8, pixels: 2 };
+        assert_eq!(m.pairs, vec![Pair { id: fine, sums, shadow_steps: 2 }]);
+        assert_eq!((m.view.mean, m.view.tiles.len(), m.shadow.tiles.len()), (None, 0, 0), "not the tile's own");
+        steps.record(&m);
+        // Priced alone as before (its ancestor's, the frame's mean kept);
+        // as a pair, 1.5 times the view and twice the shadow fetches.
+        assert_eq!((steps.view(fine, false), steps.view_mean(), steps.shadow(fine, false)), (10.0, 12.0, 1.0));
+        assert_eq!((steps.view(fine, true), steps.shadow(fine, true)), (15.0, 2.0));
+        assert_eq!(steps.view(TileId::new(4, 9, 9), true), 18.0, "elsewhere, the mean as a pair");
+        // A frame without pairs keeps the ratios.
+        steps.record(&view_only(12.0, vec![(coarse, 10.0)]));
+        assert_eq!((steps.view(fine, true), steps.shadow(fine, true)), (15.0, 2.0));
     }
 
     #[test]
@@ -242,18 +343,18 @@ mod tests {
             steps.record(&FrameSteps::default());
         }
         assert_eq!(
-            (steps.view(tile), steps.shadow(tile)),
+            (steps.view(tile, false), steps.shadow(tile, false)),
             (40.0, 0.7),
             "drawn within the last {MAX_AGE_FRAMES} frames"
         );
         steps.record(&FrameSteps::default());
         assert_eq!(
-            (steps.view(tile), steps.view_mean(), steps.shadow(tile)),
+            (steps.view(tile, false), steps.view_mean(), steps.shadow(tile, false)),
             (30.0, 30.0, 0.8),
             "aged out; the means stay"
         );
         assert!(steps.view.tiles.is_empty() && steps.shadow.tiles.is_empty(), "and forgotten");
         steps.record(&view_only(12.0, vec![(tile, 11.0)]));
-        assert_eq!(steps.view(tile), 11.0);
+        assert_eq!(steps.view(tile, false), 11.0);
     }
 }

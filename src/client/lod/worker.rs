@@ -8,8 +8,10 @@ use super::super::camera::Camera;
 use super::budget::{Budget, TreeItem};
 use super::steps::RaySteps;
 use super::{Selected, Selector};
+use crate::grid::TileId;
 use crate::lod::model::CostModel;
 use crate::lod::predict::Cone;
+use std::collections::HashSet;
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
 use std::thread::JoinHandle;
@@ -29,6 +31,8 @@ pub struct Request {
     pub budget: Budget,
     /// The rays' fetches per tile.
     pub steps: Arc<RaySteps>,
+    /// Under geomorphing, the cut drawn, whose refinements morph.
+    pub refining: Option<Arc<HashSet<TileId>>>,
 }
 
 /// The selection thread and its channels.
@@ -46,7 +50,8 @@ impl Worker {
         let (outbox, results) = channel();
         let thread = std::thread::Builder::new().name("lod-select".into()).spawn(move || {
             for r in inbox {
-                let selected = selector.select(&r.cameras, r.cone, &r.trees, (&r.model, &r.budget), &r.steps);
+                let pricing = (r.steps.as_ref(), r.refining.as_deref());
+                let selected = selector.select(&r.cameras, r.cone, &r.trees, (&r.model, &r.budget), pricing);
                 if outbox.send(selected).is_err() {
                     break;
                 }
