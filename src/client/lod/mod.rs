@@ -107,9 +107,11 @@ impl Selector {
     /// calibrated constants fit predictions).
     pub fn features(&self, camera: &Camera, drawn: &[Choice], steps: &RaySteps) -> CostFeatures {
         self.with_scope(std::slice::from_ref(camera), None, (steps, None), |scope| {
-            drawn
+            let tiles: Vec<_> = drawn.iter().map(|c| (c.id, c.morphs)).collect();
+            candidates::drawn(scope, &tiles)
                 .iter()
-                .map(|c| budget::features(&candidates::candidate(scope, c.id, c.morphs), c.shadow_steps))
+                .zip(drawn)
+                .map(|(t, c)| budget::features(t, c.shadow_steps))
                 .fold(CostFeatures::default(), |a, f| a.plus(&f))
         })
     }
