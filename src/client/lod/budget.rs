@@ -96,7 +96,9 @@ pub struct Choice {
     pub id: TileId,
     /// Shadow samples per hit.
     pub shadow_steps: u32,
-    /// Drawn as a morph pair (priced, or measured, as one: [`super::steps`]).
+    /// Drawn as a morph pair: a selection's refinement of the cut it
+    /// replaces (priced as one), or a tile drawn morphing up or down
+    /// (measured as one: [`super::steps`]).
     pub morphs: bool,
 }
 

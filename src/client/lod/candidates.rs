@@ -30,12 +30,14 @@
 //! in a valley, measured on a plane just under the eye, would otherwise
 //! cost half the screen while its children cost nothing, and refining it
 //! would lower the cost, which greedy increments never follow. A tile
-//! drawn is priced the same way ([`drawn`]: a walk from it), so that the
-//! cost model learns from frames priced as the selections price them. Its rays
+//! drawn is priced by the same rule ([`drawn`]: a walk from it, from the
+//! camera that drew it), so that the cost model learns from frames priced
+//! as the selections price them. Its rays
 //! are *faded* when some camera sees its canopy fade on its box (the far
 //! fade, or the trees' blend near the camera: [`raycast::Fade::whole`],
 //! the renderer's rule), which the renderer draws with a costlier
-//! pipeline. Under geomorphing a tile finer than the cut drawn *morphs*: it
+//! pipeline. Under geomorphing a tile below a tile of the cut it replaces
+//! *morphs*: it
 //! is drawn as a morph pair through its first interval, its rays priced as
 //! a pair's ([`RaySteps::view`]).
 
@@ -127,12 +129,17 @@ pub fn candidates(scope: &Scope) -> Candidates {
 
 /// The drawn tiles as candidates, priced as a selection prices them: each
 /// the first candidate of a walk from it (its ray pixels capped by its
-/// children in view), or where the walk does not take it (out of view,
-/// too coarse to draw) as [`candidate`] prices it alone.
+/// children in view; the walks share the scope's limit), or where the
+/// walk does not take it (out of view, too coarse to draw) as
+/// [`candidate`] prices it alone.
 pub fn drawn(scope: &Scope, tiles: &[(TileId, bool)]) -> Vec<Candidate> {
-    let walked = |&(id, morphs): &(TileId, bool)| walk(scope, vec![(id, None, morphs)]).tiles.first().copied();
-    let alone = |&(id, morphs): &(TileId, bool)| candidate(scope, id, morphs);
-    tiles.iter().map(|t| walked(t).filter(|c| c.id == t.0).unwrap_or_else(|| alone(t))).collect()
+    let mut left = scope.limit;
+    let mut walked = |id, morphs| {
+        let found = walk(&Scope { limit: left, ..*scope }, vec![(id, None, morphs)]).tiles;
+        left = left.saturating_sub(found.len());
+        found.first().copied().filter(|c| c.id == id)
+    };
+    tiles.iter().map(|&(id, morphs)| walked(id, morphs).unwrap_or_else(|| candidate(scope, id, morphs))).collect()
 }
 
 /// Walks the quadtree down from `stack`: each tile with its parent among

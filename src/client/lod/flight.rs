@@ -24,6 +24,7 @@ use crate::grid::{TileGrid, TileId};
 use crate::lod::calibrate::{CalibratorSettings, CostCalibrator};
 use crate::lod::model::{CostFeatures, CostModel};
 use crate::lod::predict::PathPredictor;
+use std::collections::HashSet;
 use std::sync::Arc;
 
 /// The calibrator's settings: a light ridge toward the (freely scaled)
@@ -168,7 +169,7 @@ impl BudgetFlight {
                 ahead::ahead(&self.predictor, camera, t_s, ahead::stages(self.morphs.is_some()), &self.look, &ground);
             let trees = self.tree_items(&cameras);
             let (model, budget, steps) = (self.model(), self.aimed(), self.steps.clone());
-            let refining = self.morphs.as_ref().map(|m| Arc::new(m.drawn().clone()));
+            let refining = self.refining().map(Arc::new);
             let request = Request { cameras, cone: Some(cone), trees, model, budget, steps, refining };
             if self.worker.submit(request) {
                 self.requested_s = t_s;
@@ -185,10 +186,18 @@ impl BudgetFlight {
         if self.current.is_none() {
             let cameras = std::slice::from_ref(camera);
             let trees = self.tree_items(cameras);
-            let pricing = (self.steps.as_ref(), self.morphs.as_ref().map(Morphs::drawn));
+            let refining = self.refining();
+            let pricing = (self.steps.as_ref(), refining.as_ref());
             self.current = Some(self.selector.select(cameras, None, &trees, (&model, &self.budget), pricing));
         }
         self.current.clone().unwrap_or_default()
+    }
+
+    /// Under geomorphing, the cut a selection started now replaces (the
+    /// held one, else the one drawn): its refinements will morph.
+    fn refining(&self) -> Option<HashSet<TileId>> {
+        self.morphs.as_ref()?;
+        Some(self.pending.as_ref().or(self.current.as_ref()).map_or_else(Vec::new, ids).into_iter().collect())
     }
 
     /// The tiles drawn, on which the next selections' tree groups grow.
@@ -469,12 +478,14 @@ mod tests {
     }
 
     #[test]
-    fn selections_price_the_refinements_of_the_cut_drawn_as_morph_pairs() {
+    fn selections_price_the_refinements_of_the_cut_they_replace_as_morph_pairs() {
         let mut f = flight();
         let first = f.frame(0.0, &camera(10.05));
         assert!(first.cut.tiles.iter().all(|c| !c.morphs), "nothing drawn before: {:?}", first.cut.tiles);
-        f.morphs(0.0, &ids(&first));
-        // Lower, a period later: the next cut refines the one drawn.
+        // Lower, a period later: the next cut refines the first. Its
+        // request starts before the first is drawn (no `morphs` call):
+        // judged against the cut the morphs last saw drawn (review), none
+        // of its tiles was priced as morphing.
         let low = Camera::looking(Geodetic::new(10.05, 46.33, 1200.0), 0.0, -20.0, 60.0, (160, 120));
         let next = (0..500).find_map(|_| {
             std::thread::sleep(std::time::Duration::from_millis(10));

@@ -105,12 +105,6 @@ impl Morphs {
         out
     }
 
-    /// The last cut drawn: a tile of a later cut below one of its tiles
-    /// will morph from it.
-    pub fn drawn(&self) -> &HashSet<TileId> {
-        &self.drawn
-    }
-
     /// Whether the downmorphs of the last cut drawn were all complete and
     /// no tile the next cut refines was morphing (the next cut may be
     /// drawn: its coarse tiles lie where they ended, its fine ones start

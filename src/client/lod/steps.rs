@@ -20,11 +20,12 @@
 //! pair through its first interval: two surfaces read per height, bounds
 //! enclosing both (in the demo's four-tile view 1.3 times the view and
 //! twice the shadow fetches of the tile alone). Its measures are kept apart
-//! from the tiles' own: a frame's pairs give the ratio of what their rays
-//! took to what they were priced at alone (their ancestors' measures, for
-//! a tile refined), and a tile that will be drawn morphing is priced at its
-//! own measure times the last such ratio ([`RaySteps::view`] with
-//! `morphs`).
+//! from the tiles' own: the pairs' rays give the ratio of what they took
+//! to what they were priced at alone (their ancestors' measures, for a
+//! tile refined; a tile morphing down onto a coarser one, its own), over
+//! the frames that drew pairs, the older weighing less
+//! ([`PAIR_MEMORY`]), and a tile that will be drawn morphing is priced at
+//! its own measure times that ratio ([`RaySteps::view`] with `morphs`).
 
 use super::budget::Choice;
 use crate::grid::TileId;
@@ -54,9 +55,9 @@ pub struct RaySteps {
     view: PerTile,
     /// Shadow-ray fetches per ray-cast pixel and shadow step.
     shadow: PerTile,
-    /// What the rays of tiles drawn as morph pairs took over what they
-    /// were priced at alone, view and shadow, as last measured.
-    pair: [f64; 2],
+    /// What the rays of tiles drawn as morph pairs took, and what they
+    /// were priced at alone: view and shadow.
+    pair: [Ratio; 2],
     /// Frames recorded.
     frame: u64,
 }
@@ -164,7 +165,7 @@ impl RaySteps {
         RaySteps {
             view: PerTile::new(view_prior),
             shadow: PerTile::new(SHADOW_FETCHES_PER_STEP),
-            pair: [1.0; 2],
+            pair: [Ratio::default(); 2],
             frame: 0,
         }
     }
@@ -178,15 +179,15 @@ impl RaySteps {
     /// View-ray steps per ray-cast pixel to price tile `id` with, drawn
     /// as a morph pair if it `morphs`.
     pub fn view(&self, id: TileId, morphs: bool) -> f64 {
-        self.view.of(id, self.frame) * if morphs { self.pair[0] } else { 1.0 }
+        self.view.of(id, self.frame) * if morphs { self.pair[0].value() } else { 1.0 }
     }
 
     /// Shadow-ray fetches per ray-cast pixel and shadow step to price tile
     /// `id` with, drawn as a morph pair if it `morphs` (at least
     /// [`SHADOW_FETCHES_FLOOR`]).
     pub fn shadow(&self, id: TileId, morphs: bool) -> f64 {
-        let pair = if morphs { self.pair[1] } else { 1.0 };
-        (self.shadow.of(id, self.frame) * pair).max(SHADOW_FETCHES_FLOOR)
+        let pair = if morphs { self.pair[1].value() } else { 1.0 };
+        self.shadow.of(id, self.frame).max(SHADOW_FETCHES_FLOOR) * pair
     }
 
     /// Records a drawn frame; a frame without ray-cast pixels (or without
@@ -199,29 +200,51 @@ impl RaySteps {
         self.shadow.record(&measured.shadow, self.frame);
     }
 
-    /// The ratios of what the `pairs`' rays took to what they were priced
-    /// at alone, before this frame's measures price them.
+    /// Adds what the `pairs`' rays took and what they were priced at
+    /// alone, before this frame's measures price them.
     fn record_pairs(&mut self, pairs: &[Pair]) {
-        let (view, shadow) = (&self.view, &self.shadow);
-        let frame = self.frame;
+        if pairs.is_empty() {
+            return;
+        }
+        let (view, shadow, frame) = (&self.view, &self.shadow, self.frame);
         let took: f64 = pairs.iter().map(|p| p.sums.view as f64).sum();
         let priced: f64 = pairs.iter().map(|p| p.sums.pixels as f64 * view.of(p.id, frame)).sum();
-        if let Some(r) = ratio(took, priced) {
-            self.pair[0] = r;
-        }
+        self.pair[0].add(took, priced);
         let shadowed = || pairs.iter().filter(|p| p.shadow_steps > 0);
         let took: f64 = shadowed().map(|p| p.sums.shadow as f64).sum();
         let steps = |p: &Pair| (p.sums.pixels * u64::from(p.shadow_steps)) as f64;
-        let priced: f64 = shadowed().map(|p| steps(p) * shadow.of(p.id, frame)).sum();
-        if let Some(r) = ratio(took, priced) {
-            self.pair[1] = r;
-        }
+        let priced: f64 = shadowed().map(|p| steps(p) * shadow.of(p.id, frame).max(SHADOW_FETCHES_FLOOR)).sum();
+        self.pair[1].add(took, priced);
     }
 }
 
-/// `took / priced`, where it is a finite ratio.
-fn ratio(took: f64, priced: f64) -> Option<f64> {
-    (priced > 0.0 && took.is_finite() && priced.is_finite()).then(|| took / priced)
+/// Weight of a frame's morph pairs against the next frame's that draws
+/// some: a pair seen in a sliver of the screen moves the ratio by its
+/// share of the pixels, and the pairs of the last few frames with pairs
+/// make it.
+pub const PAIR_MEMORY: f64 = 0.75;
+
+/// What rays took over what they were priced at, summed over frames with
+/// weights [`PAIR_MEMORY`]`^age`.
+#[derive(Clone, Copy, Debug, Default)]
+struct Ratio {
+    took: f64,
+    priced: f64,
+}
+
+impl Ratio {
+    /// The ratio; 1 before anything was priced.
+    fn value(&self) -> f64 {
+        if self.priced > 0.0 { self.took / self.priced } else { 1.0 }
+    }
+
+    /// Adds a frame's, if it priced anything.
+    fn add(&mut self, took: f64, priced: f64) {
+        if priced > 0.0 && priced.is_finite() && took.is_finite() {
+            self.took = PAIR_MEMORY * self.took + took;
+            self.priced = PAIR_MEMORY * self.priced + priced;
+        }
+    }
 }
 
 impl PerTile {
@@ -331,6 +354,28 @@ mod tests {
         // A frame without pairs keeps the ratios.
         steps.record(&view_only(12.0, vec![(coarse, 10.0)]));
         assert_eq!((steps.view(fine, true), steps.shadow(fine, true)), (15.0, 2.0));
+        // Later pairs weigh in by their pixels, the earlier at PAIR_MEMORY:
+        // one pixel at 40 fetches (4 times its price), without shadow rays.
+        let drawn = [Choice { shadow_steps: 0, ..drawn[0] }];
+        steps.record(&FrameSteps::measure(&[[40, 0]], &[1], &drawn));
+        let view = (PAIR_MEMORY * 30.0 + 40.0) / (PAIR_MEMORY * 20.0 + 10.0);
+        assert!((steps.view(fine, true) - 10.0 * view).abs() < 1e-12, "{}", steps.view(fine, true));
+        assert_eq!(steps.shadow(fine, true), 2.0, "no shadow rays: that ratio kept");
+    }
+
+    #[test]
+    fn a_pairs_shadow_ratio_is_taken_against_the_floored_price() {
+        // Review: shadow rays that all but stopped at once on the coarse
+        // tile (0.01 fetches a step, priced at the floor 0.1) and took 0.5
+        // on its refinement drawn as a pair made a ratio of 50, which
+        // priced every other tile's morph at 50 times its own.
+        let (coarse, fine, other) = (TileId::new(5, 1, 2), TileId::new(6, 2, 4), TileId::new(5, 9, 9));
+        let mut steps = RaySteps::new(20.0);
+        let shadow = Means { mean: Some(1.0), tiles: vec![(coarse, 0.01), (other, 1.0)] };
+        steps.record(&FrameSteps { shadow, ..view_only(12.0, vec![(coarse, 10.0), (other, 10.0)]) });
+        let drawn = [Choice { id: fine, shadow_steps: 2, morphs: true }];
+        steps.record(&FrameSteps::measure(&[[10, 1], [10, 1]], &[1, 1], &drawn));
+        assert_eq!((steps.shadow(fine, true), steps.shadow(other, true)), (0.5, 5.0));
     }
 
     #[test]
