@@ -131,7 +131,7 @@ pub fn candidates(scope: &Scope) -> Candidates {
 /// the first candidate of a walk from it (its ray pixels capped by its
 /// children in view; the walks share the scope's limit), or where the
 /// walk does not take it (out of view, too coarse to draw) as
-/// [`candidate`] prices it alone.
+/// `candidate` prices it alone.
 pub fn drawn(scope: &Scope, tiles: &[(TileId, bool)]) -> Vec<Candidate> {
     let mut left = scope.limit;
     let mut walked = |id, morphs| {
