@@ -36,10 +36,9 @@
 //! are *faded* when some camera sees its canopy fade on its box (the far
 //! fade, or the trees' blend near the camera: [`raycast::Fade::whole`],
 //! the renderer's rule), which the renderer draws with a costlier
-//! pipeline. Under geomorphing a tile below a tile of the cut it replaces
-//! *morphs*: it
-//! is drawn as a morph pair through its first interval, its rays priced as
-//! a pair's ([`RaySteps::view`]).
+//! pipeline. Under geomorphing a tile below a tile of the cut the
+//! selection replaces *morphs*: it is drawn as a morph pair through its
+//! first interval, its rays priced as a pair's ([`RaySteps::view`]).
 
 use super::super::camera::Camera;
 use super::super::frame::TileFrame;
@@ -78,8 +77,8 @@ pub struct Candidate {
     /// fade or the trees' blend reaches it), which the renderer draws with
     /// a costlier pipeline than a whole canopy.
     pub faded: bool,
-    /// Whether it refines a tile of the cut drawn, which geomorphing draws
-    /// as a morph pair ([`Scope::refining`]).
+    /// Whether it refines a tile of the cut the selection replaces, which
+    /// geomorphing draws as a morph pair ([`Scope::refining`]).
     pub morphs: bool,
 }
 
@@ -109,8 +108,8 @@ pub struct Scope<'a> {
     pub limit: usize,
     /// The rays' fetches measured per tile.
     pub steps: &'a RaySteps,
-    /// Under geomorphing, the cut drawn: a tile below one of its tiles is
-    /// drawn morphing from it.
+    /// Under geomorphing, the cut the selection replaces: a tile below one
+    /// of its tiles is drawn morphing from it.
     pub refining: Option<&'a HashSet<TileId>>,
 }
 
@@ -143,17 +142,17 @@ pub fn drawn(scope: &Scope, tiles: &[(TileId, bool)]) -> Vec<Candidate> {
 }
 
 /// Walks the quadtree down from `stack`: each tile with its parent among
-/// the candidates, and whether it lies below a tile of the cut drawn (it
-/// morphs).
+/// the candidates, and whether it lies below a tile of the cut replaced
+/// (it morphs).
 fn walk(scope: &Scope, mut stack: Vec<(TileId, Option<u32>, bool)>) -> Candidates {
     let mut out = Candidates::default();
     let Some(first) = scope.cameras.first() else { return out };
     let b = &scope.bounds;
     let area = b.sector();
     let planes: Vec<[DVec3; 4]> = scope.cameras.iter().map(Camera::side_planes).collect();
-    let drawn = |id| scope.refining.is_some_and(|cut| cut.contains(&id));
+    let replaced = |id| scope.refining.is_some_and(|cut| cut.contains(&id));
     while let Some((id, parent, morphs)) = stack.pop() {
-        let below = morphs || drawn(id);
+        let below = morphs || replaced(id);
         let sector = scope.grid.sector(id);
         // Strictly: a tile whose edge lies on the area's edge holds data
         // only along that edge, which the tile inside holds too.
@@ -372,6 +371,7 @@ fn seen_px(camera: &Camera, sector: &Sector, (lo, hi): (f64, f64), own: bool) ->
 
 #[cfg(test)]
 mod tests {
+    use super::super::steps::{FrameSteps, Pair, Sums};
     use super::*;
 
     fn walk(camera: Camera, cone: Option<Cone>, max_level: u32) -> Candidates {
@@ -446,9 +446,9 @@ mod tests {
         let range = |_| Some((500.0, 3500.0));
         let mut steps = RaySteps::new(20.0);
         // Pairs measured at 1.5 times what they were priced at alone.
-        let sums = super::super::steps::Sums { view: 30, shadow: 0, pixels: 1 };
-        let pair = super::super::steps::Pair { id: TileId::new(3, 0, 0), sums, shadow_steps: 0 };
-        steps.record(&super::super::steps::FrameSteps { pairs: vec![pair], ..Default::default() });
+        let sums = Sums { view: 30, shadow: 0, pixels: 1 };
+        let pair = Pair { id: TileId::new(3, 0, 0), sums, shadow_steps: 0 };
+        steps.record(&FrameSteps { pairs: vec![pair], ..Default::default() });
         let alone = candidates(&scope(&cameras, &range, &steps)).tiles;
         assert!(alone.iter().all(|t| !t.morphs && t.view_steps == 20.0), "nothing drawn: nothing morphs");
         // The cut drawn: a tile the candidates refine.

@@ -493,7 +493,7 @@ mod tests {
             (ids(&s) != ids(&first)).then_some(s)
         });
         let next = next.expect("a new cut");
-        let drawn: std::collections::HashSet<TileId> = ids(&first).into_iter().collect();
+        let drawn: HashSet<TileId> = ids(&first).into_iter().collect();
         let below = |id: TileId| std::iter::successors(id.parent(), TileId::parent).any(|a| drawn.contains(&a));
         assert!(next.cut.tiles.iter().all(|c| c.morphs == below(c.id)), "{:?}", next.cut.tiles);
         assert!(next.cut.tiles.iter().any(|c| c.morphs), "it refines: {:?}", next.cut.tiles);

@@ -183,8 +183,8 @@ impl RaySteps {
     }
 
     /// Shadow-ray fetches per ray-cast pixel and shadow step to price tile
-    /// `id` with, drawn as a morph pair if it `morphs` (at least
-    /// [`SHADOW_FETCHES_FLOOR`]).
+    /// `id` with (at least [`SHADOW_FETCHES_FLOOR`]), times the pairs'
+    /// ratio if it is drawn as a morph pair (`morphs`).
     pub fn shadow(&self, id: TileId, morphs: bool) -> f64 {
         let pair = if morphs { self.pair[1].value() } else { 1.0 };
         self.shadow.of(id, self.frame).max(SHADOW_FETCHES_FLOOR) * pair
