@@ -46,6 +46,13 @@ enum Command {
     /// Pregenerate tiles into the tile cache (resumable, parallel, sharded).
     #[cfg(feature = "server")]
     Seed(Box<cli::serving::SeedArgs>),
+    /// What the tile cache holds per version; remove stale versions and
+    /// trim it to a size.
+    #[cfg(feature = "server")]
+    Cache {
+        #[command(subcommand)]
+        what: cli::cache::CacheCommand,
+    },
     /// Print benchmark tables.
     Bench {
         #[command(subcommand)]
@@ -83,6 +90,8 @@ fn run(command: Command) -> Result<()> {
         Command::View(args) => args.run(),
         #[cfg(feature = "server")]
         Command::Seed(args) => args.run(),
+        #[cfg(feature = "server")]
+        Command::Cache { what } => what.run(),
         Command::Bench { what } => what.run(),
         Command::Canopy(args) => args.run(),
         Command::Info(args) => args.run(),

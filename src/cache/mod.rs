@@ -19,6 +19,7 @@ pub mod dir;
 pub mod envelope;
 pub mod flight;
 pub(crate) mod holder;
+pub mod prune;
 #[cfg(feature = "server")]
 pub mod redis;
 

@@ -2,6 +2,8 @@
 //! its run; `main.rs` parses, dispatches and reports errors.
 
 pub mod bench;
+#[cfg(feature = "server")]
+pub mod cache;
 #[cfg(feature = "client")]
 pub mod flight;
 pub mod produce;

@@ -5,6 +5,7 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod cache_prune; // sylva cache: usage, stale versions removed, trims by least recent use, on a directory and on Redis
 mod canopy; // LiDAR canopy proxies: CHM vs a published one, seams, tileability, bad input
 mod canopy_report; // the pictures of docs/canopy.md (ignored: writes files)
 mod cli; // the `sylva` binary: tile, build, info, errors that name the file

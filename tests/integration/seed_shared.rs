@@ -14,14 +14,16 @@ use std::time::{Duration, Instant};
 use sylva::cache::{Lookup, TileStore};
 
 /// A `redis-server` on a Unix socket in a temporary directory.
-struct Redis {
+pub struct Redis {
     child: Child,
-    url: String,
+    /// `redis+unix://…`.
+    pub url: String,
     _dir: TempDir,
 }
 
 impl Redis {
-    fn start(tag: &str) -> Redis {
+    /// Starts one; `tag` names its directory.
+    pub fn start(tag: &str) -> Redis {
         let dir = TempDir::new(tag);
         let socket = dir.join("redis.sock");
         let child = Command::new("redis-server")

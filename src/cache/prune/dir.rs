@@ -1,0 +1,258 @@
+//! The directory cache's walk: a version is the directory `{root}/{version}`;
+//! its entries are every file, link and directory under it, counted by the
+//! blocks they take (as `du` counts); a tile is a file or link outside
+//! `uniform/` that is neither a lock nor a temporary. A file's last use is
+//! the later of its modification and access times: a file system mounted
+//! `relatime` (Linux's default) records the first read after each write
+//! and at most one a day after that; one mounted `noatime` none, and its
+//! tiles are trimmed oldest written first.
+//!
+//! Directories a trim empties stay: a tile computed there again needs them,
+//! and its writer may be making it at that moment.
+
+use super::{Entry, Kind, Maintain, is_version};
+use crate::cache::CacheError;
+use std::fs;
+use std::io;
+use std::os::unix::fs::MetadataExt;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, SystemTime};
+
+/// What failed, as [`CacheError::Io`] says it.
+const READ_DIR: &str = "read the cache directory";
+
+/// The walk of a directory cache.
+pub(crate) struct Walker {
+    root: PathBuf,
+}
+
+impl Walker {
+    /// The cache at `root`, which must be a directory.
+    pub fn open(root: &Path) -> Result<Walker, CacheError> {
+        match fs::metadata(root) {
+            Ok(m) if m.is_dir() => Ok(Walker { root: root.to_path_buf() }),
+            Ok(_) => Err(CacheError::io("use the tile cache", root, io::Error::other("it is not a directory"))),
+            Err(e) => Err(CacheError::io("use the tile cache", root, e)),
+        }
+    }
+
+    /// Visits `path` (a directory after everything in it) and removes the
+    /// tiles `remove` asks for.
+    fn visit(&self, path: &Path, in_shared: bool, remove: &mut dyn FnMut(&Entry) -> bool) -> Result<(), CacheError> {
+        let meta = match fs::symlink_metadata(path) {
+            Ok(m) => m,
+            // Removed by another process since its directory was read.
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
+            Err(e) => return Err(CacheError::io(READ_DIR, path, e)),
+        };
+        if meta.is_dir() {
+            for child in read_dir(path)? {
+                let shared = in_shared || child.file_name().is_some_and(|n| n == "uniform");
+                self.visit(&child, shared, remove)?;
+            }
+        }
+        let tile = !meta.is_dir() && !in_shared && !is_lock_or_temporary(path);
+        let entry = Entry {
+            bytes: meta.blocks() * 512,
+            last_used: (!meta.is_dir()).then(|| last_used(&meta)),
+            kind: if tile { Kind::Tile } else { Kind::Kept },
+        };
+        if remove(&entry) && tile {
+            match fs::remove_file(path) {
+                Err(e) if e.kind() != io::ErrorKind::NotFound => {
+                    return Err(CacheError::io("remove the cache entry", path, e));
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Maintain for Walker {
+    fn describe(&self) -> String {
+        format!("directory {}", self.root.display())
+    }
+
+    fn versions(&self) -> Result<Vec<String>, CacheError> {
+        let mut versions: Vec<String> = read_dir(&self.root)?
+            .into_iter()
+            .filter(|p| p.is_dir())
+            .filter_map(|p| p.file_name().and_then(|n| n.to_str()).map(str::to_string))
+            .filter(|name| is_version(name))
+            .collect();
+        versions.sort();
+        Ok(versions)
+    }
+
+    fn walk(&self, version: &str, remove: &mut dyn FnMut(&Entry) -> bool) -> Result<(), CacheError> {
+        self.visit(&self.root.join(version), false, remove)
+    }
+
+    fn remove_version(&self, version: &str) -> Result<(), CacheError> {
+        let path = self.root.join(version);
+        match fs::remove_dir_all(&path) {
+            Err(e) if e.kind() != io::ErrorKind::NotFound => Err(CacheError::io("remove the version", &path, e)),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// The paths in directory `path` (none if it went meanwhile).
+fn read_dir(path: &Path) -> Result<Vec<PathBuf>, CacheError> {
+    let entries = match fs::read_dir(path) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(CacheError::io(READ_DIR, path, e)),
+    };
+    entries.map(|e| e.map(|e| e.path()).map_err(|e| CacheError::io(READ_DIR, path, e))).collect()
+}
+
+/// A tile's lock (`{key}.lock`) or a writer's temporary (`.{name}.{token}.tmp`).
+fn is_lock_or_temporary(path: &Path) -> bool {
+    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+    name.ends_with(".lock") || (name.starts_with('.') && name.ends_with(".tmp"))
+}
+
+/// The later of the modification and access times.
+fn last_used(meta: &fs::Metadata) -> SystemTime {
+    let at = |secs: i64, nanos: i64| {
+        let since = Duration::new(secs.max(0) as u64, nanos.clamp(0, 999_999_999) as u32);
+        SystemTime::UNIX_EPOCH + since
+    };
+    at(meta.mtime(), meta.mtime_nsec()).max(at(meta.atime(), meta.atime_nsec()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{Plan, Pruned, prune, usage};
+    use crate::cache::{Backend, DirStore, TileStore, flight};
+    use std::fs;
+    use std::time::{Duration, SystemTime};
+
+    const CURRENT: &str = "v00000000000000aa";
+    const OLD: &str = "v00000000000000bb";
+    const RECENT: &str = "v00000000000000cc";
+    const TILE_BYTES: usize = 40_000;
+
+    fn store(tag: &str) -> DirStore {
+        let dir = std::env::temp_dir().join(format!("sylva-prune-{tag}-{}", std::process::id()));
+        let _ = fs::remove_dir_all(&dir);
+        fs::create_dir_all(&dir).unwrap();
+        DirStore::new(dir)
+    }
+
+    /// `key`'s tile, written and read `minutes` ago.
+    fn tile(s: &DirStore, key: &str, minutes: u64) {
+        let lock = s.try_lock(key, Duration::from_secs(60)).unwrap().unwrap();
+        flight::save(s, &lock, &vec![7; TILE_BYTES], false).unwrap();
+        s.unlock(&lock).unwrap();
+        let t = SystemTime::now() - Duration::from_secs(minutes * 60);
+        let file = fs::File::options().write(true).open(s.path(key)).unwrap();
+        file.set_times(fs::FileTimes::new().set_accessed(t).set_modified(t)).unwrap();
+    }
+
+    /// What `du` says the directory takes.
+    fn du(path: &std::path::Path) -> u64 {
+        let out = std::process::Command::new("du").arg("-sB1").arg(path).output().unwrap();
+        String::from_utf8(out.stdout).unwrap().split_whitespace().next().unwrap().parse().unwrap()
+    }
+
+    fn run(s: &DirStore, plan: &Plan) -> Pruned {
+        prune(&Backend::Directory(s.root().to_path_buf()), plan, SystemTime::now()).unwrap()
+    }
+
+    fn plan(stale: bool, max_bytes: Option<u64>, dry_run: bool) -> Plan {
+        Plan { keep: vec![CURRENT.into()], stale, max_bytes, grace: Duration::from_secs(3600), dry_run }
+    }
+
+    /// A lock left held, a writer's temporary, and a shared entry linked
+    /// twice, in `version`.
+    fn others(s: &DirStore, version: &str) {
+        s.try_lock(&format!("{version}/cem/5/1/1_1.bil"), Duration::from_secs(60)).unwrap().unwrap();
+        fs::write(s.path(&format!("{version}/cem/5/1/.1_2.bil.token.tmp")), [0; 5000]).unwrap();
+        for col in [3, 4] {
+            let lock = s.try_lock(&format!("{version}/cem/5/1/1_{col}.bil"), Duration::from_secs(60)).unwrap().unwrap();
+            flight::save(s, &lock, &[0; 9000], true).unwrap();
+            s.unlock(&lock).unwrap();
+        }
+    }
+
+    #[test]
+    fn usage_counts_what_du_counts_and_only_tiles_as_tiles() {
+        let s = store("usage");
+        for row in 0..3 {
+            tile(&s, &format!("{CURRENT}/cem/6/{row}/{row}_0.bil"), 5);
+        }
+        others(&s, CURRENT);
+        // Not a version: left out, whatever it holds.
+        fs::create_dir_all(s.path("notes")).unwrap();
+        fs::write(s.path("notes/readme.txt"), "x").unwrap();
+        fs::write(s.path("seed-progress.json"), "{}").unwrap();
+        let (_, versions) = usage(&Backend::Directory(s.root().to_path_buf())).unwrap();
+        assert_eq!(versions.len(), 1);
+        // Three tiles and two links to the shared entry.
+        assert_eq!((versions[0].version.as_str(), versions[0].tiles), (CURRENT, 5));
+        assert_eq!(versions[0].bytes, du(&s.path(CURRENT)));
+        fs::remove_dir_all(s.root()).unwrap();
+    }
+
+    #[test]
+    fn a_trim_removes_the_least_recently_used_tiles_down_to_the_size() {
+        let s = store("trim");
+        let key = |i: u64| format!("{CURRENT}/cem/7/{i}/{i}_0.bil");
+        // Tiles 0..10, tile 0 the oldest; 3 and 10 used in the same minute.
+        for i in 0..10 {
+            tile(&s, &key(i), 100 - 10 * i);
+        }
+        tile(&s, &key(10), 70);
+        others(&s, CURRENT);
+        let version = s.path(CURRENT);
+        let before = du(&version);
+        let one = std::os::unix::fs::MetadataExt::blocks(&fs::metadata(s.path(&key(0))).unwrap()) * 512;
+        // Room for all but three and a half tiles: the four oldest go, and
+        // only one of the two of the cut's minute.
+        let max = before - one * 7 / 2;
+        let dry = run(&s, &plan(false, Some(max), true));
+        assert_eq!(du(&version), before, "a dry run removes nothing");
+        let done = run(&s, &plan(false, Some(max), false));
+        assert_eq!((dry.trimmed, done.trimmed), ((4, 4 * one), (4, 4 * one)));
+        let kept: Vec<u64> = (0..11).filter(|&i| s.path(&key(i)).exists()).collect();
+        assert!(kept.starts_with(&[4, 5, 6, 7, 8, 9]) && kept.len() == 7, "{kept:?}");
+        assert!(kept.contains(&3) != kept.contains(&10));
+        assert_eq!((done.bytes_after, du(&version)), (before - 4 * one, before - 4 * one));
+        assert!(done.bytes_after <= max);
+        // Locks, temporaries and shared entries stay; the links are tiles.
+        assert!(s.path(&format!("{CURRENT}/cem/5/1/1_1.bil.lock")).exists());
+        assert!(s.path(&format!("{CURRENT}/cem/5/1/.1_2.bil.token.tmp")).exists());
+        assert_eq!(fs::read_dir(s.path(&format!("{CURRENT}/uniform"))).unwrap().count(), 1);
+        fs::remove_dir_all(s.root()).unwrap();
+    }
+
+    #[test]
+    fn stale_versions_go_unless_used_within_the_grace() {
+        let s = store("stale");
+        tile(&s, &format!("{CURRENT}/cem/6/0/0_0.bil"), 600);
+        tile(&s, &format!("{OLD}/cem/6/0/0_0.bil"), 180);
+        tile(&s, &format!("{OLD}/dem/6/0/0_0.bil"), 240);
+        tile(&s, &format!("{RECENT}/cem/6/0/0_0.bil"), 5);
+        fs::create_dir_all(s.path("backup")).unwrap();
+        let dry = run(&s, &plan(true, None, true));
+        assert!(s.path(OLD).exists(), "a dry run removes nothing");
+        let done = run(&s, &plan(true, None, false));
+        for pruned in [&dry, &done] {
+            let names = |v: &[super::super::VersionUsage]| v.iter().map(|v| v.version.clone()).collect::<Vec<_>>();
+            assert_eq!(
+                (names(&pruned.removed), names(&pruned.in_use)),
+                (vec![OLD.to_string()], vec![RECENT.to_string()])
+            );
+            assert_eq!(pruned.removed[0].tiles, 2);
+        }
+        assert!(!s.path(OLD).exists());
+        for kept in [CURRENT, RECENT, "backup"] {
+            assert!(s.path(kept).exists(), "{kept}");
+        }
+        assert_eq!(done.bytes_after, du(&s.path(CURRENT)) + du(&s.path(RECENT)));
+        fs::remove_dir_all(s.root()).unwrap();
+    }
+}

@@ -1,0 +1,161 @@
+//! `sylva cache` as an operator runs it: a seeded directory cache with a
+//! stale version beside it is listed, the stale version removed (one in use
+//! kept), the cache trimmed to a size oldest tiles first, and a server on
+//! the trimmed cache answers every tile as before, the trimmed ones
+//! computed again; the same on a real Redis.
+
+use crate::common::TempDir;
+use crate::http::Server;
+use crate::seed::{ok, product_of, rmnp_config, seed, tiles, walk};
+use crate::seed_shared::Redis;
+use std::path::Path;
+use std::process::{Command, Output};
+use std::time::{Duration, SystemTime};
+use sylva::cache::prune::{Plan, prune, usage};
+use sylva::cache::{Backend, Lookup, TileStore};
+
+const STALE: &str = "v00000000000000ee";
+
+/// `sylva cache ARGS`.
+fn cache(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sylva")).arg("cache").args(args).output().expect("run sylva cache")
+}
+
+/// Sets `files` (links themselves, not their targets) written and read
+/// `minutes` ago.
+fn age(files: &[std::path::PathBuf], minutes: u64) {
+    let t = SystemTime::now() - Duration::from_secs(minutes * 60);
+    let stamp = format!("@{}", t.duration_since(SystemTime::UNIX_EPOCH).unwrap().as_secs());
+    for chunk in files.chunks(500) {
+        assert!(Command::new("touch").arg("-h").arg("-d").arg(&stamp).args(chunk).status().unwrap().success());
+    }
+}
+
+/// Blocks a file or link takes, in bytes.
+fn taken(path: &Path) -> u64 {
+    std::os::unix::fs::MetadataExt::blocks(&std::fs::symlink_metadata(path).unwrap()) * 512
+}
+
+/// What `du` says a directory takes.
+fn du(path: &Path) -> u64 {
+    let out = Command::new("du").arg("-sB1").arg(path).output().unwrap();
+    String::from_utf8(out.stdout).unwrap().split_whitespace().next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn a_directory_cache_is_listed_pruned_and_trimmed_and_serves_every_tile_after() {
+    let dir = TempDir::new("cache-prune");
+    let root = dir.join("cache");
+    let root_arg = root.to_str().unwrap();
+    ok(&seed(&dir.0, &["--cache-dir", root_arg, "--levels", "9-11", "--formats", "bil16,bil32"]));
+    let seeded = tiles(&root);
+    let current = std::fs::read_dir(&root).unwrap().next().unwrap().unwrap().file_name().into_string().unwrap();
+    // A version left by an earlier configuration, unused for three hours.
+    let copied = Command::new("cp").arg("-a").arg(root.join(&current)).arg(root.join(STALE)).status().unwrap();
+    assert!(copied.success());
+    age(&walk(&root.join(STALE)), 180);
+
+    let listed = ok(&cache(&["usage", "--cache-dir", root_arg]));
+    let line =
+        |v: &str| listed.lines().find(|l| l.starts_with(v)).unwrap_or_else(|| panic!("{v}: {listed}")).to_string();
+    assert!(line(&current).ends_with("current (Sylva demo (Val Selva))"), "{listed}");
+    assert!(line(STALE).ends_with("stale") && line(STALE).contains(&format!(" {} ", seeded.len())), "{listed}");
+
+    // Nothing asked: a usage error.
+    assert_eq!(cache(&["prune", "--cache-dir", root_arg]).status.code(), Some(2));
+    let pruned = ok(&cache(&["prune", "--cache-dir", root_arg, "--stale"]));
+    assert!(pruned.contains(&format!("removed stale version {STALE} ({} tiles", seeded.len())), "{pruned}");
+    assert!(!root.join(STALE).exists() && root.join(&current).exists());
+
+    // Half the tiles a day old, the other half fresh: a trim to a bit more
+    // than the fresh half removes the old half alone.
+    let old: Vec<&String> = seeded.keys().filter(|k| k.contains(".bil32")).collect();
+    age(&old.iter().map(|k| root.join(k)).collect::<Vec<_>>(), 24 * 60);
+    let old_bytes: u64 = old.iter().map(|k| taken(&root.join(k))).sum();
+    let max = du(&root.join(&current)) - old_bytes + 1;
+    let trimmed = ok(&cache(&["prune", "--cache-dir", root_arg, "--max-size", &max.to_string()]));
+    assert!(trimmed.contains(&format!("trimmed {} least recently used tiles", old.len())), "{trimmed}");
+    let left = tiles(&root);
+    assert_eq!(left.len(), seeded.len() - old.len());
+    assert!(left.keys().all(|k| !k.contains(".bil32")));
+    assert!(du(&root.join(&current)) <= max);
+
+    // The server answers every tile as seeded: the trimmed ones computed again.
+    let server = Server::start(None, &root);
+    for (key, bytes) in &seeded {
+        let (_, path) = product_of(key).unwrap();
+        let reply = server.get(&path);
+        assert!(reply.status == 200 && reply.body == *bytes, "{path}");
+    }
+    assert_eq!(server.metric("sylva_tile_computations_total"), old.len() as f64);
+}
+
+#[test]
+fn a_redis_cache_loses_its_stale_versions_and_is_trimmed_oldest_written_first() {
+    let dir = TempDir::new("cache-prune-redis");
+    let redis = Redis::start("cache-prune-redis-server");
+    let config =
+        rmnp_config(&dir, "redis.toml", &format!("[tile_cache]\nbackend = \"redis\"\nredis_url = \"{}\"", redis.url));
+    ok(&seed(&dir.0, &["--config", config.to_str().unwrap(), "--layers", "dem", "--levels", "6-9"]));
+    let backend = Backend::Redis { url: redis.url.clone(), prefix: "sylva:".into() };
+    let (_, versions) = usage(&backend).unwrap();
+    let [current] = &versions[..] else { panic!("{versions:?}") };
+    // A stale version written three hours ago, one written just now, and
+    // keys that are not Sylva's tiles.
+    let mut conn = ::redis::Client::open(redis.url.as_str()).unwrap().get_connection().unwrap();
+    let stamped = |minutes: u64| {
+        let ms =
+            (SystemTime::now() - Duration::from_secs(minutes * 60)).duration_since(SystemTime::UNIX_EPOCH).unwrap();
+        [b"TILE".as_slice(), &(ms.as_millis() as u64).to_le_bytes(), &[0; 100]].concat()
+    };
+    let set = |conn: &mut ::redis::Connection, key: &str, value: &[u8]| {
+        ::redis::cmd("SET").arg(key).arg(value).query::<()>(conn).unwrap();
+    };
+    for col in 0..3 {
+        set(&mut conn, &format!("sylva:{STALE}/dem/6/1/1_{col}.bil"), &stamped(180));
+    }
+    let recent = "sylva:v00000000000000ff/dem/6/1/1_0.bil";
+    set(&mut conn, recent, &stamped(5));
+    set(&mut conn, "sylva:notes/readme", b"x");
+    set(&mut conn, "other:v00000000000000dd/dem/6/1/1_0.bil", &stamped(180));
+
+    let plan = |stale, max_bytes| Plan {
+        keep: vec![current.version.clone()],
+        stale,
+        max_bytes,
+        grace: Duration::from_secs(3600),
+        dry_run: false,
+    };
+    let pruned = prune(&backend, &plan(true, None), SystemTime::now()).unwrap();
+    let names = |v: &[sylva::cache::prune::VersionUsage]| v.iter().map(|v| v.version.clone()).collect::<Vec<_>>();
+    assert_eq!(names(&pruned.removed), [STALE]);
+    assert_eq!(pruned.removed[0].tiles, 3);
+    assert_eq!(names(&pruned.in_use), ["v00000000000000ff"]);
+    let keys: Vec<String> = ::redis::cmd("KEYS").arg("*").query(&mut conn).unwrap();
+    assert!(!keys.iter().any(|k| k.contains(STALE)), "{keys:?}");
+    for kept in ["sylva:notes/readme", "other:v00000000000000dd/dem/6/1/1_0.bil", recent] {
+        assert!(keys.iter().any(|k| k == kept), "{kept}");
+    }
+
+    // Trimmed to half its size, the cache loses its oldest written tile
+    // first (the recent version's, older than the seed), then the seed's;
+    // what is left reads whole.
+    let half = pruned.bytes_after / 2;
+    let trimmed = prune(&backend, &plan(false, Some(half)), SystemTime::now()).unwrap();
+    assert!(trimmed.trimmed.0 > 1 && trimmed.bytes_after <= half, "{trimmed:?}");
+    assert!(!::redis::cmd("EXISTS").arg(recent).query::<bool>(&mut conn).unwrap());
+    let (_, after) = usage(&backend).unwrap();
+    assert_eq!(after.iter().map(|v| v.bytes).sum::<u64>(), trimmed.bytes_after);
+    let store = sylva::cache::redis::RedisStore::open(&redis.url, "sylva:").unwrap();
+    let current_keys: Vec<String> =
+        ::redis::cmd("KEYS").arg(format!("sylva:{}/*", current.version)).query(&mut conn).unwrap();
+    assert_eq!(current_keys.len() as u64, current.tiles - (trimmed.trimmed.0 - 1) + shared_entries(&current_keys));
+    for key in &current_keys {
+        assert!(matches!(store.get(key.strip_prefix("sylva:").unwrap()).unwrap(), Lookup::Hit(_)), "{key}");
+    }
+}
+
+/// Shared (uniform) entries among `keys`: never trimmed, not tiles.
+fn shared_entries(keys: &[String]) -> u64 {
+    keys.iter().filter(|k| k.contains("/uniform/")).count() as u64
+}
