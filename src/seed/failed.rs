@@ -8,7 +8,7 @@
 use super::progress::parse_tile;
 use crate::cem::Layer;
 use crate::encode::Format;
-use crate::grid::{TileGrid, TileId};
+use crate::grid::{BBox, TileGrid, TileId};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -44,8 +44,10 @@ fn where_in(path: &Path, line: usize) -> String {
     }
 }
 
-/// Reads a tile list; every tile must exist in `tiles`.
-pub fn read(path: &Path, tiles: &TileGrid) -> Result<Vec<Entry>, ListError> {
+/// Reads a tile list; every tile must exist in `tiles` and meet the
+/// region's `bounds` (a tile off them has no data: the server answers 404
+/// there and keeps nothing, so a seed has nothing to store).
+pub fn read(path: &Path, tiles: &TileGrid, bounds: &BBox) -> Result<Vec<Entry>, ListError> {
     let fail = |line: usize, message: String| ListError { path: path.to_path_buf(), line, message };
     let text = std::fs::read_to_string(path).map_err(|e| fail(0, format!("cannot read: {e}")))?;
     let mut out = Vec::new();
@@ -61,6 +63,11 @@ pub fn read(path: &Path, tiles: &TileGrid) -> Result<Vec<Entry>, ListError> {
             )
         })?;
         tiles.check(e.tile).map_err(|why| fail(i + 1, why.to_string()))?;
+        if !tiles.sector(e.tile).bbox().meets(bounds) {
+            let b = bounds;
+            let why = format!("does not meet the region; its bounds are {},{},{},{}", b.west, b.south, b.east, b.north);
+            return Err(fail(i + 1, format!("tile {} {why}", e.tile)));
+        }
         out.push(e);
     }
     Ok(out)
@@ -153,9 +160,9 @@ mod tests {
         let f = Failed::replacing(&path).unwrap();
         f.record(&entry(Layer::Dem, (5, 1, 2), &[Format::Bil16]), "still failing").unwrap();
         let grid = TileGrid::new(36.0, 513).unwrap();
-        assert_eq!(read(&path, &grid).unwrap().len(), 2, "an interrupted run would leave the list whole");
+        assert_eq!(read(&path, &grid, &BBox::WORLD).unwrap().len(), 2, "an interrupted run would leave the list whole");
         assert_eq!(f.finish().unwrap(), path);
-        assert_eq!(read(&path, &grid).unwrap(), vec![entry(Layer::Dem, (5, 1, 2), &[Format::Bil16])]);
+        assert_eq!(read(&path, &grid, &BBox::WORLD).unwrap(), vec![entry(Layer::Dem, (5, 1, 2), &[Format::Bil16])]);
         std::fs::remove_file(&path).unwrap();
     }
 
@@ -170,16 +177,19 @@ mod tests {
         f.record(&failed[0], "upstream: 500\nInternal").unwrap();
         f.record(&failed[1], "x").unwrap();
         let grid = TileGrid::new(36.0, 513).unwrap();
-        assert_eq!(read(&path, &grid).unwrap(), failed);
+        assert_eq!(read(&path, &grid, &BBox::WORLD).unwrap(), failed);
         assert!(
             std::fs::read_to_string(&path).unwrap().starts_with("cem/12/3/4 png16,tiff\t# upstream: 500 Internal\n")
         );
         // Lines without formats take the run's.
         std::fs::write(&path, "# a comment\n\ncem/1/2/3\ntrees/1/2/3\n").unwrap();
-        let err = read(&path, &grid).unwrap_err().to_string();
+        let err = read(&path, &grid, &BBox::WORLD).unwrap_err().to_string();
         assert!(err.contains(":4:") && err.contains("unknown layer \"trees\""), "{err}");
         std::fs::write(&path, "cem/1/2/3 png16,tiff,png16\n").unwrap();
-        assert_eq!(read(&path, &grid).unwrap(), vec![entry(Layer::Cem, (1, 2, 3), &[Format::Png16, Format::Tiff])]);
+        assert_eq!(
+            read(&path, &grid, &BBox::WORLD).unwrap(),
+            vec![entry(Layer::Cem, (1, 2, 3), &[Format::Png16, Format::Tiff])]
+        );
         for (bad, why) in [
             ("cem/1/2/3 png17", "unknown format \"png17\""),
             ("cem/1/2/3 png16 tiff", "\"tiff\" follows the formats"),
@@ -187,11 +197,16 @@ mod tests {
             ("cem/1/2", "\"1/2\" is not level/row/col"),
         ] {
             std::fs::write(&path, format!("{bad}\n")).unwrap();
-            let err = read(&path, &grid).unwrap_err().to_string();
+            let err = read(&path, &grid, &BBox::WORLD).unwrap_err().to_string();
             assert!(err.contains(":1:") && err.contains(why), "{bad}: {err}");
         }
         std::fs::write(&path, "cem/1/99/3\n").unwrap();
-        assert!(read(&path, &grid).unwrap_err().to_string().contains(":1: tile 1/99/3 does not exist"));
+        assert!(read(&path, &grid, &BBox::WORLD).unwrap_err().to_string().contains(":1: tile 1/99/3 does not exist"));
+        // A tile off the region: the server keeps nothing there, nor does a seed.
+        std::fs::write(&path, "cem/5/1/1\ncem/5/0/0\n").unwrap();
+        let region = BBox { west: -180.0, south: -90.0, east: -179.0, north: -89.0 };
+        let err = read(&path, &grid, &region).unwrap_err().to_string();
+        assert!(err.contains(":1: tile 5/1/1 does not meet the region; its bounds are -180,-90,-179,-89"), "{err}");
         std::fs::remove_file(&path).unwrap();
     }
 }

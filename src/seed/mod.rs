@@ -185,7 +185,8 @@ fn records(job: &Job, options: &SeedOptions) -> Result<Records, SeedError> {
     let (progress_path, failed_path) = &job.files;
     let holds = [hold::hold(progress_path)?, hold::hold(failed_path)?];
     // A list is read before the failed-tiles file (perhaps the same) is emptied.
-    let list = options.tiles_from.as_deref().map(|p| failed::read(p, &job.region.tiles)).transpose()?;
+    let list =
+        options.tiles_from.as_deref().map(|p| failed::read(p, &job.region.tiles, &job.region.bounds)).transpose()?;
     let progress = match options.resume && list.is_none() {
         true => Progress::resume(progress_path, &job.fingerprint)?,
         false => Progress::start(progress_path, &job.fingerprint),
@@ -445,7 +446,7 @@ fn dry_run(job: &Job, resumed: Option<&Progress>) -> Report {
 /// finished, so the walk visits them again and finds them in the cache.
 fn failed_earlier(job: &Job) -> String {
     let path = &job.files.1;
-    match failed::read(path, &job.region.tiles) {
+    match failed::read(path, &job.region.tiles, &job.region.bounds) {
         Ok(list) if !list.is_empty() => format!(
             "; {} tile(s) failed earlier (listed in {}): the tiles above them are counted but will be found in the cache",
             list.len(),
