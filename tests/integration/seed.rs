@@ -216,7 +216,10 @@ fn bad_input_is_named_with_the_problem() {
     let redis = dir.join("redis.toml");
     std::fs::write(&redis, "[tile_cache]\nbackend = \"redis\"\nredis_url = \"redis://127.0.0.1:1/0\"\n").unwrap();
     let list = dir.join("list.txt");
-    std::fs::write(&list, "dem/3/1/1\ncem/nine/1/1\n").unwrap();
+    std::fs::write(&list, "dem/3/30/42\ncem/nine/1/1\n").unwrap();
+    // A tile off the region: the server keeps nothing there, nor may a seed.
+    let off = dir.join("off.txt");
+    std::fs::write(&off, "dem/3/1/1\n").unwrap();
     // A cache directory that cannot be made (a file is in the way).
     let file = dir.join("a-file");
     std::fs::write(&file, "").unwrap();
@@ -224,7 +227,7 @@ fn bad_input_is_named_with_the_problem() {
     // Regression: the path and the cause alone, not what failed.
     let unmakeable = format!("cannot create the cache directory {}: Not a directory", cache.display());
     // Bad usage exits 2, bad files 1.
-    let cases: [(&[&str], &str, i32); 7] = [
+    let cases: [(&[&str], &str, i32); 8] = [
         (&["--levels", "12-3"], "--levels \"12-3\": FROM is above TO", 2),
         (
             &["--levels", "0-5", "--coverage", geojson.to_str().unwrap()],
@@ -234,6 +237,7 @@ fn bad_input_is_named_with_the_problem() {
         (&["--levels", "0-5", "--config", redis.to_str().unwrap()], "Redis at redis://127.0.0.1:1/0", 1),
         (&["--levels", "0-5", "--shard", "4/4"], "--shard \"4/4\"", 2),
         (&["--tiles-from", list.to_str().unwrap()], "list.txt:2", 1),
+        (&["--tiles-from", off.to_str().unwrap()], "off.txt:1: tile 3/1/1 does not meet the region", 1),
         (&["--levels", "0-5", "--layers", "trees"], "unknown \"trees\"", 2),
         (&["--levels", "0-5", "--cache-dir", cache.to_str().unwrap()], &unmakeable, 1),
     ];
