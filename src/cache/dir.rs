@@ -3,6 +3,8 @@
 //! (other threads, other processes sharing the directory, over NFS too) see
 //! either the old file or the whole new one.
 //!
+//! A version's directory holds [`IN_USE`], rewritten by each mark of use.
+//!
 //! Shared entries (uniform tiles) are one file under their content key and a
 //! relative symbolic link per tile; a link's own time is its entry's time.
 //! Locks are files `{key}.lock` created exclusively, holding the holder's
@@ -188,10 +190,20 @@ impl TileStore for DirStore {
         }
     }
 
+    fn mark_in_use(&self, version: &str) -> Result<(), CacheError> {
+        let path = self.path(&format!("{version}/{IN_USE}"));
+        let dir = self.path(version);
+        fs::create_dir_all(&dir).map_err(|e| CacheError::io(CREATE_DIR, &dir, e))?;
+        fs::write(&path, holder::token()).map_err(|e| CacheError::io("mark the version in use", &path, e))
+    }
+
     fn describe(&self) -> String {
         format!("directory {}", self.root.display())
     }
 }
+
+/// The file in a version's directory whose time is its last mark of use.
+pub(crate) const IN_USE: &str = ".in-use";
 
 /// The token of the lock at `path` if its holder is gone: it died on this
 /// machine, or the lock expired (its holder died elsewhere, or overran).

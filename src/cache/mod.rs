@@ -11,7 +11,9 @@
 //! and linked ([`TileStore::put_shared`]). A lock with an expiry per key
 //! ([`TileStore::try_lock`]) lets processes agree on who computes a tile
 //! ([`flight`]); a holder that dies frees it when it expires, or at once
-//! where its lock shows it ran on this machine (`holder.rs`).
+//! where its lock shows it ran on this machine (`holder.rs`). Servers and
+//! seeders mark their region's version in use ([`in_use`]), so that pruning
+//! stale versions ([`prune`]) spares theirs.
 //!
 //! Invariant: no HTTP, no async; callers run it off the async executor.
 
@@ -19,6 +21,7 @@ pub mod dir;
 pub mod envelope;
 pub mod flight;
 pub(crate) mod holder;
+pub mod in_use;
 pub mod prune;
 #[cfg(feature = "server")]
 pub mod redis;
@@ -114,6 +117,11 @@ pub trait TileStore: Send + Sync {
 
     /// Releases a lock if it is still this holder's.
     fn unlock(&self, lock: &Lock) -> Result<(), CacheError>;
+
+    /// Marks the region version `version` in use now ([`in_use`]: servers
+    /// and seeders mark theirs while they run; `sylva cache prune --stale`
+    /// keeps a version marked within its grace).
+    fn mark_in_use(&self, version: &str) -> Result<(), CacheError>;
 
     /// Where the tiles are, for logs.
     fn describe(&self) -> String;

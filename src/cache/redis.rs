@@ -4,7 +4,7 @@
 //! either the payload in its [`envelope`] (`TILE`) or the key of a shared
 //! entry (`LINK`). Locks are `SET {prefix}lock:{key} token NX PX ttl`,
 //! released by a script that deletes the lock only if it still holds the
-//! holder's token.
+//! holder's token. A version's mark of use is `{prefix}in-use:{version}`.
 //!
 //! Connections are kept in a small pool of idle ones; each has connect, read
 //! and write timeouts, so an unreachable server is an error, not a hang.
@@ -43,7 +43,7 @@ impl RedisStore {
     }
 
     /// Runs `op` on a pooled connection (a failed connection is dropped).
-    fn with<T>(&self, op: impl FnOnce(&mut Connection) -> Result<T, RedisError>) -> Result<T, CacheError> {
+    pub(crate) fn with<T>(&self, op: impl FnOnce(&mut Connection) -> Result<T, RedisError>) -> Result<T, CacheError> {
         let pooled = self.idle.lock().ok().and_then(|mut idle| idle.pop());
         let mut conn = match pooled {
             Some(c) => c,
@@ -61,6 +61,11 @@ impl RedisStore {
         conn.set_read_timeout(Some(TIMEOUT)).map_err(|e| self.error(e))?;
         conn.set_write_timeout(Some(TIMEOUT)).map_err(|e| self.error(e))?;
         Ok(conn)
+    }
+
+    /// The prefix of every key.
+    pub(crate) fn prefix(&self) -> &str {
+        &self.prefix
     }
 
     fn error(&self, e: RedisError) -> CacheError {
@@ -145,7 +150,17 @@ impl TileStore for RedisStore {
         self.with(|c| redis::cmd("EVAL").arg(UNLOCK).arg(1).arg(key).arg(&lock.token).query::<i64>(c)).map(|_| ())
     }
 
+    fn mark_in_use(&self, version: &str) -> Result<(), CacheError> {
+        let key = format!("{}{IN_USE}{version}", self.prefix);
+        let ttl = super::in_use::EVERY.as_secs() * 3;
+        self.with(|c| redis::cmd("SET").arg(key).arg(super::holder::token()).arg("EX").arg(ttl).query::<()>(c))
+    }
+
     fn describe(&self) -> String {
         format!("Redis {} (keys {}…)", self.url, self.prefix)
     }
 }
+
+/// The key (after the prefix, before the version) that marks a version in
+/// use; it expires three marks after the last.
+pub(crate) const IN_USE: &str = "in-use:";

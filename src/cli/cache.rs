@@ -58,7 +58,13 @@ impl Caches {
         let mut backend = None;
         for path in paths {
             let (config, region) = sylva::config::load_with_config(path)?;
-            backend.get_or_insert_with(|| config.tile_cache.backend(self.cache_dir.as_deref()));
+            let theirs = config.tile_cache.backend(self.cache_dir.as_deref());
+            if backend.get_or_insert_with(|| theirs.clone()) != &theirs {
+                let named = path.map_or("the demo".into(), |p| p.display().to_string());
+                return Err(super::usage(format_args!(
+                    "{named} keeps its tiles elsewhere than the first configuration: give --cache-dir, or one cache's configurations"
+                )));
+            }
             regions.push((region.version.clone(), region.name.clone()));
         }
         Ok(Current { regions, backend: backend.context("no configuration")? })
@@ -116,17 +122,36 @@ pub struct PruneArgs {
     /// configuration or a source file changed), unless used within --grace.
     #[arg(long)]
     stale: bool,
+    /// With --stale: remove them even if no configuration's version has
+    /// tiles in the cache (which suggests the servers run other
+    /// configurations, source files or Sylva than this command).
+    #[arg(long, requires = "stale")]
+    force: bool,
     /// Then remove the least recently used tiles until the cache holds at
     /// most SIZE: 500MiB, 20GiB (powers of 1024), 20G or 20GB (of 1000).
     #[arg(long, value_parser = parse_size)]
     max_size: Option<u64>,
-    /// A stale version written or read within this long is kept, as in use
-    /// by a server or seeder still running (30m, 2h, 1day).
-    #[arg(long, default_value = "1h", value_parser = humantime::parse_duration)]
+    /// With --stale: a version written, read or marked in use within this
+    /// long is kept (servers and seeders mark theirs every 5 minutes while
+    /// they run): 1h, 2days; at least 10m.
+    #[arg(long, default_value = "1h", value_parser = grace, requires = "stale")]
     grace: Duration,
     /// Say what would be removed; remove nothing.
     #[arg(long)]
     dry_run: bool,
+}
+
+/// `--grace`'s parser: a duration of at least two marks of use.
+fn grace(text: &str) -> Result<Duration, String> {
+    let least = sylva::cache::in_use::EVERY * 2;
+    match humantime::parse_duration(text).map_err(|e| e.to_string())? {
+        d if d < least => Err(format!(
+            "at least {} (running servers mark their version every {})",
+            humantime::format_duration(least),
+            humantime::format_duration(sylva::cache::in_use::EVERY)
+        )),
+        d => Ok(d),
+    }
 }
 
 /// `--max-size`'s parser.
@@ -143,16 +168,20 @@ impl PruneArgs {
         let plan = Plan {
             keep: current.regions.iter().map(|(version, _)| version.clone()).collect(),
             stale: self.stale,
+            force: self.force,
             max_bytes: self.max_size,
             grace: self.grace,
             dry_run: self.dry_run,
         };
         let pruned = prune::prune(&current.backend, &plan, SystemTime::now())?;
-        let (removes, trims) = match self.dry_run {
-            true => ("would remove", "would trim"),
-            false => ("removed", "trimmed"),
+        let (removes, trims, leaves) = match self.dry_run {
+            true => ("would remove", "would trim", "would leave"),
+            false => ("removed", "trimmed", "left"),
         };
         let mut lines = vec![format!("tile cache: {} ({})", pruned.cache, size(pruned.bytes_before))];
+        for (version, name) in &current.regions {
+            lines.push(format!("current: {version} ({name})"));
+        }
         for v in &pruned.removed {
             lines.push(format!("{removes} stale version {}", described(v)));
         }
@@ -167,8 +196,21 @@ impl PruneArgs {
                 size(bytes),
                 size(max)
             ));
+            if pruned.bytes_after > max {
+                lines.push(format!(
+                    "{} above --max-size is locks, marks, directories and in-use versions, which are not trimmed",
+                    size(pruned.bytes_after - max)
+                ));
+            }
         }
-        lines.push(format!("left: {}", size(pruned.bytes_after)));
-        super::print(lines.join("\n"))
+        lines.push(format!("{leaves}: {}", size(pruned.bytes_after)));
+        super::print(lines.join("\n"))?;
+        match &pruned.failed[..] {
+            [] => Ok(()),
+            failed => {
+                let each: Vec<String> = failed.iter().map(|(v, why)| format!("{}: {why}", v.version)).collect();
+                anyhow::bail!("{} stale version(s) not removed: {}", failed.len(), each.join("; "))
+            }
+        }
     }
 }

@@ -127,6 +127,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     }
     let store = crate::cache::open(&job.config.tile_cache.backend(options.cache_dir.as_deref()))?;
     probe(&*store)?;
+    let _in_use = crate::cache::in_use::InUse::mark(store.clone(), &job.region.version);
     // The holds are kept (not `_`, which would drop them) to the end.
     let Records { list, progress, failed, holds: _holds } = records(&job, options)?;
     let threads =

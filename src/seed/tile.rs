@@ -289,6 +289,9 @@ mod tests {
         fn unlock(&self, _: &Lock) -> Result<(), CacheError> {
             Err(self.error())
         }
+        fn mark_in_use(&self, version: &str) -> Result<(), CacheError> {
+            self.dir.mark_in_use(version)
+        }
         fn describe(&self) -> String {
             "flaky".into()
         }

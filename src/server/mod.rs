@@ -146,6 +146,8 @@ pub struct Bound {
     pub state: Arc<AppState>,
     /// Where tiles are cached, for logs.
     pub cache: String,
+    /// The region's version marked in use in the tile cache while this lives.
+    pub in_use: crate::cache::in_use::InUse,
 }
 
 impl Bound {
@@ -156,6 +158,7 @@ impl Bound {
 
     /// Serves until `shutdown` resolves, then finishes the requests in flight.
     pub async fn run(self, shutdown: impl std::future::Future<Output = ()> + Send + 'static) -> std::io::Result<()> {
+        let _in_use = self.in_use;
         axum::serve(self.listener, router(self.state)).with_graceful_shutdown(shutdown).await
     }
 }
@@ -170,12 +173,13 @@ pub async fn bind(config: Option<&Path>, options: ServeOptions) -> anyhow::Resul
     let backend = cfg.tile_cache.backend(options.cache_dir.as_deref());
     let store = tokio::task::spawn_blocking(move || crate::cache::open(&backend)).await??;
     let cache = store.describe();
+    let in_use = crate::cache::in_use::InUse::mark(store.clone(), &region.version);
     let listener =
         tokio::net::TcpListener::bind(&bind).await.map_err(|e| anyhow::anyhow!("cannot listen on {bind}: {e}"))?;
     // The address listened on, its port chosen if 0 was asked for.
     settings.bind = listener.local_addr()?.to_string();
     let state = AppState::new(region, store, cfg.tile_cache.lock_ttl(), settings)?;
-    Ok(Bound { listener, state, cache })
+    Ok(Bound { listener, state, cache, in_use })
 }
 
 /// Loads the configuration, binds, serves until SIGTERM or SIGINT, then

@@ -63,6 +63,9 @@ fn a_directory_cache_is_listed_pruned_and_trimmed_and_serves_every_tile_after() 
 
     // Nothing asked: a usage error.
     assert_eq!(cache(&["prune", "--cache-dir", root_arg]).status.code(), Some(2));
+    let dry = ok(&cache(&["prune", "--cache-dir", root_arg, "--stale", "--dry-run"]));
+    assert!(dry.contains(&format!("would remove stale version {STALE} ({} tiles", seeded.len())), "{dry}");
+    assert!(root.join(STALE).exists());
     let pruned = ok(&cache(&["prune", "--cache-dir", root_arg, "--stale"]));
     assert!(pruned.contains(&format!("removed stale version {STALE} ({} tiles", seeded.len())), "{pruned}");
     assert!(!root.join(STALE).exists() && root.join(&current).exists());
@@ -88,6 +91,18 @@ fn a_directory_cache_is_listed_pruned_and_trimmed_and_serves_every_tile_after() 
         assert!(reply.status == 200 && reply.body == *bytes, "{path}");
     }
     assert_eq!(server.metric("sylva_tile_computations_total"), old.len() as f64);
+
+    // Pruned for another region, the demo's version is stale: refused, as
+    // that region has no tiles here; forced, kept all the same, as the
+    // server running on it marked it in use.
+    let rmnp = rmnp_config(&dir, "rmnp.toml", "");
+    let other = ["prune", "--config", rmnp.to_str().unwrap(), "--cache-dir", root_arg, "--stale"];
+    let refused = cache(&other);
+    let said = String::from_utf8_lossy(&refused.stderr);
+    assert!(refused.status.code() == Some(1) && said.contains("none of the current versions"), "{said}");
+    let forced = ok(&cache(&[&other[..], &["--force"]].concat()));
+    assert!(forced.contains(&format!("kept stale version {current}")) && forced.contains("in use"), "{forced}");
+    assert!(root.join(&current).exists());
 }
 
 #[test]
@@ -119,9 +134,19 @@ fn a_redis_cache_loses_its_stale_versions_and_is_trimmed_oldest_written_first() 
     set(&mut conn, "sylva:notes/readme", b"x");
     set(&mut conn, "other:v00000000000000dd/dem/6/1/1_0.bil", &stamped(180));
 
+    // Another version marked in use by its server, its tiles old; a lock
+    // held in the current version.
+    let marked = "v00000000000000cc";
+    set(&mut conn, &format!("sylva:{marked}/dem/6/1/1_0.bil"), &stamped(180));
+    let store = sylva::cache::redis::RedisStore::open(&redis.url, "sylva:").unwrap();
+    store.mark_in_use(marked).unwrap();
+    let lock = format!("sylva:lock:{}/dem/6/1/1_0.bil", current.version);
+    set(&mut conn, &lock, b"holder");
+
     let plan = |stale, max_bytes| Plan {
         keep: vec![current.version.clone()],
         stale,
+        force: false,
         max_bytes,
         grace: Duration::from_secs(3600),
         dry_run: false,
@@ -130,32 +155,31 @@ fn a_redis_cache_loses_its_stale_versions_and_is_trimmed_oldest_written_first() 
     let names = |v: &[sylva::cache::prune::VersionUsage]| v.iter().map(|v| v.version.clone()).collect::<Vec<_>>();
     assert_eq!(names(&pruned.removed), [STALE]);
     assert_eq!(pruned.removed[0].tiles, 3);
-    assert_eq!(names(&pruned.in_use), ["v00000000000000ff"]);
+    assert_eq!(names(&pruned.in_use), ["v00000000000000cc", "v00000000000000ff"]);
     let keys: Vec<String> = ::redis::cmd("KEYS").arg("*").query(&mut conn).unwrap();
     assert!(!keys.iter().any(|k| k.contains(STALE)), "{keys:?}");
     for kept in ["sylva:notes/readme", "other:v00000000000000dd/dem/6/1/1_0.bil", recent] {
         assert!(keys.iter().any(|k| k == kept), "{kept}");
     }
 
-    // Trimmed to half its size, the cache loses its oldest written tile
-    // first (the recent version's, older than the seed), then the seed's;
-    // what is left reads whole.
+    // Trimmed to half its size, the cache loses its oldest written entries
+    // first (the marked version's, then the recent one's, both older than
+    // the seed), then the seed's; locks and marks stay; nothing left reads
+    // damaged.
+    let ours = |conn: &mut ::redis::Connection| ::redis::cmd("KEYS").arg("sylva:*").query::<Vec<String>>(conn).unwrap();
+    let before = ours(&mut conn).len() as u64;
     let half = pruned.bytes_after / 2;
     let trimmed = prune(&backend, &plan(false, Some(half)), SystemTime::now()).unwrap();
-    assert!(trimmed.trimmed.0 > 1 && trimmed.bytes_after <= half, "{trimmed:?}");
-    assert!(!::redis::cmd("EXISTS").arg(recent).query::<bool>(&mut conn).unwrap());
+    assert!(trimmed.trimmed.0 > 2 && trimmed.bytes_after <= half, "{trimmed:?}");
+    let exists =
+        |conn: &mut ::redis::Connection, key: &str| ::redis::cmd("EXISTS").arg(key).query::<bool>(conn).unwrap();
+    assert!(!exists(&mut conn, recent) && !exists(&mut conn, &format!("sylva:{marked}/dem/6/1/1_0.bil")));
+    assert!(exists(&mut conn, &lock) && exists(&mut conn, &format!("sylva:in-use:{marked}")));
+    let left = ours(&mut conn);
+    assert_eq!(left.len() as u64, before - trimmed.trimmed.0);
     let (_, after) = usage(&backend).unwrap();
     assert_eq!(after.iter().map(|v| v.bytes).sum::<u64>(), trimmed.bytes_after);
-    let store = sylva::cache::redis::RedisStore::open(&redis.url, "sylva:").unwrap();
-    let current_keys: Vec<String> =
-        ::redis::cmd("KEYS").arg(format!("sylva:{}/*", current.version)).query(&mut conn).unwrap();
-    assert_eq!(current_keys.len() as u64, current.tiles - (trimmed.trimmed.0 - 1) + shared_entries(&current_keys));
-    for key in &current_keys {
-        assert!(matches!(store.get(key.strip_prefix("sylva:").unwrap()).unwrap(), Lookup::Hit(_)), "{key}");
+    for key in left.iter().filter(|k| k.starts_with(&format!("sylva:{}/", current.version))) {
+        assert!(!matches!(store.get(key.strip_prefix("sylva:").unwrap()).unwrap(), Lookup::Corrupt), "{key}");
     }
-}
-
-/// Shared (uniform) entries among `keys`: never trimmed, not tiles.
-fn shared_entries(keys: &[String]) -> u64 {
-    keys.iter().filter(|k| k.contains("/uniform/")).count() as u64
 }

@@ -1,17 +1,22 @@
 //! The directory cache's walk: a version is the directory `{root}/{version}`;
 //! its entries are every file, link and directory under it, counted by the
 //! blocks they take (as `du` counts); a tile is a file or link outside
-//! `uniform/` that is neither a lock nor a temporary. A file's last use is
-//! the later of its modification and access times: a file system mounted
-//! `relatime` (Linux's default) records the first read after each write
-//! and at most one a day after that; one mounted `noatime` none, and its
-//! tiles are trimmed oldest written first.
+//! `uniform/` (where shared entries are) whose name does not start with a
+//! dot (writers' temporaries, the mark of use) or end in `.lock`. A file's
+//! last use is the later of its modification and access times: a file
+//! system mounted `relatime` (Linux's default) records the first read
+//! after each write and at most one a day after that; one mounted `noatime`
+//! none, and its tiles are trimmed oldest written first.
 //!
-//! Directories a trim empties stay: a tile computed there again needs them,
-//! and its writer may be making it at that moment.
+//! A version is removed by renaming it out of the way (`.{version}.removing`,
+//! which no walk takes for a version) and deleting that: a writer that
+//! comes after the rename makes the version's directory anew. Directories a
+//! trim empties stay: a tile computed there again needs them, and its
+//! writer may be making it at that moment.
 
 use super::{Entry, Kind, Maintain, is_version};
-use crate::cache::CacheError;
+use crate::cache::dir::IN_USE;
+use crate::cache::{CacheError, DirStore, TileStore};
 use std::fs;
 use std::io;
 use std::os::unix::fs::MetadataExt;
@@ -22,23 +27,27 @@ use std::time::{Duration, SystemTime};
 const READ_DIR: &str = "read the cache directory";
 
 /// The walk of a directory cache.
-pub(crate) struct Walker {
-    root: PathBuf,
-}
+pub(crate) struct Walker(DirStore);
 
 impl Walker {
-    /// The cache at `root`, which must be a directory.
+    /// The cache at `root`, which must be a directory (it is not made).
     pub fn open(root: &Path) -> Result<Walker, CacheError> {
         match fs::metadata(root) {
-            Ok(m) if m.is_dir() => Ok(Walker { root: root.to_path_buf() }),
+            Ok(m) if m.is_dir() => Ok(Walker(DirStore::new(root))),
             Ok(_) => Err(CacheError::io("use the tile cache", root, io::Error::other("it is not a directory"))),
             Err(e) => Err(CacheError::io("use the tile cache", root, e)),
         }
     }
 
-    /// Visits `path` (a directory after everything in it) and removes the
-    /// tiles `remove` asks for.
-    fn visit(&self, path: &Path, in_shared: bool, remove: &mut dyn FnMut(&Entry) -> bool) -> Result<(), CacheError> {
+    /// Visits `path` of `version` (a directory after everything in it) and
+    /// removes the tiles and shared entries `remove` asks for.
+    fn visit(
+        &self,
+        version: &str,
+        path: &Path,
+        shared: bool,
+        remove: &mut dyn FnMut(&str, &Entry) -> bool,
+    ) -> Result<(), CacheError> {
         let meta = match fs::symlink_metadata(path) {
             Ok(m) => m,
             // Removed by another process since its directory was read.
@@ -46,18 +55,15 @@ impl Walker {
             Err(e) => return Err(CacheError::io(READ_DIR, path, e)),
         };
         if meta.is_dir() {
+            let top = path == self.0.path(version);
             for child in read_dir(path)? {
-                let shared = in_shared || child.file_name().is_some_and(|n| n == "uniform");
-                self.visit(&child, shared, remove)?;
+                let into_shared = shared || (top && child.file_name().is_some_and(|n| n == "uniform"));
+                self.visit(version, &child, into_shared, remove)?;
             }
         }
-        let tile = !meta.is_dir() && !in_shared && !is_lock_or_temporary(path);
-        let entry = Entry {
-            bytes: meta.blocks() * 512,
-            last_used: (!meta.is_dir()).then(|| last_used(&meta)),
-            kind: if tile { Kind::Tile } else { Kind::Kept },
-        };
-        if remove(&entry) && tile {
+        let kind = kind(&meta, path, shared);
+        let entry = Entry { bytes: meta.blocks() * 512, last_used: (!meta.is_dir()).then(|| last_used(&meta)), kind };
+        if remove(version, &entry) && kind != Kind::Kept {
             match fs::remove_file(path) {
                 Err(e) if e.kind() != io::ErrorKind::NotFound => {
                     return Err(CacheError::io("remove the cache entry", path, e));
@@ -71,29 +77,41 @@ impl Walker {
 
 impl Maintain for Walker {
     fn describe(&self) -> String {
-        format!("directory {}", self.root.display())
+        self.0.describe()
     }
 
-    fn versions(&self) -> Result<Vec<String>, CacheError> {
-        let mut versions: Vec<String> = read_dir(&self.root)?
+    fn walk(&self, remove: &mut dyn FnMut(&str, &Entry) -> bool) -> Result<(), CacheError> {
+        let mut versions: Vec<String> = read_dir(self.0.root())?
             .into_iter()
-            .filter(|p| p.is_dir())
             .filter_map(|p| p.file_name().and_then(|n| n.to_str()).map(str::to_string))
             .filter(|name| is_version(name))
             .collect();
         versions.sort();
-        Ok(versions)
+        for version in versions {
+            let path = self.0.path(&version);
+            if path.is_dir() {
+                self.visit(&version, &path, false, remove)?;
+            }
+        }
+        Ok(())
     }
 
-    fn walk(&self, version: &str, remove: &mut dyn FnMut(&Entry) -> bool) -> Result<(), CacheError> {
-        self.visit(&self.root.join(version), false, remove)
-    }
-
-    fn remove_version(&self, version: &str) -> Result<(), CacheError> {
-        let path = self.root.join(version);
-        match fs::remove_dir_all(&path) {
-            Err(e) if e.kind() != io::ErrorKind::NotFound => Err(CacheError::io("remove the version", &path, e)),
-            _ => Ok(()),
+    fn remove_version(&self, version: &str, since: SystemTime) -> Result<bool, CacheError> {
+        let path = self.0.path(version);
+        let marked = fs::metadata(path.join(IN_USE)).and_then(|m| m.modified());
+        if marked.is_ok_and(|t| t >= since) {
+            return Ok(false);
+        }
+        let aside = self.0.path(&format!(".{version}.removing"));
+        let failed = |doing, e| Err(CacheError::io(doing, &path, e));
+        match fs::rename(&path, &aside) {
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(true),
+            Err(e) => return failed("set aside the version", e),
+            Ok(()) => {}
+        }
+        match fs::remove_dir_all(&aside) {
+            Err(e) if e.kind() != io::ErrorKind::NotFound => failed("remove the version", e),
+            _ => Ok(true),
         }
     }
 }
@@ -108,10 +126,17 @@ fn read_dir(path: &Path) -> Result<Vec<PathBuf>, CacheError> {
     entries.map(|e| e.map(|e| e.path()).map_err(|e| CacheError::io(READ_DIR, path, e))).collect()
 }
 
-/// A tile's lock (`{key}.lock`) or a writer's temporary (`.{name}.{token}.tmp`).
-fn is_lock_or_temporary(path: &Path) -> bool {
+/// What the file, link or directory at `path` is; `shared`: under the
+/// version's `uniform/`.
+fn kind(meta: &fs::Metadata, path: &Path, shared: bool) -> Kind {
     let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-    name.ends_with(".lock") || (name.starts_with('.') && name.ends_with(".tmp"))
+    // Locks, writers' temporaries (`.{name}.{token}.tmp`) and the mark of use.
+    let kept = meta.is_dir() || name.starts_with('.') || name.ends_with(".lock");
+    match (kept, shared) {
+        (true, _) => Kind::Kept,
+        (false, true) => Kind::Shared,
+        (false, false) => Kind::Tile,
+    }
 }
 
 /// The later of the modification and access times.
@@ -125,7 +150,8 @@ fn last_used(meta: &fs::Metadata) -> SystemTime {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{Plan, Pruned, prune, usage};
+    use super::super::{Maintain, Plan, Pruned, prune, usage};
+    use super::Walker;
     use crate::cache::{Backend, DirStore, TileStore, flight};
     use std::fs;
     use std::time::{Duration, SystemTime};
@@ -133,6 +159,7 @@ mod tests {
     const CURRENT: &str = "v00000000000000aa";
     const OLD: &str = "v00000000000000bb";
     const RECENT: &str = "v00000000000000cc";
+    const MARKED: &str = "v00000000000000dd";
     const TILE_BYTES: usize = 40_000;
 
     fn store(tag: &str) -> DirStore {
@@ -144,12 +171,17 @@ mod tests {
 
     /// `key`'s tile, written and read `minutes` ago.
     fn tile(s: &DirStore, key: &str, minutes: u64) {
+        tile_read(s, key, minutes, minutes);
+    }
+
+    /// `key`'s tile, written `written` minutes ago and read `read` ago.
+    fn tile_read(s: &DirStore, key: &str, written: u64, read: u64) {
         let lock = s.try_lock(key, Duration::from_secs(60)).unwrap().unwrap();
         flight::save(s, &lock, &vec![7; TILE_BYTES], false).unwrap();
         s.unlock(&lock).unwrap();
-        let t = SystemTime::now() - Duration::from_secs(minutes * 60);
+        let ago = |minutes: u64| SystemTime::now() - Duration::from_secs(minutes * 60);
         let file = fs::File::options().write(true).open(s.path(key)).unwrap();
-        file.set_times(fs::FileTimes::new().set_accessed(t).set_modified(t)).unwrap();
+        file.set_times(fs::FileTimes::new().set_accessed(ago(read)).set_modified(ago(written))).unwrap();
     }
 
     /// What `du` says the directory takes.
@@ -163,7 +195,8 @@ mod tests {
     }
 
     fn plan(stale: bool, max_bytes: Option<u64>, dry_run: bool) -> Plan {
-        Plan { keep: vec![CURRENT.into()], stale, max_bytes, grace: Duration::from_secs(3600), dry_run }
+        let grace = Duration::from_secs(3600);
+        Plan { keep: vec![CURRENT.into()], stale, force: false, max_bytes, grace, dry_run }
     }
 
     /// A lock left held, a writer's temporary, and a shared entry linked
@@ -201,11 +234,13 @@ mod tests {
     fn a_trim_removes_the_least_recently_used_tiles_down_to_the_size() {
         let s = store("trim");
         let key = |i: u64| format!("{CURRENT}/cem/7/{i}/{i}_0.bil");
-        // Tiles 0..10, tile 0 the oldest; 3 and 10 used in the same minute.
+        // Tiles 0..10, tile 0 the oldest; 3 and 10 used in the same minute;
+        // 11 written before all, but read since.
         for i in 0..10 {
             tile(&s, &key(i), 100 - 10 * i);
         }
         tile(&s, &key(10), 70);
+        tile_read(&s, &key(11), 200, 1);
         others(&s, CURRENT);
         let version = s.path(CURRENT);
         let before = du(&version);
@@ -217,12 +252,12 @@ mod tests {
         assert_eq!(du(&version), before, "a dry run removes nothing");
         let done = run(&s, &plan(false, Some(max), false));
         assert_eq!((dry.trimmed, done.trimmed), ((4, 4 * one), (4, 4 * one)));
-        let kept: Vec<u64> = (0..11).filter(|&i| s.path(&key(i)).exists()).collect();
-        assert!(kept.starts_with(&[4, 5, 6, 7, 8, 9]) && kept.len() == 7, "{kept:?}");
+        let kept: Vec<u64> = (0..12).filter(|&i| s.path(&key(i)).exists()).collect();
+        assert!(kept.starts_with(&[4, 5, 6, 7, 8, 9]) && kept.ends_with(&[11]) && kept.len() == 8, "{kept:?}");
         assert!(kept.contains(&3) != kept.contains(&10));
         assert_eq!((done.bytes_after, du(&version)), (before - 4 * one, before - 4 * one));
         assert!(done.bytes_after <= max);
-        // Locks, temporaries and shared entries stay; the links are tiles.
+        // Locks, temporaries and the (newer) shared entry stay.
         assert!(s.path(&format!("{CURRENT}/cem/5/1/1_1.bil.lock")).exists());
         assert!(s.path(&format!("{CURRENT}/cem/5/1/.1_2.bil.token.tmp")).exists());
         assert_eq!(fs::read_dir(s.path(&format!("{CURRENT}/uniform"))).unwrap().count(), 1);
@@ -236,6 +271,9 @@ mod tests {
         tile(&s, &format!("{OLD}/cem/6/0/0_0.bil"), 180);
         tile(&s, &format!("{OLD}/dem/6/0/0_0.bil"), 240);
         tile(&s, &format!("{RECENT}/cem/6/0/0_0.bil"), 5);
+        // Old tiles, but a server of that version runs: marked in use.
+        tile(&s, &format!("{MARKED}/cem/6/0/0_0.bil"), 300);
+        s.mark_in_use(MARKED).unwrap();
         fs::create_dir_all(s.path("backup")).unwrap();
         let dry = run(&s, &plan(true, None, true));
         assert!(s.path(OLD).exists(), "a dry run removes nothing");
@@ -244,15 +282,35 @@ mod tests {
             let names = |v: &[super::super::VersionUsage]| v.iter().map(|v| v.version.clone()).collect::<Vec<_>>();
             assert_eq!(
                 (names(&pruned.removed), names(&pruned.in_use)),
-                (vec![OLD.to_string()], vec![RECENT.to_string()])
+                (vec![OLD.to_string()], vec![RECENT.to_string(), MARKED.to_string()])
             );
             assert_eq!(pruned.removed[0].tiles, 2);
         }
         assert!(!s.path(OLD).exists());
-        for kept in [CURRENT, RECENT, "backup"] {
+        for kept in [CURRENT, RECENT, MARKED, "backup"] {
             assert!(s.path(kept).exists(), "{kept}");
         }
-        assert_eq!(done.bytes_after, du(&s.path(CURRENT)) + du(&s.path(RECENT)));
+        let versions = [CURRENT, RECENT, MARKED].map(|v| du(&s.path(v)));
+        assert_eq!(done.bytes_after, versions.iter().sum::<u64>());
+        // A version marked after the walk measured it is kept all the same.
+        let hour_ago = SystemTime::now() - Duration::from_secs(3600);
+        assert!(!Walker::open(s.root()).unwrap().remove_version(MARKED, hour_ago).unwrap());
+        fs::remove_dir_all(s.root()).unwrap();
+    }
+
+    #[test]
+    fn a_prune_that_finds_no_current_version_removes_nothing_unless_forced() {
+        let s = store("none-current");
+        tile(&s, &format!("{OLD}/cem/6/0/0_0.bil"), 180);
+        let backend = Backend::Directory(s.root().to_path_buf());
+        let refused = prune(&backend, &plan(true, None, false), SystemTime::now()).unwrap_err();
+        assert!(
+            refused.to_string().contains(&format!("none of the current versions ({CURRENT}) has tiles")),
+            "{refused}"
+        );
+        assert!(s.path(OLD).exists());
+        let forced = prune(&backend, &Plan { force: true, ..plan(true, None, false) }, SystemTime::now()).unwrap();
+        assert_eq!((forced.removed.len(), s.path(OLD).exists()), (1, false));
         fs::remove_dir_all(s.root()).unwrap();
     }
 }

@@ -16,9 +16,13 @@
 //! counting instead of removing.
 //!
 //! Safe beside running servers and seeders: a tile removed is a miss,
-//! computed again; a tile being written lands after the walk or is kept;
-//! locks, temporaries and shared (uniform) entries are never trimmed; and a
-//! stale version used within a grace period is kept, as in use.
+//! computed again (a shared entry removed too: its links miss); a tile
+//! being written lands after the walk or is kept; locks, temporaries and
+//! marks of use are never trimmed; and a stale version written, read or
+//! marked in use (`cache::in_use`: every running server and seeder marks
+//! its own) within a grace period is kept, checked again just before it is
+//! removed. A stale version is removed whole, its locks too (no one is
+//! computing its tiles, or it would not be stale).
 
 mod dir;
 #[cfg(feature = "server")]
@@ -36,41 +40,45 @@ pub(crate) struct Entry {
     /// When it was last written or read, as far as the backend knows
     /// (`None` for a directory: listing it is no use of a tile).
     pub last_used: Option<SystemTime>,
-    /// Whether trimming may remove it.
+    /// What it is.
     pub kind: Kind,
 }
 
-/// What an entry is, for trimming.
+/// What an entry is, for counting and trimming.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum Kind {
     /// A tile (its file or its link to a shared entry): trimmed by use.
     Tile,
-    /// Anything else of the version (shared entries, locks, temporaries,
-    /// directories): counted, never trimmed.
+    /// A shared entry (a uniform tile's content): trimmed by use too (its
+    /// links then find nothing, a miss, and the tile is made again).
+    Shared,
+    /// A lock, a writer's temporary, a mark of use, a directory: counted,
+    /// never trimmed.
     Kept,
 }
 
-/// A backend's walk over its versions.
+/// A backend's walk.
 pub(crate) trait Maintain {
     /// Where the cache is, for messages.
     fn describe(&self) -> String;
-    /// The version keys present.
-    fn versions(&self) -> Result<Vec<String>, CacheError>;
-    /// Visits every entry of `version`; an entry for which `remove` is true
-    /// is removed (one already gone is no error).
-    fn walk(&self, version: &str, remove: &mut dyn FnMut(&Entry) -> bool) -> Result<(), CacheError>;
-    /// Removes a whole version.
-    fn remove_version(&self, version: &str) -> Result<(), CacheError>;
+    /// Visits every entry of every version in one walk; an entry for which
+    /// `remove` (given its version) is true is removed if it is a tile or a
+    /// shared entry (one already gone is no error).
+    fn walk(&self, remove: &mut dyn FnMut(&str, &Entry) -> bool) -> Result<(), CacheError>;
+    /// Removes a whole version, unless it was marked in use (`cache::in_use`)
+    /// at or after `since`: then it is kept and the answer is false.
+    fn remove_version(&self, version: &str, since: SystemTime) -> Result<bool, CacheError>;
 }
 
-/// True for a version key: `v` and 16 hex digits (`config::version_key`).
-/// Anything else in a cache is not Sylva's tiles, and is left alone.
+/// True for a version key: `v` and 16 lowercase hex digits
+/// (`config::version_key`). Anything else in a cache is not Sylva's tiles,
+/// and is left alone.
 pub(crate) fn is_version(name: &str) -> bool {
-    name.len() == 17 && name.starts_with('v') && name[1..].bytes().all(|b| b.is_ascii_hexdigit())
+    name.len() == 17 && name.starts_with('v') && name[1..].bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
 }
 
 /// What one version holds.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct VersionUsage {
     /// Its key.
     pub version: String,
@@ -78,32 +86,56 @@ pub struct VersionUsage {
     pub tiles: u64,
     /// Bytes of everything under it.
     pub bytes: u64,
-    /// When anything of it was last written or read.
+    /// When anything of it was last written, read or marked in use.
     pub last_used: Option<SystemTime>,
 }
 
-/// The versions of the cache at `backend`, largest first.
+/// The versions of the cache at `backend`, largest first, and where it is.
 pub fn usage(backend: &Backend) -> Result<(String, Vec<VersionUsage>), CacheError> {
     let store = open(backend)?;
-    let mut measured = measure(&*store)?;
-    measured.sort_by(|a, b| b.usage.bytes.cmp(&a.usage.bytes).then(a.usage.version.cmp(&b.usage.version)));
-    Ok((store.describe(), measured.into_iter().map(|m| m.usage).collect()))
+    let mut versions: Vec<VersionUsage> = measure(&*store)?.into_values().map(|m| m.usage).collect();
+    versions.sort_by(|a, b| b.bytes.cmp(&a.bytes).then(a.version.cmp(&b.version)));
+    Ok((store.describe(), versions))
 }
 
 /// What to prune.
 #[derive(Clone, Debug)]
 pub struct Plan {
-    /// The versions in use (of the configurations served and seeded).
+    /// The versions current (of the configurations served and seeded).
     pub keep: Vec<String>,
     /// Remove the other versions.
     pub stale: bool,
-    /// Then trim the least recently used tiles until the cache holds at
-    /// most this many bytes.
+    /// Remove them even if no current version has tiles in the cache
+    /// (otherwise a sign that the current versions were computed elsewise
+    /// than the servers': another Sylva, other source files).
+    pub force: bool,
+    /// Then trim the least recently used tiles until the cache's versions
+    /// take at most this many bytes.
     pub max_bytes: Option<u64>,
-    /// A stale version written or read within this long is kept, as in use.
+    /// A stale version written, read or marked in use within this long is
+    /// kept, as in use.
     pub grace: Duration,
     /// Say what would go, remove nothing.
     pub dry_run: bool,
+}
+
+/// Why a prune did not run.
+#[derive(Debug, thiserror::Error)]
+pub enum PruneError {
+    /// The cache could not be read or changed.
+    #[error(transparent)]
+    Cache(#[from] CacheError),
+    /// No current version is in the cache, but stale ones are.
+    #[error(
+        "none of the current versions ({}) has tiles in {cache}, so every version there would be stale: are the servers' configurations, source files and Sylva the same as this command's? (`sylva cache usage` lists the versions; --force removes them anyway)",
+        keep.join(", ")
+    )]
+    NoCurrentVersion {
+        /// The versions kept.
+        keep: Vec<String>,
+        /// Where the cache is.
+        cache: String,
+    },
 }
 
 /// What a prune did (or, dry, would do).
@@ -111,81 +143,97 @@ pub struct Plan {
 pub struct Pruned {
     /// Where the cache is.
     pub cache: String,
-    /// Bytes before.
+    /// Bytes of its versions before.
     pub bytes_before: u64,
     /// Stale versions removed.
     pub removed: Vec<VersionUsage>,
     /// Stale versions kept because they were used within the grace.
     pub in_use: Vec<VersionUsage>,
-    /// Tiles trimmed, and their bytes.
+    /// Stale versions that could not be removed, and why.
+    pub failed: Vec<(VersionUsage, String)>,
+    /// Tiles and shared entries trimmed, and their bytes.
     pub trimmed: (u64, u64),
-    /// Bytes after.
+    /// Bytes of its versions after.
     pub bytes_after: u64,
 }
 
 /// Prunes the cache at `backend` by `plan`, `now` being the time the grace
 /// counts back from.
-pub fn prune(backend: &Backend, plan: &Plan, now: SystemTime) -> Result<Pruned, CacheError> {
+pub fn prune(backend: &Backend, plan: &Plan, now: SystemTime) -> Result<Pruned, PruneError> {
     let store = open(backend)?;
     let measured = measure(&*store)?;
+    let stale = |v: &str| plan.stale && !plan.keep.iter().any(|k| k == v);
+    if !plan.force && measured.keys().any(|v| stale(v)) && !measured.keys().any(|v| plan.keep.contains(v)) {
+        return Err(PruneError::NoCurrentVersion { keep: plan.keep.clone(), cache: store.describe() });
+    }
     let mut pruned = Pruned {
         cache: store.describe(),
-        bytes_before: measured.iter().map(|m| m.usage.bytes).sum(),
+        bytes_before: measured.values().map(|m| m.usage.bytes).sum(),
         ..Pruned::default()
     };
-    let mut left = Vec::new();
-    for m in measured {
-        let recent = m.usage.last_used.is_some_and(|t| now.duration_since(t).map_or(true, |age| age < plan.grace));
-        match (plan.stale && !plan.keep.contains(&m.usage.version), recent) {
-            (false, _) => left.push(m),
-            (true, true) => {
+    let since = now.checked_sub(plan.grace).unwrap_or(SystemTime::UNIX_EPOCH);
+    let mut left = BTreeMap::new();
+    for (version, m) in measured {
+        let recent = m.usage.last_used.is_some_and(|t| t >= since);
+        let removed = match (stale(&version), recent, plan.dry_run) {
+            (false, _, _) => false,
+            (true, true, _) => {
                 pruned.in_use.push(m.usage.clone());
-                left.push(m);
+                false
             }
-            (true, false) => {
-                if !plan.dry_run {
-                    store.remove_version(&m.usage.version)?;
+            (true, false, true) => true,
+            // Checked again just before: a server may have started since.
+            (true, false, false) => match store.remove_version(&version, since) {
+                Ok(removed) => {
+                    if !removed {
+                        pruned.in_use.push(m.usage.clone());
+                    }
+                    removed
                 }
-                pruned.removed.push(m.usage);
+                Err(e) => {
+                    pruned.failed.push((m.usage.clone(), e.to_string()));
+                    false
+                }
+            },
+        };
+        match removed {
+            true => pruned.removed.push(m.usage),
+            false => {
+                left.insert(version, m);
             }
         }
     }
-    let bytes_left: u64 = left.iter().map(|m| m.usage.bytes).sum();
+    let bytes_left: u64 = left.values().map(|m| m.usage.bytes).sum();
     let excess = plan.max_bytes.map_or(0, |max| bytes_left.saturating_sub(max));
-    pruned.trimmed = match excess {
-        0 => (0, 0),
-        _ => trim(&*store, &left, excess, plan.dry_run)?,
-    };
-    pruned.bytes_after = bytes_left - pruned.trimmed.1;
+    if excess > 0 {
+        pruned.trimmed = trim(&*store, &left, excess, plan.dry_run)?;
+    }
+    pruned.bytes_after = bytes_left.saturating_sub(pruned.trimmed.1);
     Ok(pruned)
 }
 
 /// A version measured by the first walk.
+#[derive(Default)]
 struct Measured {
     usage: VersionUsage,
-    /// Its tiles' bytes by the minute they were last used.
+    /// Its trimmable entries' bytes by the minute they were last used.
     by_minute: BTreeMap<u64, u64>,
 }
 
 /// The first walk: every version measured, nothing removed.
-fn measure(store: &dyn Maintain) -> Result<Vec<Measured>, CacheError> {
-    let mut out = Vec::new();
-    for version in store.versions()? {
-        let mut m = Measured {
-            usage: VersionUsage { version: version.clone(), tiles: 0, bytes: 0, last_used: None },
-            by_minute: BTreeMap::new(),
-        };
-        store.walk(&version, &mut |e| {
-            m.usage.bytes += e.bytes;
-            m.usage.last_used = m.usage.last_used.max(e.last_used);
-            if let (Kind::Tile, Some(t)) = (e.kind, e.last_used) {
-                m.usage.tiles += 1;
-                *m.by_minute.entry(minute(t)).or_default() += e.bytes;
-            }
-            false
-        })?;
-        out.push(m);
-    }
+fn measure(store: &dyn Maintain) -> Result<BTreeMap<String, Measured>, CacheError> {
+    let mut out: BTreeMap<String, Measured> = BTreeMap::new();
+    store.walk(&mut |version, e| {
+        let m = out.entry(version.to_string()).or_default();
+        m.usage.version = version.to_string();
+        m.usage.bytes += e.bytes;
+        m.usage.last_used = m.usage.last_used.max(e.last_used);
+        m.usage.tiles += u64::from(e.kind == Kind::Tile);
+        if e.kind != Kind::Kept {
+            *m.by_minute.entry(e.last_used.map_or(0, minute)).or_default() += e.bytes;
+        }
+        false
+    })?;
     Ok(out)
 }
 
@@ -194,10 +242,10 @@ fn minute(t: SystemTime) -> u64 {
     t.duration_since(SystemTime::UNIX_EPOCH).map_or(0, |d| d.as_secs() / 60)
 }
 
-/// The versions' tile bytes by minute of last use, merged.
-fn histogram(versions: &[Measured]) -> BTreeMap<u64, u64> {
+/// The versions' trimmable bytes by minute of last use, merged.
+fn histogram(versions: &BTreeMap<String, Measured>) -> BTreeMap<u64, u64> {
     let mut all = BTreeMap::new();
-    for (&minute, &bytes) in versions.iter().flat_map(|m| &m.by_minute) {
+    for (&minute, &bytes) in versions.values().flat_map(|m| &m.by_minute) {
         *all.entry(minute).or_default() += bytes;
     }
     all
@@ -226,22 +274,27 @@ fn cut(histogram: &BTreeMap<u64, u64>, excess: u64) -> Option<Cut> {
     last
 }
 
-/// The second walk: the oldest tiles removed, up to the cut (counted
-/// only, on a dry run).
-fn trim(store: &dyn Maintain, versions: &[Measured], excess: u64, dry_run: bool) -> Result<(u64, u64), CacheError> {
+/// The second walk: the oldest tiles and shared entries of `versions`
+/// removed, up to the cut (counted only, on a dry run).
+fn trim(
+    store: &dyn Maintain,
+    versions: &BTreeMap<String, Measured>,
+    excess: u64,
+    dry_run: bool,
+) -> Result<(u64, u64), CacheError> {
     let Some(cut) = cut(&histogram(versions), excess) else { return Ok((0, 0)) };
     let (mut removed, mut at_cut) = ((0, 0), 0);
-    for m in versions {
-        store.walk(&m.usage.version, &mut |e| {
-            let minute = e.last_used.map_or(0, minute);
-            let old = e.kind == Kind::Tile && (minute < cut.minute || (minute == cut.minute && at_cut < cut.bytes));
-            if old {
-                at_cut += if minute == cut.minute { e.bytes } else { 0 };
-                removed = (removed.0 + 1, removed.1 + e.bytes);
-            }
-            old && !dry_run
-        })?;
-    }
+    store.walk(&mut |version, e| {
+        let minute = e.last_used.map_or(0, minute);
+        let old = e.kind != Kind::Kept
+            && versions.contains_key(version)
+            && (minute < cut.minute || (minute == cut.minute && at_cut < cut.bytes));
+        if old {
+            at_cut += if minute == cut.minute { e.bytes } else { 0 };
+            removed = (removed.0 + 1, removed.1 + e.bytes);
+        }
+        old && !dry_run
+    })?;
     Ok(removed)
 }
 
@@ -250,7 +303,7 @@ fn open(backend: &Backend) -> Result<Box<dyn Maintain>, CacheError> {
     match backend {
         Backend::Directory(root) => Ok(Box::new(dir::Walker::open(root)?)),
         #[cfg(feature = "server")]
-        Backend::Redis { url, prefix } => Ok(Box::new(redis::Walker::open(url, prefix)?)),
+        Backend::Redis { url, prefix } => Ok(Box::new(redis::Walker(super::redis::RedisStore::open(url, prefix)?))),
         #[cfg(not(feature = "server"))]
         Backend::Redis { url, .. } => Err(CacheError::Unsupported(format!(
             "the Redis tile cache at {url} needs Sylva built with the `server` feature"
@@ -276,7 +329,9 @@ mod tests {
     #[test]
     fn version_keys_are_told_from_other_names() {
         assert!(is_version("v0123456789abcdef"));
-        for name in ["v0123456789abcde", "w0123456789abcdef", "v0123456789abcdeg", "uniform", "seed-progress.json"] {
+        for name in
+            ["v0123456789abcde", "w0123456789abcdef", "v0123456789abcdeg", "vDEADBEEFDEADBEEF", "uniform", "in-use"]
+        {
             assert!(!is_version(name), "{name}");
         }
     }

@@ -1,48 +1,28 @@
-//! The Redis cache's walk: a version is every key `{prefix}{version}/…`
-//! (tiles, and shared entries under `uniform/`) and `{prefix}lock:{version}/…`
-//! (locks), found by `SCAN`, measured by `MEMORY USAGE`. An entry's last use
-//! is the time written in its value (Redis keeps no read time under every
-//! eviction policy), so a trim removes the oldest written first; a lock,
-//! which lives only while held, is in use now. (Redis can bound its memory
-//! itself, by least recent use: `maxmemory` with `maxmemory-policy
-//! allkeys-lru`; every key of Sylva's may go.)
+//! The Redis cache's walk: one `SCAN` of the keys under the prefix, each
+//! key given to its version — `{prefix}{version}/…` (tiles, and shared
+//! entries under `uniform/`), `{prefix}lock:{version}/…` (locks) and
+//! `{prefix}in-use:{version}` (the mark of use) — and measured by `MEMORY
+//! USAGE`. An entry's last use is the time written in its value (Redis
+//! keeps no read time under every eviction policy), so a trim removes the
+//! oldest written first; a lock or a mark, which lives only while its
+//! holder does, is in use now. (Redis can bound its memory itself, by least
+//! recent use: `maxmemory` with `maxmemory-policy allkeys-lru`; every key of
+//! Sylva's may go.)
 
 use super::{Entry, Kind, Maintain, is_version};
-use crate::cache::CacheError;
-use redis::{Client, Connection, RedisError};
-use std::collections::BTreeSet;
-use std::sync::Mutex;
+use crate::cache::redis::{IN_USE, RedisStore};
+use crate::cache::{CacheError, TileStore};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 /// Keys asked for per `SCAN` step.
 const SCAN_COUNT: usize = 1000;
+/// The prefix of lock keys, after the cache's own.
+const LOCK: &str = "lock:";
 
 /// The walk of a Redis cache.
-pub(crate) struct Walker {
-    url: String,
-    prefix: String,
-    conn: Mutex<Connection>,
-}
+pub(crate) struct Walker(pub RedisStore);
 
 impl Walker {
-    /// Connects to the cache at `url` whose keys start with `prefix`.
-    pub fn open(url: &str, prefix: &str) -> Result<Walker, CacheError> {
-        let error = |e: RedisError| CacheError::Redis { url: url.into(), message: e.to_string() };
-        let conn =
-            Client::open(url).and_then(|c| c.get_connection_with_timeout(Duration::from_secs(5))).map_err(error)?;
-        Ok(Walker { url: url.into(), prefix: prefix.into(), conn: Mutex::new(conn) })
-    }
-
-    fn error(&self, e: RedisError) -> CacheError {
-        CacheError::Redis { url: self.url.clone(), message: e.to_string() }
-    }
-
-    /// Runs `op` on the connection.
-    fn with<T>(&self, op: impl FnOnce(&mut Connection) -> Result<T, RedisError>) -> Result<T, CacheError> {
-        let mut conn = self.conn.lock().map_err(|_| CacheError::Unsupported("the Redis connection broke".into()))?;
-        op(&mut conn).map_err(|e| self.error(e))
-    }
-
     /// Calls `each` with every batch of keys matching `pattern`.
     fn scan(
         &self,
@@ -51,7 +31,7 @@ impl Walker {
     ) -> Result<(), CacheError> {
         let mut cursor = 0u64;
         loop {
-            let (next, keys): (u64, Vec<Vec<u8>>) = self.with(|c| {
+            let (next, keys): (u64, Vec<Vec<u8>>) = self.0.with(|c| {
                 redis::cmd("SCAN").arg(cursor).arg("MATCH").arg(pattern).arg("COUNT").arg(SCAN_COUNT).query(c)
             })?;
             each(keys)?;
@@ -73,7 +53,7 @@ impl Walker {
             pipe.cmd("MEMORY").arg("USAGE").arg(key).arg("SAMPLES").arg(0);
             pipe.cmd("GETRANGE").arg(key).arg(4).arg(11);
         }
-        let replies: Vec<redis::Value> = self.with(|c| pipe.query(c))?;
+        let replies: Vec<redis::Value> = self.0.with(|c| pipe.query(c))?;
         Ok(replies
             .chunks(2)
             .map(|pair| {
@@ -82,6 +62,27 @@ impl Walker {
                 bytes.map(|b| (b, written(&stamp)))
             })
             .collect())
+    }
+
+    /// The version of `key` (after the prefix) and what the key is.
+    fn classify(key: &str) -> Option<(&str, Kind)> {
+        let (version, kind) = match (key.strip_prefix(LOCK), key.strip_prefix(IN_USE)) {
+            (Some(locked), _) => (locked.split_once('/')?.0, Kind::Kept),
+            (_, Some(version)) => (version, Kind::Kept),
+            _ => match key.split_once('/')? {
+                (version, rest) if rest.starts_with("uniform/") => (version, Kind::Shared),
+                (version, _) => (version, Kind::Tile),
+            },
+        };
+        is_version(version).then_some((version, kind))
+    }
+
+    /// Unlinks `keys` (none: nothing to do).
+    fn unlink(&self, keys: Vec<Vec<u8>>) -> Result<(), CacheError> {
+        match keys.is_empty() {
+            true => Ok(()),
+            false => self.0.with(|c| redis::cmd("UNLINK").arg(keys).query::<u64>(c)).map(|_| ()),
+        }
     }
 }
 
@@ -99,61 +100,50 @@ fn glob_literal(text: &str) -> String {
 
 impl Maintain for Walker {
     fn describe(&self) -> String {
-        format!("Redis {} (keys {}…)", self.url, self.prefix)
+        self.0.describe()
     }
 
-    fn versions(&self) -> Result<Vec<String>, CacheError> {
-        let mut versions = BTreeSet::new();
-        self.scan(&format!("{}*", glob_literal(&self.prefix)), &mut |keys| {
-            for key in keys {
-                let key = String::from_utf8_lossy(&key);
-                let rest = key.strip_prefix(self.prefix.as_str()).unwrap_or_default();
-                let rest = rest.strip_prefix("lock:").unwrap_or(rest);
-                if let Some((version, _)) = rest.split_once('/').filter(|(v, _)| is_version(v)) {
-                    versions.insert(version.to_string());
+    fn walk(&self, remove: &mut dyn FnMut(&str, &Entry) -> bool) -> Result<(), CacheError> {
+        let prefix = self.0.prefix().to_string();
+        self.scan(&format!("{}*", glob_literal(&prefix)), &mut |keys| {
+            let ours: Vec<Vec<u8>> = keys
+                .into_iter()
+                .filter(|k| {
+                    std::str::from_utf8(k)
+                        .ok()
+                        .and_then(|k| k.strip_prefix(&prefix))
+                        .and_then(Walker::classify)
+                        .is_some()
+                })
+                .collect();
+            let measured = self.measure(&ours)?;
+            let mut gone = Vec::new();
+            for (key, m) in ours.into_iter().zip(measured) {
+                let text = String::from_utf8_lossy(&key);
+                let (Some((bytes, written)), Some((version, kind))) = (m, Walker::classify(&text[prefix.len()..]))
+                else {
+                    continue;
+                };
+                let last_used = if kind == Kind::Kept { SystemTime::now() } else { written };
+                if remove(version, &Entry { bytes, last_used: Some(last_used), kind }) && kind != Kind::Kept {
+                    gone.push(key);
                 }
             }
-            Ok(())
-        })?;
-        Ok(versions.into_iter().collect())
+            self.unlink(gone)
+        })
     }
 
-    fn walk(&self, version: &str, remove: &mut dyn FnMut(&Entry) -> bool) -> Result<(), CacheError> {
-        let prefix = glob_literal(&self.prefix);
-        let shared = format!("{}{version}/uniform/", self.prefix);
-        for (pattern, lock) in [(format!("{prefix}{version}/*"), false), (format!("{prefix}lock:{version}/*"), true)] {
-            self.scan(&pattern, &mut |keys| {
-                let measured = self.measure(&keys)?;
-                let mut gone = Vec::new();
-                for (key, m) in keys.into_iter().zip(measured) {
-                    let Some((bytes, written)) = m else { continue };
-                    let tile = !lock && !key.starts_with(shared.as_bytes());
-                    let last_used = if lock { SystemTime::now() } else { written };
-                    let entry =
-                        Entry { bytes, last_used: Some(last_used), kind: if tile { Kind::Tile } else { Kind::Kept } };
-                    if remove(&entry) && tile {
-                        gone.push(key);
-                    }
-                }
-                if !gone.is_empty() {
-                    self.with(|c| redis::cmd("UNLINK").arg(gone).query::<u64>(c))?;
-                }
-                Ok(())
-            })?;
+    fn remove_version(&self, version: &str, _since: SystemTime) -> Result<bool, CacheError> {
+        let prefix = self.0.prefix();
+        // A mark lives three marks' intervals: any mark left is recent.
+        let mark = format!("{prefix}{IN_USE}{version}");
+        if self.0.with(|c| redis::cmd("EXISTS").arg(&mark).query::<bool>(c))? {
+            return Ok(false);
         }
-        Ok(())
-    }
-
-    fn remove_version(&self, version: &str) -> Result<(), CacheError> {
-        let prefix = glob_literal(&self.prefix);
-        for pattern in [format!("{prefix}{version}/*"), format!("{prefix}lock:{version}/*")] {
-            self.scan(&pattern, &mut |keys| {
-                if !keys.is_empty() {
-                    self.with(|c| redis::cmd("UNLINK").arg(keys).query::<u64>(c))?;
-                }
-                Ok(())
-            })?;
+        let glob = glob_literal(prefix);
+        for pattern in [format!("{glob}{version}/*"), format!("{glob}{LOCK}{version}/*")] {
+            self.scan(&pattern, &mut |keys| self.unlink(keys))?;
         }
-        Ok(())
+        Ok(true)
     }
 }
