@@ -3,7 +3,7 @@
 //! (other threads, other processes sharing the directory, over NFS too) see
 //! either the old file or the whole new one.
 //!
-//! A version's directory holds [`IN_USE`], rewritten by each mark of use.
+//! A version's directory holds `.in-use`, rewritten by each mark of use.
 //!
 //! Shared entries (uniform tiles) are one file under their content key and a
 //! relative symbolic link per tile; a link's own time is its entry's time.
@@ -100,8 +100,7 @@ impl DirStore {
     /// its length bounded (a token read back from a damaged lock file may
     /// be anything).
     fn scratch(&self, lock: &Lock) -> PathBuf {
-        let token: String = lock.token.chars().take(TOKEN_CHARS).map(holder::file_safe).collect();
-        crate::outputs::sibling_tagged(&self.path(&lock.key), &token, "tmp")
+        crate::outputs::sibling_tagged(&self.path(&lock.key), &file_token(&lock.token), "tmp")
     }
 
     /// The lock file of `key`.
@@ -122,6 +121,12 @@ impl DirStore {
             let _ = fs::remove_file(&path);
         }
     }
+}
+
+/// A token as a file name may hold it: characters kept to a safe set, its
+/// length bounded (a token read back from a damaged lock may be anything).
+pub(crate) fn file_token(token: &str) -> String {
+    token.chars().take(TOKEN_CHARS).map(holder::file_safe).collect()
 }
 
 /// Most characters of a token kept in a temporary file's name: a token is
@@ -194,7 +199,15 @@ impl TileStore for DirStore {
         let path = self.path(&format!("{version}/{IN_USE}"));
         let dir = self.path(version);
         fs::create_dir_all(&dir).map_err(|e| CacheError::io(CREATE_DIR, &dir, e))?;
-        fs::write(&path, holder::token()).map_err(|e| CacheError::io("mark the version in use", &path, e))
+        // Through a temporary, as tiles are: a mark another user left is
+        // replaced as theirs are, with the directory's permission alone.
+        let token = holder::token();
+        let tmp = crate::outputs::sibling_tagged(&path, &file_token(&token), "tmp");
+        let written = fs::write(&tmp, &token).and_then(|()| fs::rename(&tmp, &path));
+        if written.is_err() {
+            let _ = fs::remove_file(&tmp);
+        }
+        written.map_err(|e| CacheError::io("mark the version in use", &path, e))
     }
 
     fn describe(&self) -> String {

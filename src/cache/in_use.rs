@@ -4,50 +4,54 @@
 //! its tiles are (a server of a seeded cache only reads, and reads leave no
 //! trace a prune can rely on).
 
-use super::TileStore;
+use super::{CacheError, TileStore};
 use std::sync::Arc;
 use std::sync::mpsc::{self, RecvTimeoutError};
-use std::thread::JoinHandle;
 use std::time::Duration;
 
 /// How often a running server or seeder marks its version.
 pub const EVERY: Duration = Duration::from_secs(300);
 
-/// Marks a version while it lives (a thread of its own); dropping it stops.
+/// Marks a version while it lives (a thread of its own); dropping it tells
+/// the thread to stop, without waiting for a mark in hand (a cache that
+/// hangs must not hold up a server's shutdown).
 pub struct InUse {
-    stop: Option<mpsc::Sender<()>>,
-    thread: Option<JoinHandle<()>>,
+    _stop: mpsc::Sender<()>,
 }
 
 impl InUse {
     /// Marks `version` in `store` now and every [`EVERY`]. A mark that
-    /// fails (a read-only cache) is logged once.
+    /// fails is logged once (at info where the cache is read-only: it is
+    /// then seeded, and served as it is).
     pub fn mark(store: Arc<dyn TileStore>, version: &str) -> InUse {
         let (stop, stopped) = mpsc::channel::<()>();
         let version = version.to_string();
         let run = move || {
-            let mut warned = false;
+            let mut said = false;
             loop {
                 if let Err(e) = store.mark_in_use(&version)
-                    && !std::mem::replace(&mut warned, true)
+                    && !std::mem::replace(&mut said, true)
                 {
-                    tracing::warn!(error = %e, "cannot mark the version in use: `sylva cache prune --stale` may remove it");
+                    let why = "cannot mark the version in use: `sylva cache prune --stale` may remove it";
+                    match read_only(&e) {
+                        true => tracing::info!(error = %e, "{why}"),
+                        false => tracing::warn!(error = %e, "{why}"),
+                    }
                 }
                 if stopped.recv_timeout(EVERY) != Err(RecvTimeoutError::Timeout) {
                     return;
                 }
             }
         };
-        let thread = std::thread::Builder::new().name("sylva-in-use".into()).spawn(run).ok();
-        InUse { stop: Some(stop), thread }
+        if let Err(e) = std::thread::Builder::new().name("sylva-in-use".into()).spawn(run) {
+            tracing::warn!(error = %e, "cannot start marking the version in use");
+        }
+        InUse { _stop: stop }
     }
 }
 
-impl Drop for InUse {
-    fn drop(&mut self) {
-        drop(self.stop.take());
-        if let Some(thread) = self.thread.take() {
-            let _ = thread.join();
-        }
-    }
+/// True for a cache this process may not write.
+fn read_only(e: &CacheError) -> bool {
+    use std::io::ErrorKind::{PermissionDenied, ReadOnlyFilesystem};
+    matches!(e, CacheError::Io { source, .. } if matches!(source.kind(), PermissionDenied | ReadOnlyFilesystem))
 }

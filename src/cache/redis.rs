@@ -4,7 +4,8 @@
 //! either the payload in its [`envelope`] (`TILE`) or the key of a shared
 //! entry (`LINK`). Locks are `SET {prefix}lock:{key} token NX PX ttl`,
 //! released by a script that deletes the lock only if it still holds the
-//! holder's token. A version's mark of use is `{prefix}in-use:{version}`.
+//! holder's token. A version's mark of use is `{prefix}in-use:{version}`,
+//! a `MARK` value (its time the mark's) that expires after 30 days.
 //!
 //! Connections are kept in a small pool of idle ones; each has connect, read
 //! and write timeouts, so an unreachable server is an error, not a hang.
@@ -16,6 +17,7 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 const TILE: &[u8; 4] = b"TILE";
 const LINK: &[u8; 4] = b"LINK";
+const MARK: &[u8; 4] = b"MARK";
 /// Tag and time.
 const HEADER: usize = 12;
 /// Connecting, reading or writing longer than this is a failure.
@@ -73,11 +75,7 @@ impl RedisStore {
     }
 
     fn set(&self, key: &str, tag: &[u8; 4], body: &[u8]) -> Result<(), CacheError> {
-        let now = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64);
-        let mut value = Vec::with_capacity(HEADER + body.len());
-        value.extend_from_slice(tag);
-        value.extend_from_slice(&now.to_le_bytes());
-        value.extend_from_slice(body);
+        let value = stamped(tag, body);
         self.with(|c| redis::cmd("SET").arg(format!("{}{key}", self.prefix)).arg(value).query::<()>(c))
     }
 
@@ -91,6 +89,16 @@ impl RedisStore {
     fn raw(&self, key: &str) -> Result<Option<Vec<u8>>, CacheError> {
         self.with(|c| redis::cmd("GET").arg(format!("{}{key}", self.prefix)).query::<Option<Vec<u8>>>(c))
     }
+}
+
+/// Unix milliseconds now, as a value's header holds them.
+fn now_ms() -> [u8; 8] {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64).to_le_bytes()
+}
+
+/// A value: `tag`, the time now, `body`.
+fn stamped(tag: &[u8; 4], body: &[u8]) -> Vec<u8> {
+    [tag.as_slice(), &now_ms(), body].concat()
 }
 
 /// Splits a value into its tag, time and body.
@@ -124,7 +132,11 @@ impl TileStore for RedisStore {
 
     fn put_shared(&self, lock: &Lock, blob: &str, payload: &[u8]) -> Result<(), CacheError> {
         match self.get(blob)? {
-            Lookup::Hit(s) if s.bytes == payload => {}
+            // Its time renewed: a trim takes it for used (Redis keeps no
+            // read time), as it is.
+            Lookup::Hit(s) if s.bytes == payload => self.with(|c| {
+                redis::cmd("SETRANGE").arg(format!("{}{blob}", self.prefix)).arg(4).arg(&now_ms()[..]).query::<()>(c)
+            })?,
             _ => self.set_tile(blob, payload)?,
         }
         self.set(&lock.key, LINK, blob.as_bytes())
@@ -151,9 +163,9 @@ impl TileStore for RedisStore {
     }
 
     fn mark_in_use(&self, version: &str) -> Result<(), CacheError> {
+        let value = stamped(MARK, super::holder::token().as_bytes());
         let key = format!("{}{IN_USE}{version}", self.prefix);
-        let ttl = super::in_use::EVERY.as_secs() * 3;
-        self.with(|c| redis::cmd("SET").arg(key).arg(super::holder::token()).arg("EX").arg(ttl).query::<()>(c))
+        self.with(|c| redis::cmd("SET").arg(key).arg(value).arg("EX").arg(MARK_TTL.as_secs()).query::<()>(c))
     }
 
     fn describe(&self) -> String {
@@ -162,5 +174,8 @@ impl TileStore for RedisStore {
 }
 
 /// The key (after the prefix, before the version) that marks a version in
-/// use; it expires three marks after the last.
+/// use; its value is a `MARK` with the time of the last mark.
 pub(crate) const IN_USE: &str = "in-use:";
+
+/// A mark outlives any grace a prune may be given, then goes by itself.
+const MARK_TTL: Duration = Duration::from_secs(30 * 86_400);

@@ -131,9 +131,10 @@ pub struct PruneArgs {
     /// most SIZE: 500MiB, 20GiB (powers of 1024), 20G or 20GB (of 1000).
     #[arg(long, value_parser = parse_size)]
     max_size: Option<u64>,
-    /// With --stale: a version written, read or marked in use within this
-    /// long is kept (servers and seeders mark theirs every 5 minutes while
-    /// they run): 1h, 2days; at least 10m.
+    /// With --stale: a version written, marked in use (servers and seeders
+    /// mark theirs every 5 minutes while they run) or read (as far as the
+    /// file system records reads; Redis does not) within this long is kept:
+    /// 1h, 2days; at least 10m.
     #[arg(long, default_value = "1h", value_parser = grace, requires = "stale")]
     grace: Duration,
     /// Say what would be removed; remove nothing.
@@ -190,27 +191,22 @@ impl PruneArgs {
             lines.push(format!("kept stale version {}: in use, within --grace {grace}", described(v)));
         }
         if let Some(max) = self.max_size {
-            let (tiles, bytes) = pruned.trimmed;
-            lines.push(format!(
-                "{trims} {tiles} least recently used tiles ({}) for --max-size {}",
-                size(bytes),
-                size(max)
-            ));
+            let (entries, bytes) = pruned.trimmed;
+            let what = format!("{entries} least recently used tiles and shared entries ({})", size(bytes));
+            lines.push(format!("{trims} {what} for --max-size {}", size(max)));
             if pruned.bytes_after > max {
-                lines.push(format!(
-                    "{} above --max-size is locks, marks, directories and in-use versions, which are not trimmed",
-                    size(pruned.bytes_after - max)
-                ));
+                let over = size(pruned.bytes_after - max);
+                lines.push(format!("{over} above --max-size: locks, marks and directories are never trimmed, nor tiles used during the prune"));
             }
         }
         lines.push(format!("{leaves}: {}", size(pruned.bytes_after)));
         super::print(lines.join("\n"))?;
-        match &pruned.failed[..] {
-            [] => Ok(()),
-            failed => {
-                let each: Vec<String> = failed.iter().map(|(v, why)| format!("{}: {why}", v.version)).collect();
-                anyhow::bail!("{} stale version(s) not removed: {}", failed.len(), each.join("; "))
-            }
+        let mut failures: Vec<String> =
+            pruned.failed.iter().map(|(v, why)| format!("stale version {} not removed: {why}", v.version)).collect();
+        failures.extend(pruned.trim_failed.iter().map(|why| format!("the trim stopped: {why}")));
+        match failures.is_empty() {
+            true => Ok(()),
+            false => anyhow::bail!("{}", failures.join("; ")),
         }
     }
 }

@@ -50,6 +50,7 @@ fn a_directory_cache_is_listed_pruned_and_trimmed_and_serves_every_tile_after() 
     ok(&seed(&dir.0, &["--cache-dir", root_arg, "--levels", "9-11", "--formats", "bil16,bil32"]));
     let seeded = tiles(&root);
     let current = std::fs::read_dir(&root).unwrap().next().unwrap().unwrap().file_name().into_string().unwrap();
+    assert!(root.join(&current).join(".in-use").exists(), "the seeder marks its version in use");
     // A version left by an earlier configuration, unused for three hours.
     let copied = Command::new("cp").arg("-a").arg(root.join(&current)).arg(root.join(STALE)).status().unwrap();
     assert!(copied.success());
@@ -77,7 +78,7 @@ fn a_directory_cache_is_listed_pruned_and_trimmed_and_serves_every_tile_after() 
     let old_bytes: u64 = old.iter().map(|k| taken(&root.join(k))).sum();
     let max = du(&root.join(&current)) - old_bytes + 1;
     let trimmed = ok(&cache(&["prune", "--cache-dir", root_arg, "--max-size", &max.to_string()]));
-    assert!(trimmed.contains(&format!("trimmed {} least recently used tiles", old.len())), "{trimmed}");
+    assert!(trimmed.contains(&format!("trimmed {} least recently used tiles and shared", old.len())), "{trimmed}");
     let left = tiles(&root);
     assert_eq!(left.len(), seeded.len() - old.len());
     assert!(left.keys().all(|k| !k.contains(".bil32")));
@@ -93,16 +94,31 @@ fn a_directory_cache_is_listed_pruned_and_trimmed_and_serves_every_tile_after() 
     assert_eq!(server.metric("sylva_tile_computations_total"), old.len() as f64);
 
     // Pruned for another region, the demo's version is stale: refused, as
-    // that region has no tiles here; forced, kept all the same, as the
-    // server running on it marked it in use.
+    // that region has no tiles here. Forced, with everything of the demo's
+    // aged three hours (its mark too), it is kept while a server runs on it
+    // (which marks it), and removed once none does.
     let rmnp = rmnp_config(&dir, "rmnp.toml", "");
     let other = ["prune", "--config", rmnp.to_str().unwrap(), "--cache-dir", root_arg, "--stale"];
     let refused = cache(&other);
     let said = String::from_utf8_lossy(&refused.stderr);
     assert!(refused.status.code() == Some(1) && said.contains("none of the current versions"), "{said}");
-    let forced = ok(&cache(&[&other[..], &["--force"]].concat()));
-    assert!(forced.contains(&format!("kept stale version {current}")) && forced.contains("in use"), "{forced}");
-    assert!(root.join(&current).exists());
+    drop(server);
+    let forced = [&other[..], &["--force"]].concat();
+    let mark = root.join(&current).join(".in-use");
+    age(&walk(&root.join(&current)), 180);
+    let server = Server::start(None, &root);
+    let start = std::time::Instant::now();
+    while std::fs::metadata(&mark).unwrap().modified().unwrap().elapsed().unwrap() > Duration::from_secs(60) {
+        assert!(start.elapsed() < Duration::from_secs(20), "the server did not mark its version");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let kept = ok(&cache(&forced));
+    assert!(kept.contains(&format!("kept stale version {current}")) && kept.contains("in use"), "{kept}");
+    drop(server);
+    age(&walk(&root.join(&current)), 180);
+    let removed = ok(&cache(&forced));
+    assert!(removed.contains(&format!("removed stale version {current}")), "{removed}");
+    assert!(!root.join(&current).exists());
 }
 
 #[test]
@@ -129,6 +145,8 @@ fn a_redis_cache_loses_its_stale_versions_and_is_trimmed_oldest_written_first() 
     for col in 0..3 {
         set(&mut conn, &format!("sylva:{STALE}/dem/6/1/1_{col}.bil"), &stamped(180));
     }
+    // Its server stopped three hours ago: its last mark is as old.
+    set(&mut conn, &format!("sylva:in-use:{STALE}"), &stamped(180));
     let recent = "sylva:v00000000000000ff/dem/6/1/1_0.bil";
     set(&mut conn, recent, &stamped(5));
     set(&mut conn, "sylva:notes/readme", b"x");

@@ -8,15 +8,17 @@
 //! after each write and at most one a day after that; one mounted `noatime`
 //! none, and its tiles are trimmed oldest written first.
 //!
-//! A version is removed by renaming it out of the way (`.{version}.removing`,
-//! which no walk takes for a version) and deleting that: a writer that
-//! comes after the rename makes the version's directory anew. Directories a
+//! A version is removed by renaming it out of the way
+//! (`.{version}.removing.{token}`, which no walk takes for a version) and
+//! deleting that: a writer that comes after the rename makes the version's
+//! directory anew; what a prune killed or failing mid-deletion leaves, the
+//! next one deletes first. Directories a
 //! trim empties stay: a tile computed there again needs them, and its
 //! writer may be making it at that moment.
 
-use super::{Entry, Kind, Maintain, is_version};
-use crate::cache::dir::IN_USE;
-use crate::cache::{CacheError, DirStore, TileStore};
+use super::{Entry, Kind, Maintain, Removal, is_version};
+use crate::cache::dir::{IN_USE, file_token};
+use crate::cache::{CacheError, DirStore, TileStore, holder};
 use std::fs;
 use std::io;
 use std::os::unix::fs::MetadataExt;
@@ -96,25 +98,50 @@ impl Maintain for Walker {
         Ok(())
     }
 
-    fn remove_version(&self, version: &str, since: SystemTime) -> Result<bool, CacheError> {
+    fn remove_versions(&self, versions: &[String], since: SystemTime) -> Result<Vec<Removal>, CacheError> {
+        self.sweep()?;
+        Ok(versions.iter().map(|v| self.remove_version(v, since)).collect())
+    }
+}
+
+impl Walker {
+    /// Removes `version` unless marked in use since `since`: set aside by a
+    /// rename, then deleted (what the deletion leaves, the next prune's
+    /// sweep takes).
+    fn remove_version(&self, version: &str, since: SystemTime) -> Removal {
         let path = self.0.path(version);
         let marked = fs::metadata(path.join(IN_USE)).and_then(|m| m.modified());
         if marked.is_ok_and(|t| t >= since) {
-            return Ok(false);
+            return Removal::Marked;
         }
-        let aside = self.0.path(&format!(".{version}.removing"));
-        let failed = |doing, e| Err(CacheError::io(doing, &path, e));
+        let aside = self.0.path(&format!(".{version}{ASIDE}{}", file_token(&holder::token())));
         match fs::rename(&path, &aside) {
-            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(true),
-            Err(e) => return failed("set aside the version", e),
-            Ok(()) => {}
-        }
-        match fs::remove_dir_all(&aside) {
-            Err(e) if e.kind() != io::ErrorKind::NotFound => failed("remove the version", e),
-            _ => Ok(true),
+            Ok(()) => {
+                if let Err(e) = fs::remove_dir_all(&aside) {
+                    tracing::warn!(error = %e, path = %aside.display(), "a stale version set aside is not all deleted; the next prune tries again");
+                }
+                Removal::Removed
+            }
+            Err(e) if e.kind() == io::ErrorKind::NotFound => Removal::Removed,
+            Err(e) => Removal::Failed(CacheError::io("set aside the version", &path, e).to_string()),
         }
     }
+
+    /// Deletes the versions earlier removals set aside and left.
+    fn sweep(&self) -> Result<(), CacheError> {
+        for path in read_dir(self.0.root())? {
+            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+            let left = name.strip_prefix('.').and_then(|n| n.split_once(ASIDE)).is_some_and(|(v, _)| is_version(v));
+            if left {
+                fs::remove_dir_all(&path).map_err(|e| CacheError::io("remove the version set aside", &path, e))?;
+            }
+        }
+        Ok(())
+    }
 }
+
+/// What a version set aside for removal has after its key in its name.
+const ASIDE: &str = ".removing.";
 
 /// The paths in directory `path` (none if it went meanwhile).
 fn read_dir(path: &Path) -> Result<Vec<PathBuf>, CacheError> {
@@ -150,7 +177,7 @@ fn last_used(meta: &fs::Metadata) -> SystemTime {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{Maintain, Plan, Pruned, prune, usage};
+    use super::super::{Plan, Pruned, Removal, prune, usage};
     use super::Walker;
     use crate::cache::{Backend, DirStore, TileStore, flight};
     use std::fs;
@@ -294,7 +321,24 @@ mod tests {
         assert_eq!(done.bytes_after, versions.iter().sum::<u64>());
         // A version marked after the walk measured it is kept all the same.
         let hour_ago = SystemTime::now() - Duration::from_secs(3600);
-        assert!(!Walker::open(s.root()).unwrap().remove_version(MARKED, hour_ago).unwrap());
+        assert_eq!(Walker::open(s.root()).unwrap().remove_version(MARKED, hour_ago), Removal::Marked);
+        fs::remove_dir_all(s.root()).unwrap();
+    }
+
+    #[test]
+    fn what_a_removal_left_set_aside_goes_with_the_next_prune() {
+        let s = store("aside");
+        tile(&s, &format!("{CURRENT}/cem/6/0/0_0.bil"), 5);
+        let left = s.path(&format!(".{OLD}.removing.killed"));
+        fs::create_dir_all(left.join("cem/6/0")).unwrap();
+        fs::write(left.join("cem/6/0/0_0.bil"), [0; 100]).unwrap();
+        // Not a version to the walks.
+        let (_, versions) = usage(&Backend::Directory(s.root().to_path_buf())).unwrap();
+        assert_eq!(versions.len(), 1);
+        run(&s, &plan(true, None, true));
+        assert!(left.exists(), "a dry run removes nothing");
+        run(&s, &plan(true, None, false));
+        assert!(!left.exists());
         fs::remove_dir_all(s.root()).unwrap();
     }
 
@@ -302,6 +346,8 @@ mod tests {
     fn a_prune_that_finds_no_current_version_removes_nothing_unless_forced() {
         let s = store("none-current");
         tile(&s, &format!("{OLD}/cem/6/0/0_0.bil"), 180);
+        // The current version marked (a server started once), but no tiles.
+        s.mark_in_use(CURRENT).unwrap();
         let backend = Backend::Directory(s.root().to_path_buf());
         let refused = prune(&backend, &plan(true, None, false), SystemTime::now()).unwrap_err();
         assert!(

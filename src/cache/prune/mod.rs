@@ -65,9 +65,21 @@ pub(crate) trait Maintain {
     /// `remove` (given its version) is true is removed if it is a tile or a
     /// shared entry (one already gone is no error).
     fn walk(&self, remove: &mut dyn FnMut(&str, &Entry) -> bool) -> Result<(), CacheError>;
-    /// Removes a whole version, unless it was marked in use (`cache::in_use`)
-    /// at or after `since`: then it is kept and the answer is false.
-    fn remove_version(&self, version: &str, since: SystemTime) -> Result<bool, CacheError>;
+    /// Removes whole versions, each unless it was marked in use
+    /// (`cache::in_use`) at or after `since`; first, anything an earlier
+    /// removal left half done.
+    fn remove_versions(&self, versions: &[String], since: SystemTime) -> Result<Vec<Removal>, CacheError>;
+}
+
+/// What became of a stale version [`Maintain::remove_versions`] was given.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) enum Removal {
+    /// Gone.
+    Removed,
+    /// Marked in use since the walk measured it: kept.
+    Marked,
+    /// Still there, for this reason.
+    Failed(String),
 }
 
 /// True for a version key: `v` and 16 lowercase hex digits
@@ -153,6 +165,8 @@ pub struct Pruned {
     pub failed: Vec<(VersionUsage, String)>,
     /// Tiles and shared entries trimmed, and their bytes.
     pub trimmed: (u64, u64),
+    /// Why the trim stopped short, if it did.
+    pub trim_failed: Option<String>,
     /// Bytes of its versions after.
     pub bytes_after: u64,
 }
@@ -161,9 +175,10 @@ pub struct Pruned {
 /// counts back from.
 pub fn prune(backend: &Backend, plan: &Plan, now: SystemTime) -> Result<Pruned, PruneError> {
     let store = open(backend)?;
-    let measured = measure(&*store)?;
+    let mut measured = measure(&*store)?;
     let stale = |v: &str| plan.stale && !plan.keep.iter().any(|k| k == v);
-    if !plan.force && measured.keys().any(|v| stale(v)) && !measured.keys().any(|v| plan.keep.contains(v)) {
+    let current_has_tiles = plan.keep.iter().any(|v| measured.get(v).is_some_and(|m| m.usage.tiles > 0));
+    if !plan.force && !current_has_tiles && measured.keys().any(|v| stale(v)) {
         return Err(PruneError::NoCurrentVersion { keep: plan.keep.clone(), cache: store.describe() });
     }
     let mut pruned = Pruned {
@@ -172,41 +187,34 @@ pub fn prune(backend: &Backend, plan: &Plan, now: SystemTime) -> Result<Pruned, 
         ..Pruned::default()
     };
     let since = now.checked_sub(plan.grace).unwrap_or(SystemTime::UNIX_EPOCH);
-    let mut left = BTreeMap::new();
-    for (version, m) in measured {
-        let recent = m.usage.last_used.is_some_and(|t| t >= since);
-        let removed = match (stale(&version), recent, plan.dry_run) {
-            (false, _, _) => false,
-            (true, true, _) => {
-                pruned.in_use.push(m.usage.clone());
-                false
-            }
-            (true, false, true) => true,
-            // Checked again just before: a server may have started since.
-            (true, false, false) => match store.remove_version(&version, since) {
-                Ok(removed) => {
-                    if !removed {
-                        pruned.in_use.push(m.usage.clone());
-                    }
-                    removed
-                }
-                Err(e) => {
-                    pruned.failed.push((m.usage.clone(), e.to_string()));
-                    false
-                }
-            },
-        };
-        match removed {
-            true => pruned.removed.push(m.usage),
-            false => {
-                left.insert(version, m);
-            }
+    let (recent, unused): (Vec<&Measured>, Vec<&Measured>) = measured
+        .values()
+        .filter(|m| stale(&m.usage.version))
+        .partition(|m| m.usage.last_used.is_some_and(|t| t >= since));
+    pruned.in_use = recent.iter().map(|m| m.usage.clone()).collect();
+    let unused: Vec<String> = unused.iter().map(|m| m.usage.version.clone()).collect();
+    let outcomes = match (plan.stale, plan.dry_run) {
+        (true, false) => store.remove_versions(&unused, since)?,
+        _ => vec![Removal::Removed; unused.len()],
+    };
+    for (version, outcome) in unused.iter().zip(outcomes) {
+        let m = &measured[version];
+        match outcome {
+            Removal::Removed => pruned.removed.push(m.usage.clone()),
+            Removal::Marked => pruned.in_use.push(m.usage.clone()),
+            Removal::Failed(why) => pruned.failed.push((m.usage.clone(), why)),
         }
     }
-    let bytes_left: u64 = left.values().map(|m| m.usage.bytes).sum();
+    for gone in &pruned.removed {
+        measured.remove(&gone.version);
+    }
+    let bytes_left: u64 = measured.values().map(|m| m.usage.bytes).sum();
     let excess = plan.max_bytes.map_or(0, |max| bytes_left.saturating_sub(max));
     if excess > 0 {
-        pruned.trimmed = trim(&*store, &left, excess, plan.dry_run)?;
+        match trim(&*store, &measured, excess, plan.dry_run) {
+            Ok(trimmed) => pruned.trimmed = trimmed,
+            Err(e) => pruned.trim_failed = Some(e.to_string()),
+        }
     }
     pruned.bytes_after = bytes_left.saturating_sub(pruned.trimmed.1);
     Ok(pruned)

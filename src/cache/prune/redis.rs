@@ -4,14 +4,16 @@
 //! `{prefix}in-use:{version}` (the mark of use) — and measured by `MEMORY
 //! USAGE`. An entry's last use is the time written in its value (Redis
 //! keeps no read time under every eviction policy), so a trim removes the
-//! oldest written first; a lock or a mark, which lives only while its
-//! holder does, is in use now. (Redis can bound its memory itself, by least
+//! oldest written first; a mark's is the mark's; a lock, which lives only
+//! while held, is in use now. Stale versions are removed by one more
+//! `SCAN`, their marks checked first. (Redis can bound its memory itself, by least
 //! recent use: `maxmemory` with `maxmemory-policy allkeys-lru`; every key of
 //! Sylva's may go.)
 
-use super::{Entry, Kind, Maintain, is_version};
+use super::{Entry, Kind, Maintain, Removal, is_version};
 use crate::cache::redis::{IN_USE, RedisStore};
 use crate::cache::{CacheError, TileStore};
+use std::collections::HashSet;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 /// Keys asked for per `SCAN` step.
@@ -124,7 +126,8 @@ impl Maintain for Walker {
                 else {
                     continue;
                 };
-                let last_used = if kind == Kind::Kept { SystemTime::now() } else { written };
+                // A lock lives only while held; a mark has its time.
+                let last_used = if text[prefix.len()..].starts_with(LOCK) { SystemTime::now() } else { written };
                 if remove(version, &Entry { bytes, last_used: Some(last_used), kind }) && kind != Kind::Kept {
                     gone.push(key);
                 }
@@ -133,17 +136,32 @@ impl Maintain for Walker {
         })
     }
 
-    fn remove_version(&self, version: &str, _since: SystemTime) -> Result<bool, CacheError> {
-        let prefix = self.0.prefix();
-        // A mark lives three marks' intervals: any mark left is recent.
-        let mark = format!("{prefix}{IN_USE}{version}");
-        if self.0.with(|c| redis::cmd("EXISTS").arg(&mark).query::<bool>(c))? {
-            return Ok(false);
+    fn remove_versions(&self, versions: &[String], since: SystemTime) -> Result<Vec<Removal>, CacheError> {
+        if versions.is_empty() {
+            return Ok(Vec::new());
         }
-        let glob = glob_literal(prefix);
-        for pattern in [format!("{glob}{version}/*"), format!("{glob}{LOCK}{version}/*")] {
-            self.scan(&pattern, &mut |keys| self.unlink(keys))?;
+        let prefix = self.0.prefix().to_string();
+        let mut marks = redis::pipe();
+        for version in versions {
+            marks.cmd("GETRANGE").arg(format!("{prefix}{IN_USE}{version}")).arg(4).arg(11);
         }
-        Ok(true)
+        let stamps: Vec<Vec<u8>> = self.0.with(|c| marks.query(c))?;
+        let outcomes: Vec<Removal> = stamps
+            .iter()
+            .map(|stamp| if written(stamp) >= since { Removal::Marked } else { Removal::Removed })
+            .collect();
+        let going: HashSet<&str> =
+            versions.iter().zip(&outcomes).filter(|(_, o)| **o == Removal::Removed).map(|(v, _)| v.as_str()).collect();
+        if !going.is_empty() {
+            self.scan(&format!("{}*", glob_literal(&prefix)), &mut |keys| {
+                let theirs = keys.into_iter().filter(|k| {
+                    let version =
+                        std::str::from_utf8(k).ok().and_then(|k| k.strip_prefix(&prefix)).and_then(Walker::classify);
+                    version.is_some_and(|(v, _)| going.contains(v))
+                });
+                self.unlink(theirs.collect())
+            })?;
+        }
+        Ok(outcomes)
     }
 }
