@@ -4,10 +4,11 @@
 //! key, and nothing reads the old one again), then the least recently used
 //! tiles of the versions left, down to a size.
 //!
-//! The cache is walked twice at most, in memory bounded by the number of
-//! versions and of distinct minutes of use, not by the number of tiles: the
-//! first walk measures every version and sorts its tiles' bytes into a
-//! histogram by the minute they were last used; the oldest minutes whose
+//! The cache is walked twice at most (a Redis cache once more to remove
+//! stale versions), in memory bounded by the number of versions and of
+//! distinct minutes of use, not by the number of tiles: the first walk
+//! measures every version and sorts the bytes of its tiles and shared
+//! entries into a histogram by the minute they were last used; the oldest minutes whose
 //! bytes reach the excess give the cut; the second walk removes the tiles
 //! last used before the cut's minute, and of those used in it as many as
 //! the excess still needs (in the order the walk meets them). A tile read
@@ -20,8 +21,8 @@
 //! being written lands after the walk or is kept; locks, temporaries and
 //! marks of use are never trimmed; and a stale version written, read or
 //! marked in use (`cache::in_use`: every running server and seeder marks
-//! its own) within a grace period is kept, checked again just before it is
-//! removed. A stale version is removed whole, its locks too (no one is
+//! its own) within a grace period is kept, its mark checked again just
+//! before it is removed. A stale version is removed whole, its locks too (no one is
 //! computing its tiles, or it would not be stale).
 
 mod dir;
@@ -176,9 +177,9 @@ pub struct Pruned {
 pub fn prune(backend: &Backend, plan: &Plan, now: SystemTime) -> Result<Pruned, PruneError> {
     let store = open(backend)?;
     let mut measured = measure(&*store)?;
-    let stale = |v: &str| plan.stale && !plan.keep.iter().any(|k| k == v);
+    let any_stale = plan.stale && measured.keys().any(|v| !plan.keep.contains(v));
     let current_has_tiles = plan.keep.iter().any(|v| measured.get(v).is_some_and(|m| m.usage.tiles > 0));
-    if !plan.force && !current_has_tiles && measured.keys().any(|v| stale(v)) {
+    if any_stale && !current_has_tiles && !plan.force {
         return Err(PruneError::NoCurrentVersion { keep: plan.keep.clone(), cache: store.describe() });
     }
     let mut pruned = Pruned {
@@ -187,27 +188,7 @@ pub fn prune(backend: &Backend, plan: &Plan, now: SystemTime) -> Result<Pruned, 
         ..Pruned::default()
     };
     let since = now.checked_sub(plan.grace).unwrap_or(SystemTime::UNIX_EPOCH);
-    let (recent, unused): (Vec<&Measured>, Vec<&Measured>) = measured
-        .values()
-        .filter(|m| stale(&m.usage.version))
-        .partition(|m| m.usage.last_used.is_some_and(|t| t >= since));
-    pruned.in_use = recent.iter().map(|m| m.usage.clone()).collect();
-    let unused: Vec<String> = unused.iter().map(|m| m.usage.version.clone()).collect();
-    let outcomes = match (plan.stale, plan.dry_run) {
-        (true, false) => store.remove_versions(&unused, since)?,
-        _ => vec![Removal::Removed; unused.len()],
-    };
-    for (version, outcome) in unused.iter().zip(outcomes) {
-        let m = &measured[version];
-        match outcome {
-            Removal::Removed => pruned.removed.push(m.usage.clone()),
-            Removal::Marked => pruned.in_use.push(m.usage.clone()),
-            Removal::Failed(why) => pruned.failed.push((m.usage.clone(), why)),
-        }
-    }
-    for gone in &pruned.removed {
-        measured.remove(&gone.version);
-    }
+    remove_stale(&*store, &mut measured, plan, since, &mut pruned)?;
     let bytes_left: u64 = measured.values().map(|m| m.usage.bytes).sum();
     let excess = plan.max_bytes.map_or(0, |max| bytes_left.saturating_sub(max));
     if excess > 0 {
@@ -218,6 +199,38 @@ pub fn prune(backend: &Backend, plan: &Plan, now: SystemTime) -> Result<Pruned, 
     }
     pruned.bytes_after = bytes_left.saturating_sub(pruned.trimmed.1);
     Ok(pruned)
+}
+
+/// Removes (or, dry, counts) the stale versions not used since `since`
+/// and leaves out of `measured` those removed.
+fn remove_stale(
+    store: &dyn Maintain,
+    measured: &mut BTreeMap<String, Measured>,
+    plan: &Plan,
+    since: SystemTime,
+    pruned: &mut Pruned,
+) -> Result<(), CacheError> {
+    let stale = measured.values().filter(|m| plan.stale && !plan.keep.contains(&m.usage.version));
+    let (recent, unused): (Vec<&Measured>, Vec<&Measured>) =
+        stale.partition(|m| m.usage.last_used.is_some_and(|t| t >= since));
+    pruned.in_use = recent.iter().map(|m| m.usage.clone()).collect();
+    let unused: Vec<String> = unused.iter().map(|m| m.usage.version.clone()).collect();
+    let outcomes = match (plan.stale, plan.dry_run) {
+        (true, false) => store.remove_versions(&unused, since)?,
+        _ => vec![Removal::Removed; unused.len()],
+    };
+    for (version, outcome) in unused.iter().zip(outcomes) {
+        let usage = measured[version].usage.clone();
+        match outcome {
+            Removal::Removed => {
+                measured.remove(version);
+                pruned.removed.push(usage);
+            }
+            Removal::Marked => pruned.in_use.push(usage),
+            Removal::Failed(why) => pruned.failed.push((usage, why)),
+        }
+    }
+    Ok(())
 }
 
 /// A version measured by the first walk.
