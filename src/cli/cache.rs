@@ -97,14 +97,17 @@ fn usage(caches: &Caches) -> Result<()> {
 
 /// A version's columns.
 fn row(v: &VersionUsage) -> String {
-    let when = v.last_used.map_or("-".to_string(), |t| humantime::format_rfc3339_seconds(t).to_string());
-    format!("{:<17}  {:>10}  {:>10}  {when:<20}", v.version, v.tiles, size(v.bytes))
+    format!("{:<17}  {:>10}  {:>10}  {:<20}", v.version, v.tiles, size(v.bytes), last_used(v, "-"))
 }
 
 /// A version in a sentence.
 fn described(v: &VersionUsage) -> String {
-    let when = v.last_used.map_or("never".to_string(), |t| humantime::format_rfc3339_seconds(t).to_string());
-    format!("{} ({} tiles, {}, last used {when})", v.version, v.tiles, size(v.bytes))
+    format!("{} ({} tiles, {}, last used {})", v.version, v.tiles, size(v.bytes), last_used(v, "never"))
+}
+
+/// When a version was last used (UTC, to the second), or `never`.
+fn last_used(v: &VersionUsage, never: &str) -> String {
+    v.last_used.map_or(never.to_string(), |t| humantime::format_rfc3339_seconds(t).to_string())
 }
 
 /// Bytes for people (IEC units).
