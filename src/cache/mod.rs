@@ -13,7 +13,8 @@
 //! ([`flight`]); a holder that dies frees it when it expires, or at once
 //! where its lock shows it ran on this machine (`holder.rs`). Servers and
 //! seeders mark their region's version in use ([`in_use`]), so that pruning
-//! stale versions ([`prune`]) spares theirs.
+//! stale versions ([`prune`]) spares theirs; servers hold the cache to a
+//! size, one trim per interval among them ([`quota`]).
 //!
 //! Invariant: no HTTP, no async; callers run it off the async executor.
 
@@ -23,6 +24,7 @@ pub mod flight;
 pub(crate) mod holder;
 pub mod in_use;
 pub mod prune;
+pub mod quota;
 #[cfg(feature = "server")]
 pub mod redis;
 

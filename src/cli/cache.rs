@@ -3,10 +3,10 @@
 //! (`sylva::cache::prune`).
 
 use anyhow::{Context, Result};
-use bytesize::ByteSize;
 use std::path::PathBuf;
 use std::time::{Duration, SystemTime};
 use sylva::cache::prune::{self, Plan, VersionUsage};
+use sylva::config::show_size as size;
 
 /// `sylva cache`'s commands.
 #[derive(clap::Subcommand)]
@@ -110,11 +110,6 @@ fn last_used(v: &VersionUsage, never: &str) -> String {
     v.last_used.map_or(never.to_string(), |t| humantime::format_rfc3339_seconds(t).to_string())
 }
 
-/// Bytes for people (IEC units).
-fn size(bytes: u64) -> String {
-    ByteSize::b(bytes).display().iec().to_string()
-}
-
 /// `sylva cache prune`.
 #[derive(clap::Args)]
 #[command(group = clap::ArgGroup::new("what").required(true).multiple(true).args(["stale", "max_size"]))]
@@ -132,7 +127,7 @@ pub struct PruneArgs {
     force: bool,
     /// Then remove the least recently used tiles until the cache holds at
     /// most SIZE: 500MiB, 20GiB (powers of 1024), 20G or 20GB (of 1000).
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = sylva::config::parse_size)]
     max_size: Option<u64>,
     /// With --stale: a version written, marked in use (servers and seeders
     /// mark theirs every 5 minutes while they run) or read (as far as the
@@ -156,14 +151,6 @@ fn grace(text: &str) -> Result<Duration, String> {
         )),
         d => Ok(d),
     }
-}
-
-/// `--max-size`'s parser.
-fn parse_size(text: &str) -> Result<u64, String> {
-    text.trim()
-        .parse::<ByteSize>()
-        .map(|s| s.as_u64())
-        .map_err(|_| format!("not a size: {text:?} (e.g. 500MiB, 20GiB)"))
 }
 
 impl PruneArgs {

@@ -148,6 +148,7 @@ fn check_values(config: &Config) -> Result<(), String> {
     }
     config.dem.nodata.check().map_err(|m| format!("[dem] nodata: {m}"))?;
     config.canopy.check().map_err(|m| format!("[canopy] {m}"))?;
+    config.tile_cache.check().map_err(|m| format!("[tile_cache] {m}"))?;
     config.server.check().map_err(|m| format!("[server] {m}"))
 }
 

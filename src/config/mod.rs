@@ -76,6 +76,14 @@ pub struct TileCacheConfig {
     /// A process computing a tile holds its lock at most this long, seconds;
     /// after that (its holder died) another process may take it over.
     pub lock_ttl_s: f64,
+    /// The cache's bound, bytes (given as a size: "20GiB"): the servers
+    /// sharing it trim its least recently used tiles back to this size
+    /// (`cache::quota`); `None`: unbounded.
+    #[serde(deserialize_with = "size")]
+    pub max_size: Option<u64>,
+    /// How often the servers trim the cache to `max_size`, seconds (one of
+    /// them each time).
+    pub trim_interval_s: f64,
 }
 
 impl Default for TileCacheConfig {
@@ -88,6 +96,8 @@ impl Default for TileCacheConfig {
             // A tile takes 5-50 ms; 30 s covers a loaded machine's worst case
             // while a crashed holder delays its tiles by at most that long.
             lock_ttl_s: 30.0,
+            max_size: None,
+            trim_interval_s: 600.0,
         }
     }
 }
@@ -104,12 +114,61 @@ impl TileCacheConfig {
         }
     }
 
+    /// The bound's settings checked.
+    fn check(&self) -> Result<(), String> {
+        if self.max_size == Some(0) {
+            return Err("max_size must be more than 0 bytes (leave it out for no bound)".into());
+        }
+        let (least, most) = (TRIM_INTERVAL_S.start(), TRIM_INTERVAL_S.end());
+        if !TRIM_INTERVAL_S.contains(&self.trim_interval_s) {
+            return Err(format!("trim_interval_s = {}: must be {least} to {most}", self.trim_interval_s));
+        }
+        Ok(())
+    }
+
+    /// How often the servers trim the cache to its bound.
+    pub fn trim_interval(&self) -> std::time::Duration {
+        std::time::Duration::from_secs_f64(self.trim_interval_s.clamp(*TRIM_INTERVAL_S.start(), *TRIM_INTERVAL_S.end()))
+    }
+
     /// The lock expiry (nonsense values become the default).
     pub fn lock_ttl(&self) -> std::time::Duration {
         let s = self.lock_ttl_s;
         std::time::Duration::from_secs_f64(if s.is_finite() && s > 0.0 { s.min(86_400.0) } else { 30.0 })
     }
 }
+
+/// A size as "500MiB", "20 GiB" or "1000000" (bytes) give it: bytes.
+pub fn parse_size(text: &str) -> Result<u64, String> {
+    text.trim()
+        .parse::<bytesize::ByteSize>()
+        .map(|s| s.as_u64())
+        .map_err(|_| format!("not a size: {text:?} (e.g. 500MiB, 20GiB)"))
+}
+
+/// Bytes for people (IEC units: "1.5 GiB"), as [`parse_size`] reads them.
+pub fn show_size(bytes: u64) -> String {
+    bytesize::ByteSize::b(bytes).display().iec().to_string()
+}
+
+/// A size in a configuration file: a string [`parse_size`] reads, or a
+/// number of bytes.
+fn size<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Given {
+        Bytes(u64),
+        Text(String),
+    }
+    match Given::deserialize(d) {
+        Ok(Given::Bytes(n)) => Ok(Some(n)),
+        Ok(Given::Text(text)) => parse_size(&text).map(Some).map_err(serde::de::Error::custom),
+        Err(_) => Err(serde::de::Error::custom("not a size (e.g. \"500MiB\", \"20GiB\", or a number of bytes)")),
+    }
+}
+
+/// Trim intervals, seconds: a minute (a trim walks the whole cache) to a day.
+const TRIM_INTERVAL_S: std::ops::RangeInclusive<f64> = 60.0..=86_400.0;
 
 /// Tile cache backends.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]

@@ -1,11 +1,12 @@
 //! Prometheus metrics at `/metrics`: requests and their latency by route and
-//! status, tile cache hits and misses, tile computations, and the time spent
-//! in each pipeline stage.
+//! status, tile cache hits and misses, tile computations, the time spent
+//! in each pipeline stage, and the tile cache's trims to its bound.
 
 use crate::cem::{Stage, Stats};
 use prometheus_client::encoding::EncodeLabelSet;
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::metrics::histogram::{Histogram, exponential_buckets};
 use prometheus_client::registry::Registry;
 use std::sync::atomic::AtomicU64;
@@ -57,6 +58,9 @@ pub struct Metrics {
     cache: Family<ResultLabel, Counter>,
     computations: Counter,
     stage_seconds: Family<StageLabel, Counter<f64, AtomicU64>>,
+    trimmed_tiles: Counter,
+    trimmed_bytes: Counter,
+    cache_bytes: Gauge,
 }
 
 impl Metrics {
@@ -80,7 +84,29 @@ impl Metrics {
             computations.clone(),
         );
         registry.register("stage_seconds", "Time spent in each pipeline stage and in encoding", stage_seconds.clone());
-        Metrics { registry, requests, latency, cache, computations, stage_seconds }
+        let (trimmed_tiles, trimmed_bytes, cache_bytes) = (Counter::default(), Counter::default(), Gauge::default());
+        registry.register(
+            "tile_cache_trimmed_tiles",
+            "Tiles and shared entries this server's trims removed ([tile_cache] max_size)",
+            trimmed_tiles.clone(),
+        );
+        registry.register("tile_cache_trimmed_bytes", "Bytes this server's trims removed", trimmed_bytes.clone());
+        registry.register(
+            "tile_cache_bytes",
+            "Bytes of the tile cache after the last trim this server ran",
+            cache_bytes.clone(),
+        );
+        Metrics {
+            registry,
+            requests,
+            latency,
+            cache,
+            computations,
+            stage_seconds,
+            trimmed_tiles,
+            trimmed_bytes,
+            cache_bytes,
+        }
     }
 
     /// Counts a finished request.
@@ -111,6 +137,13 @@ impl Metrics {
                 .inc_by(stats.elapsed(stage).as_secs_f64());
         }
         self.stage_seconds.get_or_create(&StageLabel { stage: "encode" }).inc_by(encode.as_secs_f64());
+    }
+
+    /// Counts a trim of the tile cache.
+    pub fn trimmed(&self, pruned: &crate::cache::prune::Pruned) {
+        self.trimmed_tiles.inc_by(pruned.trimmed.0);
+        self.trimmed_bytes.inc_by(pruned.trimmed.1);
+        self.cache_bytes.set(i64::try_from(pruned.bytes_after).unwrap_or(i64::MAX));
     }
 
     /// Tiles computed so far.
@@ -150,6 +183,8 @@ mod tests {
             "sylva_tile_cache_total",
             "sylva_tile_computations_total",
             "sylva_stage_seconds_total",
+            "sylva_tile_cache_trimmed_tiles_total",
+            "sylva_tile_cache_bytes",
         ] {
             assert!(text.contains(name), "{name} missing from\n{text}");
         }

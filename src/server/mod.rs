@@ -24,6 +24,7 @@ mod tilejson;
 pub mod wms;
 
 use crate::cache::TileStore;
+use crate::cache::quota::{Limit, Quota};
 use crate::config::ServerConfig;
 use crate::produce::ProduceError;
 use crate::region::Region;
@@ -148,6 +149,8 @@ pub struct Bound {
     pub cache: String,
     /// The region's version marked in use in the tile cache while this lives.
     pub in_use: crate::cache::in_use::InUse,
+    /// The tile cache held to `[tile_cache] max_size` while this lives.
+    pub quota: Option<crate::cache::quota::Quota>,
 }
 
 impl Bound {
@@ -158,7 +161,7 @@ impl Bound {
 
     /// Serves until `shutdown` resolves, then finishes the requests in flight.
     pub async fn run(self, shutdown: impl std::future::Future<Output = ()> + Send + 'static) -> std::io::Result<()> {
-        let _in_use = self.in_use;
+        let _held = (self.in_use, self.quota);
         axum::serve(self.listener, router(self.state)).with_graceful_shutdown(shutdown).await
     }
 }
@@ -171,15 +174,21 @@ pub async fn bind(config: Option<&Path>, options: ServeOptions) -> anyhow::Resul
     let mut settings = cfg.server.clone();
     let bind = options.bind.unwrap_or_else(|| settings.bind.clone());
     let backend = cfg.tile_cache.backend(options.cache_dir.as_deref());
-    let store = tokio::task::spawn_blocking(move || crate::cache::open(&backend)).await??;
+    let opened = backend.clone();
+    let store = tokio::task::spawn_blocking(move || crate::cache::open(&opened)).await??;
     let cache = store.describe();
     let in_use = crate::cache::in_use::InUse::mark(store.clone(), &region.version);
     let listener =
         tokio::net::TcpListener::bind(&bind).await.map_err(|e| anyhow::anyhow!("cannot listen on {bind}: {e}"))?;
     // The address listened on, its port chosen if 0 was asked for.
     settings.bind = listener.local_addr()?.to_string();
-    let state = AppState::new(region, store, cfg.tile_cache.lock_ttl(), settings)?;
-    Ok(Bound { listener, state, cache, in_use })
+    let state = AppState::new(region, store.clone(), cfg.tile_cache.lock_ttl(), settings)?;
+    let quota = cfg.tile_cache.max_size.map(|max| {
+        let limit = Limit { max_bytes: max, every: cfg.tile_cache.trim_interval() };
+        let metrics = state.metrics.clone();
+        Quota::start(backend, store, limit, move |pruned| metrics.trimmed(pruned))
+    });
+    Ok(Bound { listener, state, cache, in_use, quota })
 }
 
 /// Loads the configuration, binds, serves until SIGTERM or SIGINT, then

@@ -201,3 +201,47 @@ fn a_redis_cache_loses_its_stale_versions_and_is_trimmed_oldest_written_first() 
         assert!(!matches!(store.get(key.strip_prefix("sylva:").unwrap()).unwrap(), Lookup::Corrupt), "{key}");
     }
 }
+
+#[test]
+fn a_server_holds_its_cache_to_max_size_and_serves_every_tile_after() {
+    let dir = TempDir::new("cache-quota");
+    let root = dir.join("cache");
+    ok(&seed(&dir.0, &["--cache-dir", root.to_str().unwrap(), "--levels", "9-11", "--formats", "bil16"]));
+    let seeded = tiles(&root);
+    let version = std::fs::read_dir(&root).unwrap().next().unwrap().unwrap().path();
+    let max = du(&version) / 2;
+    let config = dir.join("bounded.toml");
+    std::fs::write(&config, format!("[tile_cache]\nmax_size = \"{max} B\"\ntrim_interval_s = 60\n")).unwrap();
+
+    // The server trims as it starts, the least recently used tiles first.
+    let server = Server::start(Some(&config), &root);
+    let start = std::time::Instant::now();
+    while server.metric("sylva_tile_cache_trimmed_tiles_total") == 0.0 {
+        assert!(start.elapsed() < Duration::from_secs(30), "the server did not trim its cache");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let trimmed = server.metric("sylva_tile_cache_trimmed_tiles_total");
+    assert!(du(&version) <= max, "{} > {max}", du(&version));
+    assert_eq!(tiles(&root).len() as f64, seeded.len() as f64 - trimmed);
+    assert!(server.metric("sylva_tile_cache_bytes") <= max as f64);
+    for (key, bytes) in &seeded {
+        let (_, path) = product_of(key).unwrap();
+        let reply = server.get(&path);
+        assert!(reply.status == 200 && reply.body == *bytes, "{path}");
+    }
+    assert_eq!(server.metric("sylva_tile_computations_total"), trimmed);
+    drop(server);
+
+    // Seeding more than the bound is said: the servers will trim it.
+    let root_arg = root.to_str().unwrap();
+    let more =
+        ["--config", config.to_str().unwrap(), "--cache-dir", root_arg, "--levels", "9-12", "--formats", "bil16"];
+    let said = ok(&seed(&dir.0, &more));
+    assert!(said.contains("more than [tile_cache] max_size"), "{said}");
+
+    // A bound that is no size is refused, naming the file and the key.
+    std::fs::write(&config, "[tile_cache]\nmax_size = \"lots\"\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_sylva")).args(["info", "--config"]).arg(&config).output().unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && said.contains("bounded.toml") && said.contains("max_size"), "{said}");
+}

@@ -1,0 +1,180 @@
+//! The tile cache's bound, held by the servers (`[tile_cache] max_size`):
+//! every quarter of the trim interval each server tries to take the cache's
+//! trim lock for one interval; the one that takes it trims the least
+//! recently used tiles back to the size ([`prune`], as `sylva cache prune
+//! --max-size` does) and leaves the lock to expire, so that one trim runs
+//! per interval however many servers share the cache. A server that dies
+//! holding it delays the next trim by the rest of the interval at most (at
+//! once on a directory cache of the same machine: `holder.rs`).
+//!
+//! A trim walks the whole cache (every version, stale ones too: theirs are
+//! the least recently used tiles, so they go first) and removes only tiles
+//! and shared entries, which the servers compute again when asked; it runs
+//! on a thread of its own, beside the requests.
+
+use super::prune::{self, Plan, PruneError, Pruned};
+use super::{Backend, TileStore};
+use std::sync::Arc;
+use std::sync::mpsc::{self, RecvTimeoutError};
+use std::time::{Duration, SystemTime};
+
+/// The trim lock's key: outside every version, so no walk counts it.
+const LOCK: &str = "trim";
+
+/// A size and how often to trim the cache back to it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Limit {
+    /// Bytes the cache's versions may take.
+    pub max_bytes: u64,
+    /// How often one of the servers sharing the cache trims it.
+    pub every: Duration,
+}
+
+/// Trims the cache at `backend` while it lives (a thread of its own);
+/// dropping it tells the thread to stop, without waiting for a trim in hand.
+pub struct Quota {
+    _stop: mpsc::Sender<()>,
+}
+
+impl Quota {
+    /// Holds the cache at `backend` (`store` its open store) to `limit`,
+    /// from now on; `report` is told of every trim this process runs.
+    pub fn start(
+        backend: Backend,
+        store: Arc<dyn TileStore>,
+        limit: Limit,
+        report: impl Fn(&Pruned) + Send + 'static,
+    ) -> Quota {
+        let (stop, stopped) = mpsc::channel::<()>();
+        let run = move || {
+            let mut failing = false;
+            loop {
+                match trim_if_due(&backend, &*store, limit) {
+                    Ok(Some(pruned)) => {
+                        log(&pruned, limit);
+                        report(&pruned);
+                        failing = false;
+                    }
+                    Ok(None) => {}
+                    Err(e) if !std::mem::replace(&mut failing, true) => {
+                        tracing::warn!(error = %e, "cannot trim the tile cache to [tile_cache] max_size");
+                    }
+                    Err(_) => {}
+                }
+                if stopped.recv_timeout(limit.every / 4) != Err(RecvTimeoutError::Timeout) {
+                    return;
+                }
+            }
+        };
+        if let Err(e) = std::thread::Builder::new().name("sylva-quota".into()).spawn(run) {
+            tracing::warn!(error = %e, "cannot start trimming the tile cache");
+        }
+        Quota { _stop: stop }
+    }
+}
+
+/// Trims the cache to `limit` unless a trim ran within its interval (the
+/// trim lock held: `None`).
+pub fn trim_if_due(backend: &Backend, store: &dyn TileStore, limit: Limit) -> Result<Option<Pruned>, PruneError> {
+    // The lock is left to expire: it says that a trim ran within the interval.
+    if store.try_lock(LOCK, limit.every)?.is_none() {
+        return Ok(None);
+    }
+    let plan = Plan {
+        keep: Vec::new(),
+        stale: false,
+        force: false,
+        max_bytes: Some(limit.max_bytes),
+        grace: Duration::ZERO,
+        dry_run: false,
+    };
+    prune::prune(backend, &plan, SystemTime::now()).map(Some)
+}
+
+/// Says what a trim did: at info when it removed anything or fell short.
+fn log(pruned: &Pruned, limit: Limit) {
+    let (tiles, bytes) = pruned.trimmed;
+    if let Some(why) = &pruned.trim_failed {
+        tracing::warn!(cache = %pruned.cache, error = %why, "the tile cache's trim stopped short");
+    } else if tiles > 0 {
+        tracing::info!(
+            cache = %pruned.cache,
+            tiles,
+            bytes,
+            before = pruned.bytes_before,
+            after = pruned.bytes_after,
+            max = limit.max_bytes,
+            "trimmed the least recently used tiles to [tile_cache] max_size"
+        );
+    } else {
+        tracing::debug!(cache = %pruned.cache, bytes = pruned.bytes_before, max = limit.max_bytes, "tile cache within its bound");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cache::{DirStore, Lookup};
+
+    /// A directory cache of `n` tiles of 10 kB in one version, and its store.
+    fn filled(tag: &str, n: usize) -> (std::path::PathBuf, Arc<dyn TileStore>) {
+        let root = std::env::temp_dir().join(format!("sylva-quota-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let store: Arc<dyn TileStore> = Arc::new(DirStore::open(&root).unwrap());
+        fill(&*store, n);
+        (root, store)
+    }
+
+    /// Writes tiles `0..n`.
+    fn fill(store: &dyn TileStore, n: usize) {
+        for i in 0..n {
+            let lock = store.try_lock(&format!("v0123456789abcdef/cem/5/1/1_{i}.bil"), Duration::from_secs(5));
+            let lock = lock.unwrap().unwrap();
+            store.put(&lock, &vec![7; 10_000]).unwrap();
+            store.unlock(&lock).unwrap();
+        }
+    }
+
+    fn tiles_left(store: &dyn TileStore, n: usize) -> usize {
+        (0..n)
+            .filter(|i| matches!(store.get(&format!("v0123456789abcdef/cem/5/1/1_{i}.bil")), Ok(Lookup::Hit(_))))
+            .count()
+    }
+
+    #[test]
+    fn one_trim_per_interval_however_many_servers_share_the_cache() {
+        let (root, store) = filled("once", 40);
+        let backend = Backend::Directory(root.clone());
+        let limit = Limit { max_bytes: 200_000, every: Duration::from_secs(3600) };
+        let pruned = trim_if_due(&backend, &*store, limit).unwrap().expect("the first trim runs");
+        assert!(pruned.trimmed.0 > 0 && pruned.bytes_after <= limit.max_bytes, "{pruned:?}");
+        assert!(tiles_left(&*store, 40) < 40);
+        // Another server (another store on the same directory), within the
+        // interval: no second walk.
+        let other = DirStore::open(&root).unwrap();
+        assert!(trim_if_due(&backend, &other, limit).unwrap().is_none());
+        // Its lock is no tile: the cache's usage does not count it.
+        let (_, versions) = prune::usage(&backend).unwrap();
+        assert_eq!(versions.len(), 1);
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn a_quota_trims_when_started_and_again_each_interval() {
+        let (root, store) = filled("interval", 30);
+        let backend = Backend::Directory(root.clone());
+        let limit = Limit { max_bytes: 150_000, every: Duration::from_millis(400) };
+        let (told, trims) = mpsc::channel();
+        let quota = Quota::start(backend, store.clone(), limit, move |p: &Pruned| {
+            let _ = told.send(p.trimmed.0);
+        });
+        let first = trims.recv_timeout(Duration::from_secs(20)).expect("a trim at start");
+        assert!(first > 0 && tiles_left(&*store, 30) < 30);
+        // Filled again past the bound, trimmed again once the interval is over.
+        fill(&*store, 30);
+        let again = std::iter::from_fn(|| trims.recv_timeout(Duration::from_secs(20)).ok()).find(|&n| n > 0);
+        assert!(again.is_some(), "no second trim");
+        drop(quota);
+        let _ = std::fs::remove_dir_all(&root);
+    }
+}
