@@ -1,6 +1,7 @@
-//! OGC service exceptions: the codes of WMS 1.1.1 / 1.3.0 (and the OWS
-//! common `MissingParameterValue` / `InvalidParameterValue`), and the
-//! ServiceExceptionReport documents of both versions.
+//! OGC service exceptions: the codes of WMS 1.1.1 / 1.3.0 and WMTS 1.0.0
+//! (and the OWS common `MissingParameterValue` / `InvalidParameterValue`),
+//! the ServiceExceptionReport documents of both WMS versions, and the OWS
+//! 1.1 ExceptionReport of WMTS.
 
 use super::wms::request::Version;
 use std::fmt;
@@ -26,6 +27,8 @@ pub enum Code {
     OperationNotSupported,
     /// GetFeatureInfo's pixel is off the map (1.3.0 only).
     InvalidPoint,
+    /// A WMTS tile's row or column is outside its matrix.
+    TileOutOfRange,
     /// The server failed (no standard code; reported without one).
     NoApplicableCode,
 }
@@ -36,6 +39,7 @@ impl Code {
         match self {
             Code::LayerNotDefined => "LayerNotDefined",
             Code::InvalidPoint => "InvalidPoint",
+            Code::TileOutOfRange => "TileOutOfRange",
             Code::StyleNotDefined => "StyleNotDefined",
             Code::InvalidCrs => "InvalidCRS",
             Code::InvalidSrs => "InvalidSRS",
@@ -77,13 +81,8 @@ impl Exception {
             Code::NoApplicableCode => String::new(),
             c => format!(" code=\"{}\"", c.as_str()),
         };
-        let locator = self.locator.as_deref().map(|l| format!(" locator=\"{}\"", escape(l))).unwrap_or_default();
-        // In ASCII, characters beyond it as references: clients match the
-        // MIME type exactly (no charset) and some then decode as Latin-1.
-        let message = escape(&self.message)
-            .chars()
-            .map(|c| if c.is_ascii() { c.to_string() } else { format!("&#x{:X};", u32::from(c)) })
-            .collect::<String>();
+        let locator = self.locator_attribute();
+        let message = ascii_text(&self.message);
         match version {
             Version::V111 => (
                 "application/vnd.ogc.se_xml",
@@ -107,6 +106,34 @@ impl Exception {
             ),
         }
     }
+
+    /// The OWS 1.1 ExceptionReport document (WMTS), and its MIME type.
+    pub fn ows_report(&self) -> (&'static str, String) {
+        let locator = self.locator_attribute();
+        (
+            "application/xml",
+            format!(
+                "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n\
+                 <ExceptionReport xmlns=\"http://www.opengis.net/ows/1.1\" version=\"1.1.0\" xml:lang=\"en\">\n  \
+                 <Exception exceptionCode=\"{}\"{locator}><ExceptionText>{}</ExceptionText></Exception>\n\
+                 </ExceptionReport>\n",
+                self.code.as_str(),
+                ascii_text(&self.message)
+            ),
+        )
+    }
+
+    /// ` locator="…"`, or nothing.
+    fn locator_attribute(&self) -> String {
+        self.locator.as_deref().map(|l| format!(" locator=\"{}\"", escape(l))).unwrap_or_default()
+    }
+}
+
+/// `text` escaped for XML, in ASCII: characters beyond it as references
+/// (clients match the MIME type exactly, no charset, and some then decode
+/// as Latin-1).
+fn ascii_text(text: &str) -> String {
+    escape(text).chars().map(|c| if c.is_ascii() { c.to_string() } else { format!("&#x{:X};", u32::from(c)) }).collect()
 }
 
 impl fmt::Display for Exception {
@@ -153,5 +180,18 @@ mod tests {
         assert!(xml.is_ascii() && xml.contains("1 &#x2264; x"), "{xml}");
         let doc = roxmltree::Document::parse(&xml).unwrap();
         assert_eq!(doc.descendants().find(|n| n.has_tag_name("ServiceException")).unwrap().text(), Some("need 1 ≤ x"));
+    }
+
+    #[test]
+    fn ows_reports_carry_the_code_locator_and_text() {
+        let (mime, xml) = Exception::new(Code::TileOutOfRange, "row 9 ≥ 8").locator("TILEROW").ows_report();
+        assert_eq!(mime, "application/xml");
+        assert!(xml.is_ascii(), "{xml}");
+        let doc = roxmltree::Document::parse(&xml).unwrap();
+        assert_eq!(doc.root_element().tag_name().namespace(), Some("http://www.opengis.net/ows/1.1"));
+        let ex = doc.descendants().find(|n| n.has_tag_name("Exception")).unwrap();
+        assert_eq!(ex.attribute("exceptionCode"), Some("TileOutOfRange"));
+        assert_eq!(ex.attribute("locator"), Some("TILEROW"));
+        assert_eq!(ex.first_element_child().unwrap().text(), Some("row 9 ≥ 8"));
     }
 }

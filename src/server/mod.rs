@@ -22,6 +22,7 @@ pub use routes::MAX_XYZ_ZOOM;
 pub mod service;
 mod tilejson;
 pub mod wms;
+mod wmts;
 
 use crate::cache::TileStore;
 use crate::cache::quota::{Limit, Quota};

@@ -1,8 +1,9 @@
 //! Routes and middleware: `/health`, `/metrics`, `/tiles.json` (the grid and
 //! region a client flies over), World Wind tiles (path and
 //! `?T=&L=&X=&Y=` forms), XYZ Terrarium tiles (zooms 0 to
-//! [`MAX_XYZ_ZOOM`]) with a TileJSON per layer, and `/wms`; per-request
-//! timeout (503, a ServiceExceptionReport on `/wms`), URI length limit, CORS
+//! [`MAX_XYZ_ZOOM`]) with a TileJSON per layer, `/wms` and `/wmts`;
+//! per-request timeout (503, an OGC exception report on `/wms` and `/wmts`),
+//! URI length limit, CORS
 //! for browser clients (read-only data: any origin may GET), gzip for BIL
 //! bodies, request metrics and logs.
 
@@ -48,6 +49,8 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/tiles/{layer}/{level}/{row}/{file}", get(tile_path))
         .route("/xyz/{layer}/tiles.json", get(xyz_tilejson))
         .route("/xyz/{layer}/{z}/{x}/{file}", get(xyz))
+        .route("/wmts", get(super::wmts::handle).fallback(super::wmts::other_method))
+        .route("/wmts/1.0.0/WMTSCapabilities.xml", get(super::wmts::capabilities_file))
         .layer(CompressionLayer::new().gzip(true).compress_when(bil_only))
         .layer(middleware::from_fn_with_state(state.clone(), observe))
         .layer(cors())
@@ -75,14 +78,14 @@ async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Nex
     let query = (route == "wms").then(|| request.uri().query().unwrap_or("").to_string());
     let response = if request.uri().to_string().len() > MAX_URI_BYTES {
         let message = format!("request URI longer than {MAX_URI_BYTES} bytes");
-        refused(query.as_deref(), StatusCode::URI_TOO_LONG, message)
+        refused(route, query.as_deref(), StatusCode::URI_TOO_LONG, message)
     } else {
         match tokio::time::timeout(timeout, next.run(request)).await {
             Ok(response) => response,
             // Its tile is still computed and cached for the retry.
             Err(_) => {
                 let message = format!("the request took longer than {timeout:?}; retry later");
-                refused(query.as_deref(), StatusCode::SERVICE_UNAVAILABLE, message)
+                refused(route, query.as_deref(), StatusCode::SERVICE_UNAVAILABLE, message)
             }
         }
     };
@@ -91,19 +94,24 @@ async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Nex
 }
 
 /// A request refused before its handler answered (a 503 is to be retried
-/// in 5 s): a ServiceExceptionReport in the version asked for for a WMS
-/// `query` (never an image: a refusal costs nothing), text elsewhere.
-fn refused(wms_query: Option<&str>, status: StatusCode, message: String) -> Response {
-    let mut headers = axum::http::HeaderMap::new();
+/// in 5 s): an OGC exception report on `/wms` (a ServiceExceptionReport in
+/// the version `wms_query` asks for; never an image: a refusal costs
+/// nothing) and `/wmts`, text elsewhere.
+fn refused(route: &str, wms_query: Option<&str>, status: StatusCode, message: String) -> Response {
+    let mut response = match (route, wms_query) {
+        ("wmts", _) => super::wmts::refused(status, message),
+        (_, Some(query)) => {
+            let version = super::wms::request::version_of(query);
+            let e = super::exception::Exception::new(super::exception::Code::NoApplicableCode, message);
+            let (mime, body) = e.report(version);
+            (status, [(header::CONTENT_TYPE, mime)], body).into_response()
+        }
+        _ => (status, message).into_response(),
+    };
     if status == StatusCode::SERVICE_UNAVAILABLE {
-        headers.insert(header::RETRY_AFTER, axum::http::HeaderValue::from_static("5"));
+        response.headers_mut().insert(header::RETRY_AFTER, axum::http::HeaderValue::from_static("5"));
     }
-    let Some(query) = wms_query else { return (status, headers, message).into_response() };
-    let version = super::wms::request::version_of(query);
-    let (mime, body) =
-        super::exception::Exception::new(super::exception::Code::NoApplicableCode, message).report(version);
-    headers.insert(header::CONTENT_TYPE, axum::http::HeaderValue::from_static(mime));
-    (status, headers, body).into_response()
+    response
 }
 
 fn route_label(path: &str) -> &'static str {
@@ -113,6 +121,7 @@ fn route_label(path: &str) -> &'static str {
         "/wms" => "wms",
         "/tiles" | "/tiles/{layer}/{level}/{row}/{file}" | "/tiles.json" => "tiles",
         "/xyz/{layer}/{z}/{x}/{file}" | "/xyz/{layer}/tiles.json" => "xyz",
+        "/wmts" | "/wmts/1.0.0/WMTSCapabilities.xml" => "wmts",
         _ => "other",
     }
 }
@@ -269,10 +278,22 @@ async fn xyz(
     if z > MAX_XYZ_ZOOM || x >= 1 << z || y >= 1 << z {
         return Err(ServeError::NotFound);
     }
-    let t = state.tiles.get(Product::Xyz { layer, zxy: (z, x, y) }).await?;
+    xyz_tile(&state, layer, (z, x, y), picture, &headers).await
+}
+
+/// The XYZ tile `zxy` of `layer`: a picture in `picture`'s format, or
+/// Terrarium heights (`None`).
+pub(super) async fn xyz_tile(
+    state: &AppState,
+    layer: MapLayer,
+    zxy: (u32, u64, u64),
+    picture: Option<PictureFormat>,
+    headers: &HeaderMap,
+) -> Result<Response, ServeError> {
+    let t = state.tiles.get(Product::Xyz { layer, zxy }).await?;
     match picture {
-        Some(format) => picture_tile(&state, layer, t, format, &headers).await,
-        None => Ok(respond::tile(&t, &meta(&state, layer, Encoding::Terrarium), &headers)),
+        Some(format) => picture_tile(state, layer, t, format, headers).await,
+        None => Ok(respond::tile(&t, &meta(state, layer, Encoding::Terrarium), headers)),
     }
 }
 
@@ -290,13 +311,19 @@ async fn xyz_tilejson(
 /// A layer XYZ tiles are served in: heights or the pictures.
 fn xyz_layer(name: &str) -> Result<MapLayer, ServeError> {
     let layer = parse_layer(name)?;
-    if matches!(layer, MapLayer::Data(Layer::Cover | Layer::Surface)) {
+    if !has_xyz_tiles(layer) {
         return Err(ServeError::BadRequest(format!(
             "{} is not a height: XYZ tiles carry heights or the pictures",
             layer.name()
         )));
     }
     Ok(layer)
+}
+
+/// Whether XYZ tiles (and WMTS) serve `layer`: heights and the pictures,
+/// not cover or classes.
+pub(super) fn has_xyz_tiles(layer: MapLayer) -> bool {
+    !matches!(layer, MapLayer::Data(Layer::Cover | Layer::Surface))
 }
 
 /// The encoding a picture tile's extension asks for.

@@ -5,6 +5,7 @@
 
 use super::routes::MAX_XYZ_ZOOM;
 use super::wms::request::MapLayer;
+use crate::grid::BBox;
 use crate::region::Region;
 use serde_json::{Value, json};
 
@@ -18,21 +19,16 @@ const MERCATOR_MAX_LAT: f64 = 85.051_128_779_806_6;
 /// region beyond Web Mercator's latitudes (around a pole), which has no
 /// XYZ tiles.
 pub fn document(region: &Region, layer: MapLayer, base: &str) -> Option<Value> {
-    // TileJSON's bounds do not wrap: a region across 180° is every longitude.
-    let b = region.bounds.on_the_globe();
-    if b.south >= MERCATOR_MAX_LAT || b.north <= -MERCATOR_MAX_LAT {
-        return None;
-    }
-    let lat = |l: f64| l.clamp(-MERCATOR_MAX_LAT, MERCATOR_MAX_LAT);
+    let Extent { bounds: b, min_zoom, max_zoom } = extent(region, layer)?;
     let mut doc = json!({
         "tilejson": "3.0.0",
         "name": format!("{} {}", region.name, layer.name()),
         "tiles": [format!("{base}/xyz/{}/{{z}}/{{x}}/{{y}}.png", layer.name())],
         "scheme": "xyz",
         "tileSize": TILE_PX,
-        "minzoom": min_zoom(region),
-        "maxzoom": max_zoom(region, layer),
-        "bounds": [b.west, lat(b.south), b.east, lat(b.north)],
+        "minzoom": min_zoom,
+        "maxzoom": max_zoom,
+        "bounds": [b.west, b.south, b.east, b.north],
     });
     if !layer.is_picture() {
         doc["encoding"] = json!("terrarium");
@@ -40,8 +36,33 @@ pub fn document(region: &Region, layer: MapLayer, base: &str) -> Option<Value> {
     Some(doc)
 }
 
+/// Where and at which zooms a layer's XYZ tiles hold the region.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Extent {
+    /// The region's box within ±180° of longitude (every longitude where it
+    /// crosses the antimeridian: neither TileJSON's nor WMTS's boxes wrap)
+    /// and Web Mercator's latitudes.
+    pub bounds: BBox,
+    /// The shallowest zoom at which the region spans a pixel.
+    pub min_zoom: u32,
+    /// The shallowest zoom as fine as the layer's finest source.
+    pub max_zoom: u32,
+}
+
+/// The extent of `layer`'s XYZ tiles; none for a region beyond Web
+/// Mercator's latitudes.
+pub fn extent(region: &Region, layer: MapLayer) -> Option<Extent> {
+    let b = region.bounds.on_the_globe();
+    if b.south >= MERCATOR_MAX_LAT || b.north <= -MERCATOR_MAX_LAT {
+        return None;
+    }
+    let lat = |l: f64| l.clamp(-MERCATOR_MAX_LAT, MERCATOR_MAX_LAT);
+    let bounds = BBox { south: lat(b.south), north: lat(b.north), ..b };
+    Some(Extent { bounds, min_zoom: min_zoom(region), max_zoom: max_zoom(region, layer) })
+}
+
 /// The side of an XYZ tile, pixels (MapLibre assumes 512 unless told).
-const TILE_PX: u32 = 256;
+pub const TILE_PX: u32 = 256;
 
 /// The shallowest zoom at which the region spans a pixel (shallower tiles
 /// hold no data: 404).

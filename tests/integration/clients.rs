@@ -1,7 +1,7 @@
 //! Real WMS clients against the real server: GDAL's WMS driver (`gdalinfo`,
 //! `gdal_translate`, Debian `gdal-bin`) and OWSLib (Debian `python3-owslib`)
 //! read the capabilities and fetch a `dem` map of rmnp whose values match
-//! `sylva build` of the same grid.
+//! `sylva build` of the same grid; both read the WMTS too.
 
 use crate::common::{self, TempDir};
 use crate::http::Server;
@@ -61,7 +61,8 @@ fn assert_matches(client: &str, got: &[f32], reference: &[f32]) {
 }
 
 fn run(cmd: &mut Command, what: &str) -> String {
-    let out = cmd.output().unwrap_or_else(|e| panic!("{what} ({e}): install it with `bash scripts/setup.sh`"));
+    // GDAL's WMS and WMTS drivers would cache tiles in the working directory.
+    let out = cmd.env("GDAL_ENABLE_WMS_CACHE", "NO").output().unwrap_or_else(|e| panic!("{what} ({e}): install it with `bash scripts/setup.sh`"));
     assert!(
         out.status.success(),
         "{what} failed:\n{}{}",
@@ -232,4 +233,51 @@ fn gdal_opens_a_served_geotiff_by_its_url() {
     let url = format!("/vsicurl/{}{path}", server.base);
     run(Command::new("gdal_translate").args(["-q", &url]).arg(&out), "gdal_translate");
     assert_eq!(tiff_of_side(&out, 513), tiff_of_side(&direct, 513));
+}
+
+/// GDAL's `WMTS:` name of a layer of the demo.
+fn wmts_layer(server: &Server, layer: &str) -> String {
+    format!("WMTS:{}/wmts?SERVICE=WMTS&REQUEST=GetCapabilities,layer={layer}", server.base)
+}
+
+#[test]
+fn gdal_reads_the_wmts_layers_and_their_heights() {
+    let dir = TempDir::new("client-gdal-wmts");
+    let server = Server::start(None, &dir.join("cache"));
+    let info = run(Command::new("gdalinfo").arg(format!("WMTS:{}/wmts", server.base)), "gdalinfo");
+    for layer in ["dem", "canopy", "cem", "colour", "relief"] {
+        assert!(info.contains(&format!(",layer={layer}\n")), "gdalinfo lists {layer}:\n{info}");
+    }
+    // The layer's box is the region's, in Web Mercator.
+    let info = run(Command::new("gdalinfo").arg(wmts_layer(&server, "cem")), "gdalinfo");
+    assert!(info.contains("Upper Left  ( 1113194.907, 5852757.634)"), "{info}");
+    // Terrarium heights read back, nearest neighbour (averaged codes are no heights).
+    let out = dir.join("cem.png");
+    let args = ["-q", "-r", "nearest", "-outsize", "256", "0"];
+    run(Command::new("gdal_translate").args(args).arg(wmts_layer(&server, "cem")).arg(&out), "gdal_translate");
+    let rgb = image::open(&out).unwrap().into_rgb8();
+    let heights: Vec<f64> = rgb.pixels().map(|p| sylva::encode::terrarium::height(p.0)).collect();
+    let (low, high) = heights.iter().fold((f64::MAX, f64::MIN), |(a, b), &h| (a.min(h), b.max(h)));
+    assert!(low > 500.0 && high < 4000.0 && high - low > 1000.0, "{low} to {high} m");
+}
+
+#[test]
+fn owslib_reads_the_wmts_and_its_tiles_are_the_xyz_tiles() {
+    let dir = TempDir::new("client-owslib-wmts");
+    let server = Server::start(None, &dir.join("cache"));
+    let out = dir.join("tile.jpg");
+    let script = format!(
+        "import sys\nfrom owslib.wmts import WebMapTileService\n\
+         wmts = WebMapTileService('{base}/wmts')\n\
+         assert list(wmts.contents) == ['dem', 'canopy', 'cem', 'colour', 'relief'], list(wmts.contents)\n\
+         assert wmts['relief'].formats == ['image/png', 'image/jpeg'], wmts['relief'].formats\n\
+         assert len(wmts.tilematrixsets['WebMercatorQuad'].tilematrix) == 25\n\
+         tile = wmts.gettile(layer='relief', tilematrixset='WebMercatorQuad', tilematrix='12', row=1449, column=2161, format='image/jpeg')\n\
+         open(sys.argv[1], 'wb').write(tile.read())\n",
+        base = server.base
+    );
+    run(Command::new(python_with_owslib()).args(["-c", &script]).arg(&out), "OWSLib");
+    let xyz = server.get("/xyz/relief/12/2161/1449.jpg");
+    assert_eq!(xyz.status, 200);
+    assert_eq!(std::fs::read(&out).unwrap(), xyz.body);
 }

@@ -420,6 +420,8 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
     let long = server.get(&format!("/wms?x={}", "a".repeat(10_000)));
     assert_eq!(long.status, 414);
     assert!(long.text().contains("ServiceExceptionReport"), "{}", long.text());
+    let long = server.get(&format!("/wmts?x={}", "a".repeat(10_000)));
+    assert!(long.status == 414 && long.text().contains("<ExceptionReport"), "{}", long.text());
     assert_eq!(server.get(&format!("/tiles?x={}", "a".repeat(10_000))).status, 414);
     assert_eq!(server.get("/health").status, 200, "still up");
 }
@@ -781,13 +783,15 @@ fn a_failing_tile_cache_still_serves_and_one_unusable_at_start_is_refused() {
 }
 
 #[test]
-fn wms_by_another_method_than_get_is_an_ogc_report() {
+fn wms_and_wmts_by_another_method_than_get_is_an_ogc_report() {
     let dir = TempDir::new("srv-post");
     let server = Server::start(None, &dir.join("cache"));
     let agent: ureq::Agent = ureq::Agent::config_builder().http_status_as_error(false).build().into();
-    let mut response = agent.post(&format!("{}/wms", server.base)).send_empty().unwrap();
-    assert_eq!(response.status().as_u16(), 405);
-    assert_eq!(response.headers().get("allow").and_then(|v| v.to_str().ok()), Some("GET, HEAD"));
-    let body = response.body_mut().read_to_string().unwrap();
-    assert!(body.contains("ServiceExceptionReport") && body.contains("OperationNotSupported"), "{body}");
+    for (service, report) in [("wms", "ServiceExceptionReport"), ("wmts", "<ExceptionReport")] {
+        let mut response = agent.post(&format!("{}/{service}", server.base)).send_empty().unwrap();
+        assert_eq!(response.status().as_u16(), 405);
+        assert_eq!(response.headers().get("allow").and_then(|v| v.to_str().ok()), Some("GET, HEAD"));
+        let body = response.body_mut().read_to_string().unwrap();
+        assert!(body.contains(report) && body.contains("OperationNotSupported"), "{body}");
+    }
 }

@@ -161,7 +161,8 @@ fn layers(s: &Service, version: Version) -> String {
         .join("\n")
 }
 
-fn title(layer: MapLayer) -> &'static str {
+/// A layer's title, for people.
+pub(crate) fn title(layer: MapLayer) -> &'static str {
     use crate::cem::Layer::*;
     match layer {
         MapLayer::Data(Dem) => "Ground elevation (m)",

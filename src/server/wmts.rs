@@ -1,0 +1,434 @@
+//! `/wmts`: OGC WMTS 1.0.0 over the XYZ tiles, for the GIS clients that
+//! read tiles by that standard (QGIS, ArcGIS, OpenLayers, GDAL, OWSLib).
+//!
+//! GetCapabilities (KVP at `/wmts`, or `/wmts` alone; RESTful at
+//! `/wmts/1.0.0/WMTSCapabilities.xml`) lists the layers the XYZ routes serve
+//! — heights as Terrarium PNG, the pictures as PNG and JPEG — in one tile
+//! matrix set, `WebMercatorQuad` (EPSG:3857, 256-pixel tiles on the
+//! GoogleMapsCompatible scales, zooms 0 to [`MAX_XYZ_ZOOM`]); each layer with
+//! the zooms and tiles of the region (`TileMatrixSetLimits`, the zooms its
+//! TileJSON gives) and a RESTful template, which is its XYZ path. GetTile
+//! (KVP) answers the tile that path does, from the same cache. Requests that
+//! are wrong get an OWS 1.1 ExceptionReport; a tile off the region's data is
+//! a 404 without body (GDAL draws it empty), as on the XYZ path.
+
+use super::exception::{Code, Exception, escape};
+use super::query::Params;
+use super::routes::{MAX_XYZ_ZOOM, has_xyz_tiles, xyz_tile};
+use super::tilejson::{self, Extent, TILE_PX};
+use super::wms::capabilities::title;
+use super::wms::picture::PictureFormat;
+use super::wms::request::{LAYERS, MapLayer};
+use super::{AppState, ServeError};
+use crate::grid::mercator::{HALF_WORLD_M, to_mercator};
+use crate::region::Region;
+use axum::extract::{RawQuery, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use std::fmt::Write;
+use std::sync::Arc;
+
+/// The one tile matrix set's identifier (OGC Two Dimensional Tile Matrix
+/// Set's name for it).
+const MATRIX_SET: &str = "WebMercatorQuad";
+
+/// Scale denominator of zoom 0: 156,543.034 m per pixel over the standard
+/// 0.28 mm pixel; each zoom halves it.
+const SCALE_0: f64 = 559_082_264.028_717_8;
+
+/// Answers a WMTS KVP request.
+pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuery, headers: HeaderMap) -> Response {
+    match parse(query.as_deref().unwrap_or("")) {
+        Err(e) => exception(&e, StatusCode::BAD_REQUEST),
+        Ok(Request::GetCapabilities) => capabilities(&state, &headers),
+        Ok(Request::GetTile(t)) => match xyz_tile(&state, t.layer, t.zxy, t.picture, &headers).await {
+            Ok(response) => response,
+            Err(e) => failure(e),
+        },
+    }
+}
+
+/// `/wmts/1.0.0/WMTSCapabilities.xml`: the capabilities, RESTful.
+pub async fn capabilities_file(State(state): State<Arc<AppState>>, headers: HeaderMap) -> Response {
+    capabilities(&state, &headers)
+}
+
+/// Answers a request to `/wmts` by another method than GET (or HEAD): KVP
+/// and RESTful requests only, no SOAP.
+pub async fn other_method() -> Response {
+    let e = Exception::new(Code::OperationNotSupported, "WMTS here is GET: key-value pairs, or the RESTful paths");
+    let (mime, body) = e.ows_report();
+    (StatusCode::METHOD_NOT_ALLOWED, [(header::CONTENT_TYPE, mime), (header::ALLOW, "GET, HEAD")], body).into_response()
+}
+
+/// A WMTS request's report for a request refused before it was read (too
+/// long a URI, a timeout), with `status`.
+pub fn refused(status: StatusCode, message: String) -> Response {
+    exception(&Exception::new(Code::NoApplicableCode, message), status)
+}
+
+/// What a KVP request asks for.
+#[derive(Debug, PartialEq)]
+enum Request {
+    GetCapabilities,
+    GetTile(TileRequest),
+}
+
+/// One tile: the layer, its XYZ address and picture format (none:
+/// Terrarium PNG heights).
+#[derive(Debug, PartialEq)]
+struct TileRequest {
+    layer: MapLayer,
+    zxy: (u32, u64, u64),
+    picture: Option<PictureFormat>,
+}
+
+/// Reads a KVP query (keys in any case); none at all asks for the
+/// capabilities (GDAL's `WMTS:` of the bare endpoint asks so).
+fn parse(query: &str) -> Result<Request, Exception> {
+    if query.trim().is_empty() {
+        return Ok(Request::GetCapabilities);
+    }
+    let params = Params::new(query);
+    if let Some((key, message)) = params.conflict() {
+        return Err(Exception::new(Code::InvalidParameterValue, message).locator(key));
+    }
+    let service = required(&params, "SERVICE")?;
+    if !service.eq_ignore_ascii_case("WMTS") {
+        return Err(invalid("SERVICE", format!("this endpoint is WMTS, not {service:?}")));
+    }
+    match required(&params, "REQUEST")? {
+        r if r.eq_ignore_ascii_case("GetCapabilities") => Ok(Request::GetCapabilities),
+        r if r.eq_ignore_ascii_case("GetTile") => tile_request(&params).map(Request::GetTile),
+        r => Err(Exception::new(
+            Code::OperationNotSupported,
+            format!("request {r:?} is not offered: GetCapabilities or GetTile"),
+        )
+        .locator("REQUEST")),
+    }
+}
+
+/// A GetTile's parameters checked: the layer, style, format and matrix set
+/// offered, the tile within its matrix.
+fn tile_request(params: &Params) -> Result<TileRequest, Exception> {
+    if let Some(v) = params.get("VERSION").filter(|v| v.trim() != "1.0.0") {
+        return Err(invalid("VERSION", format!("version {v:?} is not offered: 1.0.0")));
+    }
+    let name = required(params, "LAYER")?;
+    let layer = LAYERS
+        .into_iter()
+        .find(|l| has_xyz_tiles(*l) && l.name().eq_ignore_ascii_case(name.trim()))
+        .ok_or_else(|| invalid("LAYER", format!("no layer {name:?}: {}", layer_names())))?;
+    // STYLE is required by the standard; a client leaving it out means the one style.
+    if let Some(style) = params.get("STYLE").filter(|s| !s.is_empty() && !s.eq_ignore_ascii_case("default")) {
+        return Err(invalid("STYLE", format!("no style {style:?}: each layer has one, \"default\"")));
+    }
+    let format = required(params, "FORMAT")?;
+    let picture = match (layer.is_picture(), formats(layer).iter().find(|f| f.eq_ignore_ascii_case(format.trim()))) {
+        (_, None) => {
+            return Err(invalid(
+                "FORMAT",
+                format!("{} tiles are {}, not {format:?}", layer.name(), formats(layer).join(" or ")),
+            ));
+        }
+        (true, Some(f)) => PictureFormat::of_extension(f.trim_start_matches("image/")),
+        (false, Some(_)) => None,
+    };
+    let set = required(params, "TILEMATRIXSET")?;
+    if set.trim() != MATRIX_SET {
+        return Err(invalid("TILEMATRIXSET", format!("no tile matrix set {set:?}: {MATRIX_SET}")));
+    }
+    let z = number(params, "TILEMATRIX")?;
+    let z = u32::try_from(z)
+        .ok()
+        .filter(|&z| z <= MAX_XYZ_ZOOM)
+        .ok_or_else(|| invalid("TILEMATRIX", format!("no tile matrix {z} in {MATRIX_SET}: 0 to {MAX_XYZ_ZOOM}")))?;
+    let (row, col) = (number(params, "TILEROW")?, number(params, "TILECOL")?);
+    for (value, key) in [(row, "TILEROW"), (col, "TILECOL")] {
+        if value >= 1 << z {
+            let message = format!("{key} {value} is outside tile matrix {z}: 0 to {}", (1u64 << z) - 1);
+            return Err(Exception::new(Code::TileOutOfRange, message).locator(key));
+        }
+    }
+    Ok(TileRequest { layer, zxy: (z, col, row), picture })
+}
+
+/// A parameter that must be given.
+fn required<'a>(params: &'a Params, key: &str) -> Result<&'a str, Exception> {
+    params
+        .get(key)
+        .filter(|v| !v.trim().is_empty())
+        .ok_or_else(|| Exception::new(Code::MissingParameterValue, format!("{key} is missing")).locator(key))
+}
+
+/// A parameter that must be a whole number.
+fn number(params: &Params, key: &str) -> Result<u64, Exception> {
+    let text = required(params, key)?;
+    text.trim().parse().map_err(|_| invalid(key, format!("{key} must be a whole number, not {text:?}")))
+}
+
+fn invalid(key: &str, message: String) -> Exception {
+    Exception::new(Code::InvalidParameterValue, message).locator(key)
+}
+
+/// The layers offered, for messages.
+fn layer_names() -> String {
+    LAYERS.into_iter().filter(|&l| has_xyz_tiles(l)).map(MapLayer::name).collect::<Vec<_>>().join(", ")
+}
+
+/// The MIME types a layer's tiles come in.
+fn formats(layer: MapLayer) -> &'static [&'static str] {
+    match layer.is_picture() {
+        true => &["image/png", "image/jpeg"],
+        false => &["image/png"],
+    }
+}
+
+/// An exception report with `status` (501 for an operation not offered).
+fn exception(e: &Exception, status: StatusCode) -> Response {
+    let status = if e.code == Code::OperationNotSupported { StatusCode::NOT_IMPLEMENTED } else { status };
+    let (mime, body) = e.ows_report();
+    (status, [(header::CONTENT_TYPE, mime)], body).into_response()
+}
+
+/// A tile that could not be answered: none there (404, as on the XYZ
+/// path), or a report with the error's status and headers.
+fn failure(e: ServeError) -> Response {
+    match e {
+        ServeError::NotFound => StatusCode::NOT_FOUND.into_response(),
+        ServeError::BadRequest(m) => {
+            exception(&Exception::new(Code::InvalidParameterValue, m), StatusCode::BAD_REQUEST)
+        }
+        e => {
+            let (status, headers, message) = e.parts();
+            let (mime, body) = Exception::new(Code::NoApplicableCode, message).ows_report();
+            (status, headers, [(header::CONTENT_TYPE, mime)], body).into_response()
+        }
+    }
+}
+
+/// The capabilities, their URLs under the server's public base.
+fn capabilities(state: &AppState, headers: &HeaderMap) -> Response {
+    let body = document(state.region(), &state.public_base(headers));
+    ([(header::CONTENT_TYPE, "application/xml")], body).into_response()
+}
+
+/// The capabilities document of `region` served under `base`.
+fn document(region: &Region, base: &str) -> String {
+    let layers: String = LAYERS
+        .into_iter()
+        .filter(|&l| has_xyz_tiles(l))
+        .filter_map(|l| Some(layer(l, &tilejson::extent(region, l)?, base)))
+        .collect();
+    format!(
+        r#"<?xml version="1.0" encoding="UTF-8"?>
+<Capabilities xmlns="http://www.opengis.net/wmts/1.0" xmlns:ows="http://www.opengis.net/ows/1.1" xmlns:xlink="http://www.w3.org/1999/xlink" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengis.net/wmts/1.0 http://schemas.opengis.net/wmts/1.0/wmtsGetCapabilities_response.xsd" version="1.0.0">
+<ows:ServiceIdentification><ows:Title>{title}</ows:Title><ows:Abstract>Combined elevation maps (terrain + forest canopy) computed on demand by Sylva.</ows:Abstract><ows:ServiceType>OGC WMTS</ows:ServiceType><ows:ServiceTypeVersion>1.0.0</ows:ServiceTypeVersion></ows:ServiceIdentification>
+<ows:OperationsMetadata>{get_capabilities}{get_tile}</ows:OperationsMetadata>
+<Contents>
+{layers}{matrix_set}</Contents>
+<ServiceMetadataURL xlink:href="{base}/wmts/1.0.0/WMTSCapabilities.xml"/>
+</Capabilities>
+"#,
+        title = escape(&region.name),
+        base = escape(base),
+        get_capabilities = operation("GetCapabilities", base),
+        get_tile = operation("GetTile", base),
+        matrix_set = matrix_set(),
+    )
+}
+
+/// An operation, by KVP at `/wmts`.
+fn operation(name: &str, base: &str) -> String {
+    format!(
+        r#"<ows:Operation name="{name}"><ows:DCP><ows:HTTP><ows:Get xlink:href="{}/wmts?"><ows:Constraint name="GetEncoding"><ows:AllowedValues><ows:Value>KVP</ows:Value></ows:AllowedValues></ows:Constraint></ows:Get></ows:HTTP></ows:DCP></ows:Operation>"#,
+        escape(base)
+    )
+}
+
+/// One layer: its box, style, formats, limits and RESTful templates.
+fn layer(l: MapLayer, extent: &Extent, base: &str) -> String {
+    let b = extent.bounds;
+    let about = match l.is_picture() {
+        true => "PNG with transparency where there is no data, or JPEG on white.".to_string(),
+        false => format!(
+            "Heights in metres, Terrarium PNG: h = R * 256 + G + B / 256 - 32768 (black: no data). Tiles deeper than zoom {} are resampled from the sources.",
+            extent.max_zoom
+        ),
+    };
+    let mut out = format!(
+        r#"<Layer><ows:Title>{}</ows:Title><ows:Abstract>{about}</ows:Abstract><ows:WGS84BoundingBox><ows:LowerCorner>{} {}</ows:LowerCorner><ows:UpperCorner>{} {}</ows:UpperCorner></ows:WGS84BoundingBox><ows:Identifier>{}</ows:Identifier><Style isDefault="true"><ows:Identifier>default</ows:Identifier></Style>"#,
+        title(l),
+        b.west,
+        b.south,
+        b.east,
+        b.north,
+        l.name()
+    );
+    for format in formats(l) {
+        let _ = write!(out, "<Format>{format}</Format>");
+    }
+    let _ = write!(out, "<TileMatrixSetLink><TileMatrixSet>{MATRIX_SET}</TileMatrixSet><TileMatrixSetLimits>");
+    for z in extent.min_zoom..=extent.max_zoom {
+        let ((c0, r0), (c1, r1)) = tiles_over(extent, z);
+        let _ = write!(
+            out,
+            "<TileMatrixLimits><TileMatrix>{z}</TileMatrix><MinTileRow>{r0}</MinTileRow><MaxTileRow>{r1}</MaxTileRow><MinTileCol>{c0}</MinTileCol><MaxTileCol>{c1}</MaxTileCol></TileMatrixLimits>"
+        );
+    }
+    out.push_str("</TileMatrixSetLimits></TileMatrixSetLink>");
+    for format in formats(l) {
+        let ext = if *format == "image/jpeg" { "jpg" } else { "png" };
+        let template = format!("{base}/xyz/{}/{{TileMatrix}}/{{TileCol}}/{{TileRow}}.{ext}", l.name());
+        let _ = write!(out, r#"<ResourceURL format="{format}" resourceType="tile" template="{}"/>"#, escape(&template));
+    }
+    out.push_str("</Layer>\n");
+    out
+}
+
+/// The first and last (column, row) of zoom `z`'s tiles over the extent.
+fn tiles_over(extent: &Extent, z: u32) -> ((u64, u64), (u64, u64)) {
+    let b = extent.bounds;
+    let n = (1u64 << z) as f64;
+    let index = |metres: f64| (metres + HALF_WORLD_M) / (2.0 * HALF_WORLD_M) * n;
+    let first = |f: f64| (f.floor().max(0.0) as u64).min((1 << z) - 1);
+    // A box ending on a tile's edge does not reach into the next tile.
+    let last = |f: f64| ((f.ceil() - 1.0).max(0.0) as u64).min((1 << z) - 1);
+    let (x0, y0) = to_mercator(b.west, b.north);
+    let (x1, y1) = to_mercator(b.east, b.south);
+    let (c0, c1) = (first(index(x0)), last(index(x1)));
+    // Rows count down from the north.
+    let (r0, r1) = (first(index(-y0)), last(index(-y1)));
+    ((c0, r0), (c1.max(c0), r1.max(r0)))
+}
+
+/// The tile matrix set: every zoom served.
+fn matrix_set() -> String {
+    let mut out = format!(
+        "<TileMatrixSet><ows:Identifier>{MATRIX_SET}</ows:Identifier><ows:SupportedCRS>urn:ogc:def:crs:EPSG::3857</ows:SupportedCRS><WellKnownScaleSet>urn:ogc:def:wkss:OGC:1.0:GoogleMapsCompatible</WellKnownScaleSet>\n"
+    );
+    for z in 0..=MAX_XYZ_ZOOM {
+        let _ = writeln!(
+            out,
+            "<TileMatrix><ows:Identifier>{z}</ows:Identifier><ScaleDenominator>{}</ScaleDenominator><TopLeftCorner>{} {}</TopLeftCorner><TileWidth>{TILE_PX}</TileWidth><TileHeight>{TILE_PX}</TileHeight><MatrixWidth>{n}</MatrixWidth><MatrixHeight>{n}</MatrixHeight></TileMatrix>",
+            SCALE_0 / f64::from(1u32 << z),
+            -HALF_WORLD_M,
+            HALF_WORLD_M,
+            n = 1u64 << z
+        );
+    }
+    out.push_str("</TileMatrixSet>\n");
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cem::Layer;
+
+    fn tile(query: &str) -> Result<TileRequest, Exception> {
+        match parse(query)? {
+            Request::GetTile(t) => Ok(t),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    const RELIEF: &str = "SERVICE=WMTS&REQUEST=GetTile&VERSION=1.0.0&LAYER=relief&STYLE=default&FORMAT=image/jpeg&TILEMATRIXSET=WebMercatorQuad&TILEMATRIX=12&TILEROW=1449&TILECOL=2161";
+
+    #[test]
+    fn a_get_tile_is_the_xyz_tile_of_its_matrix_column_and_row() {
+        let t = tile(RELIEF).unwrap();
+        assert_eq!(
+            t,
+            TileRequest { layer: MapLayer::Relief, zxy: (12, 2161, 1449), picture: Some(PictureFormat::Jpeg) }
+        );
+        // Keys and names in any case; heights are Terrarium PNG.
+        let t = tile("service=wmts&request=gettile&layer=CEM&format=image/png&tilematrixset=WebMercatorQuad&tilematrix=0&tilerow=0&tilecol=0").unwrap();
+        assert_eq!(t, TileRequest { layer: MapLayer::Data(Layer::Cem), zxy: (0, 0, 0), picture: None });
+        assert_eq!(parse("SERVICE=WMTS&REQUEST=GetCapabilities").unwrap(), Request::GetCapabilities);
+        assert_eq!(parse("").unwrap(), Request::GetCapabilities);
+    }
+
+    #[test]
+    fn wrong_requests_name_the_code_and_the_parameter() {
+        let fails = |query: String, code: Code, locator: &str| {
+            let e = parse(&query).unwrap_err();
+            assert_eq!((e.code, e.locator.as_deref()), (code, Some(locator)), "{query}: {e}");
+        };
+        let with = |key: &str, value: &str| RELIEF.replace(&format!("{key}="), &format!("{key}={value}&X{key}="));
+        fails(RELIEF.replace("SERVICE=WMTS&", ""), Code::MissingParameterValue, "SERVICE");
+        fails(RELIEF.replace("SERVICE=WMTS", "SERVICE=WMS"), Code::InvalidParameterValue, "SERVICE");
+        fails(RELIEF.replace("GetTile", "GetFeatureInfo"), Code::OperationNotSupported, "REQUEST");
+        fails(with("VERSION", "2.0.0"), Code::InvalidParameterValue, "VERSION");
+        fails(with("LAYER", "cover"), Code::InvalidParameterValue, "LAYER");
+        fails(with("STYLE", "dark"), Code::InvalidParameterValue, "STYLE");
+        fails(with("FORMAT", "image/tiff"), Code::InvalidParameterValue, "FORMAT");
+        fails(
+            RELIEF.replace("LAYER=relief&STYLE=default&FORMAT=image/jpeg", "LAYER=dem&FORMAT=image/jpeg"),
+            Code::InvalidParameterValue,
+            "FORMAT",
+        );
+        fails(with("TILEMATRIXSET", "GoogleCRS84Quad"), Code::InvalidParameterValue, "TILEMATRIXSET");
+        fails(with("TILEMATRIX", "25"), Code::InvalidParameterValue, "TILEMATRIX");
+        fails(with("TILEROW", "-1"), Code::InvalidParameterValue, "TILEROW");
+        fails(with("TILEROW", "4096"), Code::TileOutOfRange, "TILEROW");
+        fails(with("TILECOL", "4096"), Code::TileOutOfRange, "TILECOL");
+        fails(RELIEF.replace("&TILECOL=2161", ""), Code::MissingParameterValue, "TILECOL");
+        fails(format!("{RELIEF}&LAYER=dem"), Code::InvalidParameterValue, "LAYER");
+        // STYLE may be left out (the one style).
+        assert!(tile(&RELIEF.replace("STYLE=default&", "")).is_ok());
+    }
+
+    #[test]
+    fn the_capabilities_give_each_layer_the_tiles_over_the_region() {
+        let region = crate::config::load(None).unwrap();
+        let xml = document(&region, "http://h:1");
+        let doc = roxmltree::Document::parse(&xml).unwrap();
+        let ows = |n: roxmltree::Node, tag: &str| {
+            n.children().find(|c| c.tag_name().name() == tag).and_then(|c| c.text()).unwrap_or_default().to_string()
+        };
+        let layers: Vec<_> = doc.descendants().filter(|n| n.has_tag_name("Layer")).collect();
+        let names: Vec<String> = layers.iter().map(|&l| ows(l, "Identifier")).collect();
+        assert_eq!(names, ["dem", "canopy", "cem", "colour", "relief"]);
+        let relief = layers[4];
+        let templates: Vec<&str> = relief
+            .children()
+            .filter(|n| n.has_tag_name("ResourceURL"))
+            .filter_map(|n| n.attribute("template"))
+            .collect();
+        assert_eq!(
+            templates,
+            [
+                "http://h:1/xyz/relief/{TileMatrix}/{TileCol}/{TileRow}.png",
+                "http://h:1/xyz/relief/{TileMatrix}/{TileCol}/{TileRow}.jpg"
+            ]
+        );
+        // Each zoom's limits are the XYZ tiles holding the region's corners.
+        let extent = tilejson::extent(&region, MapLayer::Relief).unwrap();
+        let limits: Vec<_> = relief.descendants().filter(|n| n.has_tag_name("TileMatrixLimits")).collect();
+        assert_eq!(limits.len() as u32, extent.max_zoom - extent.min_zoom + 1);
+        let b = region.bounds;
+        for l in limits {
+            let z: u32 = ows(l, "TileMatrix").parse().unwrap();
+            let at = |lon: f64, lat: f64| {
+                let n = f64::from(1u32 << z);
+                let col = ((lon + 180.0) / 360.0 * n).floor() as u64;
+                let lat = lat.to_radians();
+                let row = ((1.0 - (lat.tan() + 1.0 / lat.cos()).ln() / std::f64::consts::PI) / 2.0 * n).floor() as u64;
+                (col, row)
+            };
+            let ((c0, r0), (c1, r1)) = (at(b.west, b.north), at(b.east, b.south));
+            let got =
+                ["MinTileCol", "MinTileRow", "MaxTileCol", "MaxTileRow"].map(|k| ows(l, k).parse::<u64>().unwrap());
+            assert_eq!(got, [c0, r0, c1, r1], "zoom {z}");
+        }
+        // Every zoom served is a matrix, zoom 0 one tile on the standard scale.
+        let matrices: Vec<_> = doc
+            .descendants()
+            .filter(|n| n.has_tag_name("TileMatrix") && n.parent().is_some_and(|p| p.has_tag_name("TileMatrixSet")))
+            .collect();
+        assert_eq!(matrices.len() as u32, MAX_XYZ_ZOOM + 1);
+        let scale: f64 = ows(matrices[0], "ScaleDenominator").parse().unwrap();
+        assert!((scale * 0.000_28 * 256.0 - 2.0 * HALF_WORLD_M).abs() < 1e-3);
+    }
+}
