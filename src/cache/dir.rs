@@ -195,6 +195,21 @@ impl TileStore for DirStore {
         }
     }
 
+    fn renew(&self, lock: &Lock, _ttl: Duration) -> Result<bool, CacheError> {
+        let path = self.lock_path(&lock.key);
+        match fs::read_to_string(&path) {
+            Ok(token) if token == lock.token => {
+                let file = fs::File::options().write(true).open(&path);
+                file.and_then(|f| f.set_modified(SystemTime::now()))
+                    .map(|()| true)
+                    .map_err(|e| CacheError::io("renew the lock", &path, e))
+            }
+            Ok(_) => Ok(false),
+            Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(false),
+            Err(e) => Err(CacheError::io("read the lock", &path, e)),
+        }
+    }
+
     fn mark_in_use(&self, version: &str) -> Result<(), CacheError> {
         let path = self.path(&format!("{version}/{IN_USE}"));
         let dir = self.path(version);

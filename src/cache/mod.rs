@@ -120,6 +120,11 @@ pub trait TileStore: Send + Sync {
     /// Releases a lock if it is still this holder's.
     fn unlock(&self, lock: &Lock) -> Result<(), CacheError>;
 
+    /// Extends a lock still this holder's to `ttl` from now (on a directory,
+    /// its expiry counts from now: takers judge it by their own `ttl`);
+    /// false where it is not this holder's any more.
+    fn renew(&self, lock: &Lock, ttl: Duration) -> Result<bool, CacheError>;
+
     /// Marks the region version `version` in use now ([`in_use`]: servers
     /// and seeders mark theirs while they run; `sylva cache prune --stale`
     /// keeps a version marked within its grace).

@@ -2,10 +2,11 @@
 //! every quarter of the trim interval each server tries to take the cache's
 //! trim lock for one interval; the one that takes it trims the least
 //! recently used tiles back to the size ([`prune`], as `sylva cache prune
-//! --max-size` does) and leaves the lock to expire, so that one trim runs
-//! per interval however many servers share the cache. A server that dies
-//! holding it delays the next trim by the rest of the interval at most (at
-//! once on a directory cache of the same machine: `holder.rs`).
+//! --max-size` does), renewing the lock while it trims and once more at the
+//! end, and leaves it to expire: one trim at a time, one per interval,
+//! however many servers share the cache. A server that dies holding it
+//! delays the next trim by an interval at most (none on a directory cache of
+//! the same machine: `holder.rs`).
 //!
 //! A trim walks the whole cache (every version, stale ones too: theirs are
 //! the least recently used tiles, so they go first) and removes only tiles
@@ -13,7 +14,7 @@
 //! on a thread of its own, beside the requests.
 
 use super::prune::{self, Plan, PruneError, Pruned};
-use super::{Backend, TileStore};
+use super::{Backend, Lock, TileStore};
 use std::sync::Arc;
 use std::sync::mpsc::{self, RecvTimeoutError};
 use std::time::{Duration, SystemTime};
@@ -76,10 +77,7 @@ impl Quota {
 /// Trims the cache to `limit` unless a trim ran within its interval (the
 /// trim lock held: `None`).
 pub fn trim_if_due(backend: &Backend, store: &dyn TileStore, limit: Limit) -> Result<Option<Pruned>, PruneError> {
-    // The lock is left to expire: it says that a trim ran within the interval.
-    if store.try_lock(LOCK, limit.every)?.is_none() {
-        return Ok(None);
-    }
+    let Some(lock) = store.try_lock(LOCK, limit.every)? else { return Ok(None) };
     let plan = Plan {
         keep: Vec::new(),
         stale: false,
@@ -88,7 +86,26 @@ pub fn trim_if_due(backend: &Backend, store: &dyn TileStore, limit: Limit) -> Re
         grace: Duration::ZERO,
         dry_run: false,
     };
-    prune::prune(backend, &plan, SystemTime::now()).map(Some)
+    let pruned = holding(store, &lock, limit.every, || prune::prune(backend, &plan, SystemTime::now()));
+    // Left to expire an interval after the trim's end: no other trim till then.
+    let _ = store.renew(&lock, limit.every);
+    pruned.map(Some)
+}
+
+/// Runs `work` while renewing `lock` every quarter of `ttl` (a trim of a
+/// large cache may outlast its interval; another would trim it again).
+fn holding<T>(store: &dyn TileStore, lock: &Lock, ttl: Duration, work: impl FnOnce() -> T) -> T {
+    let (done, finished) = mpsc::channel::<()>();
+    std::thread::scope(|scope| {
+        scope.spawn(move || {
+            while finished.recv_timeout(ttl / 4) == Err(RecvTimeoutError::Timeout) {
+                let _ = store.renew(lock, ttl);
+            }
+        });
+        let out = work();
+        drop(done);
+        out
+    })
 }
 
 /// Says what a trim did: at info when it removed anything or fell short.
@@ -125,12 +142,25 @@ mod tests {
         (root, store)
     }
 
+    /// `len` bytes no file system compresses (xorshift from `seed`).
+    fn noise(seed: usize, len: usize) -> Vec<u8> {
+        let mut x = seed as u64 * 0x9e37_79b9_7f4a_7c15 + 1;
+        (0..len)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                x as u8
+            })
+            .collect()
+    }
+
     /// Writes tiles `0..n`.
     fn fill(store: &dyn TileStore, n: usize) {
         for i in 0..n {
             let lock = store.try_lock(&format!("v0123456789abcdef/cem/5/1/1_{i}.bil"), Duration::from_secs(5));
             let lock = lock.unwrap().unwrap();
-            store.put(&lock, &vec![7; 10_000]).unwrap();
+            store.put(&lock, &noise(i, 10_000)).unwrap();
             store.unlock(&lock).unwrap();
         }
     }
@@ -175,6 +205,25 @@ mod tests {
         let again = std::iter::from_fn(|| trims.recv_timeout(Duration::from_secs(20)).ok()).find(|&n| n > 0);
         assert!(again.is_some(), "no second trim");
         drop(quota);
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn a_trim_that_outlasts_its_interval_keeps_the_others_out() {
+        let (root, store) = filled("long", 1);
+        let every = Duration::from_millis(200);
+        let lock = store.try_lock(LOCK, every).unwrap().unwrap();
+        let other = DirStore::open(&root).unwrap();
+        let taken = holding(&*store, &lock, every, || {
+            std::thread::sleep(every * 3);
+            other.try_lock(LOCK, every).unwrap()
+        });
+        assert!(taken.is_none(), "another server took the lock of a trim still running");
+        assert!(store.renew(&lock, every).unwrap());
+        // Once expired it is another's, and no longer this holder's to renew.
+        std::thread::sleep(every * 2);
+        assert!(other.try_lock(LOCK, every).unwrap().is_some());
+        assert!(!store.renew(&lock, every).unwrap());
         let _ = std::fs::remove_dir_all(&root);
     }
 }

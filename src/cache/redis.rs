@@ -26,6 +26,15 @@ const TIMEOUT: Duration = Duration::from_secs(5);
 const UNLOCK: &str =
     "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('del', KEYS[1]) else return 0 end";
 
+/// A lock's expiry in whole milliseconds, as `PX` and `PEXPIRE` take it.
+fn millis(ttl: Duration) -> u64 {
+    ttl.as_millis().clamp(1, u128::from(u32::MAX)) as u64
+}
+
+/// Extends a lock's expiry (ARGV[2] ms) if it is still the caller's (ARGV[1]).
+const RENEW: &str =
+    "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('pexpire', KEYS[1], ARGV[2]) else return 0 end";
+
 /// Encoded tiles in a Redis server.
 pub struct RedisStore {
     client: Client,
@@ -35,6 +44,11 @@ pub struct RedisStore {
 }
 
 impl RedisStore {
+    /// The Redis key of `key`'s lock.
+    fn lock_key(&self, key: &str) -> String {
+        format!("{}lock:{key}", self.prefix)
+    }
+
     /// Connects to `url` (`redis://host:port/db`, `redis+unix:///path`) and
     /// checks that the server answers.
     pub fn open(url: &str, prefix: &str) -> Result<RedisStore, CacheError> {
@@ -144,10 +158,10 @@ impl TileStore for RedisStore {
 
     fn try_lock(&self, key: &str, ttl: Duration) -> Result<Option<Lock>, CacheError> {
         let lock = Lock { key: key.to_string(), token: super::holder::token() };
-        let ms = ttl.as_millis().clamp(1, u128::from(u32::MAX)) as u64;
+        let ms = millis(ttl);
         let set = self.with(|c| {
             redis::cmd("SET")
-                .arg(format!("{}lock:{key}", self.prefix))
+                .arg(self.lock_key(key))
                 .arg(&lock.token)
                 .arg("NX")
                 .arg("PX")
@@ -158,8 +172,16 @@ impl TileStore for RedisStore {
     }
 
     fn unlock(&self, lock: &Lock) -> Result<(), CacheError> {
-        let key = format!("{}lock:{}", self.prefix, lock.key);
+        let key = self.lock_key(&lock.key);
         self.with(|c| redis::cmd("EVAL").arg(UNLOCK).arg(1).arg(key).arg(&lock.token).query::<i64>(c)).map(|_| ())
+    }
+
+    fn renew(&self, lock: &Lock, ttl: Duration) -> Result<bool, CacheError> {
+        let key = self.lock_key(&lock.key);
+        let ms = millis(ttl);
+        let renewed =
+            self.with(|c| redis::cmd("EVAL").arg(RENEW).arg(1).arg(key).arg(&lock.token).arg(ms).query::<i64>(c))?;
+        Ok(renewed == 1)
     }
 
     fn mark_in_use(&self, version: &str) -> Result<(), CacheError> {

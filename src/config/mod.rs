@@ -126,9 +126,14 @@ impl TileCacheConfig {
         Ok(())
     }
 
-    /// How often the servers trim the cache to its bound.
+    /// How often the servers trim the cache to its bound (nonsense values
+    /// within the range, or the default).
     pub fn trim_interval(&self) -> std::time::Duration {
-        std::time::Duration::from_secs_f64(self.trim_interval_s.clamp(*TRIM_INTERVAL_S.start(), *TRIM_INTERVAL_S.end()))
+        let s = match self.trim_interval_s {
+            s if s.is_nan() => 600.0,
+            s => s.clamp(*TRIM_INTERVAL_S.start(), *TRIM_INTERVAL_S.end()),
+        };
+        std::time::Duration::from_secs_f64(s)
     }
 
     /// The lock expiry (nonsense values become the default).

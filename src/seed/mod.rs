@@ -125,8 +125,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
         let resumed = options.resume.then(|| Progress::resume(&job.files.0, &job.fingerprint)).transpose()?;
         return Ok(dry_run(&job, resumed.as_ref()));
     }
-    let backend = job.config.tile_cache.backend(options.cache_dir.as_deref());
-    let store = crate::cache::open(&backend)?;
+    let store = crate::cache::open(&job.config.tile_cache.backend(options.cache_dir.as_deref()))?;
     probe(&*store)?;
     let _in_use = crate::cache::in_use::InUse::mark(store.clone(), &job.region.version);
     // The holds are kept (not `_`, which would drop them) to the end.
@@ -167,24 +166,14 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     }
     let list = failed.finish().map_err(|source| SeedError::Io { path: job.files.1.clone(), source })?;
     let mut text = summary(&job, &*store, counters, started.elapsed(), &list);
-    if let Some(max) = job.config.tile_cache.max_size {
-        text.push_str(&over_bound(&backend, max));
+    if let Some(max) = job.config.tile_cache.max_size.filter(|&max| counters.bytes.load(Ordering::Relaxed) > max) {
+        let wrote = crate::config::show_size(counters.bytes.load(Ordering::Relaxed));
+        text.push_str(&format!(
+            "\nthis seed wrote {wrote}, more than [tile_cache] max_size ({}): the servers will trim the cache back to it, least recently used tiles first, some of these among them",
+            crate::config::show_size(max)
+        ));
     }
     Ok(Report { text, failed: n })
-}
-
-/// A line saying that the cache takes more than its bound, if it does
-/// (none where it cannot be measured: the seed is done either way).
-fn over_bound(backend: &crate::cache::Backend, max: u64) -> String {
-    let Ok((_, versions)) = crate::cache::prune::usage(backend) else { return String::new() };
-    match versions.iter().map(|v| v.bytes).sum::<u64>() {
-        taken if taken > max => format!(
-            "\nthe tile cache takes {}, more than [tile_cache] max_size ({}): the servers will trim it back, least recently used tiles first (this seed's among them if it alone takes more)",
-            crate::config::show_size(taken),
-            crate::config::show_size(max)
-        ),
-        _ => String::new(),
-    }
 }
 
 /// The run's records.

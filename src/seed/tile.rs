@@ -32,6 +32,9 @@ pub struct Counters {
     pub existing: AtomicU64,
     /// Failed after their retries.
     pub failed: AtomicU64,
+    /// Bytes of the tiles this run stored (a uniform tile's whole, though
+    /// stored once).
+    pub bytes: AtomicU64,
 }
 
 impl Counters {
@@ -232,6 +235,7 @@ impl Seeder<'_> {
             }
             let saved = make().and_then(|(bytes, uniform, derived)| {
                 flight::save(self.store, lock, &bytes, uniform).map_err(|e| e.to_string())?;
+                self.counters.bytes.fetch_add(bytes.len() as u64, Ordering::Relaxed);
                 Ok(if derived { Made::Derived } else { Made::Computed })
             });
             match saved {
@@ -288,6 +292,9 @@ mod tests {
         }
         fn unlock(&self, _: &Lock) -> Result<(), CacheError> {
             Err(self.error())
+        }
+        fn renew(&self, lock: &Lock, ttl: Duration) -> Result<bool, CacheError> {
+            self.dir.renew(lock, ttl)
         }
         fn mark_in_use(&self, version: &str) -> Result<(), CacheError> {
             self.dir.mark_in_use(version)

@@ -29,6 +29,8 @@ pub enum Code {
     InvalidPoint,
     /// A WMTS tile's row or column is outside its matrix.
     TileOutOfRange,
+    /// A WMTS GetFeatureInfo's pixel is outside its tile.
+    PointIjOutOfRange,
     /// The server failed (no standard code; reported without one).
     NoApplicableCode,
 }
@@ -40,6 +42,7 @@ impl Code {
             Code::LayerNotDefined => "LayerNotDefined",
             Code::InvalidPoint => "InvalidPoint",
             Code::TileOutOfRange => "TileOutOfRange",
+            Code::PointIjOutOfRange => "PointIJOutOfRange",
             Code::StyleNotDefined => "StyleNotDefined",
             Code::InvalidCrs => "InvalidCRS",
             Code::InvalidSrs => "InvalidSRS",
@@ -107,14 +110,14 @@ impl Exception {
         }
     }
 
-    /// The OWS 1.1 ExceptionReport document (WMTS), and its MIME type.
+    /// The OWS 1.1 ExceptionReport document of WMTS 1.0.0, and its MIME type.
     pub fn ows_report(&self) -> (&'static str, String) {
         let locator = self.locator_attribute();
         (
             "application/xml",
             format!(
                 "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n\
-                 <ExceptionReport xmlns=\"http://www.opengis.net/ows/1.1\" version=\"1.1.0\" xml:lang=\"en\">\n  \
+                 <ExceptionReport xmlns=\"http://www.opengis.net/ows/1.1\" version=\"1.0.0\" xml:lang=\"en\">\n  \
                  <Exception exceptionCode=\"{}\"{locator}><ExceptionText>{}</ExceptionText></Exception>\n\
                  </ExceptionReport>\n",
                 self.code.as_str(),

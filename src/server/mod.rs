@@ -1,6 +1,7 @@
 //! `sylva serve`: the tile proxy server (axum + tokio). WMS 1.1.1/1.3.0 at
-//! `/wms`, World Wind tiles at `/tiles`, XYZ Terrarium tiles at `/xyz`,
-//! `/health` and Prometheus `/metrics`; tiles cached on disk and in memory,
+//! `/wms`, World Wind tiles at `/tiles`, XYZ Terrarium tiles at `/xyz`, WMTS
+//! 1.0.0 over them at `/wmts`, `/health` and Prometheus `/metrics`; tiles
+//! cached on disk and in memory (the cache held to a size if configured),
 //! computed once however many clients ask (dissertation 6.5, "Preprocessing
 //! via Proxy Servers").
 //!
@@ -9,7 +10,7 @@
 //!
 //! Invariant: only this module knows HTTP; CPU work runs on [`pool::Pool`],
 //! never on the async executor; no request can panic the server (bad input
-//! is a 4xx with a message, an OGC exception on `/wms`).
+//! is a 4xx with a message, an OGC exception report on `/wms` and `/wmts`).
 
 pub mod exception;
 pub mod metrics;

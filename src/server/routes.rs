@@ -94,18 +94,12 @@ async fn observe(State(state): State<Arc<AppState>>, request: Request, next: Nex
 }
 
 /// A request refused before its handler answered (a 503 is to be retried
-/// in 5 s): an OGC exception report on `/wms` (a ServiceExceptionReport in
-/// the version `wms_query` asks for; never an image: a refusal costs
-/// nothing) and `/wmts`, text elsewhere.
-fn refused(route: &str, wms_query: Option<&str>, status: StatusCode, message: String) -> Response {
-    let mut response = match (route, wms_query) {
-        ("wmts", _) => super::wmts::refused(status, message),
-        (_, Some(query)) => {
-            let version = super::wms::request::version_of(query);
-            let e = super::exception::Exception::new(super::exception::Code::NoApplicableCode, message);
-            let (mime, body) = e.report(version);
-            (status, [(header::CONTENT_TYPE, mime)], body).into_response()
-        }
+/// in 5 s): an OGC exception report on `/wms` (in the version its `query`
+/// asks for) and `/wmts`, text elsewhere.
+fn refused(route: &str, query: Option<&str>, status: StatusCode, message: String) -> Response {
+    let mut response = match route {
+        "wms" => super::wms::refused(query.unwrap_or(""), status, message),
+        "wmts" => super::wmts::refused(status, message),
         _ => (status, message).into_response(),
     };
     if status == StatusCode::SERVICE_UNAVAILABLE {

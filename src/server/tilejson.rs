@@ -3,6 +3,7 @@
 //! which a MapLibre `raster-dem` (heights, Terrarium) or `raster` (the
 //! pictures) source reads from its `url`.
 
+use super::products::XYZ_SIDE;
 use super::routes::MAX_XYZ_ZOOM;
 use super::wms::request::MapLayer;
 use crate::grid::BBox;
@@ -43,7 +44,8 @@ pub struct Extent {
     /// crosses the antimeridian: neither TileJSON's nor WMTS's boxes wrap)
     /// and Web Mercator's latitudes.
     pub bounds: BBox,
-    /// The shallowest zoom at which the region spans a pixel.
+    /// The shallowest zoom at which the region spans a pixel (at most
+    /// `max_zoom`).
     pub min_zoom: u32,
     /// The shallowest zoom as fine as the layer's finest source.
     pub max_zoom: u32,
@@ -58,11 +60,13 @@ pub fn extent(region: &Region, layer: MapLayer) -> Option<Extent> {
     }
     let lat = |l: f64| l.clamp(-MERCATOR_MAX_LAT, MERCATOR_MAX_LAT);
     let bounds = BBox { south: lat(b.south), north: lat(b.north), ..b };
-    Some(Extent { bounds, min_zoom: min_zoom(region), max_zoom: max_zoom(region, layer) })
+    let max_zoom = max_zoom(region, layer);
+    // A region smaller than a pixel of its finest source's zoom: that zoom alone.
+    Some(Extent { bounds, min_zoom: min_zoom(region).min(max_zoom), max_zoom })
 }
 
 /// The side of an XYZ tile, pixels (MapLibre assumes 512 unless told).
-pub const TILE_PX: u32 = 256;
+const TILE_PX: u32 = XYZ_SIDE as u32;
 
 /// The shallowest zoom at which the region spans a pixel (shallower tiles
 /// hold no data: 404).

@@ -5,18 +5,22 @@
 //! `/wmts/1.0.0/WMTSCapabilities.xml`) lists the layers the XYZ routes serve
 //! — heights as Terrarium PNG, the pictures as PNG and JPEG — in one tile
 //! matrix set, `WebMercatorQuad` (EPSG:3857, 256-pixel tiles on the
-//! GoogleMapsCompatible scales, zooms 0 to [`MAX_XYZ_ZOOM`]); each layer with
-//! the zooms and tiles of the region (`TileMatrixSetLimits`, the zooms its
-//! TileJSON gives) and a RESTful template, which is its XYZ path. GetTile
-//! (KVP) answers the tile that path does, from the same cache. Requests that
-//! are wrong get an OWS 1.1 ExceptionReport; a tile off the region's data is
-//! a 404 without body (GDAL draws it empty), as on the XYZ path.
+//! GoogleMapsCompatible scales, zooms 0 to the deepest any layer's sources
+//! are as fine as); each layer with the zooms and tiles of the region
+//! (`TileMatrixSetLimits`, the zooms its TileJSON gives) and a RESTful
+//! template, which is its XYZ path. GetTile (KVP) answers the tile that path
+//! does, from the same cache; GetFeatureInfo the values of the data under a
+//! pixel of it, as WMS GetFeatureInfo does. Requests that are wrong get an
+//! OWS 1.1 ExceptionReport; a tile off the region's data is a 404 without
+//! body (GDAL draws it empty), as on the XYZ path.
 
 use super::exception::{Code, Exception, escape};
+use super::products::{Product, XYZ_SIDE};
 use super::query::Params;
 use super::routes::{MAX_XYZ_ZOOM, has_xyz_tiles, xyz_tile};
-use super::tilejson::{self, Extent, TILE_PX};
+use super::tilejson::{self, Extent};
 use super::wms::capabilities::title;
+use super::wms::info::{self, InfoFormat};
 use super::wms::picture::PictureFormat;
 use super::wms::request::{LAYERS, MapLayer};
 use super::{AppState, ServeError};
@@ -38,14 +42,31 @@ const SCALE_0: f64 = 559_082_264.028_717_8;
 
 /// Answers a WMTS KVP request.
 pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuery, headers: HeaderMap) -> Response {
-    match parse(query.as_deref().unwrap_or("")) {
+    match parse(query.as_deref().unwrap_or(""), deepest(state.region())) {
         Err(e) => exception(&e, StatusCode::BAD_REQUEST),
-        Ok(Request::GetCapabilities) => capabilities(&state, &headers),
-        Ok(Request::GetTile(t)) => match xyz_tile(&state, t.layer, t.zxy, t.picture, &headers).await {
+        Ok(Request::Capabilities) => capabilities(&state, &headers),
+        Ok(Request::Tile(t)) => match xyz_tile(&state, t.layer, t.zxy, t.picture, &headers).await {
             Ok(response) => response,
             Err(e) => failure(e),
         },
+        Ok(Request::FeatureInfo(t, pixel)) => feature_info(&state, &t, &pixel).await.unwrap_or_else(failure),
     }
+}
+
+/// The values of the data a tile shows at one of its pixels, computed on
+/// that pixel of the tile's grid (the value the tile shows there).
+async fn feature_info(state: &AppState, t: &TileRequest, pixel: &Pixel) -> Result<Response, ServeError> {
+    let product = Product::Xyz { layer: t.layer, zxy: t.zxy };
+    let (x, y) = pixel.at;
+    let grid = product
+        .grid(state.region())
+        .map_err(|e| ServeError::BadRequest(e.to_string()))?
+        .slice(x as i64, y as i64, 1, 1);
+    let layers = info::shows(t.layer);
+    let queried = layers.clone();
+    let values = state.tiles.run(move |region| info::values(region, &grid, &queried)).await?;
+    let (mime, body) = info::document(&layers, pixel.at, pixel.format, grid.on_globe(0, 0), &values);
+    Ok(([(header::CONTENT_TYPE, mime)], body).into_response())
 }
 
 /// `/wmts/1.0.0/WMTSCapabilities.xml`: the capabilities, RESTful.
@@ -61,8 +82,8 @@ pub async fn other_method() -> Response {
     (StatusCode::METHOD_NOT_ALLOWED, [(header::CONTENT_TYPE, mime), (header::ALLOW, "GET, HEAD")], body).into_response()
 }
 
-/// A WMTS request's report for a request refused before it was read (too
-/// long a URI, a timeout), with `status`.
+/// The report of a request refused before it was read (too long a URI, a
+/// timeout), with `status`.
 pub fn refused(status: StatusCode, message: String) -> Response {
     exception(&Exception::new(Code::NoApplicableCode, message), status)
 }
@@ -70,8 +91,17 @@ pub fn refused(status: StatusCode, message: String) -> Response {
 /// What a KVP request asks for.
 #[derive(Debug, PartialEq)]
 enum Request {
-    GetCapabilities,
-    GetTile(TileRequest),
+    Capabilities,
+    Tile(TileRequest),
+    FeatureInfo(TileRequest, Pixel),
+}
+
+/// A GetFeatureInfo's pixel of its tile (column, row from the top left)
+/// and the answer's format.
+#[derive(Debug, PartialEq)]
+struct Pixel {
+    at: (usize, usize),
+    format: InfoFormat,
 }
 
 /// One tile: the layer, its XYZ address and picture format (none:
@@ -83,11 +113,12 @@ struct TileRequest {
     picture: Option<PictureFormat>,
 }
 
-/// Reads a KVP query (keys in any case); none at all asks for the
-/// capabilities (GDAL's `WMTS:` of the bare endpoint asks so).
-fn parse(query: &str) -> Result<Request, Exception> {
+/// Reads a KVP query (keys in any case) to a matrix set ending at zoom
+/// `deepest`; none at all asks for the capabilities (GDAL's `WMTS:` of the
+/// bare endpoint asks so).
+fn parse(query: &str, deepest: u32) -> Result<Request, Exception> {
     if query.trim().is_empty() {
-        return Ok(Request::GetCapabilities);
+        return Ok(Request::Capabilities);
     }
     let params = Params::new(query);
     if let Some((key, message)) = params.conflict() {
@@ -98,42 +129,54 @@ fn parse(query: &str) -> Result<Request, Exception> {
         return Err(invalid("SERVICE", format!("this endpoint is WMTS, not {service:?}")));
     }
     match required(&params, "REQUEST")? {
-        r if r.eq_ignore_ascii_case("GetCapabilities") => Ok(Request::GetCapabilities),
-        r if r.eq_ignore_ascii_case("GetTile") => tile_request(&params).map(Request::GetTile),
+        r if r.eq_ignore_ascii_case("GetCapabilities") => Ok(Request::Capabilities),
+        r if r.eq_ignore_ascii_case("GetTile") => tile_request(&params, deepest, Needs::Tile).map(Request::Tile),
+        r if r.eq_ignore_ascii_case("GetFeatureInfo") => {
+            Ok(Request::FeatureInfo(tile_request(&params, deepest, Needs::Values)?, pixel(&params)?))
+        }
         r => Err(Exception::new(
             Code::OperationNotSupported,
-            format!("request {r:?} is not offered: GetCapabilities or GetTile"),
+            format!("request {r:?} is not offered: GetCapabilities, GetTile or GetFeatureInfo"),
         )
         .locator("REQUEST")),
     }
 }
 
+/// What a request needs of its tile.
+#[derive(Clone, Copy, PartialEq)]
+enum Needs {
+    /// Its bytes (GetTile).
+    Tile,
+    /// The values under a pixel (GetFeatureInfo).
+    Values,
+}
+
 /// A GetTile's parameters checked: the layer, style, format and matrix set
 /// offered, the tile within its matrix.
-fn tile_request(params: &Params) -> Result<TileRequest, Exception> {
+fn tile_request(params: &Params, deepest: u32, needs: Needs) -> Result<TileRequest, Exception> {
     if let Some(v) = params.get("VERSION").filter(|v| v.trim() != "1.0.0") {
         return Err(invalid("VERSION", format!("version {v:?} is not offered: 1.0.0")));
     }
     let name = required(params, "LAYER")?;
-    let layer = LAYERS
-        .into_iter()
-        .find(|l| has_xyz_tiles(*l) && l.name().eq_ignore_ascii_case(name.trim()))
-        .ok_or_else(|| invalid("LAYER", format!("no layer {name:?}: {}", layer_names())))?;
+    let layer = offered().find(|l| l.name().eq_ignore_ascii_case(name.trim())).ok_or_else(|| {
+        let names: Vec<&str> = offered().map(MapLayer::name).collect();
+        invalid("LAYER", format!("no layer {name:?}: {}", names.join(", ")))
+    })?;
     // STYLE is required by the standard; a client leaving it out means the one style.
     if let Some(style) = params.get("STYLE").filter(|s| !s.is_empty() && !s.eq_ignore_ascii_case("default")) {
         return Err(invalid("STYLE", format!("no style {style:?}: each layer has one, \"default\"")));
     }
-    let format = required(params, "FORMAT")?;
-    let picture = match (layer.is_picture(), formats(layer).iter().find(|f| f.eq_ignore_ascii_case(format.trim()))) {
-        (_, None) => {
-            return Err(invalid(
-                "FORMAT",
-                format!("{} tiles are {}, not {format:?}", layer.name(), formats(layer).join(" or ")),
-            ));
-        }
-        (true, Some(f)) => PictureFormat::of_extension(f.trim_start_matches("image/")),
-        (false, Some(_)) => None,
+    // A GetFeatureInfo's values do not depend on the tile's format, and
+    // GDAL leaves it out there.
+    let format = match (params.get("FORMAT"), needs) {
+        (None, Needs::Values) => mime(encodings(layer)[0]),
+        _ => required(params, "FORMAT")?,
     };
+    let picture =
+        *encodings(layer).iter().find(|&&e| mime(e).eq_ignore_ascii_case(format.trim())).ok_or_else(|| {
+            let offered: Vec<&str> = encodings(layer).iter().map(|&e| mime(e)).collect();
+            invalid("FORMAT", format!("{} tiles are {}, not {format:?}", layer.name(), offered.join(" or ")))
+        })?;
     let set = required(params, "TILEMATRIXSET")?;
     if set.trim() != MATRIX_SET {
         return Err(invalid("TILEMATRIXSET", format!("no tile matrix set {set:?}: {MATRIX_SET}")));
@@ -141,8 +184,8 @@ fn tile_request(params: &Params) -> Result<TileRequest, Exception> {
     let z = number(params, "TILEMATRIX")?;
     let z = u32::try_from(z)
         .ok()
-        .filter(|&z| z <= MAX_XYZ_ZOOM)
-        .ok_or_else(|| invalid("TILEMATRIX", format!("no tile matrix {z} in {MATRIX_SET}: 0 to {MAX_XYZ_ZOOM}")))?;
+        .filter(|&z| z <= deepest)
+        .ok_or_else(|| invalid("TILEMATRIX", format!("no tile matrix {z} in {MATRIX_SET}: 0 to {deepest}")))?;
     let (row, col) = (number(params, "TILEROW")?, number(params, "TILECOL")?);
     for (value, key) in [(row, "TILEROW"), (col, "TILECOL")] {
         if value >= 1 << z {
@@ -151,6 +194,22 @@ fn tile_request(params: &Params) -> Result<TileRequest, Exception> {
         }
     }
     Ok(TileRequest { layer, zxy: (z, col, row), picture })
+}
+
+/// A GetFeatureInfo's pixel (`I`, `J`) and `INFOFORMAT`.
+fn pixel(params: &Params) -> Result<Pixel, Exception> {
+    let mut at = [0; 2];
+    for (value, key) in at.iter_mut().zip(["I", "J"]) {
+        *value = usize::try_from(number(params, key)?).ok().filter(|&v| v < XYZ_SIDE).ok_or_else(|| {
+            let message = format!("{key} must be a pixel of the tile, 0 to {}", XYZ_SIDE - 1);
+            Exception::new(Code::PointIjOutOfRange, message).locator(key)
+        })?;
+    }
+    let text = required(params, "INFOFORMAT")?;
+    let offered = || InfoFormat::ALL.map(|(_, m)| m).join(", ");
+    let format =
+        InfoFormat::parse(text).ok_or_else(|| invalid("INFOFORMAT", format!("{text:?}: offered are {}", offered())))?;
+    Ok(Pixel { at: (at[0], at[1]), format })
 }
 
 /// A parameter that must be given.
@@ -171,17 +230,27 @@ fn invalid(key: &str, message: String) -> Exception {
     Exception::new(Code::InvalidParameterValue, message).locator(key)
 }
 
-/// The layers offered, for messages.
-fn layer_names() -> String {
-    LAYERS.into_iter().filter(|&l| has_xyz_tiles(l)).map(MapLayer::name).collect::<Vec<_>>().join(", ")
+/// The layers offered: those with XYZ tiles.
+fn offered() -> impl Iterator<Item = MapLayer> {
+    LAYERS.into_iter().filter(|&l| has_xyz_tiles(l))
 }
 
-/// The MIME types a layer's tiles come in.
-fn formats(layer: MapLayer) -> &'static [&'static str] {
-    match layer.is_picture() {
-        true => &["image/png", "image/jpeg"],
-        false => &["image/png"],
-    }
+/// The deepest zoom of the matrix set: the deepest a layer's sources are
+/// as fine as (clients such as GDAL take the last matrix for the full
+/// resolution; they draw deeper views from it).
+fn deepest(region: &Region) -> u32 {
+    offered().filter_map(|l| tilejson::extent(region, l)).map(|e| e.max_zoom).max().unwrap_or(MAX_XYZ_ZOOM)
+}
+
+/// A layer's tile encodings: Terrarium PNG heights (`None`), or the
+/// picture formats.
+fn encodings(layer: MapLayer) -> &'static [Option<PictureFormat>] {
+    if layer.is_picture() { &[Some(PictureFormat::Png), Some(PictureFormat::Jpeg)] } else { &[None] }
+}
+
+/// An encoding's MIME type.
+fn mime(encoding: Option<PictureFormat>) -> &'static str {
+    encoding.map_or("image/png", PictureFormat::mime)
 }
 
 /// An exception report with `status` (501 for an operation not offered).
@@ -215,16 +284,12 @@ fn capabilities(state: &AppState, headers: &HeaderMap) -> Response {
 
 /// The capabilities document of `region` served under `base`.
 fn document(region: &Region, base: &str) -> String {
-    let layers: String = LAYERS
-        .into_iter()
-        .filter(|&l| has_xyz_tiles(l))
-        .filter_map(|l| Some(layer(l, &tilejson::extent(region, l)?, base)))
-        .collect();
+    let layers: String = offered().filter_map(|l| Some(layer(l, &tilejson::extent(region, l)?, base))).collect();
     format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <Capabilities xmlns="http://www.opengis.net/wmts/1.0" xmlns:ows="http://www.opengis.net/ows/1.1" xmlns:xlink="http://www.w3.org/1999/xlink" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengis.net/wmts/1.0 http://schemas.opengis.net/wmts/1.0/wmtsGetCapabilities_response.xsd" version="1.0.0">
 <ows:ServiceIdentification><ows:Title>{title}</ows:Title><ows:Abstract>Combined elevation maps (terrain + forest canopy) computed on demand by Sylva.</ows:Abstract><ows:ServiceType>OGC WMTS</ows:ServiceType><ows:ServiceTypeVersion>1.0.0</ows:ServiceTypeVersion></ows:ServiceIdentification>
-<ows:OperationsMetadata>{get_capabilities}{get_tile}</ows:OperationsMetadata>
+<ows:OperationsMetadata>{get_capabilities}{get_tile}{get_feature_info}</ows:OperationsMetadata>
 <Contents>
 {layers}{matrix_set}</Contents>
 <ServiceMetadataURL xlink:href="{base}/wmts/1.0.0/WMTSCapabilities.xml"/>
@@ -234,7 +299,8 @@ fn document(region: &Region, base: &str) -> String {
         base = escape(base),
         get_capabilities = operation("GetCapabilities", base),
         get_tile = operation("GetTile", base),
-        matrix_set = matrix_set(),
+        get_feature_info = operation("GetFeatureInfo", base),
+        matrix_set = matrix_set(deepest(region)),
     )
 }
 
@@ -249,12 +315,13 @@ fn operation(name: &str, base: &str) -> String {
 /// One layer: its box, style, formats, limits and RESTful templates.
 fn layer(l: MapLayer, extent: &Extent, base: &str) -> String {
     let b = extent.bounds;
-    let about = match l.is_picture() {
-        true => "PNG with transparency where there is no data, or JPEG on white.".to_string(),
-        false => format!(
+    let about = if l.is_picture() {
+        "PNG with transparency where there is no data, or JPEG on white.".to_string()
+    } else {
+        format!(
             "Heights in metres, Terrarium PNG: h = R * 256 + G + B / 256 - 32768 (black: no data). Tiles deeper than zoom {} are resampled from the sources.",
             extent.max_zoom
-        ),
+        )
     };
     let mut out = format!(
         r#"<Layer><ows:Title>{}</ows:Title><ows:Abstract>{about}</ows:Abstract><ows:WGS84BoundingBox><ows:LowerCorner>{} {}</ows:LowerCorner><ows:UpperCorner>{} {}</ows:UpperCorner></ows:WGS84BoundingBox><ows:Identifier>{}</ows:Identifier><Style isDefault="true"><ows:Identifier>default</ows:Identifier></Style>"#,
@@ -265,8 +332,11 @@ fn layer(l: MapLayer, extent: &Extent, base: &str) -> String {
         b.north,
         l.name()
     );
-    for format in formats(l) {
-        let _ = write!(out, "<Format>{format}</Format>");
+    for &encoding in encodings(l) {
+        let _ = write!(out, "<Format>{}</Format>", mime(encoding));
+    }
+    for (_, format) in InfoFormat::ALL {
+        let _ = write!(out, "<InfoFormat>{format}</InfoFormat>");
     }
     let _ = write!(out, "<TileMatrixSetLink><TileMatrixSet>{MATRIX_SET}</TileMatrixSet><TileMatrixSetLimits>");
     for z in extent.min_zoom..=extent.max_zoom {
@@ -277,9 +347,10 @@ fn layer(l: MapLayer, extent: &Extent, base: &str) -> String {
         );
     }
     out.push_str("</TileMatrixSetLimits></TileMatrixSetLink>");
-    for format in formats(l) {
-        let ext = if *format == "image/jpeg" { "jpg" } else { "png" };
+    for &encoding in encodings(l) {
+        let ext = encoding.map_or("png", PictureFormat::extension);
         let template = format!("{base}/xyz/{}/{{TileMatrix}}/{{TileCol}}/{{TileRow}}.{ext}", l.name());
+        let format = mime(encoding);
         let _ = write!(out, r#"<ResourceURL format="{format}" resourceType="tile" template="{}"/>"#, escape(&template));
     }
     out.push_str("</Layer>\n");
@@ -302,16 +373,16 @@ fn tiles_over(extent: &Extent, z: u32) -> ((u64, u64), (u64, u64)) {
     ((c0, r0), (c1.max(c0), r1.max(r0)))
 }
 
-/// The tile matrix set: every zoom served.
-fn matrix_set() -> String {
+/// The tile matrix set, zooms 0 to `deepest`.
+fn matrix_set(deepest: u32) -> String {
     let mut out = format!(
         "<TileMatrixSet><ows:Identifier>{MATRIX_SET}</ows:Identifier><ows:SupportedCRS>urn:ogc:def:crs:EPSG::3857</ows:SupportedCRS><WellKnownScaleSet>urn:ogc:def:wkss:OGC:1.0:GoogleMapsCompatible</WellKnownScaleSet>\n"
     );
-    for z in 0..=MAX_XYZ_ZOOM {
+    for z in 0..=deepest {
         let _ = writeln!(
             out,
-            "<TileMatrix><ows:Identifier>{z}</ows:Identifier><ScaleDenominator>{}</ScaleDenominator><TopLeftCorner>{} {}</TopLeftCorner><TileWidth>{TILE_PX}</TileWidth><TileHeight>{TILE_PX}</TileHeight><MatrixWidth>{n}</MatrixWidth><MatrixHeight>{n}</MatrixHeight></TileMatrix>",
-            SCALE_0 / f64::from(1u32 << z),
+            "<TileMatrix><ows:Identifier>{z}</ows:Identifier><ScaleDenominator>{}</ScaleDenominator><TopLeftCorner>{} {}</TopLeftCorner><TileWidth>{XYZ_SIDE}</TileWidth><TileHeight>{XYZ_SIDE}</TileHeight><MatrixWidth>{n}</MatrixWidth><MatrixHeight>{n}</MatrixHeight></TileMatrix>",
+            SCALE_0 / 2f64.powi(z as i32),
             -HALF_WORLD_M,
             HALF_WORLD_M,
             n = 1u64 << z
@@ -325,10 +396,11 @@ fn matrix_set() -> String {
 mod tests {
     use super::*;
     use crate::cem::Layer;
+    use crate::grid::BBox;
 
     fn tile(query: &str) -> Result<TileRequest, Exception> {
-        match parse(query)? {
-            Request::GetTile(t) => Ok(t),
+        match parse(query, MAX_XYZ_ZOOM)? {
+            Request::Tile(t) => Ok(t),
             other => panic!("{other:?}"),
         }
     }
@@ -345,20 +417,35 @@ mod tests {
         // Keys and names in any case; heights are Terrarium PNG.
         let t = tile("service=wmts&request=gettile&layer=CEM&format=image/png&tilematrixset=WebMercatorQuad&tilematrix=0&tilerow=0&tilecol=0").unwrap();
         assert_eq!(t, TileRequest { layer: MapLayer::Data(Layer::Cem), zxy: (0, 0, 0), picture: None });
-        assert_eq!(parse("SERVICE=WMTS&REQUEST=GetCapabilities").unwrap(), Request::GetCapabilities);
-        assert_eq!(parse("").unwrap(), Request::GetCapabilities);
+        assert_eq!(parse("SERVICE=WMTS&REQUEST=GetCapabilities", 0).unwrap(), Request::Capabilities);
+        assert_eq!(parse("", 0).unwrap(), Request::Capabilities);
+        // The pixel of a GetFeatureInfo.
+        let info = format!("{}&I=255&J=0&INFOFORMAT=application/json", RELIEF.replace("GetTile", "GetFeatureInfo"));
+        let Request::FeatureInfo(t, pixel) = parse(&info, MAX_XYZ_ZOOM).unwrap() else { panic!("{info}") };
+        assert_eq!((t.zxy, pixel), ((12, 2161, 1449), Pixel { at: (255, 0), format: InfoFormat::Json }));
     }
 
     #[test]
     fn wrong_requests_name_the_code_and_the_parameter() {
         let fails = |query: String, code: Code, locator: &str| {
-            let e = parse(&query).unwrap_err();
+            let e = parse(&query, MAX_XYZ_ZOOM).unwrap_err();
             assert_eq!((e.code, e.locator.as_deref()), (code, Some(locator)), "{query}: {e}");
         };
         let with = |key: &str, value: &str| RELIEF.replace(&format!("{key}="), &format!("{key}={value}&X{key}="));
         fails(RELIEF.replace("SERVICE=WMTS&", ""), Code::MissingParameterValue, "SERVICE");
         fails(RELIEF.replace("SERVICE=WMTS", "SERVICE=WMS"), Code::InvalidParameterValue, "SERVICE");
-        fails(RELIEF.replace("GetTile", "GetFeatureInfo"), Code::OperationNotSupported, "REQUEST");
+        fails(RELIEF.replace("GetTile", "DescribeDomains"), Code::OperationNotSupported, "REQUEST");
+        let info = format!("{}&INFOFORMAT=text/plain", RELIEF.replace("GetTile", "GetFeatureInfo"));
+        fails(format!("{info}&J=0"), Code::MissingParameterValue, "I");
+        fails(format!("{info}&I=256&J=0"), Code::PointIjOutOfRange, "I");
+        fails(format!("{info}&I=0&J=x"), Code::InvalidParameterValue, "J");
+        fails(format!("{info}&I=0&J=0").replace("text/plain", "image/png"), Code::InvalidParameterValue, "INFOFORMAT");
+        // FORMAT may be left out of a GetFeatureInfo (GDAL does), not a GetTile.
+        fails(RELIEF.replace("&FORMAT=image/jpeg", ""), Code::MissingParameterValue, "FORMAT");
+        assert!(parse(&format!("{info}&I=0&J=0").replace("&FORMAT=image/jpeg", ""), MAX_XYZ_ZOOM).is_ok());
+        // The matrix set ends at the deepest zoom served.
+        let e = parse(RELIEF, 11).unwrap_err();
+        assert_eq!((e.code, e.locator.as_deref()), (Code::InvalidParameterValue, Some("TILEMATRIX")));
         fails(with("VERSION", "2.0.0"), Code::InvalidParameterValue, "VERSION");
         fails(with("LAYER", "cover"), Code::InvalidParameterValue, "LAYER");
         fails(with("STYLE", "dark"), Code::InvalidParameterValue, "STYLE");
@@ -427,8 +514,21 @@ mod tests {
             .descendants()
             .filter(|n| n.has_tag_name("TileMatrix") && n.parent().is_some_and(|p| p.has_tag_name("TileMatrixSet")))
             .collect();
-        assert_eq!(matrices.len() as u32, MAX_XYZ_ZOOM + 1);
+        assert_eq!(matrices.len() as u32, deepest(&region) + 1);
+        assert_eq!(deepest(&region), extent.max_zoom, "the map's pixels are the finest source's");
         let scale: f64 = ows(matrices[0], "ScaleDenominator").parse().unwrap();
         assert!((scale * 0.000_28 * 256.0 - 2.0 * HALF_WORLD_M).abs() < 1e-3);
+    }
+
+    #[test]
+    fn a_box_ending_on_a_tile_edge_does_not_reach_into_the_next_tile() {
+        // Zoom 1: the four quarters of the world; a box of the north-west one.
+        let bounds = BBox { west: -180.0, south: 0.0, east: 0.0, north: 85.0 };
+        let extent = Extent { bounds, min_zoom: 1, max_zoom: 2 };
+        assert_eq!(tiles_over(&extent, 1), ((0, 0), (0, 0)));
+        assert_eq!(tiles_over(&extent, 2), ((0, 0), (1, 1)));
+        // A box within one tile.
+        let inside = Extent { bounds: BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 }, ..extent };
+        assert_eq!(tiles_over(&inside, 1), ((1, 0), (1, 0)));
     }
 }

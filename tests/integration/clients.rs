@@ -62,7 +62,10 @@ fn assert_matches(client: &str, got: &[f32], reference: &[f32]) {
 
 fn run(cmd: &mut Command, what: &str) -> String {
     // GDAL's WMS and WMTS drivers would cache tiles in the working directory.
-    let out = cmd.env("GDAL_ENABLE_WMS_CACHE", "NO").output().unwrap_or_else(|e| panic!("{what} ({e}): install it with `bash scripts/setup.sh`"));
+    let out = cmd
+        .env("GDAL_ENABLE_WMS_CACHE", "NO")
+        .output()
+        .unwrap_or_else(|e| panic!("{what} ({e}): install it with `bash scripts/setup.sh`"));
     assert!(
         out.status.success(),
         "{what} failed:\n{}{}",
@@ -235,6 +238,16 @@ fn gdal_opens_a_served_geotiff_by_its_url() {
     assert_eq!(tiff_of_side(&out, 513), tiff_of_side(&direct, 513));
 }
 
+/// The deepest zoom of the WMTS layers' TileJSONs.
+fn deepest_zoom(server: &Server) -> u32 {
+    let zoom = |layer: &str| {
+        let doc: serde_json::Value =
+            serde_json::from_slice(&server.get(&format!("/xyz/{layer}/tiles.json")).body).unwrap();
+        doc["maxzoom"].as_u64().unwrap() as u32
+    };
+    ["dem", "canopy", "cem", "colour", "relief"].map(zoom).into_iter().max().unwrap()
+}
+
 /// GDAL's `WMTS:` name of a layer of the demo.
 fn wmts_layer(server: &Server, layer: &str) -> String {
     format!("WMTS:{}/wmts?SERVICE=WMTS&REQUEST=GetCapabilities,layer={layer}", server.base)
@@ -248,9 +261,22 @@ fn gdal_reads_the_wmts_layers_and_their_heights() {
     for layer in ["dem", "canopy", "cem", "colour", "relief"] {
         assert!(info.contains(&format!(",layer={layer}\n")), "gdalinfo lists {layer}:\n{info}");
     }
-    // The layer's box is the region's, in Web Mercator.
+    // The layer's box is the region's, in Web Mercator, to a pixel of the
+    // deepest zoom any layer's sources are as fine as (the relief's).
     let info = run(Command::new("gdalinfo").arg(wmts_layer(&server, "cem")), "gdalinfo");
-    assert!(info.contains("Upper Left  ( 1113194.907, 5852757.634)"), "{info}");
+    let deepest = deepest_zoom(&server);
+    let pixel_m = 2.0 * sylva::grid::mercator::HALF_WORLD_M / (256.0 * 2f64.powi(deepest as i32));
+    let corner = |name: &str| -> (f64, f64) {
+        let text = info.split(name).nth(1).and_then(|t| t.split(')').next()).unwrap_or_else(|| panic!("{info}"));
+        let xy: Vec<f64> = text.trim_start_matches([' ', '(']).split(',').map(|v| v.trim().parse().unwrap()).collect();
+        (xy[0], xy[1])
+    };
+    let b = common::demo().bounds;
+    for ((x, y), (lon, lat)) in [(corner("Upper Left"), (b.west, b.north)), (corner("Lower Right"), (b.east, b.south))]
+    {
+        let (mx, my) = sylva::grid::mercator::to_mercator(lon, lat);
+        assert!((x - mx).abs() <= pixel_m && (y - my).abs() <= pixel_m, "({x}, {y}) vs ({mx}, {my}):\n{info}");
+    }
     // Terrarium heights read back, nearest neighbour (averaged codes are no heights).
     let out = dir.join("cem.png");
     let args = ["-q", "-r", "nearest", "-outsize", "256", "0"];
@@ -259,6 +285,16 @@ fn gdal_reads_the_wmts_layers_and_their_heights() {
     let heights: Vec<f64> = rgb.pixels().map(|p| sylva::encode::terrarium::height(p.0)).collect();
     let (low, high) = heights.iter().fold((f64::MAX, f64::MIN), |(a, b), &h| (a.min(h), b.max(h)));
     assert!(low > 500.0 && high < 4000.0 && high - low > 1000.0, "{low} to {high} m");
+    // GDAL's identify asks GetFeatureInfo (GML) of the tile under the point.
+    let args = ["-b", "1", "-wgs84", &wmts_layer(&server, "dem"), "10.125", "46.375"];
+    let report = run(Command::new("gdallocationinfo").args(args), "gdallocationinfo");
+    let dem = report
+        .split("<sylva:value>")
+        .nth(1)
+        .and_then(|v| v.split('<').next())
+        .and_then(|v| v.parse::<f64>().ok())
+        .unwrap_or_else(|| panic!("no dem value in:\n{report}"));
+    assert!((500.0..4000.0).contains(&dem), "{dem}");
 }
 
 #[test]
@@ -271,10 +307,11 @@ fn owslib_reads_the_wmts_and_its_tiles_are_the_xyz_tiles() {
          wmts = WebMapTileService('{base}/wmts')\n\
          assert list(wmts.contents) == ['dem', 'canopy', 'cem', 'colour', 'relief'], list(wmts.contents)\n\
          assert wmts['relief'].formats == ['image/png', 'image/jpeg'], wmts['relief'].formats\n\
-         assert len(wmts.tilematrixsets['WebMercatorQuad'].tilematrix) == 25\n\
+         assert len(wmts.tilematrixsets['WebMercatorQuad'].tilematrix) == {matrices}\n\
          tile = wmts.gettile(layer='relief', tilematrixset='WebMercatorQuad', tilematrix='12', row=1449, column=2161, format='image/jpeg')\n\
          open(sys.argv[1], 'wb').write(tile.read())\n",
-        base = server.base
+        base = server.base,
+        matrices = deepest_zoom(&server) + 1
     );
     run(Command::new(python_with_owslib()).args(["-c", &script]).arg(&out), "OWSLib");
     let xyz = server.get("/xyz/relief/12/2161/1449.jpg");

@@ -66,6 +66,17 @@ fn the_default_files_commented_keys_are_the_demo_palette() {
 }
 
 #[test]
+fn a_cache_bound_is_a_size_in_any_unit_or_bytes() {
+    let dir = TempDir::new("cache-bound");
+    for (given, bytes) in [("\"20GiB\"", 20u64 << 30), ("\"500 MB\"", 500_000_000), ("1000000", 1_000_000)] {
+        let path = dir.join("bound.toml");
+        std::fs::write(&path, format!("[tile_cache]\nmax_size = {given}\n")).unwrap();
+        let (config, _) = sylva::config::load_with_config(Some(&path)).unwrap();
+        assert_eq!(config.tile_cache.max_size, Some(bytes), "{given}");
+    }
+}
+
+#[test]
 fn bad_configs_name_the_file_and_the_problem() {
     let dir = TempDir::new("bad-config");
     let cases = [
@@ -91,6 +102,11 @@ fn bad_configs_name_the_file_and_the_problem() {
         // Regression: 16384 was accepted and advertised, and GetMaps over 8193 refused.
         ("large.toml", "[server]\nmax_size = 10000\n", "max_size = 10000: must be 1 to 8193"),
         ("memory.toml", "[cache]\nmemory_mb = 0\n", "[cache] memory_mb = 0: must be 16 to 1048576"),
+        ("bound.toml", "[tile_cache]\nmax_size = 0\n", "[tile_cache] max_size must be more than 0 bytes"),
+        ("bound_unit.toml", "[tile_cache]\nmax_size = \"20 GB of tiles\"\n", "not a size: \"20 GB of tiles\""),
+        ("bound_kind.toml", "[tile_cache]\nmax_size = true\n", "not a size (e.g."),
+        ("trims.toml", "[tile_cache]\ntrim_interval_s = 5\n", "[tile_cache] trim_interval_s = 5: must be 60 to 86400"),
+        ("trims_nan.toml", "[tile_cache]\ntrim_interval_s = nan\n", "trim_interval_s = NaN: must be 60 to 86400"),
         ("url.toml", "[server]\npublic_url = \"example.org\"\n", "public_url = \"example.org\": must start with"),
         (
             "classes.toml",

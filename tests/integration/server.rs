@@ -554,6 +554,30 @@ fn xyz_tiles_are_terrarium_heights() {
 }
 
 #[test]
+fn wmts_feature_info_gives_the_heights_the_tile_shows() {
+    let dir = TempDir::new("srv-wmts-info");
+    let server = Server::start(None, &dir.join("cache"));
+    let (z, col, row) = (12, 2162, 1450);
+    let tile = image::load_from_memory(&server.get(&format!("/xyz/cem/{z}/{col}/{row}.png")).body).unwrap().into_rgb8();
+    let base = format!(
+        "/wmts?SERVICE=WMTS&REQUEST=GetFeatureInfo&VERSION=1.0.0&LAYER=cem&STYLE=default&FORMAT=image/png\
+         &TILEMATRIXSET=WebMercatorQuad&TILEMATRIX={z}&TILEROW={row}&TILECOL={col}&INFOFORMAT=application/json"
+    );
+    for (i, j) in [(0, 0), (255, 0), (17, 200), (255, 255)] {
+        let reply = server.get(&format!("{base}&I={i}&J={j}"));
+        assert_eq!(reply.header("content-type"), Some("application/json"), "{}", reply.text());
+        let doc: serde_json::Value = serde_json::from_slice(&reply.body).unwrap();
+        let value = doc["features"][0]["properties"]["value"].as_f64().unwrap();
+        // Terrarium steps are 1/256 m.
+        let shown = sylva::encode::terrarium::height(tile.get_pixel(i, j).0);
+        assert!((value - shown).abs() <= 1.0 / 256.0, "pixel {i}, {j}: {value} m, the tile shows {shown} m");
+    }
+    // A pixel off the tile is the standard's code.
+    let off = server.get(&format!("{base}&I=256&J=0"));
+    assert!(off.status == 400 && off.text().contains("PointIJOutOfRange"), "{}", off.text());
+}
+
+#[test]
 fn sigterm_stops_the_server_cleanly() {
     let dir = TempDir::new("srv-term");
     let server = Server::start(None, &dir.join("cache"));

@@ -54,7 +54,8 @@ impl InfoFormat {
         (InfoFormat::Gml, "application/vnd.ogc.gml"),
     ];
 
-    fn parse(text: &str) -> Option<InfoFormat> {
+    /// The format a MIME type (or a short name) asks for.
+    pub fn parse(text: &str) -> Option<InfoFormat> {
         match text.trim().to_ascii_lowercase().as_str() {
             "text/plain" => Some(InfoFormat::Text),
             "text/html" => Some(InfoFormat::Html),
@@ -127,7 +128,7 @@ pub(super) fn parse(params: &Params, version: Version, limits: Limits) -> Result
 
 /// The data layers a map layer shows, which querying it answers with:
 /// itself, or for a picture the data it shows.
-fn shows(layer: MapLayer) -> Vec<Layer> {
+pub fn shows(layer: MapLayer) -> Vec<Layer> {
     match layer {
         MapLayer::Data(layer) => vec![layer],
         _ => PICTURED.to_vec(),
@@ -171,13 +172,18 @@ pub fn values(region: &Region, grid: &SampleGrid, layers: &[Layer]) -> Result<Ve
         .collect())
 }
 
-/// The answer in the format asked: `(lon, lat)` the pixel's centre,
-/// `values` those of [`FeatureInfo::layers`].
-pub fn document(info: &FeatureInfo, (lon, lat): (f64, f64), values: &[Option<f64>]) -> (&'static str, String) {
-    let rows: Vec<(Layer, Option<f64>)> = info.layers.iter().copied().zip(values.iter().copied()).collect();
-    let body = match info.format {
+/// The answer in `format` for the pixel `(x, y)` of a map or tile, whose
+/// centre is at `(lon, lat)`: `values` those of `layers`.
+pub fn document(
+    layers: &[Layer],
+    (x, y): (usize, usize),
+    format: InfoFormat,
+    (lon, lat): (f64, f64),
+    values: &[Option<f64>],
+) -> (&'static str, String) {
+    let rows: Vec<(Layer, Option<f64>)> = layers.iter().copied().zip(values.iter().copied()).collect();
+    let body = match format {
         InfoFormat::Text => {
-            let (x, y) = info.pixel;
             let head = format!("Sylva feature info at lon {lon:.8}, lat {lat:.8} (pixel {x}, {y})\n");
             rows.iter().map(|&(l, v)| format!("{} = {}\n", l.name(), reading(l, v))).fold(head, |t, r| t + &r)
         }
@@ -194,7 +200,7 @@ pub fn document(info: &FeatureInfo, (lon, lat): (f64, f64), values: &[Option<f64
         InfoFormat::Json => geojson(&rows, lon, lat),
         InfoFormat::Gml => gml(&rows, lon, lat),
     };
-    (info.format.mime(), body)
+    (format.mime(), body)
 }
 
 /// A value as people read it: with its unit, a class with its name.
@@ -323,13 +329,13 @@ mod tests {
         let mut info = parsed(&format!("{BASE}&QUERY_LAYERS=dem&I=0&J=0")).unwrap();
         info.layers = vec![Layer::Dem, Layer::Cover, Layer::Surface, Layer::Canopy];
         let values = [Some(1234.5), Some(0.25), Some(1.0), None];
-        let (mime, text) = document(&info, (-105.95, 40.875), &values);
+        let (mime, text) = document(&info.layers, info.pixel, info.format, (-105.95, 40.875), &values);
         assert_eq!(mime, "text/plain");
         for line in ["dem = 1234.50 m", "cover = 0.250", "surface = 1 (forest)", "canopy = no data", "lon -105.95"] {
             assert!(text.contains(line), "{line}:\n{text}");
         }
         info.format = InfoFormat::Json;
-        let (_, json) = document(&info, (-105.95, 40.875), &values);
+        let (_, json) = document(&info.layers, info.pixel, info.format, (-105.95, 40.875), &values);
         let doc: serde_json::Value = serde_json::from_str(&json).unwrap();
         let features = doc["features"].as_array().unwrap();
         assert_eq!(features.len(), 4);
@@ -337,9 +343,13 @@ mod tests {
         assert_eq!(features[2]["properties"]["class"], "forest");
         assert!(features[3]["properties"]["value"].is_null());
         info.format = InfoFormat::Html;
-        assert!(document(&info, (0.0, 0.0), &values).1.contains("<th>dem</th><td>1234.50 m</td>"));
+        assert!(
+            document(&info.layers, info.pixel, info.format, (0.0, 0.0), &values)
+                .1
+                .contains("<th>dem</th><td>1234.50 m</td>")
+        );
         info.format = InfoFormat::Gml;
-        let (mime, xml) = document(&info, (-105.95, 40.875), &values);
+        let (mime, xml) = document(&info.layers, info.pixel, info.format, (-105.95, 40.875), &values);
         assert_eq!(mime, "application/vnd.ogc.gml");
         let doc = roxmltree::Document::parse(&xml).unwrap();
         let members: Vec<_> = doc.descendants().filter(|n| n.has_tag_name("featureMember")).collect();

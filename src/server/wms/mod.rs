@@ -118,8 +118,17 @@ async fn feature_info(state: &AppState, info: &info::FeatureInfo) -> Result<Resp
     let (grid, layers) = (info::point(info), info.layers.clone());
     let values = state.tiles.run(move |region| info::values(region, &grid, &layers)).await?;
     // Longitudes wrapped into [-180, 180) (a box may reach past the antimeridian).
-    let (mime, body) = info::document(info, info::point(info).on_globe(0, 0), &values);
+    let (mime, body) = info::document(&info.layers, info.pixel, info.format, info::point(info).on_globe(0, 0), &values);
     Ok(([(header::CONTENT_TYPE, mime)], body).into_response())
+}
+
+/// The report of a request refused before it was read (too long a URI, a
+/// timeout), with `status`: in the version `query` asks for, never an image
+/// (a refusal costs nothing).
+pub fn refused(query: &str, status: StatusCode, message: String) -> Response {
+    let e = Exception::new(super::exception::Code::NoApplicableCode, message);
+    let (mime, body) = e.report(request::version_of(query));
+    (status, [(header::CONTENT_TYPE, mime)], body).into_response()
 }
 
 /// Answers a request to `/wms` by another method than GET (or HEAD): the

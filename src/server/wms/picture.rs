@@ -34,6 +34,14 @@ impl PictureFormat {
         }
     }
 
+    /// The file extension of a tile in this format.
+    pub fn extension(self) -> &'static str {
+        match self {
+            PictureFormat::Png => "png",
+            PictureFormat::Jpeg => "jpg",
+        }
+    }
+
     /// The format of a tile's file extension (any case), if it is a picture's.
     pub fn of_extension(ext: &str) -> Option<PictureFormat> {
         match ext.to_ascii_lowercase().as_str() {
