@@ -245,3 +245,25 @@ fn a_server_holds_its_cache_to_max_size_and_serves_every_tile_after() {
     let said = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && said.contains("bounded.toml") && said.contains("max_size"), "{said}");
 }
+
+#[test]
+fn servers_on_redis_trim_one_at_a_time_and_the_holder_alone_renews() {
+    let redis = Redis::start("cache-quota-redis");
+    let backend = Backend::Redis { url: redis.url.clone(), prefix: "sylva:".into() };
+    let open = || sylva::cache::redis::RedisStore::open(&redis.url, "sylva:").unwrap();
+    let (one, other) = (open(), open());
+    let limit = sylva::cache::quota::Limit { max_bytes: 1 << 30, every: Duration::from_secs(600) };
+    let trimmed = sylva::cache::quota::trim_if_due(&backend, &one, limit).unwrap();
+    assert!(trimmed.is_some_and(|p| p.trimmed == (0, 0)), "an empty cache within its bound");
+    assert!(sylva::cache::quota::trim_if_due(&backend, &other, limit).unwrap().is_none(), "one trim per interval");
+    let mut conn = ::redis::Client::open(redis.url.as_str()).unwrap().get_connection().unwrap();
+    let ttl: i64 = ::redis::cmd("PTTL").arg("sylva:lock:trim").query(&mut conn).unwrap();
+    assert!((590_000..=600_000).contains(&ttl), "left to expire an interval after the trim: {ttl} ms");
+
+    let lock = one.try_lock("v0123456789abcdef/dem/1/0/0_0.bil", Duration::from_secs(5)).unwrap().unwrap();
+    assert!(one.renew(&lock, Duration::from_secs(60)).unwrap());
+    let ttl: i64 = ::redis::cmd("PTTL").arg(format!("sylva:lock:{}", lock.key)).query(&mut conn).unwrap();
+    assert!(ttl > 50_000, "renewed to a minute: {ttl} ms");
+    let stranger = sylva::cache::Lock { key: lock.key.clone(), token: "another holder".into() };
+    assert!(!other.renew(&stranger, Duration::from_secs(60)).unwrap());
+}
