@@ -200,9 +200,12 @@ impl TileStore for DirStore {
         match fs::read_to_string(&path) {
             Ok(token) if token == lock.token => {
                 let file = fs::File::options().write(true).open(&path);
-                file.and_then(|f| f.set_modified(SystemTime::now()))
-                    .map(|()| true)
-                    .map_err(|e| CacheError::io("renew the lock", &path, e))
+                match file.and_then(|f| f.set_modified(SystemTime::now())) {
+                    Ok(()) => Ok(true),
+                    // Released between the read and the renewal.
+                    Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(false),
+                    Err(e) => Err(CacheError::io("renew the lock", &path, e)),
+                }
             }
             Ok(_) => Ok(false),
             Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(false),

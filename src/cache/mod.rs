@@ -10,8 +10,9 @@
 //! are all alike (all sea, all nodata) are stored once under a content key
 //! and linked ([`TileStore::put_shared`]). A lock with an expiry per key
 //! ([`TileStore::try_lock`]) lets processes agree on who computes a tile
-//! ([`flight`]); a holder that dies frees it when it expires, or at once
-//! where its lock shows it ran on this machine (`holder.rs`). Servers and
+//! ([`flight`]); a holder renews its lock while it computes ([`lease`]), and
+//! one that dies frees it when it expires, or at once where its lock shows
+//! it ran on this machine (`holder.rs`). Servers and
 //! seeders mark their region's version in use ([`in_use`]), so that pruning
 //! stale versions ([`prune`]) spares theirs; servers hold the cache to a
 //! size, one trim per interval among them ([`quota`]).
@@ -23,6 +24,7 @@ pub mod envelope;
 pub mod flight;
 pub(crate) mod holder;
 pub mod in_use;
+pub mod lease;
 pub mod prune;
 pub mod quota;
 #[cfg(feature = "server")]

@@ -73,8 +73,9 @@ pub struct TileCacheConfig {
     pub redis_url: String,
     /// redis: prefix of every key.
     pub redis_prefix: String,
-    /// A process computing a tile holds its lock at most this long, seconds;
-    /// after that (its holder died) another process may take it over.
+    /// A tile lock's expiry, seconds: its holder renews it every third of
+    /// this while it computes; one that dies frees it this long after its
+    /// last renewal, when another process may take it over.
     pub lock_ttl_s: f64,
     /// The cache's bound, bytes (given as a size: "20GiB"): the servers
     /// sharing it trim its least recently used tiles back to this size
@@ -93,9 +94,9 @@ impl Default for TileCacheConfig {
             dir: PathBuf::from("cache"),
             redis_url: "redis://127.0.0.1:6379/0".into(),
             redis_prefix: "sylva:".into(),
-            // A tile takes 5-50 ms; 30 s covers a loaded machine's worst case
-            // while a crashed holder delays its tiles by at most that long.
-            lock_ttl_s: 30.0,
+            // Renewed every 3.3 s while held: a crashed holder delays its
+            // tiles by at most 10 s, and a renewal may come 6 s late.
+            lock_ttl_s: 10.0,
             max_size: None,
             trim_interval_s: 600.0,
         }
@@ -139,7 +140,7 @@ impl TileCacheConfig {
     /// The lock expiry (nonsense values become the default).
     pub fn lock_ttl(&self) -> std::time::Duration {
         let s = self.lock_ttl_s;
-        std::time::Duration::from_secs_f64(if s.is_finite() && s > 0.0 { s.min(86_400.0) } else { 30.0 })
+        std::time::Duration::from_secs_f64(if s.is_finite() && s > 0.0 { s.min(86_400.0) } else { 10.0 })
     }
 }
 

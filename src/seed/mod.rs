@@ -139,6 +139,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     let run = Run {
         job: &job,
         store: &*store,
+        leases: crate::cache::lease::Leases::start(store.clone(), job.config.tile_cache.lock_ttl()),
         counters,
         progress: &progress,
         failed: &failed,
@@ -239,6 +240,8 @@ fn due(last: &Mutex<Instant>, every: Duration) -> bool {
 struct Run<'a> {
     job: &'a Job,
     store: &'a dyn crate::cache::TileStore,
+    /// The locks this run holds, renewed while it makes their tiles.
+    leases: crate::cache::lease::Leases,
     counters: &'a Counters,
     progress: &'a Progress,
     failed: &'a failed::Failed,
@@ -265,7 +268,7 @@ impl Run<'_> {
             layers,
             formats: self.job.formats.clone(),
             refresh_before: self.refresh_before,
-            lock_ttl: self.job.config.tile_cache.lock_ttl(),
+            leases: &self.leases,
             retries: self.options.retries,
             from_children,
             counters: self.counters,

@@ -7,6 +7,7 @@
 use super::decimate;
 use super::failed::Entry;
 use crate::cache::flight::{self, Claim};
+use crate::cache::lease::Leases;
 use crate::cache::{Lock, Stored, TileStore};
 use crate::cem::{Layer, LayerSamples, Stats};
 use crate::encode::Format;
@@ -63,8 +64,9 @@ pub struct Seeder<'a> {
     pub formats: Vec<Format>,
     /// Entries written before this are remade.
     pub refresh_before: SystemTime,
-    /// Lock expiry.
-    pub lock_ttl: Duration,
+    /// The store's locks this process holds, renewed while it makes their
+    /// tiles (and their expiry).
+    pub leases: &'a Leases,
     /// Retries of a failed tile.
     pub retries: u32,
     /// `[level][layer]`: a tile of the level is exactly its children decimated.
@@ -181,7 +183,7 @@ impl Seeder<'_> {
         let usable = |s: &Stored| s.written >= self.refresh_before && !flight::expired(self.region.upstream_ttl, s);
         let (mut busy, mut failed) = (0, 0);
         loop {
-            let claim = match flight::claim(self.store, key, &usable, self.lock_ttl) {
+            let claim = match flight::claim(self.store, key, &usable, self.leases.ttl()) {
                 Ok(claim) => claim,
                 // The cache unreadable for a moment (a Redis timeout): tried
                 // again as a failed tile is.
@@ -202,7 +204,9 @@ impl Seeder<'_> {
                     busy += 1;
                 }
                 Claim::Compute { lock, .. } => {
+                    let held = self.leases.hold(&lock);
                     let result = self.attempts(&lock, &mut make);
+                    drop(held);
                     // A lock not released expires after the TTL; the tile is
                     // made (or failed) all the same.
                     let _ = self.store.unlock(&lock);
@@ -213,10 +217,10 @@ impl Seeder<'_> {
     }
 
     fn explain_wait(&self, key: &str) {
-        let ttl = self.lock_ttl.as_secs_f64();
+        let ttl = self.leases.ttl().as_secs_f64();
         self.wait_notice.call_once(|| {
             crate::outputs::say(format_args!(
-                "sylva seed: waiting for {key}, locked by another seeder or server (a lock left by one that died on another machine expires {ttl:.0} s after it was taken: [tile_cache] lock_ttl_s)"
+                "sylva seed: waiting for {key}, locked by another seeder or server (a lock left by one that died on another machine expires {ttl:.0} s after its last renewal: [tile_cache] lock_ttl_s)"
             ));
         });
     }
@@ -312,14 +316,15 @@ mod tests {
         let region = crate::config::load(None).unwrap();
         let (counters, notice) = (Counters::default(), std::sync::Once::new());
         let root = std::env::temp_dir().join(format!("sylva-flaky-{}", std::process::id()));
-        let store = Flaky { dir: DirStore::new(&root), failing: AtomicU32::new(0) };
+        let store = std::sync::Arc::new(Flaky { dir: DirStore::new(&root), failing: AtomicU32::new(0) });
+        let leases = Leases::start(store.clone(), Duration::from_secs(5));
         let seeder = |retries| Seeder {
             region: &region,
-            store: &store,
+            store: &*store,
             layers: vec![],
             formats: vec![],
             refresh_before: SystemTime::now(),
-            lock_ttl: Duration::from_secs(5),
+            leases: &leases,
             retries,
             from_children: vec![],
             counters: &counters,

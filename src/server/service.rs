@@ -12,6 +12,7 @@ use super::metrics::{CacheResult, Metrics};
 use super::pool::Pool;
 use super::products::{self, Computed, Product};
 use crate::cache::flight::{self, Claim};
+use crate::cache::lease::Leases;
 use crate::cache::{Lock, Lookup, TileStore};
 use crate::cem::Stage;
 use crate::region::Region;
@@ -49,15 +50,16 @@ impl Tile {
 pub struct TileService {
     region: Arc<Region>,
     store: Arc<dyn TileStore>,
-    lock_ttl: Duration,
+    leases: Arc<Leases>,
     memory: Cache<String, Arc<Tile>>,
     pool: Arc<Pool>,
     metrics: Arc<Metrics>,
 }
 
 impl TileService {
-    /// A service over `store` (whose tile locks expire after `lock_ttl`),
-    /// keeping up to `memory_bytes` of tiles in memory.
+    /// A service over `store` (whose tile locks expire after `lock_ttl`,
+    /// renewed while this process computes their tiles), keeping up to
+    /// `memory_bytes` of tiles in memory.
     pub fn new(
         region: Arc<Region>,
         store: Arc<dyn TileStore>,
@@ -74,7 +76,8 @@ impl TileService {
             Some(ttl) => builder.time_to_live(ttl).build(),
             None => builder.build(),
         };
-        TileService { region, store, lock_ttl, memory, pool, metrics }
+        let leases = Arc::new(Leases::start(store.clone(), lock_ttl));
+        TileService { region, store, leases, memory, pool, metrics }
     }
 
     /// Bytes of tiles held in memory (after pending evictions).
@@ -124,7 +127,7 @@ impl TileService {
         let mut attempt = 0;
         loop {
             let (store, k, ttl, upstream_ttl) =
-                (self.store.clone(), key.clone(), self.lock_ttl, self.region.upstream_ttl);
+                (self.store.clone(), key.clone(), self.leases.ttl(), self.region.upstream_ttl);
             let claimed = tokio::task::spawn_blocking(move || {
                 flight::claim(&*store, &k, &|s| !flight::expired(upstream_ttl, s), ttl)
             })
@@ -150,7 +153,9 @@ impl TileService {
                     attempt += 1;
                 }
                 Claim::Compute { lock, found } => {
+                    let held = self.leases.hold(&lock);
                     let result = self.fill(&lock, product, found).await;
+                    drop(held);
                     let store = self.store.clone();
                     let unlocked = tokio::task::spawn_blocking(move || store.unlock(&lock).map_err(|e| e.to_string()))
                         .await

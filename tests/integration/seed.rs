@@ -406,7 +406,7 @@ impl Upstream {
 }
 
 /// The Terrarium PNG of `/z/x/y.png`.
-fn terrarium_tile(path: &str) -> Option<Vec<u8>> {
+pub fn terrarium_tile(path: &str) -> Option<Vec<u8>> {
     let parts: Vec<u64> =
         path.trim_start_matches('/').trim_end_matches(".png").split('/').filter_map(|p| p.parse().ok()).collect();
     let [z, x, y] = parts[..] else { return None };

@@ -185,3 +185,64 @@ fn seeders_and_servers_sharing_redis_match_one_process() {
     assert_eq!(made(&outs), expected.len() as u64);
     assert_redis_holds(&redis2, &expected);
 }
+
+/// An upstream of Terrarium tiles answering each request after `delay`,
+/// counting the requests per path.
+fn slow_upstream(delay: Duration) -> (String, std::sync::Arc<std::sync::Mutex<BTreeMap<String, u32>>>) {
+    use std::io::{Read, Write};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let base = format!("http://{}", listener.local_addr().unwrap());
+    let requests: std::sync::Arc<std::sync::Mutex<BTreeMap<String, u32>>> = Default::default();
+    let counted = requests.clone();
+    std::thread::spawn(move || {
+        for mut stream in listener.incoming().flatten() {
+            let counted = counted.clone();
+            std::thread::spawn(move || {
+                let mut buf = [0u8; 2048];
+                let n = stream.read(&mut buf).unwrap_or(0);
+                let path = String::from_utf8_lossy(&buf[..n]).split_whitespace().nth(1).unwrap_or("").to_string();
+                *counted.lock().unwrap().entry(path.clone()).or_default() += 1;
+                std::thread::sleep(delay);
+                let png = crate::seed::terrarium_tile(&path).unwrap_or_default();
+                let head = format!(
+                    "HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                    png.len()
+                );
+                let _ = stream.write_all(&[head.into_bytes(), png].concat());
+            });
+        }
+    });
+    (base, requests)
+}
+
+#[test]
+fn a_tile_slower_than_the_lock_expiry_is_computed_once_by_two_servers() {
+    // Its holder renews the lock while it computes: the other server waits
+    // for the tile rather than taking the lock over and computing it again.
+    let dir = TempDir::new("lease-servers");
+    let (base, requests) = slow_upstream(Duration::from_millis(1500));
+    let config = dir.join("slow.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "name = \"slow\"\n[dem.upstream]\nservice = \"terrarium\"\nurl = \"{base}/{{z}}/{{x}}/{{y}}.png\"\nzoom = 13\nbounds = [9.9, 46.2, 10.2, 46.5]\nretries = 0\n[tile_cache]\nlock_ttl_s = 1\n"
+        ),
+    )
+    .unwrap();
+    let cache = dir.join("cache");
+    let servers = [Server::start(Some(&config), &cache), Server::start(Some(&config), &cache)];
+    let before: u32 = requests.lock().unwrap().values().sum();
+    let t = crate::common::demo().tiles.tile_containing(10.1, 46.35, 10);
+    let path = format!("/tiles/dem/{}/{}/{}_{}.bil", t.level, t.row, t.row, t.col);
+    let replies: Vec<_> = std::thread::scope(|s| {
+        let asks: Vec<_> = servers.iter().map(|server| s.spawn(|| server.get(&path))).collect();
+        asks.into_iter().map(|a| a.join().unwrap()).collect()
+    });
+    assert!(replies.iter().all(|r| r.status == 200) && replies[0].body == replies[1].body);
+    let counts = requests.lock().unwrap().clone();
+    let asked: u32 = counts.values().sum::<u32>() - before;
+    assert!(asked > 0, "the tile was read from the upstream");
+    assert!(counts.values().all(|&n| n == 1), "an upstream tile asked for twice: {counts:?}");
+    let computed: f64 = servers.iter().map(|s| s.metric("sylva_tile_computations_total")).sum();
+    assert_eq!(computed, 1.0);
+}
