@@ -197,19 +197,19 @@ impl TileStore for DirStore {
 
     fn renew(&self, lock: &Lock, _ttl: Duration) -> Result<bool, CacheError> {
         let path = self.lock_path(&lock.key);
-        match fs::read_to_string(&path) {
-            Ok(token) if token == lock.token => {
-                let file = fs::File::options().write(true).open(&path);
-                match file.and_then(|f| f.set_modified(SystemTime::now())) {
-                    Ok(()) => Ok(true),
-                    // Released between the read and the renewal.
-                    Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(false),
-                    Err(e) => Err(CacheError::io("renew the lock", &path, e)),
-                }
+        // One handle for the token and the time: a lock removed and taken
+        // again meanwhile is another file, left alone.
+        let renewed = fs::File::options().read(true).write(true).open(&path).and_then(|mut file| {
+            let mut token = String::new();
+            io::Read::read_to_string(&mut file, &mut token)?;
+            match token == lock.token {
+                true => file.set_modified(SystemTime::now()).map(|()| true),
+                false => Ok(false),
             }
-            Ok(_) => Ok(false),
+        });
+        match renewed {
             Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(false),
-            Err(e) => Err(CacheError::io("read the lock", &path, e)),
+            other => other.map_err(|e| CacheError::io("renew the lock", &path, e)),
         }
     }
 

@@ -86,14 +86,12 @@ pub fn trim_if_due(backend: &Backend, store: &dyn TileStore, limit: Limit) -> Re
         grace: Duration::ZERO,
         dry_run: false,
     };
-    let pruned = holding(store, &lock, limit.every, || prune::prune(backend, &plan, SystemTime::now()));
-    // Left to expire an interval after the trim's end: no other trim till then.
-    let _ = store.renew(&lock, limit.every);
-    pruned.map(Some)
+    holding(store, &lock, limit.every, || prune::prune(backend, &plan, SystemTime::now())).map(Some)
 }
 
 /// Runs `work` while renewing `lock` every quarter of `ttl` (a trim of a
-/// large cache may outlast its interval; another would trim it again).
+/// large cache may outlast its interval; another would trim it again), and
+/// once more at its end, so that the lock expires `ttl` after the work.
 fn holding<T>(store: &dyn TileStore, lock: &Lock, ttl: Duration, work: impl FnOnce() -> T) -> T {
     let (done, finished) = mpsc::channel::<()>();
     std::thread::scope(|scope| {
@@ -104,6 +102,7 @@ fn holding<T>(store: &dyn TileStore, lock: &Lock, ttl: Duration, work: impl FnOn
         });
         let out = work();
         drop(done);
+        let _ = store.renew(lock, ttl);
         out
     })
 }
@@ -211,7 +210,8 @@ mod tests {
     #[test]
     fn a_trim_that_outlasts_its_interval_keeps_the_others_out() {
         let (root, store) = filled("long", 1);
-        let every = Duration::from_millis(200);
+        // Renewed every quarter second: lost only if a renewal is 3/4 s late.
+        let every = Duration::from_secs(1);
         let lock = store.try_lock(LOCK, every).unwrap().unwrap();
         let other = DirStore::open(&root).unwrap();
         let taken = holding(&*store, &lock, every, || {
@@ -224,6 +224,21 @@ mod tests {
         std::thread::sleep(every * 2);
         assert!(other.try_lock(LOCK, every).unwrap().is_some());
         assert!(!store.renew(&lock, every).unwrap());
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
+    #[test]
+    fn the_interval_counts_from_the_end_of_a_trim() {
+        let (root, store) = filled("end", 1);
+        let every = Duration::from_secs(3600);
+        let lock = store.try_lock(LOCK, every).unwrap().unwrap();
+        // Taken an hour ago, and the work instant: renewed only at its end.
+        let path = root.join(format!("{LOCK}.lock"));
+        let hour_ago = SystemTime::now() - Duration::from_secs(3600);
+        std::fs::File::options().write(true).open(&path).unwrap().set_modified(hour_ago).unwrap();
+        holding(&*store, &lock, every, || ());
+        let age = std::fs::metadata(&path).unwrap().modified().unwrap().elapsed().unwrap_or_default();
+        assert!(age < Duration::from_secs(60), "the lock's time is the trim's end: {age:?} ago");
         let _ = std::fs::remove_dir_all(&root);
     }
 }

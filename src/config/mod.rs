@@ -115,10 +115,14 @@ impl TileCacheConfig {
         }
     }
 
-    /// The bound's settings checked.
+    /// The lock expiry and the bound's settings checked.
     fn check(&self) -> Result<(), String> {
         if self.max_size == Some(0) {
             return Err("max_size must be more than 0 bytes (leave it out for no bound)".into());
+        }
+        if !LOCK_TTL_S.contains(&self.lock_ttl_s) {
+            let (least, most) = (LOCK_TTL_S.start(), LOCK_TTL_S.end());
+            return Err(format!("lock_ttl_s = {}: must be {least} to {most}", self.lock_ttl_s));
         }
         let (least, most) = (TRIM_INTERVAL_S.start(), TRIM_INTERVAL_S.end());
         if !TRIM_INTERVAL_S.contains(&self.trim_interval_s) {
@@ -140,7 +144,7 @@ impl TileCacheConfig {
     /// The lock expiry (nonsense values become the default).
     pub fn lock_ttl(&self) -> std::time::Duration {
         let s = self.lock_ttl_s;
-        std::time::Duration::from_secs_f64(if s.is_finite() && s > 0.0 { s.min(86_400.0) } else { 10.0 })
+        std::time::Duration::from_secs_f64(if LOCK_TTL_S.contains(&s) { s } else { 10.0 })
     }
 }
 
@@ -172,6 +176,10 @@ fn size<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Option<u64>, D::Error>
         Err(_) => Err(serde::de::Error::custom("not a size (e.g. \"500MiB\", \"20GiB\", or a number of bytes)")),
     }
 }
+
+/// Tile lock expiries, seconds: a second (renewed every third of it) to a
+/// day.
+const LOCK_TTL_S: std::ops::RangeInclusive<f64> = 1.0..=86_400.0;
 
 /// Trim intervals, seconds: a minute (a trim walks the whole cache) to a day.
 const TRIM_INTERVAL_S: std::ops::RangeInclusive<f64> = 60.0..=86_400.0;

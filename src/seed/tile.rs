@@ -78,9 +78,10 @@ pub struct Seeder<'a> {
 }
 
 /// Busy answers (~2 s of pauses) after which a wait for another's lock is
-/// explained: a tile takes 5–50 ms, so a lock held this long is most likely
-/// left by a seeder that died on another machine (one that died on this one
-/// is taken at once), and expires only after the TTL.
+/// explained: a tile takes 5–50 ms, so a lock held this long is held by a
+/// slow holder (a slow upstream: it renews the lock while it works) or left
+/// by one that died on another machine (one that died on this one is taken
+/// at once), which expires after the TTL.
 const LONG_WAIT_PAUSES: u32 = 8;
 
 impl Seeder<'_> {
@@ -220,7 +221,7 @@ impl Seeder<'_> {
         let ttl = self.leases.ttl().as_secs_f64();
         self.wait_notice.call_once(|| {
             crate::outputs::say(format_args!(
-                "sylva seed: waiting for {key}, locked by another seeder or server (a lock left by one that died on another machine expires {ttl:.0} s after its last renewal: [tile_cache] lock_ttl_s)"
+                "sylva seed: waiting for {key}, locked by another seeder or server: one computing it renews the lock while it works; one that died on another machine leaves it to expire {ttl:.1} s after its last renewal ([tile_cache] lock_ttl_s)"
             ));
         });
     }

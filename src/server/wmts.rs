@@ -200,8 +200,11 @@ fn tile_request(params: &Params, deepest: u32, needs: Needs) -> Result<TileReque
 fn pixel(params: &Params) -> Result<Pixel, Exception> {
     let mut at = [0; 2];
     for (value, key) in at.iter_mut().zip(["I", "J"]) {
-        *value = usize::try_from(number(params, key)?).ok().filter(|&v| v < XYZ_SIDE).ok_or_else(|| {
-            let message = format!("{key} must be a pixel of the tile, 0 to {}", XYZ_SIDE - 1);
+        let text = required(params, key)?;
+        let whole: i64 =
+            text.trim().parse().map_err(|_| invalid(key, format!("{key} must be a whole number, not {text:?}")))?;
+        *value = usize::try_from(whole).ok().filter(|&v| v < XYZ_SIDE).ok_or_else(|| {
+            let message = format!("{key}={whole} is off the tile: 0 to {}", XYZ_SIDE - 1);
             Exception::new(Code::PointIjOutOfRange, message).locator(key)
         })?;
     }
@@ -438,6 +441,7 @@ mod tests {
         let info = format!("{}&INFOFORMAT=text/plain", RELIEF.replace("GetTile", "GetFeatureInfo"));
         fails(format!("{info}&J=0"), Code::MissingParameterValue, "I");
         fails(format!("{info}&I=256&J=0"), Code::PointIjOutOfRange, "I");
+        fails(format!("{info}&I=0&J=-1"), Code::PointIjOutOfRange, "J");
         fails(format!("{info}&I=0&J=x"), Code::InvalidParameterValue, "J");
         fails(format!("{info}&I=0&J=0").replace("text/plain", "image/png"), Code::InvalidParameterValue, "INFOFORMAT");
         // FORMAT may be left out of a GetFeatureInfo (GDAL does), not a GetTile.

@@ -105,6 +105,7 @@ fn bad_configs_name_the_file_and_the_problem() {
         ("bound.toml", "[tile_cache]\nmax_size = 0\n", "[tile_cache] max_size must be more than 0 bytes"),
         ("bound_unit.toml", "[tile_cache]\nmax_size = \"20 GB of tiles\"\n", "not a size: \"20 GB of tiles\""),
         ("bound_kind.toml", "[tile_cache]\nmax_size = true\n", "not a size (e.g."),
+        ("locks.toml", "[tile_cache]\nlock_ttl_s = 0.001\n", "[tile_cache] lock_ttl_s = 0.001: must be 1 to 86400"),
         ("trims.toml", "[tile_cache]\ntrim_interval_s = 5\n", "[tile_cache] trim_interval_s = 5: must be 60 to 86400"),
         ("trims_nan.toml", "[tile_cache]\ntrim_interval_s = nan\n", "trim_interval_s = NaN: must be 60 to 86400"),
         ("url.toml", "[server]\npublic_url = \"example.org\"\n", "public_url = \"example.org\": must start with"),
