@@ -143,7 +143,7 @@ mod tests {
 
     /// `len` bytes no file system compresses (xorshift from `seed`).
     fn noise(seed: usize, len: usize) -> Vec<u8> {
-        let mut x = seed as u64 * 0x9e37_79b9_7f4a_7c15 + 1;
+        let mut x = (seed as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
         (0..len)
             .map(|_| {
                 x ^= x << 13;
