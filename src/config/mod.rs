@@ -120,25 +120,19 @@ impl TileCacheConfig {
         if self.max_size == Some(0) {
             return Err("max_size must be more than 0 bytes (leave it out for no bound)".into());
         }
-        if !LOCK_TTL_S.contains(&self.lock_ttl_s) {
-            let (least, most) = (LOCK_TTL_S.start(), LOCK_TTL_S.end());
-            return Err(format!("lock_ttl_s = {}: must be {least} to {most}", self.lock_ttl_s));
-        }
-        let (least, most) = (TRIM_INTERVAL_S.start(), TRIM_INTERVAL_S.end());
-        if !TRIM_INTERVAL_S.contains(&self.trim_interval_s) {
-            return Err(format!("trim_interval_s = {}: must be {least} to {most}", self.trim_interval_s));
-        }
-        Ok(())
+        let within = |key: &str, value: f64, range: &std::ops::RangeInclusive<f64>| match range.contains(&value) {
+            true => Ok(()),
+            false => Err(format!("{key} = {value}: must be {} to {}", range.start(), range.end())),
+        };
+        within("lock_ttl_s", self.lock_ttl_s, &LOCK_TTL_S)?;
+        within("trim_interval_s", self.trim_interval_s, &TRIM_INTERVAL_S)
     }
 
     /// How often the servers trim the cache to its bound (nonsense values
-    /// within the range, or the default).
+    /// become the default).
     pub fn trim_interval(&self) -> std::time::Duration {
-        let s = match self.trim_interval_s {
-            s if s.is_nan() => 600.0,
-            s => s.clamp(*TRIM_INTERVAL_S.start(), *TRIM_INTERVAL_S.end()),
-        };
-        std::time::Duration::from_secs_f64(s)
+        let s = self.trim_interval_s;
+        std::time::Duration::from_secs_f64(if TRIM_INTERVAL_S.contains(&s) { s } else { 600.0 })
     }
 
     /// The lock expiry (nonsense values become the default).

@@ -167,10 +167,11 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     }
     let list = failed.finish().map_err(|source| SeedError::Io { path: job.files.1.clone(), source })?;
     let mut text = summary(&job, &*store, counters, started.elapsed(), &list);
-    if let Some(max) = job.config.tile_cache.max_size.filter(|&max| counters.bytes.load(Ordering::Relaxed) > max) {
-        let wrote = crate::config::show_size(counters.bytes.load(Ordering::Relaxed));
+    let wrote = counters.bytes.load(Ordering::Relaxed);
+    if let Some(max) = job.config.tile_cache.max_size.filter(|&max| wrote > max) {
         text.push_str(&format!(
-            "\nthis seed wrote {wrote}, more than [tile_cache] max_size ({}): the servers will trim the cache back to it, least recently used tiles first, some of these among them",
+            "\nthis seed wrote {}, more than [tile_cache] max_size ({}): the servers will trim the cache back to it, least recently used tiles first, some of these among them",
+            crate::config::show_size(wrote),
             crate::config::show_size(max)
         ));
     }
