@@ -12,6 +12,7 @@
 
 pub mod lattice;
 pub mod mercator;
+pub mod quad;
 
 pub use lattice::{Axis, SampleGrid};
 

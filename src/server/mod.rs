@@ -1,9 +1,9 @@
 //! `sylva serve`: the tile proxy server (axum + tokio). WMS 1.1.1/1.3.0 at
 //! `/wms`, World Wind tiles at `/tiles`, XYZ Terrarium tiles at `/xyz`, WMTS
-//! 1.0.0 over them at `/wmts`, `/health` and Prometheus `/metrics`; tiles
-//! cached on disk and in memory (the cache held to a size if configured),
-//! computed once however many clients ask (dissertation 6.5, "Preprocessing
-//! via Proxy Servers").
+//! 1.0.0 (those tiles, and geographic ones) at `/wmts`, `/health` and
+//! Prometheus `/metrics`; tiles cached on disk and in memory (the cache held
+//! to a size if configured), computed once however many clients ask
+//! (dissertation 6.5, "Preprocessing via Proxy Servers").
 //!
 //! [`router`] builds the application without a socket, so tests drive it in
 //! process; [`serve`] binds it and shuts down gracefully on SIGTERM/SIGINT.
@@ -13,6 +13,7 @@
 //! is a 4xx with a message, an OGC exception report on `/wms` and `/wmts`).
 
 pub mod exception;
+mod extent;
 pub mod metrics;
 pub mod pool;
 pub mod products;

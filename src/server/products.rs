@@ -1,10 +1,10 @@
 //! What the server makes: encoded products of a sample grid — a World Wind
-//! tile, an XYZ tile, or a WMS image — their cache keys, and how each is
-//! computed (synchronously, on a worker).
+//! tile, a tile of a quadtree set (XYZ or WMTS), or a WMS image — their cache
+//! keys, and how each is computed (synchronously, on a worker).
 
 use crate::cem::{self, Layer, LayerSamples, Stats};
 use crate::encode::{self, EncodeError, Format, Samples};
-use crate::grid::mercator::MercatorBox;
+use crate::grid::quad::TileSet;
 use crate::grid::{GridError, SampleGrid, TileId};
 use crate::produce::ProduceError;
 use crate::raster::Window;
@@ -62,11 +62,14 @@ pub enum Product {
         /// Encoding.
         encoding: Encoding,
     },
-    /// An XYZ Web Mercator tile of 256² pixels.
-    Xyz {
+    /// A tile of 256² pixels in a quadtree set: an XYZ (Web Mercator) or a
+    /// geographic WMTS tile.
+    Quad {
         /// Layer.
         layer: MapLayer,
-        /// Zoom, column, row.
+        /// The tile matrix set.
+        set: TileSet,
+        /// Zoom, column, row (from the north).
         zxy: (u32, u64, u64),
     },
     /// A WMS image on its own grid (kept in memory, not in the cache).
@@ -80,9 +83,6 @@ pub enum Product {
     },
 }
 
-/// Side of XYZ tiles, pixels.
-pub const XYZ_SIDE: usize = 256;
-
 impl Product {
     /// The cache key under `version`, or `None` for products not cached.
     pub fn key(&self, version: &str) -> Option<String> {
@@ -93,7 +93,13 @@ impl Product {
                 let ext = encoding.extension();
                 Some(format!("{version}/{name}/{}/{}/{}_{}{h}.{ext}", id.level, id.row, id.row, id.col))
             }
-            Product::Xyz { layer, zxy: (z, x, y) } => Some(format!("{version}/xyz/{}/{z}/{x}/{y}.png", layer.name())),
+            Product::Quad { layer, set, zxy: (z, x, y) } => {
+                let dir = match set {
+                    TileSet::WebMercator => "xyz",
+                    TileSet::Crs84 => "crs84",
+                };
+                Some(format!("{version}/{dir}/{}/{z}/{x}/{y}.png", layer.name()))
+            }
             Product::Image { .. } => None,
         }
     }
@@ -113,7 +119,7 @@ impl Product {
     /// The layer.
     pub fn layer(&self) -> MapLayer {
         match self {
-            Product::Tile { layer, .. } | Product::Xyz { layer, .. } | Product::Image { layer, .. } => *layer,
+            Product::Tile { layer, .. } | Product::Quad { layer, .. } | Product::Image { layer, .. } => *layer,
         }
     }
 
@@ -121,8 +127,8 @@ impl Product {
     pub fn encoding(&self) -> Encoding {
         match self {
             Product::Tile { encoding, .. } | Product::Image { encoding, .. } => *encoding,
-            Product::Xyz { layer, .. } if layer.is_picture() => Encoding::Rgba,
-            Product::Xyz { .. } => Encoding::Terrarium,
+            Product::Quad { layer, .. } if layer.is_picture() => Encoding::Rgba,
+            Product::Quad { .. } => Encoding::Terrarium,
         }
     }
 
@@ -133,7 +139,7 @@ impl Product {
                 region.tiles.check(*id)?;
                 Ok(region.tiles.tile_samples(*id, *halo))
             }
-            Product::Xyz { zxy: (z, x, y), .. } => MercatorBox::of_tile(*z, *x, *y)?.area_grid(XYZ_SIDE, XYZ_SIDE),
+            Product::Quad { set, zxy: (z, x, y), .. } => set.tile_grid(*z, *x, *y),
             Product::Image { grid, .. } => Ok(*grid),
         }
     }
@@ -312,7 +318,9 @@ mod tests {
         assert_eq!(t.key("v1").as_deref(), Some("v1/cem/9/1939/1939_2704.bil"));
         let h = Product::Tile { layer: MapLayer::Relief, id: TileId::new(9, 1, 2), halo: 32, encoding: Encoding::Rgba };
         assert_eq!(h.key("v1").as_deref(), Some("v1/relief/9/1/1_2_h32.png"));
-        let x = Product::Xyz { layer: MapLayer::Data(Layer::Dem), zxy: (11, 400, 780) };
+        let x = Product::Quad { layer: MapLayer::Data(Layer::Dem), set: TileSet::WebMercator, zxy: (11, 400, 780) };
         assert_eq!(x.key("v2").as_deref(), Some("v2/xyz/dem/11/400/780.png"));
+        let g = Product::Quad { layer: MapLayer::Relief, set: TileSet::Crs84, zxy: (11, 4000, 780) };
+        assert_eq!(g.key("v2").as_deref(), Some("v2/crs84/relief/11/4000/780.png"));
     }
 }

@@ -31,6 +31,13 @@ impl Params {
         Params { values, conflict }
     }
 
+    /// Parameters given by name (upper case) rather than in a query: a
+    /// RESTful request's path.
+    pub(super) fn of<'a>(pairs: impl IntoIterator<Item = (&'a str, &'a str)>) -> Params {
+        let values = pairs.into_iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+        Params { values, conflict: None }
+    }
+
     pub(super) fn get(&self, key: &str) -> Option<&str> {
         self.values.get(key).map(String::as_str)
     }

@@ -17,6 +17,7 @@ use super::{AppState, ServeError};
 use crate::cem::Layer;
 use crate::encode::{self, Format};
 use crate::grid::TileId;
+use crate::grid::quad::TileSet;
 use axum::Router;
 use axum::extract::{MatchedPath, Path, RawQuery, Request, State};
 use axum::http::{HeaderMap, HeaderName, StatusCode, header};
@@ -29,7 +30,8 @@ use tower_http::compression::CompressionLayer;
 use tower_http::cors::{Any, CorsLayer};
 use tower_http::trace::TraceLayer;
 
-/// Deepest XYZ zoom served (2.4 cm pixels at the equator).
+/// Deepest zoom served in either quadtree set, XYZ or WMTS (2.4 cm pixels
+/// at the equator in Web Mercator, 1.2 cm geographic).
 pub const MAX_XYZ_ZOOM: u32 = 24;
 
 /// Longest request URI, bytes; a WMS request is a few hundred.
@@ -51,6 +53,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/xyz/{layer}/{z}/{x}/{file}", get(xyz))
         .route("/wmts", get(super::wmts::handle).fallback(super::wmts::other_method))
         .route("/wmts/1.0.0/WMTSCapabilities.xml", get(super::wmts::capabilities_file))
+        .route(super::wmts::TILE_ROUTE, get(super::wmts::rest_tile))
         .layer(CompressionLayer::new().gzip(true).compress_when(bil_only))
         .layer(middleware::from_fn_with_state(state.clone(), observe))
         .layer(cors())
@@ -115,7 +118,7 @@ fn route_label(path: &str) -> &'static str {
         "/wms" => "wms",
         "/tiles" | "/tiles/{layer}/{level}/{row}/{file}" | "/tiles.json" => "tiles",
         "/xyz/{layer}/{z}/{x}/{file}" | "/xyz/{layer}/tiles.json" => "xyz",
-        "/wmts" | "/wmts/1.0.0/WMTSCapabilities.xml" => "wmts",
+        "/wmts" | "/wmts/1.0.0/WMTSCapabilities.xml" | super::wmts::TILE_ROUTE => "wmts",
         _ => "other",
     }
 }
@@ -272,19 +275,20 @@ async fn xyz(
     if z > MAX_XYZ_ZOOM || x >= 1 << z || y >= 1 << z {
         return Err(ServeError::NotFound);
     }
-    xyz_tile(&state, layer, (z, x, y), picture, &headers).await
+    quad_tile(&state, layer, TileSet::WebMercator, (z, x, y), picture, &headers).await
 }
 
-/// The XYZ tile `zxy` of `layer`: a picture in `picture`'s format, or
+/// The tile `zxy` of `layer` in `set`: a picture in `picture`'s format, or
 /// Terrarium heights (`None`).
-pub(super) async fn xyz_tile(
+pub(super) async fn quad_tile(
     state: &AppState,
     layer: MapLayer,
+    set: TileSet,
     zxy: (u32, u64, u64),
     picture: Option<PictureFormat>,
     headers: &HeaderMap,
 ) -> Result<Response, ServeError> {
-    let t = state.tiles.get(Product::Xyz { layer, zxy }).await?;
+    let t = state.tiles.get(Product::Quad { layer, set, zxy }).await?;
     match picture {
         Some(format) => picture_tile(state, layer, t, format, headers).await,
         None => Ok(respond::tile(&t, &meta(state, layer, Encoding::Terrarium), headers)),

@@ -1,62 +1,91 @@
-//! `/wmts`: OGC WMTS 1.0.0 over the XYZ tiles, for the GIS clients that
-//! read tiles by that standard (QGIS, ArcGIS, OpenLayers, GDAL, OWSLib).
+//! `/wmts`: OGC WMTS 1.0.0, for the GIS clients that read tiles by that
+//! standard (QGIS, ArcGIS, OpenLayers, GDAL, OWSLib, Cesium).
 //!
 //! GetCapabilities (KVP at `/wmts`, or `/wmts` alone; RESTful at
 //! `/wmts/1.0.0/WMTSCapabilities.xml`) lists the layers the XYZ routes serve
-//! — heights as Terrarium PNG, the pictures as PNG and JPEG — in one tile
-//! matrix set, `WebMercatorQuad` (EPSG:3857, 256-pixel tiles on the
-//! GoogleMapsCompatible scales, zooms 0 to the deepest any layer's sources
-//! are as fine as); each layer with the zooms and tiles of the region
-//! (`TileMatrixSetLimits`, the zooms its TileJSON gives) and a RESTful
-//! template, which is its XYZ path. GetTile (KVP) answers the tile that path
-//! does, from the same cache; GetFeatureInfo the values of the data under a
-//! pixel of it, as WMS GetFeatureInfo does. Requests that are wrong get an
-//! OWS 1.1 ExceptionReport; a tile off the region's data is a 404 without
-//! body (GDAL draws it empty), as on the XYZ path.
+//! — heights as Terrarium PNG, the pictures as PNG and JPEG — in two tile
+//! matrix sets of 256-pixel tiles ([`TileSet`]): `WebMercatorQuad`
+//! (EPSG:3857 on the GoogleMapsCompatible scales; its tiles are the XYZ
+//! tiles) and `WorldCRS84Quad` (longitude and latitude, two tiles at zoom 0;
+//! it reaches the poles, so a polar region has it alone). Each set's zooms
+//! run from 0 to the deepest any layer's sources are as fine as; each layer
+//! gives the zooms and tiles of the region in each set
+//! (`TileMatrixSetLimits`) and a RESTful template ([`TILE_ROUTE`]). GetTile,
+//! by KVP or by that path, answers a tile from the same cache as the XYZ
+//! path (a Web Mercator tile is the XYZ tile, the same bytes);
+//! GetFeatureInfo the values of the data under a pixel of it, as WMS
+//! GetFeatureInfo does. Requests that are wrong get an OWS 1.1
+//! ExceptionReport; a tile off the region's data is a 404 without body
+//! (GDAL draws it empty), as on the XYZ path.
 
 use super::exception::{Code, Exception, escape};
-use super::products::{Product, XYZ_SIDE};
+use super::extent::{Extent, extent};
+use super::products::Product;
 use super::query::Params;
-use super::routes::{MAX_XYZ_ZOOM, has_xyz_tiles, xyz_tile};
-use super::tilejson::{self, Extent};
+use super::routes::{MAX_XYZ_ZOOM, has_xyz_tiles, quad_tile};
 use super::wms::capabilities::title;
 use super::wms::info::{self, InfoFormat};
 use super::wms::picture::PictureFormat;
 use super::wms::request::{LAYERS, MapLayer};
 use super::{AppState, ServeError};
-use crate::grid::mercator::{HALF_WORLD_M, to_mercator};
+use crate::grid::mercator::HALF_WORLD_M;
+use crate::grid::quad::{SIDE, TileSet};
 use crate::region::Region;
-use axum::extract::{RawQuery, State};
+use axum::extract::{Path, RawQuery, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use std::fmt::Write;
 use std::sync::Arc;
 
-/// The one tile matrix set's identifier (OGC Two Dimensional Tile Matrix
-/// Set's name for it).
-const MATRIX_SET: &str = "WebMercatorQuad";
-
-/// Scale denominator of zoom 0: 156,543.034 m per pixel over the standard
-/// 0.28 mm pixel; each zoom halves it.
-const SCALE_0: f64 = 559_082_264.028_717_8;
+/// The RESTful GetTile path, the capabilities' template for every layer,
+/// set and format (`{file}` is `{TileCol}.png` or `.jpg`).
+pub const TILE_ROUTE: &str = "/wmts/1.0.0/{layer}/{style}/{set}/{z}/{row}/{file}";
 
 /// Answers a WMTS KVP request.
 pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuery, headers: HeaderMap) -> Response {
-    match parse(query.as_deref().unwrap_or(""), deepest(state.region())) {
+    match parse(query.as_deref().unwrap_or(""), &|set| deepest(state.region(), set)) {
         Err(e) => exception(&e, StatusCode::BAD_REQUEST),
         Ok(Request::Capabilities) => capabilities(&state, &headers),
-        Ok(Request::Tile(t)) => match xyz_tile(&state, t.layer, t.zxy, t.picture, &headers).await {
-            Ok(response) => response,
-            Err(e) => failure(e),
-        },
+        Ok(Request::Tile(t)) => tile(&state, &t, &headers).await,
         Ok(Request::FeatureInfo(t, pixel)) => feature_info(&state, &t, &pixel).await.unwrap_or_else(failure),
     }
+}
+
+/// Answers a RESTful GetTile ([`TILE_ROUTE`]), checked as its KVP form is.
+pub async fn rest_tile(
+    State(state): State<Arc<AppState>>,
+    Path((layer, style, set, z, row, file)): Path<(String, String, String, String, String, String)>,
+    headers: HeaderMap,
+) -> Response {
+    let (col, ext) = file.rsplit_once('.').unwrap_or((&file, ""));
+    let format = match PictureFormat::of_extension(ext) {
+        Some(f) => f.mime().to_string(),
+        None => format!(".{ext}"),
+    };
+    let params = Params::of([
+        ("LAYER", layer.as_str()),
+        ("STYLE", &style),
+        ("FORMAT", &format),
+        ("TILEMATRIXSET", &set),
+        ("TILEMATRIX", &z),
+        ("TILEROW", &row),
+        ("TILECOL", col),
+    ]);
+    match tile_request(&params, &|set| deepest(state.region(), set), Needs::Tile) {
+        Ok(t) => tile(&state, &t, &headers).await,
+        Err(e) => exception(&e, StatusCode::BAD_REQUEST),
+    }
+}
+
+/// A GetTile's tile, from the cache or computed.
+async fn tile(state: &AppState, t: &TileRequest, headers: &HeaderMap) -> Response {
+    quad_tile(state, t.layer, t.set, t.zxy, t.picture, headers).await.unwrap_or_else(failure)
 }
 
 /// The values of the data a tile shows at one of its pixels, computed on
 /// that pixel of the tile's grid (the value the tile shows there).
 async fn feature_info(state: &AppState, t: &TileRequest, pixel: &Pixel) -> Result<Response, ServeError> {
-    let product = Product::Xyz { layer: t.layer, zxy: t.zxy };
+    let product = Product::Quad { layer: t.layer, set: t.set, zxy: t.zxy };
     let (x, y) = pixel.at;
     let grid = product
         .grid(state.region())
@@ -104,19 +133,23 @@ struct Pixel {
     format: InfoFormat,
 }
 
-/// One tile: the layer, its XYZ address and picture format (none:
-/// Terrarium PNG heights).
+/// One tile: the layer, its set, zoom, column and row, and picture format
+/// (none: Terrarium PNG heights).
 #[derive(Debug, PartialEq)]
 struct TileRequest {
     layer: MapLayer,
+    set: TileSet,
     zxy: (u32, u64, u64),
     picture: Option<PictureFormat>,
 }
 
-/// Reads a KVP query (keys in any case) to a matrix set ending at zoom
-/// `deepest`; none at all asks for the capabilities (GDAL's `WMTS:` of the
-/// bare endpoint asks so).
-fn parse(query: &str, deepest: u32) -> Result<Request, Exception> {
+/// The deepest zoom of each matrix set.
+type Deepest<'a> = dyn Fn(TileSet) -> u32 + 'a;
+
+/// Reads a KVP query (keys in any case) to matrix sets ending at the zooms
+/// `deepest` gives; none at all asks for the capabilities (GDAL's `WMTS:` of
+/// the bare endpoint asks so).
+fn parse(query: &str, deepest: &Deepest) -> Result<Request, Exception> {
     if query.trim().is_empty() {
         return Ok(Request::Capabilities);
     }
@@ -153,7 +186,7 @@ enum Needs {
 
 /// A GetTile's parameters checked: the layer, style, format and matrix set
 /// offered, the tile within its matrix.
-fn tile_request(params: &Params, deepest: u32, needs: Needs) -> Result<TileRequest, Exception> {
+fn tile_request(params: &Params, deepest: &Deepest, needs: Needs) -> Result<TileRequest, Exception> {
     if let Some(v) = params.get("VERSION").filter(|v| v.trim() != "1.0.0") {
         return Err(invalid("VERSION", format!("version {v:?} is not offered: 1.0.0")));
     }
@@ -177,23 +210,26 @@ fn tile_request(params: &Params, deepest: u32, needs: Needs) -> Result<TileReque
             let offered: Vec<&str> = encodings(layer).iter().map(|&e| mime(e)).collect();
             invalid("FORMAT", format!("{} tiles are {}, not {format:?}", layer.name(), offered.join(" or ")))
         })?;
-    let set = required(params, "TILEMATRIXSET")?;
-    if set.trim() != MATRIX_SET {
-        return Err(invalid("TILEMATRIXSET", format!("no tile matrix set {set:?}: {MATRIX_SET}")));
-    }
+    let name = required(params, "TILEMATRIXSET")?;
+    let set = TileSet::parse(name).ok_or_else(|| {
+        let names: Vec<&str> = TileSet::ALL.iter().map(|s| s.name()).collect();
+        invalid("TILEMATRIXSET", format!("no tile matrix set {name:?}: {}", names.join(", ")))
+    })?;
     let z = number(params, "TILEMATRIX")?;
+    let last = deepest(set);
     let z = u32::try_from(z)
         .ok()
-        .filter(|&z| z <= deepest)
-        .ok_or_else(|| invalid("TILEMATRIX", format!("no tile matrix {z} in {MATRIX_SET}: 0 to {deepest}")))?;
+        .filter(|&z| z <= last)
+        .ok_or_else(|| invalid("TILEMATRIX", format!("no tile matrix {z} in {}: 0 to {last}", set.name())))?;
     let (row, col) = (number(params, "TILEROW")?, number(params, "TILECOL")?);
-    for (value, key) in [(row, "TILEROW"), (col, "TILECOL")] {
-        if value >= 1 << z {
-            let message = format!("{key} {value} is outside tile matrix {z}: 0 to {}", (1u64 << z) - 1);
+    let (cols, rows) = set.matrix(z);
+    for (value, key, n) in [(row, "TILEROW", rows), (col, "TILECOL", cols)] {
+        if value >= n {
+            let message = format!("{key} {value} is outside tile matrix {z}: 0 to {}", n - 1);
             return Err(Exception::new(Code::TileOutOfRange, message).locator(key));
         }
     }
-    Ok(TileRequest { layer, zxy: (z, col, row), picture })
+    Ok(TileRequest { layer, set, zxy: (z, col, row), picture })
 }
 
 /// A GetFeatureInfo's pixel (`I`, `J`) and `INFOFORMAT`.
@@ -203,8 +239,8 @@ fn pixel(params: &Params) -> Result<Pixel, Exception> {
         let text = required(params, key)?;
         let whole: i64 =
             text.trim().parse().map_err(|_| invalid(key, format!("{key} must be a whole number, not {text:?}")))?;
-        *value = usize::try_from(whole).ok().filter(|&v| v < XYZ_SIDE).ok_or_else(|| {
-            let message = format!("{key}={whole} is off the tile: 0 to {}", XYZ_SIDE - 1);
+        *value = usize::try_from(whole).ok().filter(|&v| v < SIDE).ok_or_else(|| {
+            let message = format!("{key}={whole} is off the tile: 0 to {}", SIDE - 1);
             Exception::new(Code::PointIjOutOfRange, message).locator(key)
         })?;
     }
@@ -238,11 +274,16 @@ fn offered() -> impl Iterator<Item = MapLayer> {
     LAYERS.into_iter().filter(|&l| has_xyz_tiles(l))
 }
 
-/// The deepest zoom of the matrix set: the deepest a layer's sources are
-/// as fine as (clients such as GDAL take the last matrix for the full
+/// The matrix sets that hold the region (not Web Mercator around a pole).
+fn sets(region: &Region) -> impl Iterator<Item = TileSet> + '_ {
+    TileSet::ALL.into_iter().filter(|&set| offered().any(|l| extent(region, l, set).is_some()))
+}
+
+/// The deepest zoom of a matrix set: the deepest a layer's sources are as
+/// fine as (clients such as GDAL take the last matrix for the full
 /// resolution; they draw deeper views from it).
-fn deepest(region: &Region) -> u32 {
-    offered().filter_map(|l| tilejson::extent(region, l)).map(|e| e.max_zoom).max().unwrap_or(MAX_XYZ_ZOOM)
+fn deepest(region: &Region, set: TileSet) -> u32 {
+    offered().filter_map(|l| extent(region, l, set)).map(|e| e.max_zoom).max().unwrap_or(MAX_XYZ_ZOOM)
 }
 
 /// A layer's tile encodings: Terrarium PNG heights (`None`), or the
@@ -287,14 +328,15 @@ fn capabilities(state: &AppState, headers: &HeaderMap) -> Response {
 
 /// The capabilities document of `region` served under `base`.
 fn document(region: &Region, base: &str) -> String {
-    let layers: String = offered().filter_map(|l| Some(layer(l, &tilejson::extent(region, l)?, base))).collect();
+    let layers: String = offered().map(|l| layer(region, l, base)).collect();
+    let matrix_sets: String = sets(region).map(|set| matrix_set(set, deepest(region, set))).collect();
     format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <Capabilities xmlns="http://www.opengis.net/wmts/1.0" xmlns:ows="http://www.opengis.net/ows/1.1" xmlns:xlink="http://www.w3.org/1999/xlink" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengis.net/wmts/1.0 http://schemas.opengis.net/wmts/1.0/wmtsGetCapabilities_response.xsd" version="1.0.0">
 <ows:ServiceIdentification><ows:Title>{title}</ows:Title><ows:Abstract>Combined elevation maps (terrain + forest canopy) computed on demand by Sylva.</ows:Abstract><ows:ServiceType>OGC WMTS</ows:ServiceType><ows:ServiceTypeVersion>1.0.0</ows:ServiceTypeVersion></ows:ServiceIdentification>
 <ows:OperationsMetadata>{get_capabilities}{get_tile}{get_feature_info}</ows:OperationsMetadata>
 <Contents>
-{layers}{matrix_set}</Contents>
+{layers}{matrix_sets}</Contents>
 <ServiceMetadataURL xlink:href="{base}/wmts/1.0.0/WMTSCapabilities.xml"/>
 </Capabilities>
 "#,
@@ -303,7 +345,6 @@ fn document(region: &Region, base: &str) -> String {
         get_capabilities = operation("GetCapabilities", base),
         get_tile = operation("GetTile", base),
         get_feature_info = operation("GetFeatureInfo", base),
-        matrix_set = matrix_set(deepest(region)),
     )
 }
 
@@ -315,15 +356,19 @@ fn operation(name: &str, base: &str) -> String {
     )
 }
 
-/// One layer: its box, style, formats, limits and RESTful templates.
-fn layer(l: MapLayer, extent: &Extent, base: &str) -> String {
-    let b = extent.bounds;
+/// One layer of `region`: its box, style, formats, each set's limits and
+/// the RESTful templates.
+fn layer(region: &Region, l: MapLayer, base: &str) -> String {
+    let b = region.bounds.on_the_globe();
     let about = if l.is_picture() {
         "PNG with transparency where there is no data, or JPEG on white.".to_string()
     } else {
+        let zooms: Vec<String> = sets(region)
+            .filter_map(|set| Some(format!("zoom {} of {}", extent(region, l, set)?.max_zoom, set.name())))
+            .collect();
         format!(
-            "Heights in metres, Terrarium PNG: h = R * 256 + G + B / 256 - 32768 (black: no data). Tiles deeper than zoom {} are resampled from the sources.",
-            extent.max_zoom
+            "Heights in metres, Terrarium PNG: h = R * 256 + G + B / 256 - 32768 (black: no data). Tiles deeper than {} are resampled from the sources.",
+            zooms.join(", ")
         )
     };
     let mut out = format!(
@@ -341,18 +386,18 @@ fn layer(l: MapLayer, extent: &Extent, base: &str) -> String {
     for (_, format) in InfoFormat::ALL {
         let _ = write!(out, "<InfoFormat>{format}</InfoFormat>");
     }
-    let _ = write!(out, "<TileMatrixSetLink><TileMatrixSet>{MATRIX_SET}</TileMatrixSet><TileMatrixSetLimits>");
-    for z in extent.min_zoom..=extent.max_zoom {
-        let ((c0, r0), (c1, r1)) = tiles_over(extent, z);
-        let _ = write!(
-            out,
-            "<TileMatrixLimits><TileMatrix>{z}</TileMatrix><MinTileRow>{r0}</MinTileRow><MaxTileRow>{r1}</MaxTileRow><MinTileCol>{c0}</MinTileCol><MaxTileCol>{c1}</MaxTileCol></TileMatrixLimits>"
-        );
+    for set in TileSet::ALL {
+        if let Some(e) = extent(region, l, set) {
+            out.push_str(&limits(set, &e));
+        }
     }
-    out.push_str("</TileMatrixSetLimits></TileMatrixSetLink>");
     for &encoding in encodings(l) {
         let ext = encoding.map_or("png", PictureFormat::extension);
-        let template = format!("{base}/xyz/{}/{{TileMatrix}}/{{TileCol}}/{{TileRow}}.{ext}", l.name());
+        // TILE_ROUTE's path.
+        let template = format!(
+            "{base}/wmts/1.0.0/{}/default/{{TileMatrixSet}}/{{TileMatrix}}/{{TileRow}}/{{TileCol}}.{ext}",
+            l.name()
+        );
         let format = mime(encoding);
         let _ = write!(out, r#"<ResourceURL format="{format}" resourceType="tile" template="{}"/>"#, escape(&template));
     }
@@ -360,35 +405,42 @@ fn layer(l: MapLayer, extent: &Extent, base: &str) -> String {
     out
 }
 
-/// The first and last (column, row) of zoom `z`'s tiles over the extent.
-fn tiles_over(extent: &Extent, z: u32) -> ((u64, u64), (u64, u64)) {
-    let b = extent.bounds;
-    let n = (1u64 << z) as f64;
-    let index = |metres: f64| (metres + HALF_WORLD_M) / (2.0 * HALF_WORLD_M) * n;
-    let first = |f: f64| (f.floor().max(0.0) as u64).min((1 << z) - 1);
-    // A box ending on a tile's edge does not reach into the next tile.
-    let last = |f: f64| ((f.ceil() - 1.0).max(0.0) as u64).min((1 << z) - 1);
-    let (x0, y0) = to_mercator(b.west, b.north);
-    let (x1, y1) = to_mercator(b.east, b.south);
-    let (c0, c1) = (first(index(x0)), last(index(x1)));
-    // Rows count down from the north.
-    let (r0, r1) = (first(index(-y0)), last(index(-y1)));
-    ((c0, r0), (c1.max(c0), r1.max(r0)))
+/// A layer's link to `set`: the tiles over its extent at each of its zooms.
+fn limits(set: TileSet, extent: &Extent) -> String {
+    let mut out = format!("<TileMatrixSetLink><TileMatrixSet>{}</TileMatrixSet><TileMatrixSetLimits>", set.name());
+    for z in extent.min_zoom..=extent.max_zoom {
+        let ((c0, r0), (c1, r1)) = set.tiles_over(&extent.bounds, z);
+        let _ = write!(
+            out,
+            "<TileMatrixLimits><TileMatrix>{z}</TileMatrix><MinTileRow>{r0}</MinTileRow><MaxTileRow>{r1}</MaxTileRow><MinTileCol>{c0}</MinTileCol><MaxTileCol>{c1}</MaxTileCol></TileMatrixLimits>"
+        );
+    }
+    out.push_str("</TileMatrixSetLimits></TileMatrixSetLink>");
+    out
 }
 
-/// The tile matrix set, zooms 0 to `deepest`.
-fn matrix_set(deepest: u32) -> String {
+/// A tile matrix set, zooms 0 to `deepest`: its CRS, its well-known scale
+/// set if it has one, and the corner its matrices start at (in the CRS's
+/// axis order: CRS84's is longitude first).
+fn matrix_set(set: TileSet, deepest: u32) -> String {
+    let (crs, scales, corner) = match set {
+        TileSet::WebMercator => (
+            "urn:ogc:def:crs:EPSG::3857",
+            "<WellKnownScaleSet>urn:ogc:def:wkss:OGC:1.0:GoogleMapsCompatible</WellKnownScaleSet>",
+            format!("{} {HALF_WORLD_M}", -HALF_WORLD_M),
+        ),
+        TileSet::Crs84 => ("urn:ogc:def:crs:OGC:1.3:CRS84", "", "-180 90".to_string()),
+    };
     let mut out = format!(
-        "<TileMatrixSet><ows:Identifier>{MATRIX_SET}</ows:Identifier><ows:SupportedCRS>urn:ogc:def:crs:EPSG::3857</ows:SupportedCRS><WellKnownScaleSet>urn:ogc:def:wkss:OGC:1.0:GoogleMapsCompatible</WellKnownScaleSet>\n"
+        "<TileMatrixSet><ows:Identifier>{}</ows:Identifier><ows:SupportedCRS>{crs}</ows:SupportedCRS>{scales}\n",
+        set.name()
     );
     for z in 0..=deepest {
+        let (cols, rows) = set.matrix(z);
         let _ = writeln!(
             out,
-            "<TileMatrix><ows:Identifier>{z}</ows:Identifier><ScaleDenominator>{}</ScaleDenominator><TopLeftCorner>{} {}</TopLeftCorner><TileWidth>{XYZ_SIDE}</TileWidth><TileHeight>{XYZ_SIDE}</TileHeight><MatrixWidth>{n}</MatrixWidth><MatrixHeight>{n}</MatrixHeight></TileMatrix>",
-            SCALE_0 / 2f64.powi(z as i32),
-            -HALF_WORLD_M,
-            HALF_WORLD_M,
-            n = 1u64 << z
+            "<TileMatrix><ows:Identifier>{z}</ows:Identifier><ScaleDenominator>{}</ScaleDenominator><TopLeftCorner>{corner}</TopLeftCorner><TileWidth>{SIDE}</TileWidth><TileHeight>{SIDE}</TileHeight><MatrixWidth>{cols}</MatrixWidth><MatrixHeight>{rows}</MatrixHeight></TileMatrix>",
+            set.scale_denominator(z),
         );
     }
     out.push_str("</TileMatrixSet>\n");
@@ -399,10 +451,9 @@ fn matrix_set(deepest: u32) -> String {
 mod tests {
     use super::*;
     use crate::cem::Layer;
-    use crate::grid::BBox;
 
     fn tile(query: &str) -> Result<TileRequest, Exception> {
-        match parse(query, MAX_XYZ_ZOOM)? {
+        match parse(query, &|_| MAX_XYZ_ZOOM)? {
             Request::Tile(t) => Ok(t),
             other => panic!("{other:?}"),
         }
@@ -413,25 +464,34 @@ mod tests {
     #[test]
     fn a_get_tile_is_the_xyz_tile_of_its_matrix_column_and_row() {
         let t = tile(RELIEF).unwrap();
-        assert_eq!(
-            t,
-            TileRequest { layer: MapLayer::Relief, zxy: (12, 2161, 1449), picture: Some(PictureFormat::Jpeg) }
-        );
+        let relief = TileRequest {
+            layer: MapLayer::Relief,
+            set: TileSet::WebMercator,
+            zxy: (12, 2161, 1449),
+            picture: Some(PictureFormat::Jpeg),
+        };
+        assert_eq!(t, relief);
         // Keys and names in any case; heights are Terrarium PNG.
         let t = tile("service=wmts&request=gettile&layer=CEM&format=image/png&tilematrixset=WebMercatorQuad&tilematrix=0&tilerow=0&tilecol=0").unwrap();
-        assert_eq!(t, TileRequest { layer: MapLayer::Data(Layer::Cem), zxy: (0, 0, 0), picture: None });
-        assert_eq!(parse("SERVICE=WMTS&REQUEST=GetCapabilities", 0).unwrap(), Request::Capabilities);
-        assert_eq!(parse("", 0).unwrap(), Request::Capabilities);
+        let cem =
+            TileRequest { layer: MapLayer::Data(Layer::Cem), set: TileSet::WebMercator, zxy: (0, 0, 0), picture: None };
+        assert_eq!(t, cem);
+        // Geographic tiles: twice as many columns as rows.
+        let crs84 = RELIEF.replace("WebMercatorQuad", "WorldCRS84Quad").replace("TILECOL=2161", "TILECOL=8191");
+        assert_eq!(tile(&crs84).unwrap(), TileRequest { set: TileSet::Crs84, zxy: (12, 8191, 1449), ..relief });
+        let none = |_| 0;
+        assert_eq!(parse("SERVICE=WMTS&REQUEST=GetCapabilities", &none).unwrap(), Request::Capabilities);
+        assert_eq!(parse("", &none).unwrap(), Request::Capabilities);
         // The pixel of a GetFeatureInfo.
         let info = format!("{}&I=255&J=0&INFOFORMAT=application/json", RELIEF.replace("GetTile", "GetFeatureInfo"));
-        let Request::FeatureInfo(t, pixel) = parse(&info, MAX_XYZ_ZOOM).unwrap() else { panic!("{info}") };
+        let Request::FeatureInfo(t, pixel) = parse(&info, &|_| MAX_XYZ_ZOOM).unwrap() else { panic!("{info}") };
         assert_eq!((t.zxy, pixel), ((12, 2161, 1449), Pixel { at: (255, 0), format: InfoFormat::Json }));
     }
 
     #[test]
     fn wrong_requests_name_the_code_and_the_parameter() {
         let fails = |query: String, code: Code, locator: &str| {
-            let e = parse(&query, MAX_XYZ_ZOOM).unwrap_err();
+            let e = parse(&query, &|_| MAX_XYZ_ZOOM).unwrap_err();
             assert_eq!((e.code, e.locator.as_deref()), (code, Some(locator)), "{query}: {e}");
         };
         let with = |key: &str, value: &str| RELIEF.replace(&format!("{key}="), &format!("{key}={value}&X{key}="));
@@ -446,10 +506,18 @@ mod tests {
         fails(format!("{info}&I=0&J=0").replace("text/plain", "image/png"), Code::InvalidParameterValue, "INFOFORMAT");
         // FORMAT may be left out of a GetFeatureInfo (GDAL does), not a GetTile.
         fails(RELIEF.replace("&FORMAT=image/jpeg", ""), Code::MissingParameterValue, "FORMAT");
-        assert!(parse(&format!("{info}&I=0&J=0").replace("&FORMAT=image/jpeg", ""), MAX_XYZ_ZOOM).is_ok());
-        // The matrix set ends at the deepest zoom served.
-        let e = parse(RELIEF, 11).unwrap_err();
+        assert!(parse(&format!("{info}&I=0&J=0").replace("&FORMAT=image/jpeg", ""), &|_| MAX_XYZ_ZOOM).is_ok());
+        // Each matrix set ends at its deepest zoom served.
+        let deepest = |set| if set == TileSet::WebMercator { 11 } else { 12 };
+        let e = parse(RELIEF, &deepest).unwrap_err();
         assert_eq!((e.code, e.locator.as_deref()), (Code::InvalidParameterValue, Some("TILEMATRIX")));
+        assert!(parse(&RELIEF.replace("WebMercatorQuad", "WorldCRS84Quad"), &deepest).is_ok());
+        let crs84 = |key: &str, value: &str| {
+            let query = with(key, value).replace("WebMercatorQuad", "WorldCRS84Quad");
+            fails(query, Code::TileOutOfRange, key);
+        };
+        crs84("TILEROW", "4096");
+        crs84("TILECOL", "8192");
         fails(with("VERSION", "2.0.0"), Code::InvalidParameterValue, "VERSION");
         fails(with("LAYER", "cover"), Code::InvalidParameterValue, "LAYER");
         fails(with("STYLE", "dark"), Code::InvalidParameterValue, "STYLE");
@@ -470,16 +538,37 @@ mod tests {
         assert!(tile(&RELIEF.replace("STYLE=default&", "")).is_ok());
     }
 
+    /// The text of `n`'s first child named `tag`.
+    fn child(n: roxmltree::Node, tag: &str) -> String {
+        n.children().find(|c| c.tag_name().name() == tag).and_then(|c| c.text()).unwrap_or_default().to_string()
+    }
+
+    /// The names of the sets `n` (a layer or the contents) has.
+    fn set_names(n: roxmltree::Node, tag: &str) -> Vec<String> {
+        n.descendants().filter(|c| c.has_tag_name(tag)).map(|c| child(c, "TileMatrixSet")).collect()
+    }
+
+    /// Column and row of the tile of `set` at zoom `z` holding a point,
+    /// computed here from the sets' definitions.
+    fn tile_at(set: TileSet, z: u32, lon: f64, lat: f64) -> (u64, u64) {
+        let n = f64::from(1u32 << z);
+        match set {
+            TileSet::WebMercator => {
+                let lat = lat.to_radians();
+                let row = (1.0 - (lat.tan() + 1.0 / lat.cos()).ln() / std::f64::consts::PI) / 2.0 * n;
+                (((lon + 180.0) / 360.0 * n).floor() as u64, row.floor() as u64)
+            }
+            TileSet::Crs84 => (((lon + 180.0) / 180.0 * n).floor() as u64, ((90.0 - lat) / 180.0 * n).floor() as u64),
+        }
+    }
+
     #[test]
-    fn the_capabilities_give_each_layer_the_tiles_over_the_region() {
+    fn the_capabilities_give_each_layer_the_tiles_over_the_region_in_both_sets() {
         let region = crate::config::load(None).unwrap();
         let xml = document(&region, "http://h:1");
         let doc = roxmltree::Document::parse(&xml).unwrap();
-        let ows = |n: roxmltree::Node, tag: &str| {
-            n.children().find(|c| c.tag_name().name() == tag).and_then(|c| c.text()).unwrap_or_default().to_string()
-        };
         let layers: Vec<_> = doc.descendants().filter(|n| n.has_tag_name("Layer")).collect();
-        let names: Vec<String> = layers.iter().map(|&l| ows(l, "Identifier")).collect();
+        let names: Vec<String> = layers.iter().map(|&l| child(l, "Identifier")).collect();
         assert_eq!(names, ["dem", "canopy", "cem", "colour", "relief"]);
         let relief = layers[4];
         let templates: Vec<&str> = relief
@@ -490,49 +579,56 @@ mod tests {
         assert_eq!(
             templates,
             [
-                "http://h:1/xyz/relief/{TileMatrix}/{TileCol}/{TileRow}.png",
-                "http://h:1/xyz/relief/{TileMatrix}/{TileCol}/{TileRow}.jpg"
+                "http://h:1/wmts/1.0.0/relief/default/{TileMatrixSet}/{TileMatrix}/{TileRow}/{TileCol}.png",
+                "http://h:1/wmts/1.0.0/relief/default/{TileMatrixSet}/{TileMatrix}/{TileRow}/{TileCol}.jpg"
             ]
         );
-        // Each zoom's limits are the XYZ tiles holding the region's corners.
-        let extent = tilejson::extent(&region, MapLayer::Relief).unwrap();
-        let limits: Vec<_> = relief.descendants().filter(|n| n.has_tag_name("TileMatrixLimits")).collect();
-        assert_eq!(limits.len() as u32, extent.max_zoom - extent.min_zoom + 1);
+        assert_eq!(set_names(relief, "TileMatrixSetLink"), ["WebMercatorQuad", "WorldCRS84Quad"]);
+        // Each zoom's limits are the tiles holding the region's corners.
         let b = region.bounds;
-        for l in limits {
-            let z: u32 = ows(l, "TileMatrix").parse().unwrap();
-            let at = |lon: f64, lat: f64| {
-                let n = f64::from(1u32 << z);
-                let col = ((lon + 180.0) / 360.0 * n).floor() as u64;
-                let lat = lat.to_radians();
-                let row = ((1.0 - (lat.tan() + 1.0 / lat.cos()).ln() / std::f64::consts::PI) / 2.0 * n).floor() as u64;
-                (col, row)
-            };
-            let ((c0, r0), (c1, r1)) = (at(b.west, b.north), at(b.east, b.south));
-            let got =
-                ["MinTileCol", "MinTileRow", "MaxTileCol", "MaxTileRow"].map(|k| ows(l, k).parse::<u64>().unwrap());
-            assert_eq!(got, [c0, r0, c1, r1], "zoom {z}");
+        for link in relief.children().filter(|n| n.has_tag_name("TileMatrixSetLink")) {
+            let set = TileSet::parse(&child(link, "TileMatrixSet")).unwrap();
+            let extent = extent(&region, MapLayer::Relief, set).unwrap();
+            let limits: Vec<_> = link.descendants().filter(|n| n.has_tag_name("TileMatrixLimits")).collect();
+            assert_eq!(limits.len() as u32, extent.max_zoom - extent.min_zoom + 1);
+            for l in limits {
+                let z: u32 = child(l, "TileMatrix").parse().unwrap();
+                let ((c0, r0), (c1, r1)) = (tile_at(set, z, b.west, b.north), tile_at(set, z, b.east, b.south));
+                let got = ["MinTileCol", "MinTileRow", "MaxTileCol", "MaxTileRow"]
+                    .map(|k| child(l, k).parse::<u64>().unwrap());
+                assert_eq!(got, [c0, r0, c1, r1], "{set:?} zoom {z}");
+            }
         }
-        // Every zoom served is a matrix, zoom 0 one tile on the standard scale.
-        let matrices: Vec<_> = doc
-            .descendants()
-            .filter(|n| n.has_tag_name("TileMatrix") && n.parent().is_some_and(|p| p.has_tag_name("TileMatrixSet")))
-            .collect();
-        assert_eq!(matrices.len() as u32, deepest(&region) + 1);
-        assert_eq!(deepest(&region), extent.max_zoom, "the map's pixels are the finest source's");
-        let scale: f64 = ows(matrices[0], "ScaleDenominator").parse().unwrap();
-        assert!((scale * 0.000_28 * 256.0 - 2.0 * HALF_WORLD_M).abs() < 1e-3);
+        // Every zoom served is a matrix, zoom 0 on the standard scale.
+        let contents = doc.descendants().find(|n| n.has_tag_name("Contents")).unwrap();
+        let set_nodes: Vec<_> = contents.children().filter(|n| n.has_tag_name("TileMatrixSet")).collect();
+        assert_eq!(set_nodes.len(), 2);
+        for set_node in set_nodes {
+            let set = TileSet::parse(&child(set_node, "Identifier")).unwrap();
+            let matrices: Vec<_> = set_node.children().filter(|n| n.has_tag_name("TileMatrix")).collect();
+            assert_eq!(matrices.len() as u32, deepest(&region, set) + 1);
+            let finest = extent(&region, MapLayer::Relief, set).unwrap().max_zoom;
+            assert_eq!(deepest(&region, set), finest, "the map's pixels are the finest source's");
+            let scale: f64 = child(matrices[0], "ScaleDenominator").parse().unwrap();
+            let world_m = scale * 0.000_28 * 256.0 * set.matrix(0).0 as f64;
+            assert!((world_m - 2.0 * HALF_WORLD_M).abs() < 1e-3, "{set:?}: {world_m} m");
+            let size = ["MatrixWidth", "MatrixHeight"].map(|k| child(matrices[0], k).parse::<u64>().unwrap());
+            assert_eq!((size[0], size[1]), set.matrix(0));
+        }
     }
 
     #[test]
-    fn a_box_ending_on_a_tile_edge_does_not_reach_into_the_next_tile() {
-        // Zoom 1: the four quarters of the world; a box of the north-west one.
-        let bounds = BBox { west: -180.0, south: 0.0, east: 0.0, north: 85.0 };
-        let extent = Extent { bounds, min_zoom: 1, max_zoom: 2 };
-        assert_eq!(tiles_over(&extent, 1), ((0, 0), (0, 0)));
-        assert_eq!(tiles_over(&extent, 2), ((0, 0), (1, 1)));
-        // A box within one tile.
-        let inside = Extent { bounds: BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 }, ..extent };
-        assert_eq!(tiles_over(&inside, 1), ((1, 0), (1, 0)));
+    fn a_polar_region_is_offered_in_geographic_tiles_alone() {
+        let mut region = crate::config::load(None).unwrap();
+        region.bounds = crate::grid::BBox { west: -180.0, south: -90.0, east: 180.0, north: -86.0 };
+        let xml = document(&region, "http://h:1");
+        let doc = roxmltree::Document::parse(&xml).unwrap();
+        let contents = doc.descendants().find(|n| n.has_tag_name("Contents")).unwrap();
+        let sets: Vec<String> =
+            contents.children().filter(|n| n.has_tag_name("TileMatrixSet")).map(|n| child(n, "Identifier")).collect();
+        assert_eq!(sets, ["WorldCRS84Quad"]);
+        for layer in contents.children().filter(|n| n.has_tag_name("Layer")) {
+            assert_eq!(set_names(layer, "TileMatrixSetLink"), ["WorldCRS84Quad"]);
+        }
     }
 }

@@ -248,9 +248,14 @@ fn deepest_zoom(server: &Server) -> u32 {
     ["dem", "canopy", "cem", "colour", "relief"].map(zoom).into_iter().max().unwrap()
 }
 
-/// GDAL's `WMTS:` name of a layer of the demo.
+/// GDAL's `WMTS:` name of a layer of the demo in the Web Mercator set.
 fn wmts_layer(server: &Server, layer: &str) -> String {
-    format!("WMTS:{}/wmts?SERVICE=WMTS&REQUEST=GetCapabilities,layer={layer}", server.base)
+    wmts_layer_in(server, layer, "WebMercatorQuad")
+}
+
+/// GDAL's `WMTS:` name of a layer of the demo in a tile matrix set.
+fn wmts_layer_in(server: &Server, layer: &str, set: &str) -> String {
+    format!("WMTS:{}/wmts?SERVICE=WMTS&REQUEST=GetCapabilities,layer={layer},tilematrixset={set}", server.base)
 }
 
 #[test]
@@ -259,32 +264,23 @@ fn gdal_reads_the_wmts_layers_and_their_heights() {
     let server = Server::start(None, &dir.join("cache"));
     let info = run(Command::new("gdalinfo").arg(format!("WMTS:{}/wmts", server.base)), "gdalinfo");
     for layer in ["dem", "canopy", "cem", "colour", "relief"] {
-        assert!(info.contains(&format!(",layer={layer}\n")), "gdalinfo lists {layer}:\n{info}");
+        for set in ["WebMercatorQuad", "WorldCRS84Quad"] {
+            let name = format!(",layer={layer},tilematrixset={set}\n");
+            assert!(info.contains(&name), "gdalinfo lists {layer} in {set}:\n{info}");
+        }
     }
     // The layer's box is the region's, in Web Mercator, to a pixel of the
     // deepest zoom any layer's sources are as fine as (the relief's).
     let info = run(Command::new("gdalinfo").arg(wmts_layer(&server, "cem")), "gdalinfo");
     let deepest = deepest_zoom(&server);
     let pixel_m = 2.0 * sylva::grid::mercator::HALF_WORLD_M / (256.0 * 2f64.powi(deepest as i32));
-    let corner = |name: &str| -> (f64, f64) {
-        let text = info.split(name).nth(1).and_then(|t| t.split(')').next()).unwrap_or_else(|| panic!("{info}"));
-        let xy: Vec<f64> = text.trim_start_matches([' ', '(']).split(',').map(|v| v.trim().parse().unwrap()).collect();
-        (xy[0], xy[1])
-    };
     let b = common::demo().bounds;
-    for ((x, y), (lon, lat)) in [(corner("Upper Left"), (b.west, b.north)), (corner("Lower Right"), (b.east, b.south))]
-    {
+    let corners = [(corner(&info, "Upper Left"), (b.west, b.north)), (corner(&info, "Lower Right"), (b.east, b.south))];
+    for ((x, y), (lon, lat)) in corners {
         let (mx, my) = sylva::grid::mercator::to_mercator(lon, lat);
         assert!((x - mx).abs() <= pixel_m && (y - my).abs() <= pixel_m, "({x}, {y}) vs ({mx}, {my}):\n{info}");
     }
-    // Terrarium heights read back, nearest neighbour (averaged codes are no heights).
-    let out = dir.join("cem.png");
-    let args = ["-q", "-r", "nearest", "-outsize", "256", "0"];
-    run(Command::new("gdal_translate").args(args).arg(wmts_layer(&server, "cem")).arg(&out), "gdal_translate");
-    let rgb = image::open(&out).unwrap().into_rgb8();
-    let heights: Vec<f64> = rgb.pixels().map(|p| sylva::encode::terrarium::height(p.0)).collect();
-    let (low, high) = heights.iter().fold((f64::MAX, f64::MIN), |(a, b), &h| (a.min(h), b.max(h)));
-    assert!(low > 500.0 && high < 4000.0 && high - low > 1000.0, "{low} to {high} m");
+    assert_demo_heights(&dir.join("cem.png"), &wmts_layer(&server, "cem"));
     // GDAL's identify asks GetFeatureInfo (GML) of the tile under the point.
     let args = ["-b", "1", "-wgs84", &wmts_layer(&server, "dem"), "10.125", "46.375"];
     let report = run(Command::new("gdallocationinfo").args(args), "gdallocationinfo");
@@ -297,6 +293,58 @@ fn gdal_reads_the_wmts_layers_and_their_heights() {
     assert!((500.0..4000.0).contains(&dem), "{dem}");
 }
 
+/// The (x, y) gdalinfo gives a corner (`Upper Left`, …) of its raster.
+fn corner(info: &str, name: &str) -> (f64, f64) {
+    let text = info.split(name).nth(1).and_then(|t| t.split(')').next()).unwrap_or_else(|| panic!("{info}"));
+    let xy: Vec<f64> = text.trim_start_matches([' ', '(']).split(',').map(|v| v.trim().parse().unwrap()).collect();
+    (xy[0], xy[1])
+}
+
+/// Reads GDAL's dataset `name` (a layer of CEM heights over the demo) to
+/// `out`, 256 pixels wide, and checks the Terrarium heights it holds.
+fn assert_demo_heights(out: &Path, name: &str) {
+    // Nearest neighbour: averaged codes are no heights.
+    let args = ["-q", "-r", "nearest", "-outsize", "256", "0"];
+    run(Command::new("gdal_translate").args(args).arg(name).arg(out), "gdal_translate");
+    let rgb = image::open(out).unwrap().into_rgb8();
+    let heights: Vec<f64> = rgb.pixels().map(|p| sylva::encode::terrarium::height(p.0)).collect();
+    let (low, high) = heights.iter().fold((f64::MAX, f64::MIN), |(a, b), &h| (a.min(h), b.max(h)));
+    assert!(low > 500.0 && high < 4000.0 && high - low > 1000.0, "{name}: {low} to {high} m");
+}
+
+#[test]
+fn gdal_reads_the_geographic_wmts_to_the_region_and_a_pixel() {
+    let dir = TempDir::new("client-gdal-wmts-crs84");
+    let server = Server::start(None, &dir.join("cache"));
+    let name = wmts_layer_in(&server, "cem", "WorldCRS84Quad");
+    let info = run(Command::new("gdalinfo").arg(&name), "gdalinfo");
+    assert!(info.contains("ID[\"OGC\",\"CRS84\"]"), "{info}");
+    // Square pixels of a geographic matrix: 180° / 256 / 2^z.
+    let size =
+        info.split("Pixel Size = (").nth(1).and_then(|t| t.split(')').next()).unwrap_or_else(|| panic!("{info}"));
+    let size: Vec<f64> = size.split(',').map(|v| v.trim().parse().unwrap()).collect();
+    let zoom = (180.0 / 256.0 / size[0]).log2();
+    assert!(size[1] == -size[0] && (zoom - zoom.round()).abs() < 1e-9 && zoom > 10.0, "{info}");
+    // The box is the region's to a pixel.
+    let b = common::demo().bounds;
+    for ((x, y), (lon, lat)) in
+        [(corner(&info, "Upper Left"), (b.west, b.north)), (corner(&info, "Lower Right"), (b.east, b.south))]
+    {
+        assert!((x - lon).abs() <= size[0] && (y - lat).abs() <= size[0], "({x}, {y}) vs ({lon}, {lat}):\n{info}");
+    }
+    assert_demo_heights(&dir.join("cem.png"), &name);
+    // GDAL's identify: the GetFeatureInfo of the pixel under the point.
+    let args = ["-b", "1", "-wgs84", &name, "10.125", "46.375"];
+    let report = run(Command::new("gdallocationinfo").args(args), "gdallocationinfo");
+    let at = report
+        .split("<gml:coordinates>")
+        .nth(1)
+        .and_then(|t| t.split('<').next())
+        .unwrap_or_else(|| panic!("{report}"));
+    let at: Vec<f64> = at.split(',').map(|v| v.parse().unwrap()).collect();
+    assert!((at[0] - 10.125).abs() <= size[0] && (at[1] - 46.375).abs() <= size[0], "{report}");
+}
+
 #[test]
 fn owslib_reads_the_wmts_and_its_tiles_are_the_xyz_tiles() {
     let dir = TempDir::new("client-owslib-wmts");
@@ -307,14 +355,21 @@ fn owslib_reads_the_wmts_and_its_tiles_are_the_xyz_tiles() {
          wmts = WebMapTileService('{base}/wmts')\n\
          assert list(wmts.contents) == ['dem', 'canopy', 'cem', 'colour', 'relief'], list(wmts.contents)\n\
          assert wmts['relief'].formats == ['image/png', 'image/jpeg'], wmts['relief'].formats\n\
+         assert sorted(wmts.tilematrixsets) == ['WebMercatorQuad', 'WorldCRS84Quad'], list(wmts.tilematrixsets)\n\
          assert len(wmts.tilematrixsets['WebMercatorQuad'].tilematrix) == {matrices}\n\
          tile = wmts.gettile(layer='relief', tilematrixset='WebMercatorQuad', tilematrix='12', row=1449, column=2161, format='image/jpeg')\n\
-         open(sys.argv[1], 'wb').write(tile.read())\n",
+         open(sys.argv[1], 'wb').write(tile.read())\n\
+         tile = wmts.gettile(layer='relief', tilematrixset='WorldCRS84Quad', tilematrix='12', row=992, column=4326, format='image/png')\n\
+         open(sys.argv[2], 'wb').write(tile.read())\n",
         base = server.base,
         matrices = deepest_zoom(&server) + 1
     );
-    run(Command::new(python_with_owslib()).args(["-c", &script]).arg(&out), "OWSLib");
+    let geographic = dir.join("geographic.png");
+    run(Command::new(python_with_owslib()).args(["-c", &script]).arg(&out).arg(&geographic), "OWSLib");
     let xyz = server.get("/xyz/relief/12/2161/1449.jpg");
     assert_eq!(xyz.status, 200);
     assert_eq!(std::fs::read(&out).unwrap(), xyz.body);
+    let rest = server.get("/wmts/1.0.0/relief/default/WorldCRS84Quad/12/992/4326.png");
+    assert_eq!((rest.status, rest.header("content-type")), (200, Some("image/png")));
+    assert_eq!(std::fs::read(&geographic).unwrap(), rest.body);
 }

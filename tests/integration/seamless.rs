@@ -251,22 +251,33 @@ fn rmnp_relief_neighbours_share_edge_pixels_exactly() {
 }
 
 #[test]
-fn xyz_relief_tiles_equal_windows_of_a_mercator_build() {
+fn quadtree_relief_tiles_equal_windows_of_a_build() {
     // Regression: a Web Mercator grid's rows were shaded with the north–south
     // spacing of the grid's middle; the build below has its middle at the
     // tile's southern edge, up to a few degrees from the tile's own (at zoom
     // 6 a channel differed by 2).
     use sylva::grid::mercator::{HALF_WORLD_M, MercatorBox, to_mercator};
+    use sylva::grid::quad::TileSet;
     let demo = common::demo();
     let b = demo.bounds;
-    let (mx, my) = to_mercator(0.5 * (b.west + b.east), 0.5 * (b.south + b.north));
+    let (lon, lat) = (0.5 * (b.west + b.east), 0.5 * (b.south + b.north));
+    let (mx, my) = to_mercator(lon, lat);
     for z in [5, 6, 7, 8] {
+        // The tile holding the region's middle and the box of it with its
+        // southern neighbour, in each set.
         let size = 2.0 * HALF_WORLD_M / f64::from(1u32 << z);
         let (x, y) = (((mx + HALF_WORLD_M) / size) as u64, ((HALF_WORLD_M - my) / size) as u64);
         let tile_box = MercatorBox::of_tile(z, x, y).expect("tile");
-        let grid = MercatorBox { south: tile_box.south - size, ..tile_box }.area_grid(256, 512).expect("grid");
-        let build = relief(&demo, Product::Image { layer: MapLayer::Relief, grid, encoding: Encoding::Rgba });
-        let tile = relief(&demo, Product::Xyz { layer: MapLayer::Relief, zxy: (z, x, y) });
-        assert_same_pixels(&tile, &pixels(&build, 0, 0, 256, 256), &format!("xyz relief {z}/{x}/{y}"));
+        let mercator = MercatorBox { south: tile_box.south - size, ..tile_box }.area_grid(256, 512).expect("grid");
+        let deg = 180.0 / f64::from(1u32 << z);
+        let (col, row) = (((lon + 180.0) / deg) as u64, ((90.0 - lat) / deg) as u64);
+        let (west, north) = (-180.0 + col as f64 * deg, 90.0 - row as f64 * deg);
+        let geographic = BBox { west, south: north - 2.0 * deg, east: west + deg, north }.area_grid(256, 512).unwrap();
+        for (set, (x, y), grid) in [(TileSet::WebMercator, (x, y), mercator), (TileSet::Crs84, (col, row), geographic)]
+        {
+            let build = relief(&demo, Product::Image { layer: MapLayer::Relief, grid, encoding: Encoding::Rgba });
+            let tile = relief(&demo, Product::Quad { layer: MapLayer::Relief, set, zxy: (z, x, y) });
+            assert_same_pixels(&tile, &pixels(&build, 0, 0, 256, 256), &format!("{set:?} relief {z}/{x}/{y}"));
+        }
     }
 }

@@ -387,6 +387,11 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
         ("/tiles/dem/-1/0/0_0.bil", "level must be a whole number"),
         ("/xyz/dem/12/-1/0.png", "x must be a whole number"),
         ("/tiles/relief/3/1/1_1.gif", ".png or .jpg"),
+        ("/wmts/1.0.0/relief/default/Foo/12/0/0.png", "TILEMATRIXSET"),
+        ("/wmts/1.0.0/dem/default/WorldCRS84Quad/3/8/0.png", "TileOutOfRange"),
+        ("/wmts/1.0.0/dem/default/WorldCRS84Quad/3/0/16.png", "TileOutOfRange"),
+        ("/wmts/1.0.0/dem/fancy/WorldCRS84Quad/3/0/0.png", "STYLE"),
+        ("/wmts/1.0.0/dem/default/WorldCRS84Quad/3/0/0.tif", "FORMAT"),
         (
             "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=relief&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=application/bil16",
             "InvalidFormat",
@@ -412,6 +417,7 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
         "/xyz/dem/25/0/0.png",
         "/tiles/cem/3/99999999999999999999/1_1.bil",
         "/xyz/dem/3/1/99999999999999999999.png",
+        "/wmts/1.0.0/dem/default/WorldCRS84Quad/3/0/0.png",
         "/nowhere",
     ];
     for path in past_any_tile {
@@ -575,6 +581,49 @@ fn wmts_feature_info_gives_the_heights_the_tile_shows() {
     // A pixel off the tile is the standard's code.
     let off = server.get(&format!("{base}&I=256&J=0"));
     assert!(off.status == 400 && off.text().contains("PointIJOutOfRange"), "{}", off.text());
+}
+
+#[test]
+fn geographic_wmts_tiles_are_the_wms_map_of_their_box_and_cached() {
+    let dir = TempDir::new("srv-wmts-crs84");
+    let server = Server::start(None, &dir.join("cache"));
+    let z = 12u32;
+    let size = 180.0 / f64::from(1u32 << z);
+    let (col, row) = (((10.125 + 180.0) / size) as u64, ((90.0 - 46.375) / size) as u64);
+    let rest = server.get(&format!("/wmts/1.0.0/cem/default/WorldCRS84Quad/{z}/{row}/{col}.png"));
+    assert_eq!((rest.status, rest.header("content-type")), (200, Some("image/png")), "{}", rest.text());
+    let kvp = server.get(&format!(
+        "/wmts?SERVICE=WMTS&REQUEST=GetTile&VERSION=1.0.0&LAYER=cem&STYLE=default&FORMAT=image/png\
+         &TILEMATRIXSET=WorldCRS84Quad&TILEMATRIX={z}&TILEROW={row}&TILECOL={col}"
+    ));
+    assert_eq!(kvp.body, rest.body);
+    assert_eq!(server.metric("sylva_tile_computations_total"), 1.0, "computed once");
+    // The WMS map of the tile's box, 256 pixels square, in float32: the
+    // same pixel centres, the same heights to a Terrarium step.
+    let (west, north) = (-180.0 + col as f64 * size, 90.0 - row as f64 * size);
+    let (east, south) = (west + size, north - size);
+    let map = server.get(&format!(
+        "/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=cem&STYLES=&CRS=CRS:84\
+         &BBOX={west},{south},{east},{north}&WIDTH=256&HEIGHT=256&FORMAT=application/bil32"
+    ));
+    assert_eq!((map.status, map.body.len()), (200, 256 * 256 * 4), "{}", map.text());
+    let heights = map.body.chunks(4).map(|b| f64::from(f32::from_le_bytes(b.try_into().unwrap())));
+    let tile = image::load_from_memory(&rest.body).unwrap().into_rgb8();
+    assert_eq!(tile.dimensions(), (256, 256));
+    for (i, (p, h)) in tile.pixels().zip(heights).enumerate() {
+        let shown = sylva::encode::terrarium::height(p.0);
+        assert!((shown - h).abs() <= 1.0 / 256.0, "pixel {i}: the tile {shown} m, the map {h} m");
+    }
+    // Kept in the tile cache beside the XYZ tiles.
+    let version = std::fs::read_dir(dir.join("cache")).unwrap().map(|e| e.unwrap().path()).find(|p| p.is_dir());
+    let stored = version.unwrap().join(format!("crs84/cem/{z}/{col}/{row}.png"));
+    // (The file is the tile and the cache's 16-byte trailer.)
+    let file = std::fs::read(&stored).unwrap_or_default();
+    assert!(file.len() == rest.body.len() + 16 && file.starts_with(&rest.body), "{stored:?}: {} bytes", file.len());
+    // A Web Mercator tile by the RESTful path is the XYZ tile.
+    let via_wmts = server.get("/wmts/1.0.0/relief/default/WebMercatorQuad/12/1449/2161.jpg");
+    assert_eq!((via_wmts.status, via_wmts.header("content-type")), (200, Some("image/jpeg")));
+    assert_eq!(via_wmts.body, server.get("/xyz/relief/12/2161/1449.jpg").body);
 }
 
 #[test]
