@@ -4,7 +4,8 @@
 # our GeoTIFFs and our WMS with them), Mesa's software Vulkan and OpenGL for
 # the renderer, redis-server (the tests start one for the shared Redis tile
 # cache), Xvfb and the X11 libraries winit opens (the viewer's tests open a
-# window), and Rust through rustup when cargo is missing.
+# window), Node.js with CesiumJS's engine (the tests read our Cesium terrain
+# with it, from tests/cesium), and Rust through rustup when cargo is missing.
 # Safe to run again: it installs only what is absent.
 set -euo pipefail
 sudo=""
@@ -24,6 +25,7 @@ command -v gdalinfo >/dev/null || need+=(gdal-bin)
 ls /usr/lib/*/libEGL.so.1 >/dev/null 2>&1 || need+=(libegl1)
 ls /usr/lib/*/dri/swrast_dri.so >/dev/null 2>&1 || need+=(libgl1-mesa-dri)
 command -v redis-server >/dev/null || need+=(redis-server)
+command -v npm >/dev/null || need+=(nodejs npm)
 # `sylva view`'s tests open its window on a virtual X display, through the
 # X11 libraries winit loads at run time.
 command -v Xvfb >/dev/null || need+=(xvfb)
@@ -35,6 +37,9 @@ if [ ${#need[@]} -gt 0 ]; then
   $sudo apt-get update -qq
   $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${need[@]}"
 fi
+# CesiumJS's engine at the version tests/cesium pins, for the terrain tests.
+cesium="$(dirname "$0")/../tests/cesium"
+[ -d "$cesium/node_modules/@cesium/engine" ] || npm ci --prefix "$cesium" --no-audit --no-fund --loglevel=error
 if ! command -v cargo >/dev/null; then
   [ -x "$HOME/.cargo/bin/cargo" ] || curl -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal
   echo "Rust installed in ~/.cargo; run: source ~/.cargo/env" >&2

@@ -32,7 +32,7 @@ enum Command {
     Tile(cli::produce::TileArgs),
     /// Compute a layer over a whole box in one go (the reference tiles match).
     Build(cli::produce::BuildArgs),
-    /// Serve WMS, WMTS, World Wind and XYZ tiles over HTTP.
+    /// Serve WMS, WMTS, World Wind, XYZ tiles and Cesium terrain over HTTP.
     #[cfg(feature = "server")]
     Serve(cli::serving::ServeArgs),
     /// Fly a camera path headless: PNG frames and per-frame statistics.

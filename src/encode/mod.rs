@@ -1,6 +1,7 @@
 //! Tile encodings: raw BIL (16-bit integer, 32-bit float; little-endian,
 //! exactly width × height samples, row 0 north, as World Wind expects),
-//! 16-bit greyscale PNG, and float32 GeoTIFF.
+//! 16-bit greyscale PNG, and float32 GeoTIFF; for web clients Terrarium PNG
+//! ([`terrarium`]) and Cesium's heightmap terrain ([`heightmap`]).
 //!
 //! Heights are `f32` metres inside Sylva. 16-bit encodings state how to read
 //! them back: `h = offset + scale · v` (see [`Quantization`]); values outside
@@ -10,6 +11,7 @@
 
 pub mod data_picture;
 pub mod geotiff;
+pub mod heightmap;
 pub mod relief;
 pub mod terrarium;
 

@@ -3,6 +3,7 @@
 //! (0, 0) at the north-west, `2^z × 2^z` tiles).
 
 use super::lattice::{Axis, MERCATOR_RADIUS_M, Mapping, SampleGrid};
+use super::quad::MAX_ZOOM;
 use super::{GridError, check_size};
 use std::f64::consts::PI;
 
@@ -58,10 +59,11 @@ impl MercatorBox {
 
     /// The box of XYZ tile `(z, x, y)`, or an error if it does not exist.
     pub fn of_tile(z: u32, x: u64, y: u64) -> Result<MercatorBox, GridError> {
-        if z > 30 || x >= 1 << z || y >= 1 << z {
-            return Err(GridError::NoSuchTile { level: z, row: y, col: x, rows: 1 << z.min(30), cols: 1 << z.min(30) });
+        let n = 1u64 << z.min(MAX_ZOOM);
+        if z > MAX_ZOOM || x >= n || y >= n {
+            return Err(GridError::NoSuchTile { level: z, row: y, col: x, rows: n, cols: n });
         }
-        let size = 2.0 * HALF_WORLD_M / (1u64 << z) as f64;
+        let size = 2.0 * HALF_WORLD_M / n as f64;
         let west = -HALF_WORLD_M + x as f64 * size;
         let north = HALF_WORLD_M - y as f64 * size;
         Ok(MercatorBox { west, south: north - size, east: west + size, north })

@@ -14,7 +14,7 @@ use super::{BBox, GridError, SampleGrid};
 pub const SIDE: usize = 256;
 
 /// Deepest zoom addressable (tile indices stay exact in `f64`).
-const MAX_ZOOM: u32 = 30;
+pub const MAX_ZOOM: u32 = 30;
 
 /// A tile matrix set.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -44,6 +44,7 @@ impl TileSet {
 
     /// Columns and rows of zoom `z`.
     pub fn matrix(self, z: u32) -> (u64, u64) {
+        debug_assert!(z <= MAX_ZOOM, "zoom {z}");
         let n = 1u64 << z.min(MAX_ZOOM);
         match self {
             TileSet::WebMercator => (n, n),
@@ -54,20 +55,13 @@ impl TileSet {
     /// The pixel centres of tile `(z, col, row)`, or an error if it does not
     /// exist.
     pub fn tile_grid(self, z: u32, col: u64, row: u64) -> Result<SampleGrid, GridError> {
-        let (cols, rows) = self.matrix(z);
+        let (cols, rows) = self.matrix(z.min(MAX_ZOOM));
         if z > MAX_ZOOM || col >= cols || row >= rows {
             return Err(GridError::NoSuchTile { level: z, row, col, rows, cols });
         }
         match self {
             TileSet::WebMercator => MercatorBox::of_tile(z, col, row)?.area_grid(SIDE, SIDE),
-            TileSet::Crs84 => {
-                // Powers of two: every edge is exact, so neighbours' pixel
-                // centres lie on one lattice.
-                let size = 180.0 / rows as f64;
-                let west = -180.0 + col as f64 * size;
-                let north = 90.0 - row as f64 * size;
-                BBox { west, south: north - size, east: west + size, north }.area_grid(SIDE, SIDE)
-            }
+            TileSet::Crs84 => geographic_box(z, col, row).area_grid(SIDE, SIDE),
         }
     }
 
@@ -127,6 +121,16 @@ impl TileSet {
     }
 }
 
+/// The box of geographic tile `(z, col, row)` (rows from the north; the
+/// tile is assumed to exist). Edges are multiples of a power of two: exact,
+/// so neighbours' samples lie on one lattice.
+pub fn geographic_box(z: u32, col: u64, row: u64) -> BBox {
+    let size = 180.0 / TileSet::Crs84.matrix(z).1 as f64;
+    let west = -180.0 + col as f64 * size;
+    let north = 90.0 - row as f64 * size;
+    BBox { west, south: north - size, east: west + size, north }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -155,10 +159,12 @@ mod tests {
     #[test]
     fn scales_are_the_standards() {
         // OGC 2D Tile Matrix Set, Annex D: WebMercatorQuad and WorldCRS84Quad.
-        let close = |a: f64, b: f64| (a - b).abs() < 1e-6 * b;
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-12 * b;
         assert!(close(TileSet::WebMercator.scale_denominator(0), 559_082_264.028_717_8));
         assert!(close(TileSet::Crs84.scale_denominator(0), 279_541_132.014_358_9));
         assert!(close(TileSet::Crs84.scale_denominator(3), 34_942_641.501_794_87));
+        assert!((TileSet::Crs84.pixel_m(60.0) - 78_271.517).abs() < 1e-3);
+        assert!((TileSet::WebMercator.pixel_m(60.0) - 156_543.034 / 2.0).abs() < 1e-3);
         assert_eq!(TileSet::Crs84.pixel_deg(), 180.0 / 256.0);
         assert_eq!(TileSet::WebMercator.pixel_deg(), 360.0 / 256.0);
         assert_eq!(TileSet::parse("worldcrs84quad"), Some(TileSet::Crs84));

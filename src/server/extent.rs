@@ -51,15 +51,22 @@ fn min_zoom(region: &Region, set: TileSet) -> u32 {
 }
 
 /// The shallowest zoom whose pixels, at the region's middle latitude, are
-/// no larger than the finest source of `layer` (the DEM's for `dem`, else
-/// also the land cover's); clients draw deeper zooms from it.
+/// no larger than the finest source of `layer`.
 fn max_zoom(region: &Region, layer: MapLayer, set: TileSet) -> u32 {
+    let b = region.bounds;
+    let mid_lat = (0.5 * (b.south + b.north)).clamp(-MERCATOR_MAX_LAT, MERCATOR_MAX_LAT);
+    finest_zoom(region, layer, set.pixel_m(mid_lat))
+}
+
+/// The shallowest zoom of a quadtree whose samples are `zoom0_m` apart at
+/// zoom 0 where they are no farther apart than the finest source of
+/// `layer` (the DEM's for `dem`, else also the land cover's); clients draw
+/// deeper zooms from it.
+pub fn finest_zoom(region: &Region, layer: MapLayer, zoom0_m: f64) -> u32 {
     let cover = region.landcover.as_ref().filter(|_| layer != MapLayer::Data(crate::cem::Layer::Dem));
     let finest_m =
         std::iter::once(&region.dem).chain(cover).map(|r| r.georef().pixel_m()).fold(f64::INFINITY, f64::min);
-    let b = region.bounds;
-    let mid_lat = (0.5 * (b.south + b.north)).clamp(-MERCATOR_MAX_LAT, MERCATOR_MAX_LAT);
-    let zoom = (set.pixel_m(mid_lat) / finest_m).log2().ceil();
+    let zoom = (zoom0_m / finest_m).log2().ceil();
     if zoom.is_finite() { zoom.clamp(0.0, f64::from(MAX_XYZ_ZOOM)) as u32 } else { MAX_XYZ_ZOOM }
 }
 
@@ -76,9 +83,17 @@ mod tests {
             let e = extent(&region, MapLayer::Data(Layer::Dem), set).unwrap();
             // A pixel of that zoom is no larger than the DEM's, one of the
             // zoom before is.
-            let px = |z: u32| set.pixel_m(46.375) / 2f64.powi(z as i32);
+            let zoom0_m = match set {
+                TileSet::WebMercator => 156_543.034 * 46.375f64.to_radians().cos(),
+                TileSet::Crs84 => 78_271.517,
+            };
+            let px = |z: u32| zoom0_m / 2f64.powi(z as i32);
             let z = e.max_zoom;
-            assert!(px(z) <= finest * 1.001 && px(z - 1) > finest, "{set:?} zoom {z}: {} m, finest {finest} m", px(z));
+            assert!(
+                z > 0 && px(z) <= finest * 1.001 && px(z - 1) > finest,
+                "{set:?} zoom {z}: {} m, {finest} m",
+                px(z)
+            );
             assert_eq!(e.bounds, region.bounds);
         }
         // The demo spans 0.25°: 1.4 pixels of Web Mercator's zoom 3, 0.7 of

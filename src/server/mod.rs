@@ -1,7 +1,8 @@
 //! `sylva serve`: the tile proxy server (axum + tokio). WMS 1.1.1/1.3.0 at
 //! `/wms`, World Wind tiles at `/tiles`, XYZ Terrarium tiles at `/xyz`, WMTS
-//! 1.0.0 (those tiles, and geographic ones) at `/wmts`, `/health` and
-//! Prometheus `/metrics`; tiles cached on disk and in memory (the cache held
+//! 1.0.0 (those tiles, and geographic ones) at `/wmts`, Cesium terrain at
+//! `/cesium`, `/health` and Prometheus `/metrics`; tiles cached on disk and
+//! in memory (the cache held
 //! to a size if configured), computed once however many clients ask
 //! (dissertation 6.5, "Preprocessing via Proxy Servers").
 //!
@@ -12,6 +13,7 @@
 //! never on the async executor; no request can panic the server (bad input
 //! is a 4xx with a message, an OGC exception report on `/wms` and `/wmts`).
 
+mod cesium;
 pub mod exception;
 mod extent;
 pub mod metrics;

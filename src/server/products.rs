@@ -1,13 +1,15 @@
 //! What the server makes: encoded products of a sample grid — a World Wind
-//! tile, a tile of a quadtree set (XYZ or WMTS), or a WMS image — their cache
-//! keys, and how each is computed (synchronously, on a worker).
+//! tile, a tile of a quadtree set (XYZ or WMTS), a Cesium terrain tile, or a
+//! WMS image — their cache keys, and how each is computed (synchronously, on
+//! a worker).
 
 use crate::cem::{self, Layer, LayerSamples, Stats};
+use crate::encode::heightmap::Children;
 use crate::encode::{self, EncodeError, Format, Samples};
 use crate::grid::quad::TileSet;
 use crate::grid::{GridError, SampleGrid, TileId};
 use crate::produce::ProduceError;
-use crate::raster::Window;
+use crate::raster::{Raster, Window};
 use crate::region::Region;
 use std::time::{Duration, Instant};
 
@@ -25,6 +27,8 @@ pub enum Encoding {
     /// A data layer drawn as an RGBA PNG picture ([`encode::data_picture`]):
     /// what a picture format (JPEG) answers for a data layer.
     Picture,
+    /// Cesium's heightmap terrain ([`encode::heightmap`]).
+    Heightmap,
 }
 
 impl Encoding {
@@ -36,6 +40,7 @@ impl Encoding {
             Encoding::Data(Format::Png16) | Encoding::Terrarium | Encoding::Rgba => "png",
             Encoding::Data(Format::Tiff) => "tif",
             Encoding::Picture => "picture.png",
+            Encoding::Heightmap => "terrain",
         }
     }
 
@@ -44,6 +49,7 @@ impl Encoding {
         match self {
             Encoding::Data(f) => f.mime(),
             Encoding::Terrarium | Encoding::Rgba | Encoding::Picture => "image/png",
+            Encoding::Heightmap => "application/octet-stream",
         }
     }
 }
@@ -70,6 +76,13 @@ pub enum Product {
         /// The tile matrix set.
         set: TileSet,
         /// Zoom, column, row (from the north).
+        zxy: (u32, u64, u64),
+    },
+    /// A Cesium terrain tile of heights.
+    Terrain {
+        /// Layer (heights).
+        layer: Layer,
+        /// Zoom, column, row (from the south).
         zxy: (u32, u64, u64),
     },
     /// A WMS image on its own grid (kept in memory, not in the cache).
@@ -100,6 +113,9 @@ impl Product {
                 };
                 Some(format!("{version}/{dir}/{}/{z}/{x}/{y}.png", layer.name()))
             }
+            Product::Terrain { layer, zxy: (z, x, y) } => {
+                Some(format!("{version}/cesium/{}/{z}/{x}/{y}.terrain", layer.name()))
+            }
             Product::Image { .. } => None,
         }
     }
@@ -120,6 +136,7 @@ impl Product {
     pub fn layer(&self) -> MapLayer {
         match self {
             Product::Tile { layer, .. } | Product::Quad { layer, .. } | Product::Image { layer, .. } => *layer,
+            Product::Terrain { layer, .. } => MapLayer::Data(*layer),
         }
     }
 
@@ -129,6 +146,7 @@ impl Product {
             Product::Tile { encoding, .. } | Product::Image { encoding, .. } => *encoding,
             Product::Quad { layer, .. } if layer.is_picture() => Encoding::Rgba,
             Product::Quad { .. } => Encoding::Terrarium,
+            Product::Terrain { .. } => Encoding::Heightmap,
         }
     }
 
@@ -140,6 +158,7 @@ impl Product {
                 Ok(region.tiles.tile_samples(*id, *halo))
             }
             Product::Quad { set, zxy: (z, x, y), .. } => set.tile_grid(*z, *x, *y),
+            Product::Terrain { zxy, .. } => super::cesium::tile_grid(region, *zxy),
             Product::Image { grid, .. } => Ok(*grid),
         }
     }
@@ -174,10 +193,13 @@ pub fn compute(region: &Region, product: &Product) -> Result<Computed, ProduceEr
         MapLayer::Relief => Ok(Computed::absent(Stats::default())),
         MapLayer::Colour => colour(region, &grid),
         MapLayer::Data(layer) if product.encoding() == Encoding::Picture => data_picture(region, &grid, layer),
-        MapLayer::Data(layer) => {
-            let (samples, stats) = samples(region, &grid, layer)?;
-            encode_samples(region, &grid, layer, product.encoding(), samples.as_ref(), stats)
-        }
+        MapLayer::Data(layer) => match product {
+            Product::Terrain { zxy, .. } => terrain(region, &grid, layer, super::cesium::children(region, layer, *zxy)),
+            _ => {
+                let (samples, stats) = samples(region, &grid, layer)?;
+                encode_samples(region, &grid, layer, product.encoding(), samples.as_ref(), stats)
+            }
+        },
     }
 }
 
@@ -219,6 +241,22 @@ pub fn encode_samples(
     // GeoTIFFs carry their position; the other encodings only the samples.
     let uniform = encoding != Encoding::Data(Format::Tiff) && uniform(&samples);
     Ok(Computed { bytes, uniform, stats, encode: start.elapsed() })
+}
+
+/// A Cesium terrain tile: heights everywhere (Cesium has no holes; the
+/// encoding puts 0 m where there is no data) and which `children` exist.
+fn terrain(region: &Region, grid: &SampleGrid, layer: Layer, children: Children) -> Result<Computed, ProduceError> {
+    let (samples, stats) = samples(region, grid, layer)?;
+    let heights = match samples {
+        Some(LayerSamples::Float(heights)) => heights,
+        None => Raster::filled(grid.width(), grid.height(), f32::NAN),
+        Some(LayerSamples::Class(_)) => {
+            return Err(EncodeError(format!("layer {} holds classes, not heights", layer.name())).into());
+        }
+    };
+    let start = Instant::now();
+    let bytes = encode::heightmap::encode(&heights, children);
+    Ok(Computed { bytes, uniform: false, stats, encode: start.elapsed() })
 }
 
 /// Every sample the same (bitwise).

@@ -1,11 +1,11 @@
 //! Routes and middleware: `/health`, `/metrics`, `/tiles.json` (the grid and
 //! region a client flies over), World Wind tiles (path and
 //! `?T=&L=&X=&Y=` forms), XYZ Terrarium tiles (zooms 0 to
-//! [`MAX_XYZ_ZOOM`]) with a TileJSON per layer, `/wms` and `/wmts`;
-//! per-request timeout (503, an OGC exception report on `/wms` and `/wmts`),
-//! URI length limit, CORS
-//! for browser clients (read-only data: any origin may GET), gzip for BIL
-//! bodies, request metrics and logs.
+//! [`MAX_XYZ_ZOOM`]) with a TileJSON per layer, `/wms`, `/wmts` and
+//! `/cesium`; per-request timeout (503, an OGC exception report on `/wms`
+//! and `/wmts`), URI length limit, CORS for browser clients (read-only data:
+//! any origin may GET), gzip for BIL and Cesium terrain bodies, request
+//! metrics and logs.
 
 use super::products::{Encoding, Product};
 use super::query::Params;
@@ -30,17 +30,20 @@ use tower_http::compression::CompressionLayer;
 use tower_http::cors::{Any, CorsLayer};
 use tower_http::trace::TraceLayer;
 
-/// Deepest zoom served in either quadtree set, XYZ or WMTS (2.4 cm pixels
-/// at the equator in Web Mercator, 1.2 cm geographic).
+/// Deepest XYZ zoom served (9.3 mm pixels at the equator), and the deepest
+/// any extent advertises (TileJSON's, WMTS's sets, Cesium's terrain), which
+/// end at the zoom as fine as a layer's finest source.
 pub const MAX_XYZ_ZOOM: u32 = 24;
 
 /// Longest request URI, bytes; a WMS request is a few hundred.
 const MAX_URI_BYTES: usize = 8192;
 
 pub fn router(state: Arc<AppState>) -> Router {
-    // Elevation grids compress well; PNG and TIFF are compressed already.
-    let bil_only = |_: StatusCode, _: axum::http::Version, h: &HeaderMap, _: &axum::http::Extensions| {
-        h.get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok()).is_some_and(|t| t.starts_with("application/bil"))
+    // Elevation grids (BIL, Cesium terrain) compress well; PNG and TIFF are
+    // compressed already.
+    let grids_only = |_: StatusCode, _: axum::http::Version, h: &HeaderMap, _: &axum::http::Extensions| {
+        let mime = h.get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok());
+        mime.is_some_and(|t| t.starts_with("application/bil") || t == Encoding::Heightmap.mime())
     };
     Router::new()
         .route("/health", get(health))
@@ -51,10 +54,12 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/tiles/{layer}/{level}/{row}/{file}", get(tile_path))
         .route("/xyz/{layer}/tiles.json", get(xyz_tilejson))
         .route("/xyz/{layer}/{z}/{x}/{file}", get(xyz))
+        .route("/cesium/{layer}/layer.json", get(super::cesium::layer_json))
+        .route("/cesium/{layer}/{z}/{x}/{file}", get(super::cesium::tile))
         .route("/wmts", get(super::wmts::handle).fallback(super::wmts::other_method))
         .route("/wmts/1.0.0/WMTSCapabilities.xml", get(super::wmts::capabilities_file))
-        .route(super::wmts::TILE_ROUTE, get(super::wmts::rest_tile))
-        .layer(CompressionLayer::new().gzip(true).compress_when(bil_only))
+        .route(super::wmts::TILE_ROUTE, get(super::wmts::rest_tile).fallback(super::wmts::other_method))
+        .layer(CompressionLayer::new().gzip(true).compress_when(grids_only))
         .layer(middleware::from_fn_with_state(state.clone(), observe))
         .layer(cors())
         .layer(TraceLayer::new_for_http())
@@ -119,6 +124,7 @@ fn route_label(path: &str) -> &'static str {
         "/tiles" | "/tiles/{layer}/{level}/{row}/{file}" | "/tiles.json" => "tiles",
         "/xyz/{layer}/{z}/{x}/{file}" | "/xyz/{layer}/tiles.json" => "xyz",
         "/wmts" | "/wmts/1.0.0/WMTSCapabilities.xml" | super::wmts::TILE_ROUTE => "wmts",
+        "/cesium/{layer}/layer.json" | "/cesium/{layer}/{z}/{x}/{file}" => "cesium",
         _ => "other",
     }
 }

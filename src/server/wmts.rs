@@ -22,7 +22,7 @@ use super::exception::{Code, Exception, escape};
 use super::extent::{Extent, extent};
 use super::products::Product;
 use super::query::Params;
-use super::routes::{MAX_XYZ_ZOOM, has_xyz_tiles, quad_tile};
+use super::routes::{has_xyz_tiles, quad_tile};
 use super::wms::capabilities::title;
 use super::wms::info::{self, InfoFormat};
 use super::wms::picture::PictureFormat;
@@ -31,6 +31,7 @@ use super::{AppState, ServeError};
 use crate::grid::mercator::HALF_WORLD_M;
 use crate::grid::quad::{SIDE, TileSet};
 use crate::region::Region;
+use axum::extract::rejection::PathRejection;
 use axum::extract::{Path, RawQuery, State};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -51,15 +52,31 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
     }
 }
 
+/// The parts of a RESTful GetTile's path, by [`TILE_ROUTE`]'s names.
+#[derive(serde::Deserialize)]
+pub struct TilePath {
+    layer: String,
+    style: String,
+    set: String,
+    z: String,
+    row: String,
+    file: String,
+}
+
 /// Answers a RESTful GetTile ([`TILE_ROUTE`]), checked as its KVP form is.
 pub async fn rest_tile(
     State(state): State<Arc<AppState>>,
-    Path((layer, style, set, z, row, file)): Path<(String, String, String, String, String, String)>,
+    path: Result<Path<TilePath>, PathRejection>,
     headers: HeaderMap,
 ) -> Response {
+    let Ok(Path(TilePath { layer, style, set, z, row, file })) = path else {
+        let e = Exception::new(Code::InvalidParameterValue, "the tile path is not UTF-8 text");
+        return exception(&e, StatusCode::BAD_REQUEST);
+    };
     let (col, ext) = file.rsplit_once('.').unwrap_or((&file, ""));
     let format = match PictureFormat::of_extension(ext) {
         Some(f) => f.mime().to_string(),
+        None if ext.is_empty() => "a file name without extension".to_string(),
         None => format!(".{ext}"),
     };
     let params = Params::of([
@@ -143,8 +160,8 @@ struct TileRequest {
     picture: Option<PictureFormat>,
 }
 
-/// The deepest zoom of each matrix set.
-type Deepest<'a> = dyn Fn(TileSet) -> u32 + 'a;
+/// The deepest zoom of each matrix set offered (none: a set not offered).
+type Deepest<'a> = dyn Fn(TileSet) -> Option<u32> + 'a;
 
 /// Reads a KVP query (keys in any case) to matrix sets ending at the zooms
 /// `deepest` gives; none at all asks for the capabilities (GDAL's `WMTS:` of
@@ -211,12 +228,11 @@ fn tile_request(params: &Params, deepest: &Deepest, needs: Needs) -> Result<Tile
             invalid("FORMAT", format!("{} tiles are {}, not {format:?}", layer.name(), offered.join(" or ")))
         })?;
     let name = required(params, "TILEMATRIXSET")?;
-    let set = TileSet::parse(name).ok_or_else(|| {
-        let names: Vec<&str> = TileSet::ALL.iter().map(|s| s.name()).collect();
+    let (set, last) = TileSet::parse(name).and_then(|set| Some((set, deepest(set)?))).ok_or_else(|| {
+        let names: Vec<&str> = TileSet::ALL.iter().filter(|&&s| deepest(s).is_some()).map(|s| s.name()).collect();
         invalid("TILEMATRIXSET", format!("no tile matrix set {name:?}: {}", names.join(", ")))
     })?;
     let z = number(params, "TILEMATRIX")?;
-    let last = deepest(set);
     let z = u32::try_from(z)
         .ok()
         .filter(|&z| z <= last)
@@ -274,16 +290,18 @@ fn offered() -> impl Iterator<Item = MapLayer> {
     LAYERS.into_iter().filter(|&l| has_xyz_tiles(l))
 }
 
-/// The matrix sets that hold the region (not Web Mercator around a pole).
-fn sets(region: &Region) -> impl Iterator<Item = TileSet> + '_ {
-    TileSet::ALL.into_iter().filter(|&set| offered().any(|l| extent(region, l, set).is_some()))
+/// The matrix sets offered, those that hold the region (not Web Mercator
+/// around a pole), and the deepest zoom of each.
+fn sets(region: &Region) -> impl Iterator<Item = (TileSet, u32)> + '_ {
+    TileSet::ALL.into_iter().filter_map(|set| Some((set, deepest(region, set)?)))
 }
 
 /// The deepest zoom of a matrix set: the deepest a layer's sources are as
 /// fine as (clients such as GDAL take the last matrix for the full
-/// resolution; they draw deeper views from it).
-fn deepest(region: &Region, set: TileSet) -> u32 {
-    offered().filter_map(|l| extent(region, l, set)).map(|e| e.max_zoom).max().unwrap_or(MAX_XYZ_ZOOM)
+/// resolution; they draw deeper views from it); none where the set does not
+/// hold the region.
+fn deepest(region: &Region, set: TileSet) -> Option<u32> {
+    offered().filter_map(|l| extent(region, l, set)).map(|e| e.max_zoom).max()
 }
 
 /// A layer's tile encodings: Terrarium PNG heights (`None`), or the
@@ -329,7 +347,7 @@ fn capabilities(state: &AppState, headers: &HeaderMap) -> Response {
 /// The capabilities document of `region` served under `base`.
 fn document(region: &Region, base: &str) -> String {
     let layers: String = offered().map(|l| layer(region, l, base)).collect();
-    let matrix_sets: String = sets(region).map(|set| matrix_set(set, deepest(region, set))).collect();
+    let matrix_sets: String = sets(region).map(|(set, deepest)| matrix_set(set, deepest)).collect();
     format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
 <Capabilities xmlns="http://www.opengis.net/wmts/1.0" xmlns:ows="http://www.opengis.net/ows/1.1" xmlns:xlink="http://www.w3.org/1999/xlink" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengis.net/wmts/1.0 http://schemas.opengis.net/wmts/1.0/wmtsGetCapabilities_response.xsd" version="1.0.0">
@@ -364,7 +382,7 @@ fn layer(region: &Region, l: MapLayer, base: &str) -> String {
         "PNG with transparency where there is no data, or JPEG on white.".to_string()
     } else {
         let zooms: Vec<String> = sets(region)
-            .filter_map(|set| Some(format!("zoom {} of {}", extent(region, l, set)?.max_zoom, set.name())))
+            .filter_map(|(set, _)| Some(format!("zoom {} of {}", extent(region, l, set)?.max_zoom, set.name())))
             .collect();
         format!(
             "Heights in metres, Terrarium PNG: h = R * 256 + G + B / 256 - 32768 (black: no data). Tiles deeper than {} are resampled from the sources.",
@@ -451,9 +469,10 @@ fn matrix_set(set: TileSet, deepest: u32) -> String {
 mod tests {
     use super::*;
     use crate::cem::Layer;
+    use crate::server::MAX_XYZ_ZOOM;
 
     fn tile(query: &str) -> Result<TileRequest, Exception> {
-        match parse(query, &|_| MAX_XYZ_ZOOM)? {
+        match parse(query, &|_| Some(MAX_XYZ_ZOOM))? {
             Request::Tile(t) => Ok(t),
             other => panic!("{other:?}"),
         }
@@ -462,7 +481,7 @@ mod tests {
     const RELIEF: &str = "SERVICE=WMTS&REQUEST=GetTile&VERSION=1.0.0&LAYER=relief&STYLE=default&FORMAT=image/jpeg&TILEMATRIXSET=WebMercatorQuad&TILEMATRIX=12&TILEROW=1449&TILECOL=2161";
 
     #[test]
-    fn a_get_tile_is_the_xyz_tile_of_its_matrix_column_and_row() {
+    fn a_get_tile_is_the_tile_of_its_set_matrix_column_and_row() {
         let t = tile(RELIEF).unwrap();
         let relief = TileRequest {
             layer: MapLayer::Relief,
@@ -479,19 +498,19 @@ mod tests {
         // Geographic tiles: twice as many columns as rows.
         let crs84 = RELIEF.replace("WebMercatorQuad", "WorldCRS84Quad").replace("TILECOL=2161", "TILECOL=8191");
         assert_eq!(tile(&crs84).unwrap(), TileRequest { set: TileSet::Crs84, zxy: (12, 8191, 1449), ..relief });
-        let none = |_| 0;
+        let none = |_| Some(0);
         assert_eq!(parse("SERVICE=WMTS&REQUEST=GetCapabilities", &none).unwrap(), Request::Capabilities);
         assert_eq!(parse("", &none).unwrap(), Request::Capabilities);
         // The pixel of a GetFeatureInfo.
         let info = format!("{}&I=255&J=0&INFOFORMAT=application/json", RELIEF.replace("GetTile", "GetFeatureInfo"));
-        let Request::FeatureInfo(t, pixel) = parse(&info, &|_| MAX_XYZ_ZOOM).unwrap() else { panic!("{info}") };
+        let Request::FeatureInfo(t, pixel) = parse(&info, &|_| Some(MAX_XYZ_ZOOM)).unwrap() else { panic!("{info}") };
         assert_eq!((t.zxy, pixel), ((12, 2161, 1449), Pixel { at: (255, 0), format: InfoFormat::Json }));
     }
 
     #[test]
     fn wrong_requests_name_the_code_and_the_parameter() {
         let fails = |query: String, code: Code, locator: &str| {
-            let e = parse(&query, &|_| MAX_XYZ_ZOOM).unwrap_err();
+            let e = parse(&query, &|_| Some(MAX_XYZ_ZOOM)).unwrap_err();
             assert_eq!((e.code, e.locator.as_deref()), (code, Some(locator)), "{query}: {e}");
         };
         let with = |key: &str, value: &str| RELIEF.replace(&format!("{key}="), &format!("{key}={value}&X{key}="));
@@ -506,12 +525,16 @@ mod tests {
         fails(format!("{info}&I=0&J=0").replace("text/plain", "image/png"), Code::InvalidParameterValue, "INFOFORMAT");
         // FORMAT may be left out of a GetFeatureInfo (GDAL does), not a GetTile.
         fails(RELIEF.replace("&FORMAT=image/jpeg", ""), Code::MissingParameterValue, "FORMAT");
-        assert!(parse(&format!("{info}&I=0&J=0").replace("&FORMAT=image/jpeg", ""), &|_| MAX_XYZ_ZOOM).is_ok());
+        assert!(parse(&format!("{info}&I=0&J=0").replace("&FORMAT=image/jpeg", ""), &|_| Some(MAX_XYZ_ZOOM)).is_ok());
         // Each matrix set ends at its deepest zoom served.
-        let deepest = |set| if set == TileSet::WebMercator { 11 } else { 12 };
+        let deepest = |set| Some(if set == TileSet::WebMercator { 11 } else { 12 });
         let e = parse(RELIEF, &deepest).unwrap_err();
         assert_eq!((e.code, e.locator.as_deref()), (Code::InvalidParameterValue, Some("TILEMATRIX")));
         assert!(parse(&RELIEF.replace("WebMercatorQuad", "WorldCRS84Quad"), &deepest).is_ok());
+        // A set not offered (Web Mercator around a pole) is no set.
+        let polar = |set| (set == TileSet::Crs84).then_some(12);
+        let e = parse(RELIEF, &polar).unwrap_err();
+        assert_eq!((e.code, e.locator.as_deref()), (Code::InvalidParameterValue, Some("TILEMATRIXSET")));
         let crs84 = |key: &str, value: &str| {
             let query = with(key, value).replace("WebMercatorQuad", "WorldCRS84Quad");
             fails(query, Code::TileOutOfRange, key);
@@ -606,9 +629,10 @@ mod tests {
         for set_node in set_nodes {
             let set = TileSet::parse(&child(set_node, "Identifier")).unwrap();
             let matrices: Vec<_> = set_node.children().filter(|n| n.has_tag_name("TileMatrix")).collect();
-            assert_eq!(matrices.len() as u32, deepest(&region, set) + 1);
+            let deepest = deepest(&region, set).unwrap();
+            assert_eq!(matrices.len() as u32, deepest + 1);
             let finest = extent(&region, MapLayer::Relief, set).unwrap().max_zoom;
-            assert_eq!(deepest(&region, set), finest, "the map's pixels are the finest source's");
+            assert_eq!(deepest, finest, "the map's pixels are the finest source's");
             let scale: f64 = child(matrices[0], "ScaleDenominator").parse().unwrap();
             let world_m = scale * 0.000_28 * 256.0 * set.matrix(0).0 as f64;
             assert!((world_m - 2.0 * HALF_WORLD_M).abs() < 1e-3, "{set:?}: {world_m} m");

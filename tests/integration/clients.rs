@@ -346,7 +346,7 @@ fn gdal_reads_the_geographic_wmts_to_the_region_and_a_pixel() {
 }
 
 #[test]
-fn owslib_reads_the_wmts_and_its_tiles_are_the_xyz_tiles() {
+fn owslib_reads_both_wmts_matrix_sets_and_their_tiles() {
     let dir = TempDir::new("client-owslib-wmts");
     let server = Server::start(None, &dir.join("cache"));
     let out = dir.join("tile.jpg");
@@ -372,4 +372,55 @@ fn owslib_reads_the_wmts_and_its_tiles_are_the_xyz_tiles() {
     let rest = server.get("/wmts/1.0.0/relief/default/WorldCRS84Quad/12/992/4326.png");
     assert_eq!((rest.status, rest.header("content-type")), (200, Some("image/png")));
     assert_eq!(std::fs::read(&geographic).unwrap(), rest.body);
+}
+
+/// The directory with CesiumJS's engine and the script that reads a terrain
+/// tile with it.
+fn cesium_dir() -> PathBuf {
+    let dir = common::repo().join("tests/cesium");
+    assert!(
+        dir.join("node_modules/@cesium/engine").is_dir(),
+        "no CesiumJS in {dir:?}: install it with `bash scripts/setup.sh`"
+    );
+    dir
+}
+
+#[test]
+fn cesium_reads_the_terrain_and_its_heights_are_the_wms_map_at_its_samples() {
+    let dir = TempDir::new("client-cesium");
+    let server = Server::start(None, &dir.join("cache"));
+    let layer_json: serde_json::Value = serde_json::from_slice(&server.get("/cesium/cem/layer.json").body).unwrap();
+    let z = layer_json["maxzoom"].as_u64().unwrap() as u32;
+    // The deepest tile holding the demo's middle (rows from the south).
+    let size = 180.0 / f64::from(1u32 << z);
+    let (x, y) = (((10.125 + 180.0) / size) as u64, ((46.375 + 90.0) / size) as u64);
+    let args = [format!("{}/cesium/cem", server.base), z.to_string(), x.to_string(), y.to_string()];
+    let out = run(Command::new("node").current_dir(cesium_dir()).arg("terrain.mjs").args(&args), "node (CesiumJS)");
+    let doc: serde_json::Value = serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"));
+    assert_eq!(doc["available"], true, "{out:.200}");
+    assert_eq!(doc["children"], serde_json::json!([false, false, false, false]), "the deepest zoom has no children");
+    // The WMS map whose pixel centres are the tile's samples: its box is the
+    // tile's grown by half a sample spacing.
+    let d = size / 64.0;
+    let (west, south) = (-180.0 + x as f64 * size - d / 2.0, -90.0 + y as f64 * size - d / 2.0);
+    let (east, north) = (west + size + d, south + size + d);
+    let map = server.get(&format!(
+        "/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=cem&STYLES=&CRS=CRS:84\
+         &BBOX={west},{south},{east},{north}&WIDTH=65&HEIGHT=65&FORMAT=application/bil32"
+    ));
+    assert_eq!((map.status, map.body.len()), (200, 65 * 65 * 4), "{}", map.text());
+    let expected = map.body.chunks(4).map(|b| f64::from(f32::from_le_bytes(b.try_into().unwrap())));
+    let heights = doc["heights"].as_array().unwrap();
+    assert_eq!(heights.len(), 65 * 65);
+    // Half a 0.2 m step, and rounding in Cesium's interpolation.
+    for (i, (got, want)) in heights.iter().zip(expected).enumerate() {
+        let got = got.as_f64().unwrap();
+        assert!((got - want).abs() <= 0.1 + 1e-3, "sample {i}: Cesium {got} m, the map {want} m");
+    }
+    // A tile one zoom up has the tile as a child, where Cesium looks for it.
+    let parent = [args[0].clone(), (z - 1).to_string(), (x / 2).to_string(), (y / 2).to_string()];
+    let out = run(Command::new("node").current_dir(cesium_dir()).arg("terrain.mjs").args(&parent), "node (CesiumJS)");
+    let doc: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let child = (x % 2 + 2 * (y % 2)) as usize;
+    assert_eq!(doc["children"][child], true, "{:?}", doc["children"]);
 }

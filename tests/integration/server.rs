@@ -392,6 +392,10 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
         ("/wmts/1.0.0/dem/default/WorldCRS84Quad/3/0/16.png", "TileOutOfRange"),
         ("/wmts/1.0.0/dem/fancy/WorldCRS84Quad/3/0/0.png", "STYLE"),
         ("/wmts/1.0.0/dem/default/WorldCRS84Quad/3/0/0.tif", "FORMAT"),
+        ("/cesium/cover/layer.json", "no terrain layer"),
+        ("/wmts/1.0.0/dem/default/WorldCRS84Quad/3/0/%FF.png", "not UTF-8"),
+        ("/wmts/1.0.0/relief/default/WorldCRS84Quad/3/0/0", "without extension"),
+        ("/cesium/relief/0/0/0.terrain", "no terrain layer"),
         (
             "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=relief&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=application/bil16",
             "InvalidFormat",
@@ -418,6 +422,12 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
         "/tiles/cem/3/99999999999999999999/1_1.bil",
         "/xyz/dem/3/1/99999999999999999999.png",
         "/wmts/1.0.0/dem/default/WorldCRS84Quad/3/0/0.png",
+        "/cesium/cem/0/2/0.terrain",
+        "/cesium/cem/1/0/0.terrain",
+        "/cesium/cem/30/0/0.terrain",
+        "/cesium/cem/99999999999/0/0.terrain",
+        "/cesium/cem/0/0/0.png",
+        "/cesium/cem/0/0/x.terrain",
         "/nowhere",
     ];
     for path in past_any_tile {
@@ -502,6 +512,42 @@ fn tiles_carry_etags_cache_control_timing_and_gzip() {
     let raw = crate::http::get_raw(&format!("{}{}", server.base, path.replace(".png", ".bil")));
     assert_eq!(raw.header("content-encoding"), Some("gzip"));
     assert!(raw.body.len() < 513 * 513 * 2);
+}
+
+#[test]
+fn cesium_terrain_covers_both_hemispheres_at_zoom_0_and_is_gzipped() {
+    let dir = TempDir::new("srv-cesium");
+    let server = Server::start(None, &dir.join("cache"));
+    let doc: serde_json::Value = serde_json::from_slice(&server.get("/cesium/dem/layer.json").body).unwrap();
+    assert_eq!((doc["format"].as_str(), doc["scheme"].as_str()), (Some("heightmap-1.0"), Some("tms")));
+    assert_eq!(doc["tiles"][0], "{z}/{x}/{y}.terrain");
+    assert_eq!(doc["available"][0][0], serde_json::json!({ "startX": 0, "startY": 0, "endX": 1, "endY": 0 }));
+    // Cesium starts from both zoom-0 tiles: the western hemisphere holds no
+    // data (the ellipsoid, 0 m: value 5000), the eastern the demo.
+    let value = |b: &[u8], i: usize| u16::from_le_bytes([b[2 * i], b[2 * i + 1]]);
+    for x in [0, 1] {
+        let t = server.get(&format!("/cesium/dem/0/{x}/0.terrain"));
+        assert_eq!((t.status, t.body.len()), (200, 65 * 65 * 2 + 2), "{}", t.text());
+        assert_eq!(t.header("content-type"), Some("application/octet-stream"));
+        assert!((0..65 * 65).all(|i| value(&t.body, i) == 5000), "zoom 0 is coarser than the demo");
+        // Only the eastern one has a child: its north-west one (0–90° E,
+        // 0–90° N), Cesium's bit 4.
+        assert_eq!(t.body[65 * 65 * 2], if x == 1 { 4 } else { 0 });
+    }
+    // A tile over the demo holds its heights; BIL-like bodies are gzipped.
+    let z = doc["maxzoom"].as_u64().unwrap() as u32;
+    let size = 180.0 / f64::from(1u32 << z);
+    let (x, y) = (((10.125 + 180.0) / size) as u64, ((46.375 + 90.0) / size) as u64);
+    let path = format!("/cesium/dem/{z}/{x}/{y}.terrain");
+    let heights: Vec<f64> =
+        (0..65 * 65).map(|i| sylva::encode::heightmap::height(value(&server.get(&path).body, i))).collect();
+    assert!(heights.iter().all(|h| (500.0..4000.0).contains(h)), "{:?}", &heights[..4]);
+    let raw = crate::http::get_raw(&format!("{}{path}", server.base));
+    assert!(
+        raw.header("content-encoding") == Some("gzip") && raw.body.len() < 65 * 65 * 2,
+        "{:?}",
+        raw.header("content-encoding")
+    );
 }
 
 #[test]
@@ -860,7 +906,10 @@ fn wms_and_wmts_by_another_method_than_get_is_an_ogc_report() {
     let dir = TempDir::new("srv-post");
     let server = Server::start(None, &dir.join("cache"));
     let agent: ureq::Agent = ureq::Agent::config_builder().http_status_as_error(false).build().into();
-    for (service, report) in [("wms", "ServiceExceptionReport"), ("wmts", "<ExceptionReport")] {
+    let rest = "wmts/1.0.0/dem/default/WorldCRS84Quad/3/0/0.png";
+    for (service, report) in
+        [("wms", "ServiceExceptionReport"), ("wmts", "<ExceptionReport"), (rest, "<ExceptionReport")]
+    {
         let mut response = agent.post(&format!("{}/{service}", server.base)).send_empty().unwrap();
         assert_eq!(response.status().as_u16(), 405);
         assert_eq!(response.headers().get("allow").and_then(|v| v.to_str().ok()), Some("GET, HEAD"));
