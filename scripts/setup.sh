@@ -37,9 +37,13 @@ if [ ${#need[@]} -gt 0 ]; then
   $sudo apt-get update -qq
   $sudo env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${need[@]}"
 fi
-# CesiumJS's engine at the version tests/cesium pins, for the terrain tests.
+# CesiumJS's engine as tests/cesium's lock pins it, for the terrain tests
+# (again whenever the lock changes).
 cesium="$(dirname "$0")/../tests/cesium"
-[ -d "$cesium/node_modules/@cesium/engine" ] || npm ci --prefix "$cesium" --no-audit --no-fund --loglevel=error
+if ! cmp -s "$cesium/package-lock.json" "$cesium/node_modules/.installed-lock.json"; then
+  npm ci --prefix "$cesium" --no-audit --no-fund --loglevel=error
+  cp "$cesium/package-lock.json" "$cesium/node_modules/.installed-lock.json"
+fi
 if ! command -v cargo >/dev/null; then
   [ -x "$HOME/.cargo/bin/cargo" ] || curl -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal
   echo "Rust installed in ~/.cargo; run: source ~/.cargo/env" >&2

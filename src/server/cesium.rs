@@ -15,13 +15,13 @@
 
 use super::extent::finest_zoom;
 use super::products::{Encoding, Product};
-use super::routes::meta;
+use super::routes::{level_number, meta, whole_number};
 use super::wms::request::MapLayer;
 use super::{AppState, ServeError};
 use crate::cem::Layer;
 use crate::encode::heightmap::Children;
 use crate::grid::quad::{MAX_ZOOM, SIDE, TileSet, geographic_box};
-use crate::grid::{GridError, SampleGrid};
+use crate::grid::{BBox, GridError, SampleGrid};
 use crate::region::Region;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, header};
@@ -48,9 +48,10 @@ pub async fn tile(
     headers: HeaderMap,
 ) -> Result<Response, ServeError> {
     let layer = terrain_layer(&layer)?;
-    let y = file.strip_suffix(".terrain").ok_or(ServeError::NotFound)?;
-    let number = |text: &str| text.parse::<u64>().map_err(|_| ServeError::NotFound);
-    let zxy = (u32::try_from(number(&z)?).map_err(|_| ServeError::NotFound)?, number(&x)?, number(y)?);
+    let y = file
+        .strip_suffix(".terrain")
+        .ok_or_else(|| ServeError::BadRequest(format!("terrain tiles are {{y}}.terrain, not {file:?}")))?;
+    let zxy = (level_number(&z, "zoom")?, whole_number(&x, "x")?, whole_number(y, "y")?);
     if !exists(state.region(), layer, zxy) {
         return Err(ServeError::NotFound);
     }
@@ -84,23 +85,30 @@ pub fn deepest(region: &Region, layer: Layer) -> u32 {
     finest_zoom(region, MapLayer::Data(layer), zoom0_m)
 }
 
-/// The first and last (x, y) of the tiles of zoom `z` that exist: both at
-/// zoom 0, those over the region to the deepest zoom, none deeper.
-fn available(region: &Region, layer: Layer, z: u32) -> Option<((u64, u64), (u64, u64))> {
+/// The tiles of zoom `z` that exist, as ranges of (x, y) from the first
+/// to the last: both at zoom 0, those over the region to the deepest zoom
+/// (a range on each side of the antimeridian where the region crosses it),
+/// none deeper.
+fn available(region: &Region, layer: Layer, z: u32) -> Vec<((u64, u64), (u64, u64))> {
     if z == 0 {
-        return Some(((0, 0), (1, 0)));
+        return vec![((0, 0), (1, 0))];
     }
     if z > deepest(region, layer) {
-        return None;
+        return Vec::new();
     }
-    let ((x0, r0), (x1, r1)) = TileSet::Crs84.tiles_over(&region.bounds.on_the_globe(), z);
     let rows = TileSet::Crs84.matrix(z).1;
-    Some(((x0, rows - 1 - r1), (x1, rows - 1 - r0)))
+    let globe = BBox { west: -180.0, south: -90.0, east: 180.0, north: 90.0 };
+    let ranges = region.bounds.clipped_to(&globe).into_iter().map(|part| {
+        let ((x0, r0), (x1, r1)) = TileSet::Crs84.tiles_over(&part, z);
+        ((x0, rows - 1 - r1), (x1, rows - 1 - r0))
+    });
+    ranges.collect()
 }
 
 /// Whether tile `(z, x, y)` exists.
 pub fn exists(region: &Region, layer: Layer, (z, x, y): (u32, u64, u64)) -> bool {
-    available(region, layer, z).is_some_and(|((x0, y0), (x1, y1))| (x0..=x1).contains(&x) && (y0..=y1).contains(&y))
+    let within = |&((x0, y0), (x1, y1)): &((u64, u64), (u64, u64))| (x0..=x1).contains(&x) && (y0..=y1).contains(&y);
+    available(region, layer, z).iter().any(within)
 }
 
 /// Which of tile `(z, x, y)`'s four children exist.
@@ -119,10 +127,9 @@ pub fn children(region: &Region, layer: Layer, (z, x, y): (u32, u64, u64)) -> Ch
 pub fn document(region: &Region, layer: Layer) -> Value {
     let b = region.bounds.on_the_globe();
     let deepest = deepest(region, layer);
-    let available: Vec<Value> = (0..=deepest)
-        .filter_map(|z| available(region, layer, z))
-        .map(|((x0, y0), (x1, y1))| json!([{ "startX": x0, "startY": y0, "endX": x1, "endY": y1 }]))
-        .collect();
+    let range = |&((x0, y0), (x1, y1)): &((u64, u64), (u64, u64))| json!({ "startX": x0, "startY": y0, "endX": x1, "endY": y1 });
+    let available: Vec<Value> =
+        (0..=deepest).map(|z| Value::Array(available(region, layer, z).iter().map(range).collect())).collect();
     json!({
         "tilejson": "2.1.0",
         "name": format!("{} {}", region.name, layer.name()),
@@ -160,7 +167,7 @@ mod tests {
         assert_eq!(doc["available"][1][0], json!({ "startX": 2, "startY": 1, "endX": 2, "endY": 1 }));
         // Each existing tile's parent exists and says so in its mask.
         for z in 1..=deepest {
-            let ((x0, y0), (x1, y1)) = available(&region, Layer::Cem, z).unwrap();
+            let [((x0, y0), (x1, y1))] = available(&region, Layer::Cem, z)[..] else { panic!("one range") };
             for (x, y) in (x0..=x1).flat_map(|x| (y0..=y1).map(move |y| (x, y))) {
                 let parent = (z - 1, x / 2, y / 2);
                 assert!(exists(&region, Layer::Cem, parent), "{z}/{x}/{y}");
@@ -171,6 +178,22 @@ mod tests {
         assert!(!exists(&region, Layer::Cem, (deepest + 1, 0, 0)));
         assert_eq!(children(&region, Layer::Cem, (deepest, 0, 0)), Children(0));
         assert!(!exists(&region, Layer::Cem, (1, 0, 0)));
+    }
+
+    #[test]
+    fn a_region_across_the_antimeridian_has_tiles_on_both_sides_only() {
+        let mut region = crate::config::load(None).unwrap();
+        region.bounds = BBox { west: 179.5, south: -17.0, east: 180.5, north: -16.0 };
+        let doc = document(&region, Layer::Dem);
+        // Zoom 8: tiles of 0.703125°; 179.5° E is column 511, 180.5° (−179.5°)
+        // column 0; −17° to −16° are rows 103 to 105 from the south.
+        let z8 = json!([
+            { "startX": 0, "startY": 103, "endX": 0, "endY": 105 },
+            { "startX": 511, "startY": 103, "endX": 511, "endY": 105 }
+        ]);
+        assert_eq!(doc["available"][8], z8);
+        assert!(exists(&region, Layer::Dem, (8, 511, 104)) && exists(&region, Layer::Dem, (8, 0, 103)));
+        assert!(!exists(&region, Layer::Dem, (8, 256, 103)), "not the whole band of latitudes");
     }
 
     #[test]

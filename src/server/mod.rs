@@ -2,9 +2,8 @@
 //! `/wms`, World Wind tiles at `/tiles`, XYZ Terrarium tiles at `/xyz`, WMTS
 //! 1.0.0 (those tiles, and geographic ones) at `/wmts`, Cesium terrain at
 //! `/cesium`, `/health` and Prometheus `/metrics`; tiles cached on disk and
-//! in memory (the cache held
-//! to a size if configured), computed once however many clients ask
-//! (dissertation 6.5, "Preprocessing via Proxy Servers").
+//! in memory (the cache held to a size if configured), computed once however
+//! many clients ask (dissertation 6.5, "Preprocessing via Proxy Servers").
 //!
 //! [`router`] builds the application without a socket, so tests drive it in
 //! process; [`serve`] binds it and shuts down gracefully on SIGTERM/SIGINT.

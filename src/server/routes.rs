@@ -167,7 +167,7 @@ async fn tile_path(
 
 /// A tile coordinate: a whole number (past any tile where too large to
 /// hold: no such tile), or the request is bad.
-fn whole_number(text: &str, what: &str) -> Result<u64, ServeError> {
+pub(super) fn whole_number(text: &str, what: &str) -> Result<u64, ServeError> {
     text.parse().map_err(|_| match !text.is_empty() && text.bytes().all(|b| b.is_ascii_digit()) {
         true => ServeError::NotFound,
         false => ServeError::BadRequest(format!("{what} must be a whole number, not {text:?}")),
@@ -175,7 +175,7 @@ fn whole_number(text: &str, what: &str) -> Result<u64, ServeError> {
 }
 
 /// A level or zoom: a whole number (past any level: no such tile).
-fn level_number(text: &str, what: &str) -> Result<u32, ServeError> {
+pub(super) fn level_number(text: &str, what: &str) -> Result<u32, ServeError> {
     u32::try_from(whole_number(text, what)?).map_err(|_| ServeError::NotFound)
 }
 

@@ -73,12 +73,11 @@ pub async fn rest_tile(
         let e = Exception::new(Code::InvalidParameterValue, "the tile path is not UTF-8 text");
         return exception(&e, StatusCode::BAD_REQUEST);
     };
-    let (col, ext) = file.rsplit_once('.').unwrap_or((&file, ""));
-    let format = match PictureFormat::of_extension(ext) {
-        Some(f) => f.mime().to_string(),
-        None if ext.is_empty() => "a file name without extension".to_string(),
-        None => format!(".{ext}"),
+    let Some((col, ext)) = file.rsplit_once('.') else {
+        let message = format!("the tile's file {file:?} needs an extension: {{TileCol}}.png or .jpg");
+        return exception(&invalid("FORMAT", message), StatusCode::BAD_REQUEST);
     };
+    let format = PictureFormat::of_extension(ext).map_or_else(|| format!(".{ext}"), |f| f.mime().to_string());
     let params = Params::of([
         ("LAYER", layer.as_str()),
         ("STYLE", &style),

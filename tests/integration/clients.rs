@@ -391,9 +391,7 @@ fn cesium_reads_the_terrain_and_its_heights_are_the_wms_map_at_its_samples() {
     let server = Server::start(None, &dir.join("cache"));
     let layer_json: serde_json::Value = serde_json::from_slice(&server.get("/cesium/cem/layer.json").body).unwrap();
     let z = layer_json["maxzoom"].as_u64().unwrap() as u32;
-    // The deepest tile holding the demo's middle (rows from the south).
-    let size = 180.0 / f64::from(1u32 << z);
-    let (x, y) = (((10.125 + 180.0) / size) as u64, ((46.375 + 90.0) / size) as u64);
+    let (size, x, y) = common::demo_middle_tile(z);
     let args = [format!("{}/cesium/cem", server.base), z.to_string(), x.to_string(), y.to_string()];
     let out = run(Command::new("node").current_dir(cesium_dir()).arg("terrain.mjs").args(&args), "node (CesiumJS)");
     let doc: serde_json::Value = serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"));

@@ -25,6 +25,14 @@ pub fn region(config: &str) -> Region {
     }
 }
 
+/// The tile of the geographic quadtree's zoom `z` (two 180° tiles at zoom
+/// 0) holding the demo's middle, 10.125° E, 46.375° N: its side in degrees,
+/// its column and its row counted from the south.
+pub fn demo_middle_tile(z: u32) -> (f64, u64, u64) {
+    let size = 180.0 / f64::from(1u32 << z);
+    (size, ((10.125 + 180.0) / size) as u64, ((46.375 + 90.0) / size) as u64)
+}
+
 /// The embedded demo region.
 pub fn demo() -> Region {
     match sylva::config::load(None) {

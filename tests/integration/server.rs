@@ -394,7 +394,9 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
         ("/wmts/1.0.0/dem/default/WorldCRS84Quad/3/0/0.tif", "FORMAT"),
         ("/cesium/cover/layer.json", "no terrain layer"),
         ("/wmts/1.0.0/dem/default/WorldCRS84Quad/3/0/%FF.png", "not UTF-8"),
-        ("/wmts/1.0.0/relief/default/WorldCRS84Quad/3/0/0", "without extension"),
+        ("/wmts/1.0.0/relief/default/WorldCRS84Quad/3/0/0", "needs an extension"),
+        ("/cesium/cem/0/0/0.png", "{y}.terrain"),
+        ("/cesium/cem/0/0/x.terrain", "y must be a whole number"),
         ("/cesium/relief/0/0/0.terrain", "no terrain layer"),
         (
             "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=relief&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=application/bil16",
@@ -426,8 +428,6 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
         "/cesium/cem/1/0/0.terrain",
         "/cesium/cem/30/0/0.terrain",
         "/cesium/cem/99999999999/0/0.terrain",
-        "/cesium/cem/0/0/0.png",
-        "/cesium/cem/0/0/x.terrain",
         "/nowhere",
     ];
     for path in past_any_tile {
@@ -536,8 +536,7 @@ fn cesium_terrain_covers_both_hemispheres_at_zoom_0_and_is_gzipped() {
     }
     // A tile over the demo holds its heights; BIL-like bodies are gzipped.
     let z = doc["maxzoom"].as_u64().unwrap() as u32;
-    let size = 180.0 / f64::from(1u32 << z);
-    let (x, y) = (((10.125 + 180.0) / size) as u64, ((46.375 + 90.0) / size) as u64);
+    let (_, x, y) = common::demo_middle_tile(z);
     let path = format!("/cesium/dem/{z}/{x}/{y}.terrain");
     let heights: Vec<f64> =
         (0..65 * 65).map(|i| sylva::encode::heightmap::height(value(&server.get(&path).body, i))).collect();
@@ -634,8 +633,8 @@ fn geographic_wmts_tiles_are_the_wms_map_of_their_box_and_cached() {
     let dir = TempDir::new("srv-wmts-crs84");
     let server = Server::start(None, &dir.join("cache"));
     let z = 12u32;
-    let size = 180.0 / f64::from(1u32 << z);
-    let (col, row) = (((10.125 + 180.0) / size) as u64, ((90.0 - 46.375) / size) as u64);
+    let (size, col, from_south) = common::demo_middle_tile(z);
+    let row = (1 << z) - 1 - from_south;
     let rest = server.get(&format!("/wmts/1.0.0/cem/default/WorldCRS84Quad/{z}/{row}/{col}.png"));
     assert_eq!((rest.status, rest.header("content-type")), (200, Some("image/png")), "{}", rest.text());
     let kvp = server.get(&format!(
