@@ -75,3 +75,13 @@ impl Stats {
         self.time.iter().sum()
     }
 }
+
+/// The runs and times of two computations of one request.
+impl std::ops::AddAssign for Stats {
+    fn add_assign(&mut self, other: Stats) {
+        for i in 0..self.runs.len() {
+            self.runs[i] += other.runs[i];
+            self.time[i] += other.time[i];
+        }
+    }
+}

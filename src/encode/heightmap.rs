@@ -2,8 +2,10 @@
 //! `CesiumTerrainProvider` reads): the tile's samples as little-endian
 //! `u16`, row 0 north, `h = v / 5 − 1000` metres (0.2 m steps, −1000 to
 //! 12,107 m, clamped), then one byte saying which of the four children
-//! exist and one byte of water mask (0: no water drawn). Cesium needs a
-//! height everywhere in a tile it has: nodata is 0 m, the ellipsoid.
+//! exist, then the water mask: one byte (0: no water, 255: all water) or a
+//! square of bytes over the tile's area, row 0 north (255 water, 0 land).
+//! Cesium needs a height everywhere in a tile it has: nodata is 0 m, the
+//! ellipsoid.
 
 use crate::raster::Raster;
 
@@ -29,13 +31,14 @@ impl Children {
     pub const NORTH_EAST: u8 = 8;
 }
 
-/// Encodes a tile's heights and which children it has.
-pub fn encode(heights: &Raster<f32>, children: Children) -> Vec<u8> {
-    let mut out = Vec::with_capacity(2 * heights.data().len() + 2);
+/// Encodes a tile's heights, which children it has and its water mask.
+pub fn encode(heights: &Raster<f32>, children: Children, water: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(2 * heights.data().len() + 1 + water.len());
     for &h in heights.data() {
         out.extend_from_slice(&value(h).to_le_bytes());
     }
-    out.extend_from_slice(&[children.0, 0]);
+    out.push(children.0);
+    out.extend_from_slice(water);
     out
 }
 
@@ -67,9 +70,9 @@ mod tests {
     #[test]
     fn samples_run_row_by_row_from_the_north_then_the_masks() {
         let heights = Raster::from_vec(2, 2, vec![0.0, 1.0, 2.0, f32::NAN]).unwrap();
-        let bytes = encode(&heights, Children(Children::NORTH_WEST | Children::SOUTH_EAST));
+        let bytes = encode(&heights, Children(Children::NORTH_WEST | Children::SOUTH_EAST), &[0, 255, 255, 0]);
         let values: Vec<u16> = bytes[..8].chunks(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect();
         assert_eq!(values, [5000, 5005, 5010, 5000]);
-        assert_eq!(&bytes[8..], [6, 0]);
+        assert_eq!(&bytes[8..], [6, 0, 255, 255, 0]);
     }
 }

@@ -4,7 +4,8 @@
 //! two 180° tiles at zoom 0, rows counted from the south: TMS) and which
 //! tiles exist; `{z}/{x}/{y}.terrain` is a tile of 65 × 65 point-registered
 //! samples (neighbours share their edges, as Cesium stitches them) of `dem`
-//! or `cem` (the ground raised by the canopy), encoded by
+//! or `cem` (the ground raised by the canopy) with a water mask from the
+//! surface classes (Cesium animates water there), encoded by
 //! [`crate::encode::heightmap`].
 //!
 //! Which tiles exist: both of zoom 0 (Cesium starts from them, over the
@@ -14,26 +15,80 @@
 //! is no data). Others are 404.
 
 use super::extent::finest_zoom;
-use super::products::{Encoding, Product};
+use super::products::{Computed, Encoding, Product};
 use super::routes::{level_number, meta, whole_number};
 use super::wms::request::MapLayer;
 use super::{AppState, ServeError};
-use crate::cem::Layer;
+use crate::cem::surface::SurfaceType;
+use crate::cem::{self, Layer, LayerSamples, Stats};
 use crate::encode::heightmap::Children;
+use crate::encode::{self, EncodeError};
 use crate::grid::quad::{MAX_ZOOM, SIDE, TileSet, geographic_box};
 use crate::grid::{BBox, GridError, SampleGrid};
+use crate::produce::ProduceError;
+use crate::raster::Raster;
 use crate::region::Region;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, header};
 use axum::response::{IntoResponse, Response};
 use serde_json::{Value, json};
 use std::sync::Arc;
+use std::time::Instant;
 
 /// Samples per tile side.
 pub const SAMPLES: usize = 65;
 
 /// The layers served as terrain.
 const LAYERS: [Layer; 2] = [Layer::Dem, Layer::Cem];
+
+/// Computes tile `zxy` of `layer`: its heights (NaN, encoded 0 m, off the
+/// region's data), which children exist, and where water is.
+pub fn compute(region: &Region, layer: Layer, zxy: (u32, u64, u64)) -> Result<Computed, ProduceError> {
+    let grid = tile_grid(region, zxy)?;
+    let (heights, surface, mut stats) = if region.dem.may_cover(&grid) {
+        let mut products = cem::compute(region, &grid, &[layer, Layer::Surface])?;
+        let heights = match products.take(layer) {
+            Some(LayerSamples::Float(heights)) => heights,
+            _ => return Err(EncodeError(format!("layer {} holds no heights", layer.name())).into()),
+        };
+        (heights, products.surface, products.stats)
+    } else {
+        (Raster::filled(grid.width(), grid.height(), f32::NAN), None, Stats::default())
+    };
+    let water = water_mask(region, zxy, surface.as_ref(), &mut stats)?;
+    let start = Instant::now();
+    let bytes = encode::heightmap::encode(&heights, children(region, layer, zxy), &water);
+    Ok(Computed { bytes, uniform: false, stats, encode: start.elapsed() })
+}
+
+/// Side of a water mask that tells water from land within a tile, texels
+/// (Cesium's, over the tile's area, row 0 north).
+const MASK_SIDE: usize = 256;
+
+/// The water mask of tile `zxy` whose samples have `surface` classes: one
+/// byte when they agree (0: no water, 255: all water), else the surface's
+/// water class at the centres of a 256² grid over the tile (computed then,
+/// its stages added to `stats`).
+fn water_mask(
+    region: &Region,
+    (z, x, y): (u32, u64, u64),
+    surface: Option<&Raster<u8>>,
+    stats: &mut Stats,
+) -> Result<Vec<u8>, ProduceError> {
+    let water = |&class: &u8| class == SurfaceType::Water as u8;
+    let Some(classes) = surface.map(Raster::data).filter(|c| c.iter().any(water)) else {
+        return Ok(vec![0]);
+    };
+    if classes.iter().all(water) {
+        return Ok(vec![255]);
+    }
+    let rows = TileSet::Crs84.matrix(z).1;
+    let grid = geographic_box(z, x, rows - 1 - y).area_grid(MASK_SIDE, MASK_SIDE)?;
+    let products = cem::compute(region, &grid, &[Layer::Surface])?;
+    *stats += products.stats;
+    let classes = products.surface.ok_or_else(|| EncodeError("the surface was not computed".into()))?;
+    Ok(classes.data().iter().map(|c| if water(c) { 255 } else { 0 }).collect())
+}
 
 /// `/cesium/{layer}/layer.json`.
 pub async fn layer_json(State(state): State<Arc<AppState>>, Path(layer): Path<String>) -> Result<Response, ServeError> {

@@ -4,12 +4,11 @@
 //! a worker).
 
 use crate::cem::{self, Layer, LayerSamples, Stats};
-use crate::encode::heightmap::Children;
 use crate::encode::{self, EncodeError, Format, Samples};
 use crate::grid::quad::TileSet;
 use crate::grid::{GridError, SampleGrid, TileId};
 use crate::produce::ProduceError;
-use crate::raster::{Raster, Window};
+use crate::raster::Window;
 use crate::region::Region;
 use std::time::{Duration, Instant};
 
@@ -194,7 +193,7 @@ pub fn compute(region: &Region, product: &Product) -> Result<Computed, ProduceEr
         MapLayer::Colour => colour(region, &grid),
         MapLayer::Data(layer) if product.encoding() == Encoding::Picture => data_picture(region, &grid, layer),
         MapLayer::Data(layer) => match product {
-            Product::Terrain { zxy, .. } => terrain(region, &grid, layer, super::cesium::children(region, layer, *zxy)),
+            Product::Terrain { zxy, .. } => super::cesium::compute(region, layer, *zxy),
             _ => {
                 let (samples, stats) = samples(region, &grid, layer)?;
                 encode_samples(region, &grid, layer, product.encoding(), samples.as_ref(), stats)
@@ -241,22 +240,6 @@ pub fn encode_samples(
     // GeoTIFFs carry their position; the other encodings only the samples.
     let uniform = encoding != Encoding::Data(Format::Tiff) && uniform(&samples);
     Ok(Computed { bytes, uniform, stats, encode: start.elapsed() })
-}
-
-/// A Cesium terrain tile: heights everywhere (Cesium has no holes; the
-/// encoding puts 0 m where there is no data) and which `children` exist.
-fn terrain(region: &Region, grid: &SampleGrid, layer: Layer, children: Children) -> Result<Computed, ProduceError> {
-    let (samples, stats) = samples(region, grid, layer)?;
-    let heights = match samples {
-        Some(LayerSamples::Float(heights)) => heights,
-        None => Raster::filled(grid.width(), grid.height(), f32::NAN),
-        Some(LayerSamples::Class(_)) => {
-            return Err(EncodeError(format!("layer {} holds classes, not heights", layer.name())).into());
-        }
-    };
-    let start = Instant::now();
-    let bytes = encode::heightmap::encode(&heights, children);
-    Ok(Computed { bytes, uniform: false, stats, encode: start.elapsed() })
 }
 
 /// Every sample the same (bitwise).

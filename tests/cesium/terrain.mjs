@@ -1,7 +1,8 @@
 // Reads one tile of a Sylva Cesium terrain layer with CesiumJS's own
 // terrain provider and decoder, as a Cesium viewer would, and prints JSON:
-// whether the provider has the tile, which children it says exist, and the
-// heights Cesium gives at the tile's 65 × 65 sample points (row 0 north).
+// whether the provider has the tile, which children it says exist, the
+// heights Cesium gives at the tile's 65 × 65 sample points (row 0 north),
+// and the water mask it takes from the tile.
 //
 // node terrain.mjs LAYER_URL ZOOM X Y   (Y counted from the south, as in the URLs)
 import { CesiumTerrainProvider } from "@cesium/engine";
@@ -26,4 +27,5 @@ for (let j = 0; j < n; j++) {
 // Children in Cesium's coordinates: south-west, south-east, north-west, north-east.
 const quarters = [[0, 1], [1, 1], [0, 0], [1, 0]];
 const children = quarters.map(([dx, dy]) => data.isChildAvailable(x, y, 2 * x + dx, 2 * y + dy));
-console.log(JSON.stringify({ available, children, heights }));
+const water = Array.from(data.waterMask);
+console.log(JSON.stringify({ available, children, heights, water }));

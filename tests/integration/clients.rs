@@ -385,6 +385,41 @@ fn cesium_dir() -> PathBuf {
     dir
 }
 
+/// What CesiumJS reads of a terrain tile (`tests/cesium/terrain.mjs`'s
+/// arguments: the layer's URL, zoom, x, y from the south).
+fn cesium_reads(args: &[String]) -> serde_json::Value {
+    let out = run(Command::new("node").current_dir(cesium_dir()).arg("terrain.mjs").args(args), "node (CesiumJS)");
+    serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out:.300}"))
+}
+
+#[test]
+fn cesium_draws_water_where_the_surface_is_water() {
+    let dir = TempDir::new("client-cesium-water");
+    let server = Server::start(None, &dir.join("cache"));
+    let layer_json: serde_json::Value = serde_json::from_slice(&server.get("/cesium/dem/layer.json").body).unwrap();
+    // A tile over the demo's lake and its north-eastern shore.
+    let z = layer_json["maxzoom"].as_u64().unwrap() as u32 - 2;
+    let size = 180.0 / f64::from(1u32 << z);
+    let (x, y) = (((10.10 + 180.0) / size) as u64, ((46.36 + 90.0) / size) as u64);
+    let args = [format!("{}/cesium/dem", server.base), z.to_string(), x.to_string(), y.to_string()];
+    let mask: Vec<u64> = cesium_reads(&args)["water"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
+    // The surface classes at the centres of 256² pixels over the tile.
+    let (west, south) = (-180.0 + x as f64 * size, -90.0 + y as f64 * size);
+    let (east, north) = (west + size, south + size);
+    let map = server.get(&format!(
+        "/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS=surface&STYLES=&CRS=CRS:84\
+         &BBOX={west},{south},{east},{north}&WIDTH=256&HEIGHT=256&FORMAT=application/bil16"
+    ));
+    assert_eq!((map.status, map.body.len()), (200, 256 * 256 * 2), "{}", map.text());
+    let water = sylva::cem::surface::SurfaceType::Water as i16;
+    let expected: Vec<u64> =
+        map.body.chunks(2).map(|b| if i16::from_le_bytes([b[0], b[1]]) == water { 255 } else { 0 }).collect();
+    let lake = expected.iter().filter(|&&m| m == 255).count();
+    assert!(lake > 1000 && lake < 256 * 256 - 1000, "the tile holds water and land: {lake} water pixels");
+    assert_eq!(mask.len(), expected.len());
+    assert!(mask == expected, "{} texels differ", mask.iter().zip(&expected).filter(|(a, b)| a != b).count());
+}
+
 #[test]
 fn cesium_reads_the_terrain_and_its_heights_are_the_wms_map_at_its_samples() {
     let dir = TempDir::new("client-cesium");
@@ -393,9 +428,8 @@ fn cesium_reads_the_terrain_and_its_heights_are_the_wms_map_at_its_samples() {
     let z = layer_json["maxzoom"].as_u64().unwrap() as u32;
     let (size, x, y) = common::demo_middle_tile(z);
     let args = [format!("{}/cesium/cem", server.base), z.to_string(), x.to_string(), y.to_string()];
-    let out = run(Command::new("node").current_dir(cesium_dir()).arg("terrain.mjs").args(&args), "node (CesiumJS)");
-    let doc: serde_json::Value = serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"));
-    assert_eq!(doc["available"], true, "{out:.200}");
+    let doc = cesium_reads(&args);
+    assert_eq!(doc["available"], true);
     assert_eq!(doc["children"], serde_json::json!([false, false, false, false]), "the deepest zoom has no children");
     // The WMS map whose pixel centres are the tile's samples: its box is the
     // tile's grown by half a sample spacing.
@@ -417,8 +451,7 @@ fn cesium_reads_the_terrain_and_its_heights_are_the_wms_map_at_its_samples() {
     }
     // A tile one zoom up has the tile as a child, where Cesium looks for it.
     let parent = [args[0].clone(), (z - 1).to_string(), (x / 2).to_string(), (y / 2).to_string()];
-    let out = run(Command::new("node").current_dir(cesium_dir()).arg("terrain.mjs").args(&parent), "node (CesiumJS)");
-    let doc: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let doc = cesium_reads(&parent);
     let child = (x % 2 + 2 * (y % 2)) as usize;
     assert_eq!(doc["children"][child], true, "{:?}", doc["children"]);
 }
