@@ -20,27 +20,29 @@ pub struct InUse {
 }
 
 impl InUse {
-    /// Marks `version` in `store` now and every [`EVERY`]. A mark that
+    /// Marks `version` in `store` now (before returning: the version is
+    /// marked from its user's start) and every [`EVERY`] after. A mark that
     /// fails is logged once (at info where the cache is read-only: it is
     /// then seeded, and served as it is).
     pub fn mark(store: Arc<dyn TileStore>, version: &str) -> InUse {
         let (stop, stopped) = mpsc::channel::<()>();
         let version = version.to_string();
+        let mut said = false;
+        let mut mark = move || {
+            if let Err(e) = store.mark_in_use(&version)
+                && !std::mem::replace(&mut said, true)
+            {
+                let why = "cannot mark the version in use: `sylva cache prune --stale` may remove it";
+                match read_only(&e) {
+                    true => tracing::info!(error = %e, "{why}"),
+                    false => tracing::warn!(error = %e, "{why}"),
+                }
+            }
+        };
+        mark();
         let run = move || {
-            let mut said = false;
-            loop {
-                if let Err(e) = store.mark_in_use(&version)
-                    && !std::mem::replace(&mut said, true)
-                {
-                    let why = "cannot mark the version in use: `sylva cache prune --stale` may remove it";
-                    match read_only(&e) {
-                        true => tracing::info!(error = %e, "{why}"),
-                        false => tracing::warn!(error = %e, "{why}"),
-                    }
-                }
-                if stopped.recv_timeout(EVERY) != Err(RecvTimeoutError::Timeout) {
-                    return;
-                }
+            while stopped.recv_timeout(EVERY) == Err(RecvTimeoutError::Timeout) {
+                mark();
             }
         };
         if let Err(e) = std::thread::Builder::new().name("sylva-in-use".into()).spawn(run) {

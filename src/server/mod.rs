@@ -178,10 +178,14 @@ pub async fn bind(config: Option<&Path>, options: ServeOptions) -> anyhow::Resul
     let mut settings = cfg.server.clone();
     let bind = options.bind.unwrap_or_else(|| settings.bind.clone());
     let backend = cfg.tile_cache.backend(options.cache_dir.as_deref());
-    let opened = backend.clone();
-    let store = tokio::task::spawn_blocking(move || crate::cache::open(&opened)).await??;
+    let (opened, version) = (backend.clone(), region.version.clone());
+    let (store, in_use) = tokio::task::spawn_blocking(move || {
+        let store = crate::cache::open(&opened)?;
+        let in_use = crate::cache::in_use::InUse::mark(store.clone(), &version);
+        anyhow::Ok((store, in_use))
+    })
+    .await??;
     let cache = store.describe();
-    let in_use = crate::cache::in_use::InUse::mark(store.clone(), &region.version);
     let listener =
         tokio::net::TcpListener::bind(&bind).await.map_err(|e| anyhow::anyhow!("cannot listen on {bind}: {e}"))?;
     // The address listened on, its port chosen if 0 was asked for.
