@@ -52,13 +52,20 @@ impl TileSet {
         }
     }
 
-    /// The pixel centres of tile `(z, col, row)`, or an error if it does not
-    /// exist.
-    pub fn tile_grid(self, z: u32, col: u64, row: u64) -> Result<SampleGrid, GridError> {
+    /// An error unless tile `(z, col, row)` exists (rows counted from
+    /// either edge).
+    pub fn check(self, z: u32, col: u64, row: u64) -> Result<(), GridError> {
         let (cols, rows) = self.matrix(z.min(MAX_ZOOM));
         if z > MAX_ZOOM || col >= cols || row >= rows {
             return Err(GridError::NoSuchTile { level: z, row, col, rows, cols });
         }
+        Ok(())
+    }
+
+    /// The pixel centres of tile `(z, col, row)`, or an error if it does not
+    /// exist.
+    pub fn tile_grid(self, z: u32, col: u64, row: u64) -> Result<SampleGrid, GridError> {
+        self.check(z, col, row)?;
         match self {
             TileSet::WebMercator => MercatorBox::of_tile(z, col, row)?.area_grid(SIDE, SIDE),
             TileSet::Crs84 => geographic_box(z, col, row).area_grid(SIDE, SIDE),

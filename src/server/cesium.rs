@@ -23,7 +23,7 @@ use crate::cem::surface::SurfaceType;
 use crate::cem::{self, Layer, LayerSamples, Stats};
 use crate::encode::heightmap::Children;
 use crate::encode::{self, EncodeError};
-use crate::grid::quad::{MAX_ZOOM, SIDE, TileSet, geographic_box};
+use crate::grid::quad::{SIDE, TileSet, geographic_box};
 use crate::grid::{BBox, GridError, SampleGrid};
 use crate::produce::ProduceError;
 use crate::raster::Raster;
@@ -36,17 +36,22 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// Samples per tile side.
-pub const SAMPLES: usize = 65;
+const SAMPLES: usize = 65;
 
 /// The layers served as terrain.
 const LAYERS: [Layer; 2] = [Layer::Dem, Layer::Cem];
 
-/// Computes tile `zxy` of `layer`: its heights (NaN, encoded 0 m, off the
-/// region's data), which children exist, and where water is.
-pub fn compute(region: &Region, layer: Layer, zxy: (u32, u64, u64)) -> Result<Computed, ProduceError> {
-    let grid = tile_grid(region, zxy)?;
-    let (heights, surface, mut stats) = if region.dem.may_cover(&grid) {
-        let mut products = cem::compute(region, &grid, &[layer, Layer::Surface])?;
+/// Computes tile `zxy` of `layer` on its samples, `grid` ([`tile_grid`]):
+/// its heights (NaN, encoded 0 m, off the region's data), which children
+/// exist, and where water is.
+pub fn compute(
+    region: &Region,
+    layer: Layer,
+    zxy: (u32, u64, u64),
+    grid: &SampleGrid,
+) -> Result<Computed, ProduceError> {
+    let (heights, surface, mut stats) = if region.dem.may_cover(grid) {
+        let mut products = cem::compute(region, grid, &[layer, Layer::Surface])?;
         let heights = match products.take(layer) {
             Some(LayerSamples::Float(heights)) => heights,
             _ => return Err(EncodeError(format!("layer {} holds no heights", layer.name())).into()),
@@ -71,7 +76,7 @@ const MASK_SIDE: usize = 256;
 /// its stages added to `stats`).
 fn water_mask(
     region: &Region,
-    (z, x, y): (u32, u64, u64),
+    zxy: (u32, u64, u64),
     surface: Option<&Raster<u8>>,
     stats: &mut Stats,
 ) -> Result<Vec<u8>, ProduceError> {
@@ -82,8 +87,7 @@ fn water_mask(
     if classes.iter().all(water) {
         return Ok(vec![255]);
     }
-    let rows = TileSet::Crs84.matrix(z).1;
-    let grid = geographic_box(z, x, rows - 1 - y).area_grid(MASK_SIDE, MASK_SIDE)?;
+    let grid = tile_box(zxy).area_grid(MASK_SIDE, MASK_SIDE)?;
     let products = cem::compute(region, &grid, &[Layer::Surface])?;
     *stats += products.stats;
     let classes = products.surface.ok_or_else(|| EncodeError("the surface was not computed".into()))?;
@@ -125,16 +129,19 @@ fn terrain_layer(name: &str) -> Result<Layer, ServeError> {
 /// The samples of tile `(z, x, y)` (y from the south), or an error if it
 /// does not exist in the quadtree.
 pub fn tile_grid(region: &Region, (z, x, y): (u32, u64, u64)) -> Result<SampleGrid, GridError> {
-    let (cols, rows) = TileSet::Crs84.matrix(z.min(MAX_ZOOM));
-    if z > MAX_ZOOM || x >= cols || y >= rows {
-        return Err(GridError::NoSuchTile { level: z, row: y, col: x, rows, cols });
-    }
-    geographic_box(z, x, rows - 1 - y).point_grid(SAMPLES, SAMPLES, &region.tiles)
+    TileSet::Crs84.check(z, x, y)?;
+    tile_box((z, x, y)).point_grid(SAMPLES, SAMPLES, &region.tiles)
+}
+
+/// The box of existing tile `(z, x, y)`: the geographic set's tile whose
+/// row counted from the north is `y`'s from the south.
+fn tile_box((z, x, y): (u32, u64, u64)) -> BBox {
+    geographic_box(z, x, TileSet::Crs84.matrix(z).1 - 1 - y)
 }
 
 /// The deepest zoom of `layer`: the first whose samples are as close as its
 /// finest source's.
-pub fn deepest(region: &Region, layer: Layer) -> u32 {
+fn deepest(region: &Region, layer: Layer) -> u32 {
     // 64 sample intervals across a zoom-0 tile's 180°, at the equator.
     let zoom0_m = TileSet::Crs84.pixel_m(0.0) * SIDE as f64 / (SAMPLES - 1) as f64;
     finest_zoom(region, MapLayer::Data(layer), zoom0_m)
@@ -161,13 +168,13 @@ fn available(region: &Region, layer: Layer, z: u32) -> Vec<((u64, u64), (u64, u6
 }
 
 /// Whether tile `(z, x, y)` exists.
-pub fn exists(region: &Region, layer: Layer, (z, x, y): (u32, u64, u64)) -> bool {
+fn exists(region: &Region, layer: Layer, (z, x, y): (u32, u64, u64)) -> bool {
     let within = |&((x0, y0), (x1, y1)): &((u64, u64), (u64, u64))| (x0..=x1).contains(&x) && (y0..=y1).contains(&y);
     available(region, layer, z).iter().any(within)
 }
 
 /// Which of tile `(z, x, y)`'s four children exist.
-pub fn children(region: &Region, layer: Layer, (z, x, y): (u32, u64, u64)) -> Children {
+fn children(region: &Region, layer: Layer, (z, x, y): (u32, u64, u64)) -> Children {
     let quarters = [
         (0, 0, Children::SOUTH_WEST),
         (1, 0, Children::SOUTH_EAST),
@@ -179,7 +186,7 @@ pub fn children(region: &Region, layer: Layer, (z, x, y): (u32, u64, u64)) -> Ch
 }
 
 /// The `layer.json` of `layer` over `region`.
-pub fn document(region: &Region, layer: Layer) -> Value {
+fn document(region: &Region, layer: Layer) -> Value {
     let b = region.bounds.on_the_globe();
     let deepest = deepest(region, layer);
     let range = |&((x0, y0), (x1, y1)): &((u64, u64), (u64, u64))| json!({ "startX": x0, "startY": y0, "endX": x1, "endY": y1 });

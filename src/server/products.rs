@@ -187,18 +187,18 @@ impl Computed {
 /// Computes a product. An empty result means "no data here".
 pub fn compute(region: &Region, product: &Product) -> Result<Computed, ProduceError> {
     let grid = product.grid(region)?;
+    if let Product::Terrain { layer, zxy } = product {
+        return super::cesium::compute(region, *layer, *zxy, &grid);
+    }
     match product.layer() {
         MapLayer::Relief if region.dem.may_cover(&grid) => relief(region, &grid),
         MapLayer::Relief => Ok(Computed::absent(Stats::default())),
         MapLayer::Colour => colour(region, &grid),
         MapLayer::Data(layer) if product.encoding() == Encoding::Picture => data_picture(region, &grid, layer),
-        MapLayer::Data(layer) => match product {
-            Product::Terrain { zxy, .. } => super::cesium::compute(region, layer, *zxy),
-            _ => {
-                let (samples, stats) = samples(region, &grid, layer)?;
-                encode_samples(region, &grid, layer, product.encoding(), samples.as_ref(), stats)
-            }
-        },
+        MapLayer::Data(layer) => {
+            let (samples, stats) = samples(region, &grid, layer)?;
+            encode_samples(region, &grid, layer, product.encoding(), samples.as_ref(), stats)
+        }
     }
 }
 
