@@ -70,7 +70,7 @@ pub fn report(b: &SeedBench) -> Result<String> {
             let dir = work.join(format!("run{i}-{round}"));
             let options = SeedOptions {
                 layers: layer.into(),
-                formats: format.into(),
+                formats: Some(format.into()),
                 concurrency: workers,
                 from_children,
                 ..options(b, &dir, &b.levels, None)

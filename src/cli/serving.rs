@@ -41,13 +41,20 @@ pub struct SeedArgs {
     /// Tile cache directory (default: `[tile_cache]`).
     #[arg(long)]
     cache_dir: Option<PathBuf>,
-    /// Layers, comma-separated: dem, cover, canopy, cem, surface, max4, max32.
+    /// The tiles: worldwind (`/tiles`), xyz (WebMercatorQuad: `/xyz` and WMTS),
+    /// crs84 (WorldCRS84Quad: WMTS) or cesium (`/cesium` terrain).
+    #[arg(long, default_value = "worldwind", conflicts_with = "tiles_from")]
+    grid: String,
+    /// Layers, comma-separated: dem, cover, canopy, cem, surface, max4, max32;
+    /// xyz and crs84 also colour and relief, not cover or surface; cesium dem and cem.
     #[arg(long, default_value = "cem")]
     layers: String,
-    /// Formats, comma-separated: bil16 (.bil), bil32, png16 (.png), tiff (.tif).
-    #[arg(long, default_value = "bil16")]
-    formats: String,
-    /// Levels, FROM-TO or one level.
+    /// Formats of worldwind tiles, comma-separated: bil16 (.bil, the default),
+    /// bil32, png16 (.png), tiff (.tif).
+    #[arg(long)]
+    formats: Option<String>,
+    /// Levels, FROM-TO or one level (default for xyz, crs84 and cesium: the
+    /// zooms the server advertises).
     #[arg(long)]
     levels: Option<String>,
     /// W,S,E,N in degrees (default: the region's bounds).
@@ -56,8 +63,9 @@ pub struct SeedArgs {
     /// GeoJSON Polygons or MultiPolygons (holes allowed) instead of a box.
     #[arg(long)]
     coverage: Option<PathBuf>,
-    /// Seed the tiles listed in FILE (`layer/level/row/col [formats]` per line; a line's
-    /// formats, e.g. `png16,tiff`, replace --formats), e.g. a failed-tiles file.
+    /// Seed the tiles listed in FILE (`layer/level/row/col [formats]` per line, a line's
+    /// formats, e.g. `png16,tiff`, replacing --formats; or `xyz|crs84|cesium/layer/z/x/y`),
+    /// e.g. a failed-tiles file.
     #[arg(long, conflicts_with_all = ["levels", "bbox", "coverage", "resume"])]
     tiles_from: Option<PathBuf>,
     /// Print the tiles per level and stop.
@@ -112,6 +120,7 @@ impl SeedArgs {
         let options = sylva::seed::SeedOptions {
             config: self.config,
             cache_dir: self.cache_dir,
+            grid: self.grid,
             layers: self.layers,
             formats: self.formats,
             levels: self.levels,

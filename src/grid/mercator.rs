@@ -4,7 +4,7 @@
 
 use super::lattice::{Axis, MERCATOR_RADIUS_M, Mapping, SampleGrid};
 use super::quad::MAX_ZOOM;
-use super::{GridError, check_size};
+use super::{BBox, GridError, check_size};
 use std::f64::consts::PI;
 
 /// Half the side of the Web Mercator square, metres.
@@ -63,10 +63,22 @@ impl MercatorBox {
         if z > MAX_ZOOM || x >= n || y >= n {
             return Err(GridError::NoSuchTile { level: z, row: y, col: x, rows: n, cols: n });
         }
-        let size = 2.0 * HALF_WORLD_M / n as f64;
+        Ok(MercatorBox::tile(z, x, y))
+    }
+
+    /// The box of XYZ tile `(z, x, y)`, assumed to exist.
+    pub fn tile(z: u32, x: u64, y: u64) -> MercatorBox {
+        let size = 2.0 * HALF_WORLD_M / (1u64 << z.min(MAX_ZOOM)) as f64;
         let west = -HALF_WORLD_M + x as f64 * size;
         let north = HALF_WORLD_M - y as f64 * size;
-        Ok(MercatorBox { west, south: north - size, east: west + size, north })
+        MercatorBox { west, south: north - size, east: west + size, north }
+    }
+
+    /// The box in longitude and latitude, degrees.
+    pub fn geographic(&self) -> BBox {
+        let lon = |x: f64| (x / MERCATOR_RADIUS_M).to_degrees();
+        let lat = |y: f64| (y / MERCATOR_RADIUS_M).sinh().atan().to_degrees();
+        BBox { west: lon(self.west), south: lat(self.south), east: lon(self.east), north: lat(self.north) }
     }
 }
 
@@ -93,6 +105,9 @@ mod tests {
         let g = world.area_grid(2, 2).unwrap();
         assert!((g.lat.coord(0) - 66.513_260_443_111_83).abs() < 1e-9 && (g.lon.coord(1) - 90.0).abs() < 1e-12);
         assert!(MercatorBox::of_tile(3, 8, 0).is_err());
+        let b = ne.geographic();
+        assert_eq!((b.west, b.south), (0.0, 0.0));
+        assert!((b.east - 180.0).abs() < 1e-9 && (b.north - 85.051_128_779_806_6).abs() < 1e-9, "{b:?}");
         let (x, y) = to_mercator(-105.7, 40.35);
         let back =
             MercatorBox { west: x - 1.0, south: y - 1.0, east: x + 1.0, north: y + 1.0 }.area_grid(1, 1).unwrap();

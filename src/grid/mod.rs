@@ -64,7 +64,9 @@ pub enum GridError {
     },
 }
 
-/// A tile address: level, row (from the south) and column (from −180°).
+/// A tile address: level, row (from the south) and column (from −180°). (The
+/// seed walks the XYZ and WMTS sets with rows from the north: see
+/// `seed::pyramid`.)
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct TileId {
     /// Quadtree level, 0 = coarsest.
@@ -86,7 +88,9 @@ impl TileId {
         (self.level > 0).then(|| TileId::new(self.level - 1, self.row / 2, self.col / 2))
     }
 
-    /// The four tiles one level down, south-west first.
+    /// The four tiles one level down, row-major from the first row: south-west
+    /// first where rows count from the south (World Wind, Cesium), north-west
+    /// first where they count from the north (the XYZ and WMTS sets).
     pub fn children(&self) -> [TileId; 4] {
         let (l, r, c) = (self.level + 1, self.row * 2, self.col * 2);
         [TileId::new(l, r, c), TileId::new(l, r, c + 1), TileId::new(l, r + 1, c), TileId::new(l, r + 1, c + 1)]

@@ -2,10 +2,12 @@
 //! the servers read, so clients never wait (`../shared/DESIGN.md`, use 3).
 //!
 //! A job is layers × formats × the tiles of a level range over a box or
-//! polygons ([`coverage`]), walked depth first ([`walk`]) on a pool of
-//! workers; each tile file is claimed, made with the server's own product
-//! code (so the bytes are the server's) or, where exact, from its finished
-//! children ([`decimate`]), and stored ([`tile`]). Progress is shown
+//! polygons ([`coverage`]) in one of the server's tile pyramids
+//! ([`pyramid`]: World Wind's, the XYZ/WMTS quadtree sets, Cesium's
+//! terrain), walked depth first ([`walk`]) on a pool of workers; each tile
+//! file is claimed, made with the server's own product code (so the bytes
+//! are the server's) or, where exact, from its finished children
+//! ([`decimate`]), and stored ([`tile`]). Progress is shown
 //! ([`display`]) and saved for `--resume` ([`progress`]); tiles that still
 //! fail after their retries are listed for `--tiles-from` ([`failed`]); a
 //! job holds both files while it runs, refusing them to another ([`hold`]).
@@ -23,6 +25,7 @@ pub mod failed;
 pub mod hold;
 pub mod options;
 pub mod progress;
+pub mod pyramid;
 pub mod tile;
 pub mod walk;
 
@@ -30,8 +33,10 @@ pub use options::SeedOptions;
 pub use tile::Counters;
 
 use crate::grid::TileId;
+use crate::server::wms::request::MapLayer;
 use options::Job;
 use progress::Progress;
+use pyramid::Pyramid;
 use rayon::prelude::*;
 use std::path::Path;
 use std::sync::Mutex;
@@ -196,8 +201,7 @@ fn records(job: &Job, options: &SeedOptions) -> Result<Records, SeedError> {
     let (progress_path, failed_path) = &job.files;
     let holds = [hold::hold(progress_path)?, hold::hold(failed_path)?];
     // A list is read before the failed-tiles file (perhaps the same) is emptied.
-    let list =
-        options.tiles_from.as_deref().map(|p| failed::read(p, &job.region.tiles, &job.region.bounds)).transpose()?;
+    let list = options.tiles_from.as_deref().map(|p| failed::read(p, &job.region)).transpose()?;
     let progress = match options.resume && list.is_none() {
         true => Progress::resume(progress_path, &job.fingerprint)?,
         false => Progress::start(progress_path, &job.fingerprint),
@@ -257,14 +261,15 @@ struct Run<'a> {
 }
 
 impl Run<'_> {
-    fn seeder(&self, layers: Vec<crate::cem::Layer>) -> Seeder<'_> {
+    fn seeder(&self, pyramid: Pyramid, layers: Vec<MapLayer>) -> Seeder<'_> {
         let region = &self.job.region;
-        let from_children = match (&self.job.walk, self.options.from_children) {
-            (Some(walk), true) => exact_levels(region, &layers, *walk.levels().end()),
+        let from_children = match (&self.job.walk, self.options.from_children, pyramid) {
+            (Some(walk), true, Pyramid::WorldWind(_)) => exact_levels(region, &layers, *walk.levels().end()),
             _ => Vec::new(),
         };
         Seeder {
             region,
+            pyramid,
             store: self.store,
             layers,
             formats: self.job.formats.clone(),
@@ -280,10 +285,12 @@ impl Run<'_> {
     /// Walks the job's tiles.
     fn walk(&self, walk: Option<&Walk>) -> Result<(), SeedError> {
         let Some(walk) = walk else { return Ok(()) };
-        let total: u64 = walk.count_per_level().iter().sum::<u64>() * self.files_per_tile();
+        let files =
+            walk.count_per_level().into_iter().zip(walk.levels()).map(|(n, level)| n * self.job.files_at(level));
+        let total: u64 = files.sum();
         let display = display::Display::new(self.options.display, total, self.progress.earlier);
         if !self.progress.complete {
-            let seeder = self.seeder(self.job.layers.clone());
+            let seeder = self.seeder(self.job.pyramid, self.job.layers.clone());
             walk.roots().par_iter().for_each(|&root| {
                 self.visit(walk, &seeder, &display, root);
             });
@@ -324,7 +331,7 @@ impl Run<'_> {
             let (h, failures) = seeder.tile(tile, four.as_ref(), for_parent);
             made &= failures.is_empty();
             self.record(failures);
-            display.advance(self.files_per_tile(), self.counters.failed.load(Ordering::Relaxed));
+            display.advance(self.job.files_at(tile.level), self.counters.failed.load(Ordering::Relaxed));
             halves = h.iter().any(Option::is_some).then_some(h);
         }
         if made {
@@ -336,28 +343,32 @@ impl Run<'_> {
         (halves, made)
     }
 
-    /// Seeds the tiles of a list, each in the formats it lists (or the
-    /// job's), with a seeder per layer and formats.
+    /// Seeds the tiles of a list, World Wind's each in the formats it lists
+    /// (or the job's), with a seeder per pyramid, layer and formats.
     fn list(&self, entries: &[failed::Entry]) {
-        // The tiles of each layer and formats (those a line lists, or the
-        // job's), in the order they first appear.
-        let mut groups: Vec<(crate::cem::Layer, &[crate::encode::Format], Vec<TileId>)> = Vec::new();
+        // The tiles of each pyramid, layer and formats (those a line lists,
+        // or the job's), in the order they first appear.
+        let mut groups: Vec<(Pyramid, MapLayer, &[crate::encode::Format], Vec<TileId>)> = Vec::new();
         for e in entries {
-            let formats = if e.formats.is_empty() { &self.job.formats[..] } else { &e.formats[..] };
-            match groups.iter_mut().find(|(layer, f, _)| *layer == e.layer && *f == formats) {
-                Some(group) => group.2.push(e.tile),
-                None => groups.push((e.layer, formats, vec![e.tile])),
+            let formats = match e.pyramid {
+                Pyramid::WorldWind(_) if e.formats.is_empty() => &self.job.formats[..],
+                _ => &e.formats[..],
+            };
+            match groups.iter_mut().find(|(p, layer, f, _)| (*p, *layer, *f) == (e.pyramid, e.layer, formats)) {
+                Some(group) => group.3.push(e.tile),
+                None => groups.push((e.pyramid, e.layer, formats, vec![e.tile])),
             }
         }
-        let total = groups.iter().map(|(_, formats, tiles)| (formats.len() * tiles.len()) as u64).sum();
+        let files = |formats: &[crate::encode::Format]| formats.len().max(1) as u64;
+        let total = groups.iter().map(|(_, _, formats, tiles)| files(formats) * tiles.len() as u64).sum();
         let display = display::Display::new(self.options.display, total, 0);
-        for (layer, formats, tiles) in groups {
-            let seeder = Seeder { formats: formats.to_vec(), ..self.seeder(vec![layer]) };
+        for (pyramid, layer, formats, tiles) in groups {
+            let seeder = Seeder { formats: formats.to_vec(), ..self.seeder(pyramid, vec![layer]) };
             tiles.par_iter().for_each(|&tile| {
                 if !self.stopped() {
                     let (_, failures) = seeder.tile(tile, None, false);
                     self.record(failures);
-                    display.advance(formats.len() as u64, self.counters.failed.load(Ordering::Relaxed));
+                    display.advance(files(formats), self.counters.failed.load(Ordering::Relaxed));
                 }
             });
         }
@@ -385,21 +396,22 @@ impl Run<'_> {
             crate::outputs::say(format_args!("sylva seed: warning: {message}"));
         }
     }
-
-    fn files_per_tile(&self) -> u64 {
-        (self.job.layers.len() * self.job.formats.len()) as u64
-    }
 }
 
-/// `[level][layer]`: whether a tile of that level is exactly its children
-/// decimated (levels 0 to `last`; tiles need an even number of cells).
-fn exact_levels(region: &crate::region::Region, layers: &[crate::cem::Layer], last: u32) -> Vec<Vec<bool>> {
+/// `[level][layer]`: whether a World Wind tile of that level is exactly its
+/// children decimated (levels 0 to `last`; tiles need an even number of
+/// cells; data layers only).
+fn exact_levels(region: &crate::region::Region, layers: &[MapLayer], last: u32) -> Vec<Vec<bool>> {
     let even = (region.tiles.samples() - 1).is_multiple_of(2);
     (0..last)
         .map(|level| {
             let coarse = region.tiles.tile_samples(TileId::new(level, 0, 0), 0);
             let fine = region.tiles.tile_samples(TileId::new(level + 1, 0, 0), 0);
-            layers.iter().map(|&l| even && crate::cem::alike_across(region, l, &fine, &coarse)).collect()
+            let alike = |l| match l {
+                MapLayer::Data(l) => crate::cem::alike_across(region, l, &fine, &coarse),
+                _ => false,
+            };
+            layers.iter().map(|&l| even && alike(l)).collect()
         })
         .collect()
 }
@@ -424,15 +436,15 @@ fn dry_run(job: &Job, resumed: Option<&Progress>) -> Report {
         Some(p) => walk.count_left(&p.finished()),
         None => walk.count_per_level(),
     };
-    let files = (job.layers.len() * job.formats.len()) as u64;
+    let files: Vec<u64> = walk.levels().zip(&counts).map(|(level, n)| n * job.files_at(level)).collect();
     let rows: Vec<Vec<String>> = walk
         .levels()
-        .zip(&counts)
-        .map(|(level, n)| vec![level.to_string(), n.to_string(), (n * files).to_string()])
+        .zip(counts.iter().zip(&files))
+        .map(|(level, (n, f))| vec![level.to_string(), n.to_string(), f.to_string()])
         .chain(std::iter::once(vec![
             "all".into(),
             counts.iter().sum::<u64>().to_string(),
-            (counts.iter().sum::<u64>() * files).to_string(),
+            files.iter().sum::<u64>().to_string(),
         ]))
         .collect();
     let resuming = resumed.map_or(String::new(), |p| {
@@ -443,14 +455,11 @@ fn dry_run(job: &Job, resumed: Option<&Progress>) -> Report {
             failed_earlier(job)
         )
     });
-    let head = format!(
-        "{} — shard {}/{}, {} layer(s) × {} format(s){resuming}",
-        job.region.name,
-        job.shard.index,
-        job.shard.count,
-        job.layers.len(),
-        job.formats.len()
-    );
+    let what = match job.pyramid {
+        Pyramid::WorldWind(_) => format!("{} layer(s) × {} format(s)", job.layers.len(), job.formats.len()),
+        p => format!("{} layer(s) of {} tiles", job.layers.len(), p.name()),
+    };
+    let head = format!("{} — shard {}/{}, {what}{resuming}", job.region.name, job.shard.index, job.shard.count);
     Report { text: format!("{head}\n{}", crate::bench::table(&["level", "tiles", "files"], &rows)), failed: 0 }
 }
 
@@ -459,7 +468,7 @@ fn dry_run(job: &Job, resumed: Option<&Progress>) -> Report {
 /// finished, so the walk visits them again and finds them in the cache.
 fn failed_earlier(job: &Job) -> String {
     let path = &job.files.1;
-    match failed::read(path, &job.region.tiles, &job.region.bounds) {
+    match failed::read(path, &job.region) {
         Ok(list) if !list.is_empty() => format!(
             "; {} tile(s) failed earlier (listed in {}): the tiles above them are counted but will be found in the cache",
             list.len(),
@@ -483,6 +492,12 @@ fn summary(job: &Job, store: &dyn crate::cache::TileStore, c: &Counters, took: D
         took.as_secs_f64(),
         made as f64 / took.as_secs_f64().max(1e-9)
     );
+    if get(&c.off_data) > 0 {
+        let n = get(&c.off_data);
+        text.push_str(&format!(
+            "\n{n} tile files lie off the region's data: not stored (the server makes them at once, without the cache)"
+        ));
+    }
     if get(&c.failed) > 0 {
         text.push_str(&format!("\nfailed tiles are listed in {}; re-run them with --tiles-from {0}", failed.display()));
     }

@@ -1,16 +1,20 @@
 //! The seed command's options as given, and their checking into a job:
 //! every string parsed with an error that names the flag or file and the
-//! problem, the configuration and region loaded, the coverage read.
+//! problem, the configuration and region loaded, the coverage read, the
+//! layers and levels checked against the pyramid (a quadtree set's or
+//! Cesium's levels default to those the server advertises).
 
 use super::SeedError;
 use super::coverage::{Coverage, Relation};
 use super::display::Mode;
+use super::pyramid::{self, Pyramid};
 use super::walk::{Shard, Walk};
 use crate::cem::Layer;
 use crate::config::Config;
 use crate::encode::Format;
 use crate::grid::{BBox, TileGrid};
 use crate::region::Region;
+use crate::server::wms::request::MapLayer;
 use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
@@ -22,11 +26,16 @@ pub struct SeedOptions {
     pub config: Option<PathBuf>,
     /// Cache tiles in this directory instead of `[tile_cache]`.
     pub cache_dir: Option<PathBuf>,
+    /// The pyramid: `worldwind`, `xyz`, `crs84` or `cesium`.
+    pub grid: String,
     /// Comma-separated layers, e.g. `cem,dem`.
     pub layers: String,
-    /// Comma-separated formats, e.g. `bil16,png16`.
-    pub formats: String,
-    /// `FROM-TO` or one level (required unless `tiles_from`).
+    /// Comma-separated formats of World Wind tiles, e.g. `bil16,png16`
+    /// (default `bil16`).
+    pub formats: Option<String>,
+    /// `FROM-TO` or one level (required for World Wind's tiles unless
+    /// `tiles_from`; default for the others: the levels the server
+    /// advertises).
     pub levels: Option<String>,
     /// `W,S,E,N` (default: the region's bounds).
     pub bbox: Option<String>,
@@ -65,8 +74,9 @@ impl Default for SeedOptions {
         SeedOptions {
             config: None,
             cache_dir: None,
+            grid: "worldwind".into(),
             layers: "cem".into(),
-            formats: "bil16".into(),
+            formats: None,
             levels: None,
             bbox: None,
             coverage: None,
@@ -93,9 +103,11 @@ pub struct Job {
     pub config: Config,
     /// Its region.
     pub region: Region,
+    /// The pyramid seeded.
+    pub pyramid: Pyramid,
     /// Layers.
-    pub layers: Vec<Layer>,
-    /// Formats.
+    pub layers: Vec<MapLayer>,
+    /// Formats of World Wind's tiles (none for the other pyramids).
     pub formats: Vec<Format>,
     /// The walk (absent for a tile list).
     pub walk: Option<Walk>,
@@ -115,8 +127,6 @@ const MAX_CONCURRENCY: usize = 256;
 impl Job {
     /// Checks the options, loads the region and reads the coverage.
     pub fn new(o: &SeedOptions) -> Result<Job, SeedError> {
-        let layers = list(&o.layers, "--layers", Layer::parse, "dem, cover, canopy, cem, surface, max4, max32")?;
-        let formats = list(&o.formats, "--formats", Format::parse, "bil16, bil32, png16, tiff")?;
         let shard = o.shard.as_deref().map(parse_shard).transpose()?.unwrap_or(Shard::ALL);
         if o.concurrency > MAX_CONCURRENCY {
             return Err(SeedError::Usage(format!("--concurrency {}: at most {MAX_CONCURRENCY}", o.concurrency)));
@@ -130,16 +140,13 @@ impl Job {
             }
         };
         let (config, region) = crate::config::load_with_config(o.config.as_deref())?;
+        let (pyramid, layers, formats) = tiles(o, &region)?;
         let (walk, area) = match &o.tiles_from {
             Some(list) => (None, format!("list {}", list.display())),
             None => {
-                let levels = parse_levels(
-                    o.levels
-                        .as_deref()
-                        .ok_or_else(|| SeedError::Usage("give --levels FROM-TO (or --tiles-from FILE)".into()))?,
-                )?;
+                let levels = levels(o.levels.as_deref(), &region, pyramid, &layers)?;
                 let (coverage, area) = coverage(o, &region)?;
-                (Some(Walk::new(region.tiles, coverage, levels.clone(), shard)), format!("{area} levels {levels:?}"))
+                (Some(Walk::new(pyramid, coverage, levels.clone(), shard)), format!("{area} levels {levels:?}"))
             }
         };
         let suffix = if shard.count > 1 { format!("-{}-of-{}", shard.index, shard.count) } else { String::new() };
@@ -153,9 +160,91 @@ impl Job {
         let given = [o.config.as_deref(), o.coverage.as_deref(), list].into_iter().flatten();
         let inputs: Vec<&Path> = given.chain(named.iter().map(PathBuf::as_path)).collect();
         crate::outputs::check(&inputs, &[&files.0, &files.1])?;
-        let what = format!("{} {layers:?} {formats:?} {area} {shard:?}", region.version);
-        let fingerprint = format!("{:016x}", crate::cache::digest(what.as_bytes()));
-        Ok(Job { config, region, layers, formats, walk, shard, refresh_before, files, fingerprint })
+        let job = format!("{area} {shard:?}");
+        let fingerprint = fingerprint(&region.version, pyramid, &layers, &formats, &job);
+        Ok(Job { config, region, pyramid, layers, formats, walk, shard, refresh_before, files, fingerprint })
+    }
+
+    /// Tile files of a tile of `level`: each layer served there, in each
+    /// format (World Wind's) or its one tile.
+    pub fn files_at(&self, level: u32) -> u64 {
+        let served = self.layers.iter().filter(|&&l| self.pyramid.serves_level(&self.region, l, level));
+        (served.count() * self.formats.len().max(1)) as u64
+    }
+}
+
+/// The pyramid, the layers it carries and (World Wind's) the formats.
+fn tiles(o: &SeedOptions, region: &Region) -> Result<(Pyramid, Vec<MapLayer>, Vec<Format>), SeedError> {
+    let pyramid = Pyramid::parse(&o.grid, region.tiles)
+        .ok_or_else(|| SeedError::Usage(format!("--grid: unknown {:?}; expected one of {}", o.grid, pyramid::NAMES)))?;
+    let known = format!("{} (in {} tiles)", pyramid.layer_names(), pyramid.name());
+    let layers = list(&o.layers, "--layers", |n| map_layer(n).filter(|&l| pyramid.carries(l)), &known)?;
+    for &layer in &layers {
+        if let Some(Err(why)) = pyramid.advertised(region, layer) {
+            return Err(SeedError::Usage(format!("--grid {}: {why}", pyramid.name())));
+        }
+    }
+    let formats = match (&o.formats, pyramid) {
+        (formats, Pyramid::WorldWind(_)) => {
+            list(formats.as_deref().unwrap_or("bil16"), "--formats", Format::parse, "bil16, bil32, png16, tiff")?
+        }
+        (None, _) => Vec::new(),
+        (Some(_), p) => {
+            let why = format!("{} tiles come in one format; --formats is for worldwind tiles", p.name());
+            return Err(SeedError::Usage(format!("--formats: {why}")));
+        }
+    };
+    Ok((pyramid, layers, formats))
+}
+
+/// Digest of everything that defines a job (a World Wind job's as before
+/// the other pyramids were seeded, so that its progress file resumes).
+fn fingerprint(version: &str, pyramid: Pyramid, layers: &[MapLayer], formats: &[Format], job: &str) -> String {
+    let names: Vec<&str> = layers.iter().map(|l| l.name()).collect();
+    let what = match pyramid {
+        Pyramid::WorldWind(_) => {
+            let data: Vec<Layer> =
+                layers.iter().filter_map(|l| if let MapLayer::Data(d) = l { Some(*d) } else { None }).collect();
+            format!("{version} {data:?} {formats:?} {job}")
+        }
+        p => format!("{version} {} {names:?} {job}", p.name()),
+    };
+    format!("{:016x}", crate::cache::digest(what.as_bytes()))
+}
+
+/// A layer by name: a data layer or a picture.
+fn map_layer(name: &str) -> Option<MapLayer> {
+    MapLayer::parse(name).or_else(|| Layer::parse(name).map(MapLayer::Data))
+}
+
+/// The levels to seed: those given (their last no deeper than the deepest
+/// any layer is served at), or, for a pyramid other than World Wind's,
+/// those the server advertises for any of the layers. A layer is seeded at
+/// the levels it is served at alone ([`Job::files_at`]).
+fn levels(
+    text: Option<&str>,
+    region: &Region,
+    pyramid: Pyramid,
+    layers: &[MapLayer],
+) -> Result<RangeInclusive<u32>, SeedError> {
+    let Some(text) = text else {
+        let advertised: Vec<RangeInclusive<u32>> =
+            layers.iter().filter_map(|&l| pyramid.advertised(region, l)?.ok()).collect();
+        return match (advertised.iter().map(|l| *l.start()).min(), advertised.iter().map(|l| *l.end()).max()) {
+            (Some(from), Some(to)) => Ok(from..=to),
+            _ => Err(SeedError::Usage("give --levels FROM-TO (or --tiles-from FILE)".into())),
+        };
+    };
+    let levels = parse_levels(text)?;
+    let deepest =
+        layers.iter().filter_map(|&l| Some((*pyramid.served_levels(region, l)?.end(), l))).max_by_key(|d| d.0);
+    match deepest {
+        Some((deepest, layer)) if *levels.end() > deepest => Err(SeedError::Usage(format!(
+            "--levels {text:?}: {} {} tiles go down to level {deepest}",
+            pyramid.name(),
+            layer.name()
+        ))),
+        _ => Ok(levels),
     }
 }
 

@@ -82,7 +82,7 @@ impl Progress {
         let state: State = serde_json::from_str(&text).map_err(|e| fail(format!("not a seed progress file: {e}")))?;
         if state.job != job {
             return Err(fail(
-                "written by another job (other layers, formats, levels, area, shard or configuration); run without --resume to start afresh".into(),
+                "written by another job (other grid, layers, formats, levels, area, shard or configuration); run without --resume to start afresh".into(),
             ));
         }
         let done = state

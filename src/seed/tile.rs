@@ -1,11 +1,13 @@
 //! Seeding one tile: for each layer and format, claim its cache key (skip it
 //! if a usable entry is there, wait if another process is making it), make
-//! the samples once — from the four children's halves where that is exact,
-//! else with the server's own product code — encode, store, release. Each
-//! failure is retried a bounded number of times.
+//! it with the server's own product code — a World Wind tile's samples once
+//! for all its formats, from the four children's halves where that is
+//! exact — encode, store, release. Each failure is retried a bounded number
+//! of times.
 
 use super::decimate;
 use super::failed::Entry;
+use super::pyramid::Pyramid;
 use crate::cache::flight::{self, Claim};
 use crate::cache::lease::Leases;
 use crate::cache::{Lock, Stored, TileStore};
@@ -33,6 +35,9 @@ pub struct Counters {
     pub existing: AtomicU64,
     /// Failed after their retries.
     pub failed: AtomicU64,
+    /// Off the region's data: not stored (the server makes them at once,
+    /// without the cache).
+    pub off_data: AtomicU64,
     /// Bytes of the tiles this run stored (a uniform tile's whole, though
     /// stored once).
     pub bytes: AtomicU64,
@@ -41,7 +46,8 @@ pub struct Counters {
 impl Counters {
     /// Every file counted.
     pub fn total(&self) -> u64 {
-        [&self.computed, &self.derived, &self.existing, &self.failed].iter().map(|c| c.load(Ordering::Relaxed)).sum()
+        let all = [&self.computed, &self.derived, &self.existing, &self.failed, &self.off_data];
+        all.iter().map(|c| c.load(Ordering::Relaxed)).sum()
     }
 }
 
@@ -50,17 +56,20 @@ enum Made {
     Computed,
     Derived,
     Existing,
+    OffData,
 }
 
 /// What seeding needs to know, shared by every worker.
 pub struct Seeder<'a> {
     /// The region.
     pub region: &'a Region,
+    /// The pyramid the tiles are in.
+    pub pyramid: Pyramid,
     /// The tile cache.
     pub store: &'a dyn TileStore,
     /// Layers seeded.
-    pub layers: Vec<Layer>,
-    /// Formats of each layer.
+    pub layers: Vec<MapLayer>,
+    /// Formats of each layer (World Wind's tiles).
     pub formats: Vec<Format>,
     /// Entries written before this are remade.
     pub refresh_before: SystemTime,
@@ -92,14 +101,19 @@ impl Seeder<'_> {
         let mut halves = Vec::with_capacity(self.layers.len());
         let mut failures = Vec::new();
         for i in 0..self.layers.len() {
+            if !self.pyramid.serves_level(self.region, self.layers[i], tile.level) {
+                halves.push(None);
+                continue;
+            }
             match self.layer(tile, i, kids) {
                 Ok(samples) => {
                     let keep = for_parent && self.exact(tile.level.wrapping_sub(1), i);
                     halves.push(samples.filter(|_| keep).map(|s| decimate::half(&s)));
                 }
                 Err((why, formats)) => {
-                    self.counters.failed.fetch_add(formats.len() as u64, Ordering::Relaxed);
-                    failures.push((Entry { layer: self.layers[i], tile, formats }, why));
+                    let entry = Entry { pyramid: self.pyramid, layer: self.layers[i], tile, formats };
+                    self.counters.failed.fetch_add(entry.files(), Ordering::Relaxed);
+                    failures.push((entry, why));
                     halves.push(None);
                 }
             }
@@ -112,26 +126,34 @@ impl Seeder<'_> {
         self.from_children.get(level as usize).and_then(|l| l.get(i)).copied().unwrap_or(false)
     }
 
-    /// Seeds one layer of a tile in every format; its samples if they were
-    /// made, or why not and the formats left unmade (the one that failed
-    /// and those after it).
+    /// Seeds one layer of a tile (World Wind's in every format); its
+    /// samples if they were made, or why not and the formats left unmade
+    /// (the one that failed and those after it).
     fn layer(
         &self,
         tile: TileId,
         i: usize,
         kids: Option<&[Halves; 4]>,
     ) -> Result<Option<LayerSamples>, (String, Vec<Format>)> {
-        let layer = self.layers[i];
+        let layer = match (self.pyramid.product(self.layers[i], tile), self.layers[i]) {
+            (Some(product), _) => return self.product(&product).map(|()| None).map_err(|why| (why, Vec::new())),
+            (None, MapLayer::Data(layer)) => layer,
+            (None, other) => return Err((format!("{} has no World Wind tiles to seed", other.name()), Vec::new())),
+        };
         let grid = self.region.tiles.tile_samples(tile, 0);
         let mut samples: Option<(Option<LayerSamples>, bool)> = None;
         for (k, &format) in self.formats.iter().enumerate() {
             let product =
                 Product::Tile { layer: MapLayer::Data(layer), id: tile, halo: 0, encoding: Encoding::Data(format) };
+            if product.off_data(self.region) {
+                self.count(Made::OffData);
+                continue;
+            }
             let key = product.key(&self.region.version).ok_or_else(|| "tiles have cache keys".to_string());
             let made = key.and_then(|key| {
                 self.file(&key, || {
                     if samples.is_none() {
-                        samples = Some(self.samples(tile, i, kids)?);
+                        samples = Some(self.samples(tile, (i, layer), kids)?);
                     }
                     let (s, derived) = samples.as_ref().ok_or("samples were just made")?;
                     let c = products::encode_samples(
@@ -146,23 +168,43 @@ impl Seeder<'_> {
                     Ok((c.bytes, c.uniform, *derived))
                 })
             });
-            let made = made.map_err(|why| (why, self.formats[k..].to_vec()))?;
-            let counter = match made {
-                Made::Computed => &self.counters.computed,
-                Made::Derived => &self.counters.derived,
-                Made::Existing => &self.counters.existing,
-            };
-            counter.fetch_add(1, Ordering::Relaxed);
+            self.count(made.map_err(|why| (why, self.formats[k..].to_vec()))?);
         }
         Ok(samples.and_then(|(s, _)| s))
     }
 
-    /// The samples of layer `i`: assembled from the children if exact, else
+    /// Seeds a tile that is one product (a quadtree set's or Cesium's),
+    /// computed as the server computes it.
+    fn product(&self, product: &Product) -> Result<(), String> {
+        if product.off_data(self.region) {
+            self.count(Made::OffData);
+            return Ok(());
+        }
+        let key = product.key(&self.region.version).ok_or("tiles have cache keys")?;
+        let made = self.file(&key, || {
+            let c = products::compute(self.region, product).map_err(|e| e.to_string())?;
+            Ok((c.bytes, c.uniform, false))
+        })?;
+        self.count(made);
+        Ok(())
+    }
+
+    fn count(&self, made: Made) {
+        let counter = match made {
+            Made::Computed => &self.counters.computed,
+            Made::Derived => &self.counters.derived,
+            Made::Existing => &self.counters.existing,
+            Made::OffData => &self.counters.off_data,
+        };
+        counter.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// The samples of `layer` (the `i`th): assembled from the children if exact, else
     /// computed; the flag says they were assembled.
     fn samples(
         &self,
         tile: TileId,
-        i: usize,
+        (i, layer): (usize, Layer),
         kids: Option<&[Halves; 4]>,
     ) -> Result<(Option<LayerSamples>, bool), String> {
         let quarters = kids.filter(|_| self.exact(tile.level, i)).and_then(|k| {
@@ -173,7 +215,7 @@ impl Seeder<'_> {
             return Ok((Some(parent), true));
         }
         let grid = self.region.tiles.tile_samples(tile, 0);
-        let (s, _) = products::samples(self.region, &grid, self.layers[i]).map_err(|e| e.to_string())?;
+        let (s, _) = products::samples(self.region, &grid, layer).map_err(|e| e.to_string())?;
         Ok((s, false))
     }
 
@@ -321,6 +363,7 @@ mod tests {
         let leases = Leases::start(store.clone(), Duration::from_secs(5));
         let seeder = |retries| Seeder {
             region: &region,
+            pyramid: Pyramid::WorldWind(region.tiles),
             store: &*store,
             layers: vec![],
             formats: vec![],

@@ -1,9 +1,10 @@
 //! The quadtree walk of a seed: which tiles, in which order, and which shard
 //! seeds each.
 //!
-//! The walk starts at the level-0 tiles the coverage meets and descends
-//! depth first, children south-west, south-east, north-west, north-east,
-//! pruning subtrees outside the coverage; tiles outside the level range are
+//! The walk, over any of the [`Pyramid`]s, starts at the level-0 tiles the
+//! coverage meets and descends depth first, children in row-major order
+//! (World Wind's from the south-west, the quadtree sets' from the
+//! north-west), pruning subtrees outside the coverage; tiles outside the level range are
 //! passed through, not seeded. Counting a subtree wholly inside the coverage
 //! is a closed form (4^k tiles k levels down), so a dry run costs the
 //! boundary only.
@@ -17,7 +18,8 @@
 //! together complete.
 
 use super::coverage::{Coverage, Relation};
-use crate::grid::{TileGrid, TileId};
+use super::pyramid::Pyramid;
+use crate::grid::TileId;
 use std::collections::HashMap;
 use std::ops::RangeInclusive;
 
@@ -44,7 +46,7 @@ pub type Node = (TileId, Relation);
 /// The tiles of a job and their owners.
 #[derive(Debug)]
 pub struct Walk {
-    tiles: TileGrid,
+    pyramid: Pyramid,
     coverage: Coverage,
     levels: RangeInclusive<u32>,
     shard: Shard,
@@ -53,9 +55,9 @@ pub struct Walk {
 }
 
 impl Walk {
-    /// The walk of `levels` over `coverage` on `tiles`, for `shard`.
-    pub fn new(tiles: TileGrid, coverage: Coverage, levels: RangeInclusive<u32>, shard: Shard) -> Walk {
-        let mut walk = Walk { tiles, coverage, levels, shard, split: None };
+    /// The walk of `levels` over `coverage` in `pyramid`, for `shard`.
+    pub fn new(pyramid: Pyramid, coverage: Coverage, levels: RangeInclusive<u32>, shard: Shard) -> Walk {
+        let mut walk = Walk { pyramid, coverage, levels, shard, split: None };
         if shard.count > 1 {
             walk.split = Some(walk.deal());
         }
@@ -69,7 +71,7 @@ impl Walk {
 
     /// Level-0 tiles the coverage meets.
     pub fn roots(&self) -> Vec<Node> {
-        let (rows, cols) = self.tiles.tiles_on_level(0);
+        let (rows, cols) = self.pyramid.level0();
         let all = (0..rows).flat_map(|r| (0..cols).map(move |c| TileId::new(0, r, c)));
         all.filter_map(|t| self.node(t)).filter(|&(t, _)| self.enters(t)).collect()
     }
@@ -111,7 +113,7 @@ impl Walk {
     }
 
     fn node(&self, tile: TileId) -> Option<Node> {
-        let relation = self.coverage.relation(&self.tiles.sector(tile));
+        let relation = self.coverage.relation(&self.pyramid.footprint(tile));
         (relation != Relation::Outside).then_some((tile, relation))
     }
 
@@ -198,11 +200,12 @@ impl Walk {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::grid::BBox;
+    use crate::grid::quad::TileSet;
+    use crate::grid::{BBox, TileGrid};
 
     fn walk(levels: RangeInclusive<u32>, shard: Shard) -> Walk {
         let bbox = BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 };
-        Walk::new(TileGrid::new(36.0, 513).unwrap(), Coverage::Box(bbox), levels, shard)
+        Walk::new(Pyramid::WorldWind(TileGrid::new(36.0, 513).unwrap()), Coverage::Box(bbox), levels, shard)
     }
 
     /// Every tile the walk reaches, in order, and whether it is seeded.
@@ -283,5 +286,29 @@ mod tests {
         assert_eq!(union, expected);
         let (lo, hi) = (*sizes.iter().min().unwrap(), *sizes.iter().max().unwrap());
         assert!(hi as f64 <= 1.3 * lo as f64, "unbalanced: {sizes:?}");
+    }
+
+    #[test]
+    fn a_quadtree_sets_walk_is_its_tiles_over_the_box() {
+        let bbox = BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 };
+        for set in TileSet::ALL {
+            let w = Walk::new(Pyramid::Quad(set), Coverage::Box(bbox), 0..=13, Shard::ALL);
+            let tiles = seeded(&w);
+            for z in 0..=13 {
+                let ((c0, r0), (c1, r1)) = set.tiles_over(&bbox, z);
+                let mut expected: Vec<TileId> =
+                    (r0..=r1).flat_map(|r| (c0..=c1).map(move |c| TileId::new(z, r, c))).collect();
+                let mut walked: Vec<TileId> = tiles.iter().copied().filter(|t| t.level == z).collect();
+                expected.sort();
+                walked.sort();
+                assert_eq!(walked, expected, "{set:?} zoom {z}");
+            }
+            assert_eq!(w.count_per_level().iter().sum::<u64>(), tiles.len() as u64);
+        }
+        // A box ending on tile edges (zoom 3's 22.5° columns and rows of the
+        // geographic set) takes no tile beyond them.
+        let edges = BBox { west: 0.0, south: 45.0, east: 22.5, north: 67.5 };
+        let w = Walk::new(Pyramid::Quad(TileSet::Crs84), Coverage::Box(edges), 3..=3, Shard::ALL);
+        assert_eq!(seeded(&w), vec![TileId::new(3, 1, 8)]);
     }
 }

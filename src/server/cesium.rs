@@ -39,7 +39,7 @@ use std::time::Instant;
 const SAMPLES: usize = 65;
 
 /// The layers served as terrain.
-const LAYERS: [Layer; 2] = [Layer::Dem, Layer::Cem];
+pub const LAYERS: [Layer; 2] = [Layer::Dem, Layer::Cem];
 
 /// Computes tile `zxy` of `layer` on its samples, `grid` ([`tile_grid`]):
 /// its heights (NaN, encoded 0 m, off the region's data), which children
@@ -135,13 +135,13 @@ pub fn tile_grid(region: &Region, (z, x, y): (u32, u64, u64)) -> Result<SampleGr
 
 /// The box of existing tile `(z, x, y)`: the geographic set's tile whose
 /// row counted from the north is `y`'s from the south.
-fn tile_box((z, x, y): (u32, u64, u64)) -> BBox {
+pub fn tile_box((z, x, y): (u32, u64, u64)) -> BBox {
     geographic_box(z, x, TileSet::Crs84.matrix(z).1 - 1 - y)
 }
 
 /// The deepest zoom of `layer`: the first whose samples are as close as its
 /// finest source's.
-fn deepest(region: &Region, layer: Layer) -> u32 {
+pub fn deepest(region: &Region, layer: Layer) -> u32 {
     // 64 sample intervals across a zoom-0 tile's 180°, at the equator.
     let zoom0_m = TileSet::Crs84.pixel_m(0.0) * SIDE as f64 / (SAMPLES - 1) as f64;
     finest_zoom(region, MapLayer::Data(layer), zoom0_m)
@@ -168,7 +168,7 @@ fn available(region: &Region, layer: Layer, z: u32) -> Vec<((u64, u64), (u64, u6
 }
 
 /// Whether tile `(z, x, y)` exists.
-fn exists(region: &Region, layer: Layer, (z, x, y): (u32, u64, u64)) -> bool {
+pub fn exists(region: &Region, layer: Layer, (z, x, y): (u32, u64, u64)) -> bool {
     let within = |&((x0, y0), (x1, y1)): &((u64, u64), (u64, u64))| (x0..=x1).contains(&x) && (y0..=y1).contains(&y);
     available(region, layer, z).iter().any(within)
 }

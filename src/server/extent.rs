@@ -25,6 +25,15 @@ pub struct Extent {
     pub max_zoom: u32,
 }
 
+impl Extent {
+    /// Whether tile `(z, col, row)` of `set` lies over the bounds (within
+    /// WMTS's limits of its matrix).
+    pub fn holds(&self, set: TileSet, (z, col, row): (u32, u64, u64)) -> bool {
+        let ((c0, r0), (c1, r1)) = set.tiles_over(&self.bounds, z);
+        (c0..=c1).contains(&col) && (r0..=r1).contains(&row)
+    }
+}
+
 /// The extent of `layer`'s tiles in `set`; none for a region beyond Web
 /// Mercator's latitudes (around a pole) in that set.
 pub fn extent(region: &Region, layer: MapLayer, set: TileSet) -> Option<Extent> {

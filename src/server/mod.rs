@@ -12,9 +12,9 @@
 //! never on the async executor; no request can panic the server (bad input
 //! is a 4xx with a message, an OGC exception report on `/wms` and `/wmts`).
 
-mod cesium;
+pub mod cesium;
 pub mod exception;
-mod extent;
+pub mod extent;
 pub mod metrics;
 pub mod pool;
 pub mod products;
@@ -25,7 +25,7 @@ pub use routes::MAX_XYZ_ZOOM;
 pub mod service;
 mod tilejson;
 pub mod wms;
-mod wmts;
+pub mod wmts;
 
 use crate::cache::TileStore;
 use crate::cache::quota::{Limit, Quota};

@@ -149,6 +149,13 @@ impl Product {
         }
     }
 
+    /// Whether the product lies off the region's data: empty (Cesium's: 0 m
+    /// everywhere), and made at once again — not worth a cache entry, which
+    /// any client could add without end.
+    pub fn off_data(&self, region: &Region) -> bool {
+        self.grid(region).is_ok_and(|g| !region.dem.may_cover(&g))
+    }
+
     /// The sample grid, checked against the region's tiling.
     pub fn grid(&self, region: &Region) -> Result<SampleGrid, GridError> {
         match self {

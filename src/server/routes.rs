@@ -315,19 +315,13 @@ async fn xyz_tilejson(
 /// A layer XYZ tiles are served in: heights or the pictures.
 fn xyz_layer(name: &str) -> Result<MapLayer, ServeError> {
     let layer = parse_layer(name)?;
-    if !has_xyz_tiles(layer) {
+    if !layer.in_quad_tiles() {
         return Err(ServeError::BadRequest(format!(
             "{} is not a height: XYZ tiles carry heights or the pictures",
             layer.name()
         )));
     }
     Ok(layer)
-}
-
-/// Whether XYZ tiles (and WMTS) serve `layer`: heights and the pictures,
-/// not cover or classes.
-pub(super) fn has_xyz_tiles(layer: MapLayer) -> bool {
-    !matches!(layer, MapLayer::Data(Layer::Cover | Layer::Surface))
 }
 
 /// The encoding a picture tile's extension asks for.

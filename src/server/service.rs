@@ -102,10 +102,7 @@ impl TileService {
         // no lock in the shared cache to meet them there).
         let task = tokio::spawn(async move {
             let load = async {
-                // A product off the region's data is empty, and instantly so
-                // again: not worth a cache entry, which any client could add
-                // without end.
-                let off_data = product.grid(&this.region).is_ok_and(|g| !this.region.dem.may_cover(&g));
+                let off_data = product.off_data(&this.region);
                 let tile = match stored.filter(|_| !off_data) {
                     Some(stored) => this.load(stored, product).await?,
                     None => Arc::new(tile_of(this.compute(product).await?)),

@@ -1,5 +1,5 @@
 //! `sylva seed` as an operator runs it: seeded tiles are the server's cache
-//! hits, byte for byte; dry runs count what a seed writes and polygons prune
+//! hits, byte for byte, World Wind's, the XYZ/WMTS sets' and Cesium's; dry runs count what a seed writes and polygons prune
 //! it; a seeder killed with SIGKILL resumes to the same cache (and its dry
 //! run counts what is left) with no temporary file of the killed one left,
 //! and a wait for a lock it left is explained; one stopped with Ctrl-C
@@ -227,7 +227,7 @@ fn bad_input_is_named_with_the_problem() {
     // Regression: the path and the cause alone, not what failed.
     let unmakeable = format!("cannot create the cache directory {}: Not a directory", cache.display());
     // Bad usage exits 2, bad files 1.
-    let cases: [(&[&str], &str, i32); 8] = [
+    let cases: [(&[&str], &str, i32); 12] = [
         (&["--levels", "12-3"], "--levels \"12-3\": FROM is above TO", 2),
         (
             &["--levels", "0-5", "--coverage", geojson.to_str().unwrap()],
@@ -240,6 +240,10 @@ fn bad_input_is_named_with_the_problem() {
         (&["--tiles-from", off.to_str().unwrap()], "off.txt:1: tile 3/1/1 does not meet the region", 1),
         (&["--levels", "0-5", "--layers", "trees"], "unknown \"trees\"", 2),
         (&["--levels", "0-5", "--cache-dir", cache.to_str().unwrap()], &unmakeable, 1),
+        (&["--grid", "tms"], "--grid: unknown \"tms\"; expected one of worldwind, xyz", 2),
+        (&["--grid", "cesium", "--layers", "relief"], "expected some of dem, cem (in cesium tiles)", 2),
+        (&["--grid", "xyz", "--formats", "png16"], "xyz tiles come in one format", 2),
+        (&["--grid", "cesium", "--levels", "0-20"], "cesium cem tiles go down to level", 2),
     ];
     for (args, needle, code) in cases {
         let out = seed(&dir.0, args);
@@ -563,4 +567,87 @@ fn a_box_across_the_antimeridian_over_a_global_region_is_one_piece() {
     let (west, east) = (planned("170,-20,180,-10"), planned("-180,-20,-170,-10"));
     assert!(west > 0 && east > 0);
     assert_eq!(planned("170,-20,190,-10"), west + east);
+}
+
+/// A quadtree set's or Cesium's cache key (`version/xyz/relief/z/x/y.png`,
+/// `…/crs84/…`, `…/cesium/cem/z/x/y.terrain`) → the server's product and
+/// its URL path.
+fn quad_product_of(key: &str) -> (Product, String) {
+    use sylva::grid::quad::TileSet;
+    let parts: Vec<&str> = key.split('/').collect();
+    let [_, grid, layer, z, x, file] = parts[..] else { panic!("{key}") };
+    let (y, ext) = file.split_once('.').unwrap();
+    let zxy = (z.parse().unwrap(), x.parse().unwrap(), y.parse().unwrap());
+    let map_layer = MapLayer::parse(layer).unwrap();
+    match (grid, ext) {
+        ("xyz", "png") => (
+            Product::Quad { layer: map_layer, set: TileSet::WebMercator, zxy },
+            format!("/xyz/{layer}/{z}/{x}/{y}.png"),
+        ),
+        ("crs84", "png") => (
+            Product::Quad { layer: map_layer, set: TileSet::Crs84, zxy },
+            format!("/wmts/1.0.0/{layer}/default/WorldCRS84Quad/{z}/{y}/{x}.png"),
+        ),
+        ("cesium", "terrain") => {
+            let MapLayer::Data(layer) = map_layer else { panic!("{key}") };
+            (Product::Terrain { layer, zxy }, format!("/cesium/{}/{z}/{x}/{y}.terrain", layer.name()))
+        }
+        _ => panic!("{key}"),
+    }
+}
+
+#[test]
+fn quadtree_and_cesium_tiles_are_seeded_as_the_server_serves_them() {
+    use sylva::grid::quad::TileSet;
+    let dir = TempDir::new("seed-quad");
+    let cache = dir.join("cache");
+    let at = ["--cache-dir", cache.to_str().unwrap()];
+    let jobs: [&[&str]; 3] = [
+        &["--grid", "xyz", "--layers", "relief,dem", "--levels", "10-12"],
+        // The levels WMTS advertises, by default.
+        &["--grid", "WorldCRS84Quad", "--layers", "cem"],
+        // Each layer to the deepest zoom its layer.json lists (cem's is deeper).
+        &["--grid", "cesium", "--layers", "dem,cem", "--bbox", "10.1,46.35,10.12,46.37"],
+    ];
+    let mut planned = 0;
+    for job in jobs {
+        planned += dry_total(&ok(&seed(&dir.0, &[job, &["--dry-run"]].concat()))).1;
+        ok(&seed(&dir.0, &[job, &at].concat()));
+    }
+    let seeded = tiles(&cache);
+    assert_eq!(seeded.len() as u64, planned);
+    let region = sylva::config::load(None).unwrap();
+    let zooms = |dir: &str| {
+        let z = seeded.keys().filter(|k| k.contains(dir)).map(|k| k.split('/').nth(3).unwrap().parse().unwrap());
+        z.clone().min().zip(z.max()).unwrap()
+    };
+    use sylva::cem::Layer::{Cem, Dem};
+    let wmts = sylva::server::extent::extent(&region, MapLayer::Data(Cem), TileSet::Crs84).unwrap();
+    assert_eq!(zooms("/crs84/"), (wmts.min_zoom, wmts.max_zoom));
+    assert_eq!(zooms("/xyz/"), (10, 12));
+    let deepest = |layer| sylva::server::cesium::deepest(&region, layer);
+    assert!(deepest(Cem) > deepest(Dem));
+    assert_eq!((zooms("/cesium/dem/"), zooms("/cesium/cem/")), ((0, deepest(Dem)), (0, deepest(Cem))));
+    // Byte-identical to what the server computes on demand, and answered
+    // from the cache at the tiles' URLs.
+    let server = Server::start(None, &cache);
+    for (key, bytes) in &seeded {
+        let (product, path) = quad_product_of(key);
+        assert!(products::compute(&region, &product).unwrap().bytes == *bytes, "{key} differs from the on-demand tile");
+        let reply = server.get(&path);
+        assert_eq!(reply.status, if bytes.is_empty() { 404 } else { 200 }, "{path}");
+        assert!(reply.body == *bytes, "{path}");
+    }
+    assert_eq!(server.metric("sylva_tile_computations_total"), 0.0);
+    assert_eq!(server.metric("sylva_tile_cache_total{result=\"hit\"}"), seeded.len() as f64);
+    // A list of such tiles (as a failed-tiles file writes them) seeds the same bytes.
+    let some: Vec<&String> = seeded.keys().step_by(7).collect();
+    let lines: String =
+        some.iter().map(|k| format!("{}\n", k.split_once('/').unwrap().1.split('.').next().unwrap())).collect();
+    std::fs::write(dir.join("list.txt"), lines).unwrap();
+    let again = dir.join("again");
+    ok(&seed(&dir.0, &["--tiles-from", "list.txt", "--cache-dir", again.to_str().unwrap()]));
+    let listed = tiles(&again);
+    assert_eq!(listed.len(), some.len());
+    assert!(some.iter().all(|k| listed.get(*k) == seeded.get(*k)), "a listed tile differs from the walk's");
 }

@@ -58,6 +58,12 @@ impl MapLayer {
         matches!(self, MapLayer::Colour | MapLayer::Relief)
     }
 
+    /// Whether the quadtree tiles (XYZ, WMTS) carry the layer: heights and
+    /// the pictures, not cover or classes (no Terrarium or picture of them).
+    pub fn in_quad_tiles(self) -> bool {
+        !matches!(self, MapLayer::Data(Layer::Cover | Layer::Surface))
+    }
+
     /// Whether GetMap offers the layer in `format`: pictures in PNG and
     /// JPEG, data in any format (in JPEG, a picture of it).
     pub fn offered_in(self, format: MapFormat) -> bool {
