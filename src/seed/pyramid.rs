@@ -126,15 +126,20 @@ impl Pyramid {
         names.join(", ")
     }
 
-    /// The levels at which the server advertises `layer` over `region` (the
-    /// zooms of TileJSON, WMTS or `layer.json`), for a pyramid other than
-    /// World Wind's (whose levels are the operator's to choose); an error
-    /// where it offers the region none.
+    /// The levels at which the server advertises `layer` over `region`, for a
+    /// pyramid other than World Wind's (whose levels are the operator's to
+    /// choose): from zoom 0, a quadtree set's every matrix WMTS lists, or
+    /// to the layer's TileJSON max zoom where deeper (or WMTS does not offer
+    /// it); Cesium's `layer.json` zooms; an error where the region has none.
     pub fn advertised(self, region: &Region, layer: MapLayer) -> Option<Result<RangeInclusive<u32>, String>> {
         match (self, layer) {
             (Pyramid::WorldWind(_), _) => None,
             (Pyramid::Quad(set), _) => Some(match extent::extent(region, layer, set) {
-                Some(e) => Ok(e.min_zoom..=e.max_zoom),
+                Some(e) => {
+                    let in_wmts = wmts::offered().any(|l| l == layer);
+                    let matrices = wmts::deepest_matrix(region, set).filter(|_| in_wmts);
+                    Ok(0..=e.max_zoom.max(matrices.unwrap_or(0)))
+                }
                 None => Err(format!("the region lies beyond {}'s latitudes", set.name())),
             }),
             (Pyramid::Cesium, MapLayer::Data(l)) => Some(Ok(0..=cesium::deepest(region, l))),
@@ -206,7 +211,8 @@ impl Pyramid {
 /// How far a footprint's edges lie inside its tile's, degrees: the same at
 /// every level (so a child's footprint lies within its parent's), 0.1 mm,
 /// under a hundredth of a pixel at the deepest zoom served, far above
-/// `f64`'s resolution at ±180°.
+/// `f64`'s resolution at ±180°. (A coverage reaching less than this past a
+/// tile's edge leaves that tile, and its sliver of data, unseeded.)
 const EDGE_DEG: f64 = 1e-9;
 
 #[cfg(test)]
@@ -290,9 +296,16 @@ mod tests {
         assert_eq!(Pyramid::Quad(TileSet::Crs84).layer_names(), "dem, canopy, cem, colour, relief");
         assert_eq!(Pyramid::WorldWind(tiles).layer_names(), "dem, cover, canopy, cem, surface, max4, max32");
         let region = crate::config::load(None).unwrap();
-        let relief = Pyramid::Quad(TileSet::WebMercator).advertised(&region, MapLayer::Relief).unwrap().unwrap();
-        let e = extent::extent(&region, MapLayer::Relief, TileSet::WebMercator).unwrap();
-        assert_eq!(relief, e.min_zoom..=e.max_zoom);
+        // Every matrix of WMTS's sets, for any layer (GDAL reads each at the deepest).
+        let dem = MapLayer::Data(Layer::Dem);
+        for set in TileSet::ALL {
+            let deepest = wmts::deepest_matrix(&region, set).unwrap();
+            assert!(deepest > extent::extent(&region, dem, set).unwrap().max_zoom);
+            assert_eq!(Pyramid::Quad(set).advertised(&region, dem).unwrap().unwrap(), 0..=deepest);
+        }
+        let max4 = MapLayer::Data(Layer::Max4);
+        let e = extent::extent(&region, max4, TileSet::WebMercator).unwrap();
+        assert_eq!(Pyramid::Quad(TileSet::WebMercator).advertised(&region, max4).unwrap().unwrap(), 0..=e.max_zoom);
         assert_eq!(
             Pyramid::Quad(TileSet::WebMercator).served_levels(&region, MapLayer::Relief),
             Some(0..=MAX_XYZ_ZOOM)

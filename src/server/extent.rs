@@ -1,6 +1,7 @@
 //! Where and at which zooms a layer's tiles in a quadtree set hold the
-//! region: the box, zooms and tile limits that TileJSON and the WMTS
-//! capabilities advertise.
+//! region: the box and zooms TileJSON advertises; the box whose tiles are
+//! a WMTS layer's limits in every matrix, and the zoom that ends a matrix
+//! set (the deepest of its layers').
 
 use super::routes::MAX_XYZ_ZOOM;
 use super::wms::request::MapLayer;

@@ -230,7 +230,9 @@ fn tile_request(params: &Params, limits: &Limits, needs: Needs) -> Result<TileRe
             invalid("FORMAT", format!("{} tiles are {}, not {format:?}", layer.name(), offered.join(" or ")))
         })?;
     let name = required(params, "TILEMATRIXSET")?;
-    let (set, last) = TileSet::parse(name).and_then(|set| Some((set, deepest(limits, set)?))).ok_or_else(|| {
+    // The layer's extent in a set offered (a set is offered for every layer or none).
+    let offered_set = |set| Some((set, deepest(limits, set)?, limits(layer, set)?));
+    let (set, last, extent) = TileSet::parse(name).and_then(offered_set).ok_or_else(|| {
         let names: Vec<&str> =
             TileSet::ALL.iter().filter(|&&s| deepest(limits, s).is_some()).map(|s| s.name()).collect();
         invalid("TILEMATRIXSET", format!("no tile matrix set {name:?}: {}", names.join(", ")))
@@ -249,10 +251,9 @@ fn tile_request(params: &Params, limits: &Limits, needs: Needs) -> Result<TileRe
         }
     }
     let zxy = (z, col, row);
-    match limits(layer, set) {
-        Some(e) if e.holds(set, zxy) => Ok(TileRequest { layer, set, zxy, picture }),
-        Some(e) => Err(outside_limits(layer, set, &e, zxy)),
-        None => Err(invalid("TILEMATRIXSET", format!("{} has no tiles in {}", layer.name(), set.name()))),
+    match extent.holds(set, zxy) {
+        true => Ok(TileRequest { layer, set, zxy, picture }),
+        false => Err(outside_limits(layer, set, &extent, zxy)),
     }
 }
 
@@ -318,7 +319,7 @@ fn sets(region: &Region) -> impl Iterator<Item = (TileSet, u32)> + '_ {
 /// The deepest matrix of `set` served over `region` (none: the set is not
 /// offered there).
 pub fn deepest_matrix(region: &Region, set: TileSet) -> Option<u32> {
-    sets(region).find(|&(s, _)| s == set).map(|(_, deepest)| deepest)
+    deepest(&|layer, set| extent(region, layer, set), set)
 }
 
 /// The deepest zoom of a matrix set: the deepest a layer's sources are as
