@@ -155,10 +155,14 @@ async fn tile_path(
     headers: HeaderMap,
 ) -> Result<Response, ServeError> {
     let (level, row) = (level_number(&level, "level")?, whole_number(&row, "row")?);
-    let (stem, ext) = file.rsplit_once('.').ok_or(ServeError::NotFound)?;
-    let (file_row, col) = stem.split_once('_').ok_or(ServeError::NotFound)?;
-    if file_row.parse::<u64>().ok() != Some(row) {
-        return Err(ServeError::NotFound);
+    let named =
+        || ServeError::BadRequest(format!("tile files are {{row}}_{{col}}.{{ext}}, e.g. {row}_0.bil, not {file:?}"));
+    let (stem, ext) = file.rsplit_once('.').ok_or_else(named)?;
+    let (file_row, col) = stem.split_once('_').ok_or_else(named)?;
+    if whole_number(file_row, "row")? != row {
+        let why =
+            format!("the file's row {file_row} is not the directory's, {row}: /{{level}}/{{row}}/{{row}}_{{col}}");
+        return Err(ServeError::BadRequest(why));
     }
     let col = whole_number(col, "column")?;
     let params = query_params(query.as_deref())?;

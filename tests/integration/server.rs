@@ -410,6 +410,9 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
             "/wms?REQUEST=GetMap&VERSION=1.3.0&LAYERS=dem&CRS=EPSG:4326&BBOX=0,0,1,1&WIDTH=10&HEIGHT=10&FORMAT=image/png&LAYERS=cem",
             "given twice",
         ),
+        ("/tiles/cem/3/1/2_1.bil", "the file's row 2 is not the directory's, 1"),
+        ("/tiles/cem/3/1/1.bil", "tile files are {row}_{col}.{ext}"),
+        ("/tiles/cem/3/1/1_1", "tile files are {row}_{col}.{ext}"),
         // A tile of a matrix outside the layer's limits there.
         ("/wmts/1.0.0/dem/default/WorldCRS84Quad/3/0/0.png", "TileOutOfRange"),
     ];
@@ -420,7 +423,6 @@ fn bad_input_is_a_4xx_with_a_reason_never_a_5xx() {
     }
     let past_any_tile = [
         "/tiles/cem/99/1/1_1.bil",
-        "/tiles/cem/3/1/2_1.bil",
         "/xyz/dem/3/99/1.png",
         "/xyz/dem/25/0/0.png",
         "/tiles/cem/3/99999999999999999999/1_1.bil",
