@@ -45,7 +45,12 @@ impl Pyramid {
     /// The pyramid named `name` (any case; the quadtree sets also by their
     /// OGC names); World Wind's on `tiles`.
     pub fn parse(name: &str, tiles: TileGrid) -> Option<Pyramid> {
-        let all = [Pyramid::WorldWind(tiles), Pyramid::Quad(TileSet::WebMercator), Pyramid::Quad(TileSet::Crs84)];
+        let all = [
+            Pyramid::WorldWind(tiles),
+            Pyramid::Quad(TileSet::WebMercator),
+            Pyramid::Quad(TileSet::Crs84),
+            Pyramid::Cesium,
+        ];
         let named = |p: &Pyramid| {
             let ogc = match p {
                 Pyramid::Quad(set) => Some(set.name()),
@@ -53,7 +58,7 @@ impl Pyramid {
             };
             [Some(p.name()), ogc].into_iter().flatten().any(|n| n.eq_ignore_ascii_case(name.trim()))
         };
-        all.into_iter().chain([Pyramid::Cesium]).find(named)
+        all.into_iter().find(named)
     }
 
     /// Its name: the directory its tiles are cached under (but World Wind's,
