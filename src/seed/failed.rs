@@ -31,11 +31,16 @@ pub struct Entry {
 }
 
 impl Entry {
-    /// The tile files it stands for: one per format, or the one tile of a
-    /// pyramid without formats.
+    /// The tile files it stands for.
     pub fn files(&self) -> u64 {
-        self.formats.len().max(1) as u64
+        files(&self.formats)
     }
+}
+
+/// The tile files of one layer of a tile in `formats`: one per format (World
+/// Wind's), or the one tile of a pyramid without formats (none given).
+pub fn files(formats: &[Format]) -> u64 {
+    formats.len().max(1) as u64
 }
 
 impl std::fmt::Display for Entry {

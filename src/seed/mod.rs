@@ -359,7 +359,7 @@ impl Run<'_> {
                 None => groups.push((e.pyramid, e.layer, formats, vec![e.tile])),
             }
         }
-        let files = |formats: &[crate::encode::Format]| formats.len().max(1) as u64;
+        let files = failed::files;
         let total = groups.iter().map(|(_, _, formats, tiles)| files(formats) * tiles.len() as u64).sum();
         let display = display::Display::new(self.options.display, total, 0);
         for (pyramid, layer, formats, tiles) in groups {

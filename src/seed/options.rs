@@ -169,7 +169,7 @@ impl Job {
     /// format (World Wind's) or its one tile.
     pub fn files_at(&self, level: u32) -> u64 {
         let served = self.layers.iter().filter(|&&l| self.pyramid.serves_level(&self.region, l, level));
-        (served.count() * self.formats.len().max(1)) as u64
+        served.count() as u64 * super::failed::files(&self.formats)
     }
 }
 

@@ -140,15 +140,21 @@ impl Seeder<'_> {
             (None, MapLayer::Data(layer)) => layer,
             (None, other) => return Err((format!("{} has no World Wind tiles to seed", other.name()), Vec::new())),
         };
+        let product = |format| Product::Tile {
+            layer: MapLayer::Data(layer),
+            id: tile,
+            halo: 0,
+            encoding: Encoding::Data(format),
+        };
+        // Every format's grid is the tile's.
+        if self.formats.first().is_some_and(|&f| product(f).off_data(self.region)) {
+            self.formats.iter().for_each(|_| self.count(Made::OffData));
+            return Ok(None);
+        }
         let grid = self.region.tiles.tile_samples(tile, 0);
         let mut samples: Option<(Option<LayerSamples>, bool)> = None;
         for (k, &format) in self.formats.iter().enumerate() {
-            let product =
-                Product::Tile { layer: MapLayer::Data(layer), id: tile, halo: 0, encoding: Encoding::Data(format) };
-            if product.off_data(self.region) {
-                self.count(Made::OffData);
-                continue;
-            }
+            let product = product(format);
             let key = product.key(&self.region.version).ok_or_else(|| "tiles have cache keys".to_string());
             let made = key.and_then(|key| {
                 self.file(&key, || {
@@ -380,6 +386,49 @@ mod tests {
         store.failing.store(2, Ordering::SeqCst);
         let err = seeder(1).file("b", make).err().unwrap();
         assert!(err.starts_with("2 attempts failed; last: cannot read the cache entry flaky: timed out"), "{err}");
+        std::fs::remove_dir_all(&root).ok();
+    }
+
+    #[test]
+    fn tiles_off_the_data_are_counted_and_not_stored() {
+        // The demo lies at 10° E: World Wind's level-0 tile at -180° and
+        // Cesium's western zoom-0 tile hold none of it; the server makes
+        // such tiles at once and never reads them from the cache.
+        let region = crate::config::load(None).unwrap();
+        let (counters, notice) = (Counters::default(), std::sync::Once::new());
+        let root = std::env::temp_dir().join(format!("sylva-off-data-{}", std::process::id()));
+        let store = std::sync::Arc::new(DirStore::new(&root));
+        let leases = Leases::start(store.clone(), Duration::from_secs(5));
+        let seeder = |pyramid, formats| Seeder {
+            region: &region,
+            pyramid,
+            store: &*store,
+            layers: vec![MapLayer::Data(Layer::Cem)],
+            formats,
+            refresh_before: SystemTime::now(),
+            leases: &leases,
+            retries: 0,
+            from_children: vec![],
+            counters: &counters,
+            wait_notice: &notice,
+        };
+        let far = TileId::new(0, 0, 0);
+        let world_wind = seeder(Pyramid::WorldWind(region.tiles), vec![Format::Bil16, Format::Png16]);
+        assert!(world_wind.tile(far, None, false).1.is_empty());
+        assert!(seeder(Pyramid::Cesium, vec![]).tile(far, None, false).1.is_empty());
+        let made = [&counters.computed, &counters.existing, &counters.failed].map(|c| c.load(Ordering::Relaxed));
+        assert_eq!((counters.off_data.load(Ordering::Relaxed), made), (3, [0, 0, 0]));
+        let keys = [
+            Pyramid::Cesium.product(MapLayer::Data(Layer::Cem), far).unwrap(),
+            Product::Tile {
+                layer: MapLayer::Data(Layer::Cem),
+                id: far,
+                halo: 0,
+                encoding: Encoding::Data(Format::Bil16),
+            },
+        ]
+        .map(|p| p.key(&region.version).unwrap());
+        assert!(keys.iter().all(|k| matches!(store.get(k), Ok(Lookup::Miss))), "{keys:?}");
         std::fs::remove_dir_all(&root).ok();
     }
 }

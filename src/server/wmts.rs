@@ -312,8 +312,7 @@ pub fn offered() -> impl Iterator<Item = MapLayer> {
 /// The matrix sets offered, those that hold the region (not Web Mercator
 /// around a pole), and the deepest zoom of each.
 fn sets(region: &Region) -> impl Iterator<Item = (TileSet, u32)> + '_ {
-    let limits = |layer, set| extent(region, layer, set);
-    TileSet::ALL.into_iter().filter_map(move |set| Some((set, deepest(&limits, set)?)))
+    TileSet::ALL.into_iter().filter_map(|set| Some((set, deepest_matrix(region, set)?)))
 }
 
 /// The deepest matrix of `set` served over `region` (none: the set is not
