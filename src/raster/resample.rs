@@ -405,19 +405,31 @@ impl View<'_> {
     }
 }
 
-/// `a + t (b - a)`, and `a` when `t` is zero whatever `b` is, so that a NaN
-/// neighbour with no weight does not poison an exact hit. Both are computed
-/// and one selected: no branch in the kernels' loops.
+/// Fractions of a pixel this close to a pixel's centre count as on it: a
+/// sample placed on a source pixel (a GetMap on the source's own grid) lands
+/// a rounding error either side of it, and a nodata neighbour must not take
+/// its value away. The most it moves a sample is 10⁻⁶ of a step.
+const ON_PIXEL: f32 = 1e-6;
+
+/// `a + t (b - a)`; `a` when `t` is within [`ON_PIXEL`] of 0 and `b` within
+/// it of 1, whatever the other is, so that a NaN neighbour with no weight
+/// does not poison a hit on a pixel. All are computed and one selected: no
+/// branch in the kernels' loops.
 #[inline]
 fn lerp(a: f32, b: f32, t: f32) -> f32 {
     let v = a + t * (b - a);
-    if t == 0.0 { a } else { v }
+    let v = if t >= 1.0 - ON_PIXEL { b } else { v };
+    if t <= ON_PIXEL { a } else { v }
 }
 
-/// Catmull–Rom weights (Keys, a = −0.5) for taps at −1, 0, 1, 2.
+/// Catmull–Rom weights (Keys, a = −0.5) for taps at −1, 0, 1, 2; on a
+/// pixel (within [`ON_PIXEL`]) that pixel's alone.
 fn catmull_rom(t: f32) -> [f32; 4] {
-    if t == 0.0 {
+    if t <= ON_PIXEL {
         return [0.0, 1.0, 0.0, 0.0];
+    }
+    if t >= 1.0 - ON_PIXEL {
+        return [0.0, 0.0, 1.0, 0.0];
     }
     let (t2, t3) = (t * t, t * t * t);
     [0.5 * (-t3 + 2.0 * t2 - t), 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0), 0.5 * (-3.0 * t3 + 4.0 * t2 + t), 0.5 * (t3 - t2)]
@@ -462,6 +474,27 @@ mod tests {
         let out = resample(&src, Window::new(0, 0, 5, 4), &extent, &exact, Resampling::Bilinear);
         assert_eq!(out.get(0, 0), 5.0);
         assert!(out.get(1, 0).is_nan());
+    }
+
+    #[test]
+    fn a_sample_a_rounding_error_off_a_pixel_beside_nodata_keeps_its_value() {
+        // Regression: a GetMap on the source's own grid lost the valid pixels
+        // on either side of a void (their neighbour in the void had a weight
+        // of 1e-11 or so).
+        let mut src = ramp();
+        src.set(2, 1, f32::NAN);
+        let extent = Extent::new(5, 4, 0.5);
+        let near = vec![(1.0 + 1e-9, 1.0), (3.0 - 1e-9, 1.0), (1.0, 2.0 - 1e-9), (1.5, 1.0)];
+        for kind in [Resampling::Bilinear, Resampling::Bicubic] {
+            let coords = PixelCoords::Dense { width: 4, xy: near.clone() };
+            let out = resample(&src, Window::new(0, 0, 5, 4), &extent, &coords, kind);
+            assert_eq!([out.get(0, 0), out.get(1, 0), out.get(2, 0)], [5.0, 9.0, 8.0], "{kind:?}");
+            assert!(out.get(3, 0).is_nan(), "{kind:?}: half a pixel from the void");
+        }
+        // The separable path: the same.
+        let coords = PixelCoords::Separable { x: vec![1.0 + 1e-9, 3.0 - 1e-9], y: vec![1.0 - 1e-9] };
+        let out = resample(&src, Window::new(0, 0, 5, 4), &extent, &coords, Resampling::Bilinear);
+        assert_eq!([out.get(0, 0), out.get(1, 0)], [5.0, 9.0]);
     }
 
     #[test]
