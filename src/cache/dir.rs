@@ -54,7 +54,7 @@ impl DirStore {
             let why = io::Error::other("it must be a directory, and this is a file");
             return Err(CacheError::io("use the tile cache", root, why));
         }
-        fs::create_dir_all(root).map_err(|e| CacheError::io(CREATE_DIR, root, e))?;
+        make_dirs(root).map_err(|e| CacheError::io(CREATE_DIR, root, e))?;
         Ok(store)
     }
 
@@ -86,7 +86,7 @@ impl DirStore {
         for file in [&path, &tmp] {
             let no_parent = || CacheError::io(WRITE_ENTRY, file, io::Error::other("no parent directory"));
             let dir = file.parent().ok_or_else(no_parent)?;
-            fs::create_dir_all(dir).map_err(|e| CacheError::io(CREATE_DIR, dir, e))?;
+            make_dirs(dir).map_err(|e| CacheError::io(CREATE_DIR, dir, e))?;
         }
         let result = make(&tmp).and_then(|()| fs::rename(&tmp, &path));
         if result.is_err() {
@@ -216,7 +216,7 @@ impl TileStore for DirStore {
     fn mark_in_use(&self, version: &str) -> Result<(), CacheError> {
         let path = self.path(&format!("{version}/{IN_USE}"));
         let dir = self.path(version);
-        fs::create_dir_all(&dir).map_err(|e| CacheError::io(CREATE_DIR, &dir, e))?;
+        make_dirs(&dir).map_err(|e| CacheError::io(CREATE_DIR, &dir, e))?;
         // Through a temporary, as tiles are: a mark another user left is
         // replaced as theirs are, with the directory's permission alone.
         let token = holder::token();
@@ -247,10 +247,33 @@ fn abandoned(path: &Path, ttl: Duration) -> Option<String> {
     (holder::died(&token, meta.uid()) || age.is_some_and(|age| age > ttl)).then_some(token)
 }
 
+/// `fs::create_dir_all`, naming what is in the way when part of `dir`
+/// is no directory (a file, or a link to nothing) rather than saying
+/// "File exists".
+fn make_dirs(dir: &Path) -> io::Result<()> {
+    fs::create_dir_all(dir).map_err(|e| {
+        if e.kind() != io::ErrorKind::AlreadyExists {
+            return e;
+        }
+        let parts: Vec<&Path> = dir.ancestors().filter(|a| !a.as_os_str().is_empty()).collect();
+        match parts.into_iter().rev().find(|a| !a.is_dir()) {
+            Some(part) => match fs::read_link(part) {
+                Ok(target) => io::Error::other(format!(
+                    "{} is a link to {}, which is no directory",
+                    part.display(),
+                    target.display()
+                )),
+                Err(_) => io::Error::other(format!("{} is a file, not a directory", part.display())),
+            },
+            None => e,
+        }
+    })
+}
+
 /// Creates `path` only if it does not exist, holding `token`.
 fn create_exclusive(path: &Path, token: &str) -> io::Result<()> {
     if let Some(dir) = path.parent() {
-        fs::create_dir_all(dir)?;
+        make_dirs(dir)?;
     }
     let mut file = fs::OpenOptions::new().write(true).create_new(true).open(path)?;
     file.write_all(token.as_bytes())

@@ -47,7 +47,7 @@ pub struct SeedArgs {
     grid: String,
     /// Layers, comma-separated: dem, cover, canopy, cem, surface, max4, max32;
     /// xyz and crs84 also colour and relief, not cover or surface; cesium dem and cem.
-    #[arg(long, default_value = "cem")]
+    #[arg(long, default_value = "cem", conflicts_with = "tiles_from")]
     layers: String,
     /// Formats of worldwind tiles, comma-separated: bil16 (.bil, the default),
     /// bil32, png16 (.png), tiff (.tif).
@@ -96,7 +96,8 @@ pub struct SeedArgs {
     /// Stop (non-zero exit) after more than N failed tile files.
     #[arg(long, default_value_t = 1000)]
     max_failures: u64,
-    /// Seed part I (0-based) of N disjoint parts.
+    /// Seed part I (0-based) of N disjoint parts (of a --tiles-from list:
+    /// every N-th line from the I-th).
     #[arg(long)]
     shard: Option<String>,
     /// Compute every tile rather than building parents from their children.

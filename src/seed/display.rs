@@ -2,7 +2,7 @@
 //! a terminal, plain log lines every few seconds otherwise (a Kubernetes
 //! Job's log, CI), or nothing.
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 use std::io::IsTerminal;
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
@@ -24,6 +24,8 @@ pub enum Mode {
 /// Progress of tile files (made, found or failed) out of a total.
 pub struct Display {
     bar: ProgressBar,
+    /// The bar is drawn on the terminal.
+    drawn: bool,
     plain: bool,
     logged: Mutex<Instant>,
 }
@@ -34,14 +36,17 @@ impl Display {
         let bar_wanted = mode == Mode::Auto && std::io::stderr().is_terminal();
         let target = if bar_wanted { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() };
         let bar = ProgressBar::with_draw_target(Some(total), target);
-        let style = ProgressStyle::with_template("{wide_bar} {pos}/{len} tile files {per_sec} ETA {eta} {msg}");
+        let style = ProgressStyle::with_template("{wide_bar} {pos}/{len} tile files {rate} ETA {eta} {msg}");
         if let Ok(style) = style {
-            bar.set_style(style);
+            let rate = |state: &ProgressState, w: &mut dyn std::fmt::Write| {
+                let _ = write!(w, "{:.1}/s", state.per_sec());
+            };
+            bar.set_style(style.with_key("rate", rate));
         }
         bar.set_position(already.min(total));
         bar.reset_eta();
         let plain = mode == Mode::Plain || (mode == Mode::Auto && !bar_wanted);
-        Display { bar, plain, logged: Mutex::new(Instant::now()) }
+        Display { bar, drawn: bar_wanted, plain, logged: Mutex::new(Instant::now()) }
     }
 
     /// `n` more files; `failed` so far.
@@ -72,5 +77,9 @@ impl Display {
             crate::outputs::say(format_args!("{}", self.line(failed)));
         }
         self.bar.abandon();
+        if self.drawn {
+            // The bar's line is left open: what is printed next starts below it.
+            eprintln!();
+        }
     }
 }

@@ -192,6 +192,14 @@ impl Failed {
         }
     }
 
+    /// Ends a run stopped by a signal: the list it re-runs stays whole (its
+    /// tiles not reached yet are in it), and the new failures' file goes.
+    pub fn abandon(self) {
+        if self.replaces.is_some() {
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
+
     /// Records a failed tile.
     pub fn record(&self, entry: &Entry, why: &str) -> std::io::Result<()> {
         let why = why.replace(['\n', '\r'], " ");
@@ -243,6 +251,12 @@ mod tests {
         );
         assert_eq!(f.finish().unwrap(), path);
         assert_eq!(read(&path, &region(BBox::WORLD)).unwrap(), vec![entry(Layer::Dem, (5, 1, 2), &[Format::Bil16])]);
+        // Stopped by a signal: the list stays, its new failures' file goes.
+        let f = Failed::replacing(&path).unwrap();
+        let next = f.path().to_path_buf();
+        f.record(&entry(Layer::Dem, (5, 1, 2), &[Format::Bil16]), "again").unwrap();
+        f.abandon();
+        assert!(!next.exists() && read(&path, &region(BBox::WORLD)).unwrap().len() == 1);
         std::fs::remove_file(&path).unwrap();
     }
 

@@ -101,9 +101,7 @@ pub enum SeedError {
         next: String,
     },
     /// More tiles failed than allowed; the progress was saved.
-    #[error(
-        "stopped: {failed} tile files failed (more than --max-failures {max}); they are listed in {list}; resume with --resume"
-    )]
+    #[error("stopped: {failed} tile files failed (more than --max-failures {max}); they are listed in {list}; {next}")]
     TooManyFailures {
         /// Failed so far.
         failed: u64,
@@ -111,6 +109,8 @@ pub enum SeedError {
         max: u64,
         /// The failed-tiles file.
         list: String,
+        /// How to go on.
+        next: String,
     },
 }
 
@@ -127,14 +127,16 @@ pub struct Report {
 pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedError> {
     let job = Job::new(options)?;
     if options.dry_run {
-        let resumed = options.resume.then(|| Progress::resume(&job.files.0, &job.fingerprint)).transpose()?;
-        return Ok(dry_run(&job, resumed.as_ref()));
+        let cache = cache_identity(&job.config.tile_cache.backend(options.cache_dir.as_deref()));
+        let resumed = options.resume.then(|| Progress::resume(&job.files.0, &job.fingerprint, &cache)).transpose()?;
+        return dry_run(&job, options, resumed.as_ref());
     }
-    let store = crate::cache::open(&job.config.tile_cache.backend(options.cache_dir.as_deref()))?;
-    probe(&*store)?;
+    let backend = job.config.tile_cache.backend(options.cache_dir.as_deref());
+    let store = crate::cache::open(&backend)?;
+    probe(&*store, &job.region.version)?;
     let _in_use = crate::cache::in_use::InUse::mark(store.clone(), &job.region.version);
     // The holds are kept (not `_`, which would drop them) to the end.
-    let Records { list, progress, failed, holds: _holds } = records(&job, options)?;
+    let Records { list, progress, failed, holds: _holds } = records(&job, options, &cache_identity(&backend))?;
     let threads =
         rayon::ThreadPoolBuilder::new().num_threads(options.concurrency).thread_name(|i| format!("sylva-seed-{i}"));
     let pool = threads.build().map_err(|e| SeedError::Usage(format!("--concurrency {}: {e}", options.concurrency)))?;
@@ -161,6 +163,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     }
     let n = counters.failed.load(Ordering::Relaxed);
     if let Some(signal) = interrupt.came() {
+        failed.abandon();
         return Err(SeedError::Interrupted { signal, next: how_to_go_on(options, &job.files.0) });
     }
     if run.stop.load(Ordering::Relaxed) {
@@ -168,6 +171,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
             failed: n,
             max: options.max_failures,
             list: failed.path().display().to_string(),
+            next: how_to_go_on(options, &job.files.0),
         });
     }
     let list = failed.finish().map_err(|source| SeedError::Io { path: job.files.1.clone(), source })?;
@@ -197,14 +201,14 @@ struct Records {
 }
 
 /// The run's records, once this job holds their files.
-fn records(job: &Job, options: &SeedOptions) -> Result<Records, SeedError> {
+fn records(job: &Job, options: &SeedOptions, cache: &str) -> Result<Records, SeedError> {
     let (progress_path, failed_path) = &job.files;
     let holds = [hold::hold(progress_path)?, hold::hold(failed_path)?];
     // A list is read before the failed-tiles file (perhaps the same) is emptied.
-    let list = options.tiles_from.as_deref().map(|p| failed::read(p, &job.region)).transpose()?;
+    let list = read_list(job, options)?;
     let progress = match options.resume && list.is_none() {
-        true => Progress::resume(progress_path, &job.fingerprint)?,
-        false => Progress::start(progress_path, &job.fingerprint),
+        true => Progress::resume(progress_path, &job.fingerprint, cache)?,
+        false => Progress::start(progress_path, &job.fingerprint, cache),
     };
     let rerun_in_place = options.tiles_from.as_deref().is_some_and(|l| crate::outputs::same_file(l, failed_path));
     // A resumed run retries the earlier failures: they are listed anew.
@@ -214,6 +218,28 @@ fn records(job: &Job, options: &SeedOptions) -> Result<Records, SeedError> {
     }
     .map_err(|source| SeedError::Io { path: failed_path.clone(), source })?;
     Ok(Records { list, progress, failed, holds })
+}
+
+/// The cache a job writes to, as its progress file records it: a
+/// directory by its absolute path (once it exists), a Redis server by its
+/// URL (without a password) and key prefix.
+fn cache_identity(backend: &crate::cache::Backend) -> String {
+    match backend {
+        crate::cache::Backend::Directory(dir) => {
+            format!("directory {}", std::fs::canonicalize(dir).unwrap_or_else(|_| dir.clone()).display())
+        }
+        crate::cache::Backend::Redis { url, prefix } => {
+            let (scheme, rest) = url.split_once("://").unwrap_or(("", url));
+            let host = rest.split_once('@').map_or(rest, |(_, host)| host);
+            format!("Redis {scheme}://{host} prefix {prefix:?}")
+        }
+    }
+}
+
+/// This shard's tiles of the `--tiles-from` list, if one is given.
+fn read_list(job: &Job, options: &SeedOptions) -> Result<Option<Vec<failed::Entry>>, SeedError> {
+    let read = |path| failed::read(path, &job.region).map(|entries| job.shard.of_list(entries));
+    Ok(options.tiles_from.as_deref().map(read).transpose()?)
 }
 
 /// What an interrupted run tells its operator to do next.
@@ -285,10 +311,15 @@ impl Run<'_> {
     /// Walks the job's tiles.
     fn walk(&self, walk: Option<&Walk>) -> Result<(), SeedError> {
         let Some(walk) = walk else { return Ok(()) };
-        let files =
-            walk.count_per_level().into_iter().zip(walk.levels()).map(|(n, level)| n * self.job.files_at(level));
-        let total: u64 = files.sum();
-        let display = display::Display::new(self.options.display, total, self.progress.earlier);
+        let files = |counts: Vec<u64>| -> u64 {
+            counts.into_iter().zip(walk.levels()).map(|(n, level)| n * self.job.files_at(level)).sum()
+        };
+        let total = files(walk.count_per_level());
+        // Those left are counted from the finished subtrees, not from the
+        // files earlier runs made: tiles made after a run's last save are
+        // walked again (and found in the cache).
+        let left = if self.progress.complete { 0 } else { files(walk.count_left(&self.progress.finished())) };
+        let display = display::Display::new(self.options.display, total, total - left);
         if !self.progress.complete {
             let seeder = self.seeder(self.job.pyramid, self.job.layers.clone());
             walk.roots().par_iter().for_each(|&root| {
@@ -350,10 +381,7 @@ impl Run<'_> {
         // or the job's), in the order they first appear.
         let mut groups: Vec<(Pyramid, MapLayer, &[crate::encode::Format], Vec<TileId>)> = Vec::new();
         for e in entries {
-            let formats = match e.pyramid {
-                Pyramid::WorldWind(_) if e.formats.is_empty() => &self.job.formats[..],
-                _ => &e.formats[..],
-            };
+            let formats = self.job.formats_of(e);
             match groups.iter_mut().find(|(p, layer, f, _)| (*p, *layer, *f) == (e.pyramid, e.layer, formats)) {
                 Some(group) => group.3.push(e.tile),
                 None => groups.push((e.pyramid, e.layer, formats, vec![e.tile])),
@@ -416,10 +444,10 @@ fn exact_levels(region: &crate::region::Region, layers: &[MapLayer], last: u32) 
         .collect()
 }
 
-/// Takes and releases a lock in the cache: one that cannot be written fails
-/// the job at once, not every tile of it.
-fn probe(store: &dyn crate::cache::TileStore) -> Result<(), crate::cache::CacheError> {
-    match store.try_lock(".sylva-seed-probe", Duration::from_secs(1))? {
+/// Takes and releases a lock among `version`'s tiles: a cache that cannot
+/// be written there fails the job at once, not every tile of it.
+fn probe(store: &dyn crate::cache::TileStore, version: &str) -> Result<(), crate::cache::CacheError> {
+    match store.try_lock(&format!("{version}/.sylva-seed-probe"), Duration::from_secs(1))? {
         Some(lock) => store.unlock(&lock),
         None => Ok(()),
     }
@@ -427,9 +455,9 @@ fn probe(store: &dyn crate::cache::TileStore) -> Result<(), crate::cache::CacheE
 
 /// The dry run: tiles per level for this shard, or with `resumed` (the
 /// job's progress file) those it has left.
-fn dry_run(job: &Job, resumed: Option<&Progress>) -> Report {
+fn dry_run(job: &Job, options: &SeedOptions, resumed: Option<&Progress>) -> Result<Report, SeedError> {
     let Some(walk) = &job.walk else {
-        return Report { text: "a tile list has no levels to count".into(), failed: 0 };
+        return Ok(dry_run_list(job, &read_list(job, options)?.unwrap_or_default()));
     };
     let counts = match resumed {
         Some(p) if p.complete => vec![0; walk.levels().count()],
@@ -460,6 +488,28 @@ fn dry_run(job: &Job, resumed: Option<&Progress>) -> Report {
         p => format!("{} layer(s) of {} tiles", job.layers.len(), p.name()),
     };
     let head = format!("{} — shard {}/{}, {what}{resuming}", job.region.name, job.shard.index, job.shard.count);
+    Ok(Report { text: format!("{head}\n{}", crate::bench::table(&["level", "tiles", "files"], &rows)), failed: 0 })
+}
+
+/// The dry run of a tile list: this shard's tiles and files per pyramid
+/// and level, in the order they first appear.
+fn dry_run_list(job: &Job, entries: &[failed::Entry]) -> Report {
+    let mut rows: Vec<(String, u64, u64)> = Vec::new();
+    for e in entries {
+        let level = format!("{} {}", e.pyramid.name(), e.tile.level);
+        let files = failed::files(job.formats_of(e));
+        match rows.iter_mut().find(|r| r.0 == level) {
+            Some(row) => (row.1, row.2) = (row.1 + 1, row.2 + files),
+            None => rows.push((level, 1, files)),
+        }
+    }
+    let all = ("all".to_string(), rows.iter().map(|r| r.1).sum(), rows.iter().map(|r| r.2).sum());
+    let rows: Vec<Vec<String>> = rows
+        .into_iter()
+        .chain([all])
+        .map(|(level, tiles, files)| vec![level, tiles.to_string(), files.to_string()])
+        .collect();
+    let head = format!("{} — shard {}/{}, the tiles listed", job.region.name, job.shard.index, job.shard.count);
     Report { text: format!("{head}\n{}", crate::bench::table(&["level", "tiles", "files"], &rows)), failed: 0 }
 }
 

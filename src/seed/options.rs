@@ -154,8 +154,16 @@ impl Job {
             o.progress_file.clone().unwrap_or_else(|| PathBuf::from(format!("seed-progress{suffix}.json"))),
             o.failed_file.clone().unwrap_or_else(|| PathBuf::from(format!("seed-failed{suffix}.txt"))),
         );
-        // The failed-tiles file may be the list re-run: it is then replaced at the end.
-        let list = o.tiles_from.as_deref().filter(|l| !crate::outputs::same_file(l, &files.1));
+        // The failed-tiles file may be the list re-run: it is then replaced at
+        // the end, by one shard's failures only if the list is its alone.
+        let in_place = o.tiles_from.as_deref().is_some_and(|l| crate::outputs::same_file(l, &files.1));
+        if in_place && shard.count > 1 {
+            return Err(SeedError::Usage(format!(
+                "--shard with --tiles-from {}: that is this shard's failed-tiles file, which the run replaces with its own failures; give each shard its own --failed-file",
+                files.1.display()
+            )));
+        }
+        let list = o.tiles_from.as_deref().filter(|_| !in_place);
         let named = config.files(o.config.as_deref().map_or(Path::new("."), crate::config::base_of));
         let given = [o.config.as_deref(), o.coverage.as_deref(), list].into_iter().flatten();
         let inputs: Vec<&Path> = given.chain(named.iter().map(PathBuf::as_path)).collect();
@@ -163,6 +171,15 @@ impl Job {
         let job = format!("{area} {shard:?}");
         let fingerprint = fingerprint(&region.version, pyramid, &layers, &formats, &job);
         Ok(Job { config, region, pyramid, layers, formats, walk, shard, refresh_before, files, fingerprint })
+    }
+
+    /// The formats of a listed tile: those its line lists, else (World
+    /// Wind's) the job's.
+    pub fn formats_of<'a>(&'a self, entry: &'a super::failed::Entry) -> &'a [Format] {
+        match entry.pyramid {
+            Pyramid::WorldWind(_) if entry.formats.is_empty() => &self.formats,
+            _ => &entry.formats,
+        }
     }
 
     /// Tile files of a tile of `level`: each layer served there, in each

@@ -27,6 +27,9 @@ const EVERY: Duration = Duration::from_secs(1);
 struct State {
     /// Digest of everything that defines the job.
     job: String,
+    /// The cache it writes to (none in files from before it was recorded).
+    #[serde(default)]
+    cache: String,
     /// When the job first started, Unix ms.
     started_ms: u64,
     /// Tile files already made or found (for the progress bar).
@@ -52,6 +55,7 @@ pub struct ProgressError {
 pub struct Progress {
     path: PathBuf,
     job: String,
+    cache: String,
     started: SystemTime,
     done: Mutex<HashSet<TileId>>,
     saved: Mutex<Instant>,
@@ -62,11 +66,13 @@ pub struct Progress {
 }
 
 impl Progress {
-    /// A new job's state at `path` (replacing an old one).
-    pub fn start(path: &Path, job: &str) -> Progress {
+    /// A new state at `path` (replacing an old one) of `job`, which
+    /// writes to `cache`.
+    pub fn start(path: &Path, job: &str, cache: &str) -> Progress {
         Progress {
             path: path.to_path_buf(),
             job: job.to_string(),
+            cache: cache.to_string(),
             started: SystemTime::now(),
             done: Mutex::new(HashSet::new()),
             saved: Mutex::new(Instant::now()),
@@ -75,8 +81,10 @@ impl Progress {
         }
     }
 
-    /// The saved state of `job` at `path`; an error if the file is another job's.
-    pub fn resume(path: &Path, job: &str) -> Result<Progress, ProgressError> {
+    /// The saved state of `job` at `path`; an error if the file is another
+    /// job's, or the job wrote to another cache than `cache` (the subtrees it
+    /// finished are not there).
+    pub fn resume(path: &Path, job: &str, cache: &str) -> Result<Progress, ProgressError> {
         let fail = |message: String| ProgressError { path: path.to_path_buf(), message };
         let text = std::fs::read_to_string(path).map_err(|e| fail(format!("cannot resume: {e}")))?;
         let state: State = serde_json::from_str(&text).map_err(|e| fail(format!("not a seed progress file: {e}")))?;
@@ -84,6 +92,12 @@ impl Progress {
             return Err(fail(
                 "written by another job (other grid, layers, formats, levels, area, shard or configuration); run without --resume to start afresh".into(),
             ));
+        }
+        if !state.cache.is_empty() && state.cache != cache {
+            return Err(fail(format!(
+                "this job wrote to the cache {}, not to {cache}, which lacks the tiles it finished: resume it with that cache, or run without --resume to start afresh",
+                state.cache
+            )));
         }
         let done = state
             .done
@@ -93,6 +107,7 @@ impl Progress {
         Ok(Progress {
             path: path.to_path_buf(),
             job: job.to_string(),
+            cache: cache.to_string(),
             started: UNIX_EPOCH + Duration::from_millis(state.started_ms),
             done: Mutex::new(done),
             saved: Mutex::new(Instant::now()),
@@ -126,7 +141,8 @@ impl Progress {
     pub fn save(&self, products: u64, complete: bool) -> std::io::Result<()> {
         let done = self.done.lock().map(|d| d.iter().map(|t| t.to_string()).collect()).unwrap_or_default();
         let started_ms = self.started.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64);
-        let state = State { job: self.job.clone(), started_ms, products: self.earlier + products, done, complete };
+        let (job, cache) = (self.job.clone(), self.cache.clone());
+        let state = State { job, cache, started_ms, products: self.earlier + products, done, complete };
         let text = serde_json::to_string(&state).map_err(std::io::Error::other)?;
         let tmp = self.path.with_extension(format!("tmp{}", std::process::id()));
         std::fs::write(&tmp, text)?;
@@ -162,7 +178,7 @@ mod tests {
     #[test]
     fn finished_subtrees_replace_their_children_and_resume() {
         let path = std::env::temp_dir().join(format!("sylva-progress-{}.json", std::process::id()));
-        let p = Progress::start(&path, "job1");
+        let p = Progress::start(&path, "job1", "directory /a");
         let parent = TileId::new(3, 1, 1);
         let kids = parent.children();
         for k in kids {
@@ -172,15 +188,23 @@ mod tests {
         p.finish(parent, &kids, 5).unwrap();
         assert_eq!(p.held(), 1);
         p.save(5, false).unwrap();
-        let r = Progress::resume(&path, "job1").unwrap();
+        let r = Progress::resume(&path, "job1", "directory /a").unwrap();
         assert!(r.is_done(parent) && !r.is_done(kids[0]));
         assert_eq!((r.earlier, r.complete), (5, false));
         assert_eq!(
             r.started().duration_since(UNIX_EPOCH).unwrap().as_millis(),
             p.started().duration_since(UNIX_EPOCH).unwrap().as_millis()
         );
-        let err = Progress::resume(&path, "job2").unwrap_err().to_string();
+        let err = Progress::resume(&path, "job2", "directory /a").unwrap_err().to_string();
         assert!(err.contains("another job"), "{err}");
+        // Regression: resumed into another cache, a job skipped the subtrees
+        // it had finished in the first, and left the second incomplete.
+        let err = Progress::resume(&path, "job1", "directory /b").unwrap_err().to_string();
+        assert!(err.contains("wrote to the cache directory /a, not to directory /b"), "{err}");
+        // A file from before the cache was recorded resumes anywhere.
+        let text = std::fs::read_to_string(&path).unwrap().replace(r#""cache":"directory /a","#, "");
+        std::fs::write(&path, text).unwrap();
+        assert!(Progress::resume(&path, "job1", "directory /b").is_ok());
         std::fs::remove_file(&path).unwrap();
         assert_eq!(parse_tile("12/3/4"), Some(TileId::new(12, 3, 4)));
         assert_eq!(parse_tile("12/3"), None);

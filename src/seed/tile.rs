@@ -241,7 +241,7 @@ impl Seeder<'_> {
                     std::thread::sleep(backoff(failed));
                     continue;
                 }
-                Err(e) => return Err(format!("{} attempts failed; last: {e}", failed + 1)),
+                Err(e) => return Err(attempts_failed(failed + 1, &e)),
             };
             match claim {
                 Claim::Ready(_) => return Ok(Made::Existing),
@@ -296,7 +296,15 @@ impl Seeder<'_> {
                 Err(e) => last = e,
             }
         }
-        Err(format!("{} attempts failed; last: {last}", self.retries + 1))
+        Err(attempts_failed(self.retries + 1, &last))
+    }
+}
+
+/// Why a tile failed after `n` attempts, the last with `last`.
+fn attempts_failed(n: u32, last: &dyn std::fmt::Display) -> String {
+    match n {
+        1 => format!("failed: {last}"),
+        n => format!("{n} attempts failed; last: {last}"),
     }
 }
 

@@ -38,6 +38,12 @@ pub struct Shard {
 impl Shard {
     /// The whole job.
     pub const ALL: Shard = Shard { index: 0, count: 1 };
+
+    /// This shard's lines of a tile list: every `count`-th from the
+    /// `index`-th.
+    pub fn of_list<T>(self, lines: Vec<T>) -> Vec<T> {
+        lines.into_iter().skip(self.index as usize).step_by(self.count as usize).collect()
+    }
 }
 
 /// A tile and how it lies against the coverage.

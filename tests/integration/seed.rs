@@ -139,7 +139,7 @@ pub fn strs(args: &[String]) -> Vec<&str> {
 fn dry_total(out: &str) -> (u64, u64) {
     let row = out
         .lines()
-        .find(|l| l.contains("| all |") || l.trim_start().starts_with("|   all"))
+        .find(|l| l.split('|').nth(1).is_some_and(|cell| cell.trim() == "all"))
         .unwrap_or_else(|| panic!("{out}"));
     let cells: Vec<u64> = row.split('|').filter_map(|c| c.trim().parse().ok()).collect();
     (cells[0], cells[1])
@@ -226,8 +226,14 @@ fn bad_input_is_named_with_the_problem() {
     let cache = file.join("cache");
     // Regression: the path and the cause alone, not what failed.
     let unmakeable = format!("cannot create the cache directory {}: Not a directory", cache.display());
+    // A cache directory that is a link to nothing (was "File exists").
+    let dangling = dir.join("dangling");
+    std::os::unix::fs::symlink(dir.join("nowhere"), &dangling).unwrap();
+    let link = format!("{} is a link to {}, which is no directory", dangling.display(), dir.join("nowhere").display());
+    // A list names its layers and levels.
+    let listed = ["--tiles-from", list.to_str().unwrap()];
     // Bad usage exits 2, bad files 1.
-    let cases: [(&[&str], &str, i32); 12] = [
+    let cases: [(&[&str], &str, i32); 15] = [
         (&["--levels", "12-3"], "--levels \"12-3\": FROM is above TO", 2),
         (
             &["--levels", "0-5", "--coverage", geojson.to_str().unwrap()],
@@ -244,6 +250,13 @@ fn bad_input_is_named_with_the_problem() {
         (&["--grid", "cesium", "--layers", "relief"], "expected some of dem, cem (in cesium tiles)", 2),
         (&["--grid", "xyz", "--formats", "png16"], "xyz tiles come in one format", 2),
         (&["--grid", "cesium", "--levels", "0-20"], "cesium cem tiles go down to level", 2),
+        (&["--levels", "0-5", "--cache-dir", dangling.to_str().unwrap()], &link, 1),
+        (&[&listed[..], &["--layers", "dem"]].concat(), "cannot be used with '--layers <LAYERS>'", 2),
+        (
+            &[&listed[..], &["--shard", "0/2", "--failed-file", list.to_str().unwrap()]].concat(),
+            "give each shard its own --failed-file",
+            2,
+        ),
     ];
     for (args, needle, code) in cases {
         let out = seed(&dir.0, args);
@@ -282,8 +295,14 @@ fn a_seeder_killed_mid_run_resumes_to_the_same_cache() {
     let (_, all) = dry_total(&ok(&seed(&dir.0, &[&job[..], &["--dry-run"]].concat())));
     assert!(0 < left && left < all, "{left} of {all} files left");
 
-    let summary = ok(&seed(&dir.0, &[&job[..], &["--cache-dir", cache.to_str().unwrap(), "--resume"]].concat()));
+    // Resumed into another cache, the finished subtrees would be missing there.
+    let elsewhere = seed(&dir.0, &[&job[..], &["--cache-dir", "other", "--resume"]].concat());
+    let err = String::from_utf8_lossy(&elsewhere.stderr);
+    assert!(!elsewhere.status.success() && err.contains("this job wrote to the cache directory"), "{err}");
+    let out = seed(&dir.0, &[&job[..], &["--cache-dir", cache.to_str().unwrap(), "--resume"]].concat());
+    let summary = ok(&out);
     assert!(count(&summary, "tile files made") <= left, "{summary}");
+    ends_at_its_total(&out);
     assert_eq!(dry(&job).1, 0, "nothing is left once the job is complete");
     let resumed = tiles(&cache);
     assert_eq!(resumed.keys().collect::<Vec<_>>(), expected.keys().collect::<Vec<_>>());
@@ -293,6 +312,16 @@ fn a_seeder_killed_mid_run_resumes_to_the_same_cache() {
     let names = walk(&cache).into_iter().filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()));
     let temporaries: Vec<String> = names.filter(|n| n.starts_with('.') && n.ends_with(".tmp")).collect();
     assert!(temporaries.is_empty(), "the killed seeder's temporaries were left: {temporaries:?}");
+}
+
+/// Asserts that a seed's last progress line counts all its files, no more
+/// (regression: a resumed run counted the files earlier runs made under an
+/// unfinished subtree twice, and ended at 3349/3348).
+fn ends_at_its_total(out: &Output) {
+    let log = String::from_utf8_lossy(&out.stderr);
+    let last = log.lines().rev().find_map(|l| l.strip_prefix("seed: ")).unwrap_or_else(|| panic!("{log}"));
+    let (done, total) = last.split_once(' ').and_then(|(f, _)| f.split_once('/')).unwrap();
+    assert_eq!(done, total, "{last}");
 }
 
 #[test]
@@ -484,7 +513,9 @@ fn failing_tiles_are_retried_listed_and_rerun_and_uniform_tiles_are_stored_once(
     let dry = ok(&seed(&dir.0, &[&job[..], &["--resume", "--dry-run"]].concat()));
     assert!(dry.contains(&format!("{} tile(s) failed earlier", failed.len())), "{dry}");
     up.healed.store(true, std::sync::atomic::Ordering::SeqCst);
-    let resumed = ok(&seed(&dir.0, &[&job[..], &["--resume"]].concat()));
+    let out = seed(&dir.0, &[&job[..], &["--resume"]].concat());
+    let resumed = ok(&out);
+    ends_at_its_total(&out);
     assert_eq!(count(&resumed, "tile files made"), 2 * failed.len() as u64, "{resumed}");
     assert!(tiles(&cache).len() > partial.len());
     assert_eq!(std::fs::read_to_string(dir.join("seed-failed.txt")).unwrap(), "", "the healed tiles are not listed");
@@ -656,4 +687,17 @@ fn quadtree_and_cesium_tiles_are_seeded_as_the_server_serves_them() {
     let listed = entries(&again);
     assert_eq!(listed.len(), some.len());
     assert!(some.iter().all(|k| listed.get(*k) == seeded.get(*k)), "a listed tile differs from the walk's");
+    // Its dry run counts it; its shards split it.
+    let dry = ok(&seed(&dir.0, &["--tiles-from", "list.txt", "--dry-run"]));
+    assert_eq!(dry_total(&dry).0, some.len() as u64, "{dry}");
+    let shards: Vec<BTreeMap<String, Vec<u8>>> = (0..2)
+        .map(|i| {
+            let cache = dir.join(&format!("shard{i}"));
+            let shard = format!("{i}/2");
+            ok(&seed(&dir.0, &["--tiles-from", "list.txt", "--shard", &shard, "--cache-dir", cache.to_str().unwrap()]));
+            entries(&cache)
+        })
+        .collect();
+    assert_eq!(shards[0].len() + shards[1].len(), some.len(), "the shards overlap or leave tiles out");
+    assert!(shards.iter().flatten().all(|(k, bytes)| listed.get(k) == Some(bytes)));
 }
