@@ -31,6 +31,9 @@ pub enum Code {
     TileOutOfRange,
     /// A WMTS GetFeatureInfo's pixel is outside its tile.
     PointIjOutOfRange,
+    /// None of the versions a GetCapabilities accepts is served (OWS
+    /// Common's `AcceptVersions`).
+    VersionNegotiationFailed,
     /// The server failed (no standard code; reported without one).
     NoApplicableCode,
 }
@@ -43,6 +46,7 @@ impl Code {
             Code::InvalidPoint => "InvalidPoint",
             Code::TileOutOfRange => "TileOutOfRange",
             Code::PointIjOutOfRange => "PointIJOutOfRange",
+            Code::VersionNegotiationFailed => "VersionNegotiationFailed",
             Code::StyleNotDefined => "StyleNotDefined",
             Code::InvalidCrs => "InvalidCRS",
             Code::InvalidSrs => "InvalidSRS",

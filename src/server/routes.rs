@@ -49,6 +49,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/health", get(health))
         .route("/metrics", get(metrics))
         .route("/wms", get(super::wms::handle).fallback(super::wms::other_method))
+        .route("/wms/", get(super::wms::handle).fallback(super::wms::other_method))
         .route("/tiles.json", get(tileset))
         .route("/tiles", get(tile_query))
         .route("/tiles/{layer}/{level}/{row}/{file}", get(tile_path))
@@ -57,6 +58,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/cesium/{layer}/layer.json", get(super::cesium::layer_json))
         .route("/cesium/{layer}/{z}/{x}/{file}", get(super::cesium::tile))
         .route("/wmts", get(super::wmts::handle).fallback(super::wmts::other_method))
+        .route("/wmts/", get(super::wmts::handle).fallback(super::wmts::other_method))
         .route("/wmts/1.0.0/WMTSCapabilities.xml", get(super::wmts::capabilities_file))
         .route(super::wmts::TILE_ROUTE, get(super::wmts::rest_tile).fallback(super::wmts::other_method))
         .layer(CompressionLayer::new().gzip(true).compress_when(grids_only))
@@ -66,12 +68,15 @@ pub fn router(state: Arc<AppState>) -> Router {
         .with_state(state)
 }
 
-/// Any web page may read tiles and maps (and their quantization headers).
+/// Any web page may read tiles and maps (and their quantization headers),
+/// with any request headers (a client revalidating with `If-None-Match`,
+/// or adding its own, asks first).
 fn cors() -> CorsLayer {
     let exposed = [header::ETAG, HeaderName::from_static("x-sylva-offset"), HeaderName::from_static("x-sylva-scale")];
     CorsLayer::new()
         .allow_origin(Any)
         .allow_methods([axum::http::Method::GET, axum::http::Method::HEAD])
+        .allow_headers(Any)
         .expose_headers(exposed)
 }
 
@@ -120,10 +125,10 @@ fn route_label(path: &str) -> &'static str {
     match path {
         "/health" => "health",
         "/metrics" => "metrics",
-        "/wms" => "wms",
+        "/wms" | "/wms/" => "wms",
         "/tiles" | "/tiles/{layer}/{level}/{row}/{file}" | "/tiles.json" => "tiles",
         "/xyz/{layer}/{z}/{x}/{file}" | "/xyz/{layer}/tiles.json" => "xyz",
-        "/wmts" | "/wmts/1.0.0/WMTSCapabilities.xml" | super::wmts::TILE_ROUTE => "wmts",
+        "/wmts" | "/wmts/" | "/wmts/1.0.0/WMTSCapabilities.xml" | super::wmts::TILE_ROUTE => "wmts",
         "/cesium/{layer}/layer.json" | "/cesium/{layer}/{z}/{x}/{file}" => "cesium",
         _ => "other",
     }

@@ -181,7 +181,7 @@ fn parse(query: &str, limits: &Limits) -> Result<Request, Exception> {
         return Err(invalid("SERVICE", format!("this endpoint is WMTS, not {service:?}")));
     }
     match required(&params, "REQUEST")? {
-        r if r.eq_ignore_ascii_case("GetCapabilities") => Ok(Request::Capabilities),
+        r if r.eq_ignore_ascii_case("GetCapabilities") => accepts_ours(&params).map(|()| Request::Capabilities),
         r if r.eq_ignore_ascii_case("GetTile") => tile_request(&params, limits, Needs::Tile).map(Request::Tile),
         r if r.eq_ignore_ascii_case("GetFeatureInfo") => {
             Ok(Request::FeatureInfo(tile_request(&params, limits, Needs::Values)?, pixel(&params)?))
@@ -191,6 +191,19 @@ fn parse(query: &str, limits: &Limits) -> Result<Request, Exception> {
             format!("request {r:?} is not offered: GetCapabilities, GetTile or GetFeatureInfo"),
         )
         .locator("REQUEST")),
+    }
+}
+
+/// A GetCapabilities's `AcceptVersions`, if given, includes 1.0.0 (OWS
+/// Common 1.1 §7.3.2).
+fn accepts_ours(params: &Params) -> Result<(), Exception> {
+    match params.get("ACCEPTVERSIONS") {
+        Some(list) if !list.split(',').any(|v| v.trim() == "1.0.0") => Err(Exception::new(
+            Code::VersionNegotiationFailed,
+            format!("AcceptVersions {list:?}: this server offers WMTS 1.0.0"),
+        )
+        .locator("AcceptVersions")),
+        _ => Ok(()),
     }
 }
 
@@ -616,6 +629,12 @@ mod tests {
         crs84("TILEROW", "4096");
         crs84("TILECOL", "8192");
         fails(with("VERSION", "2.0.0"), Code::InvalidParameterValue, "VERSION");
+        let capabilities = |accepted: &str| {
+            parse(&format!("SERVICE=WMTS&REQUEST=GetCapabilities{accepted}"), &|_, _| world(MAX_XYZ_ZOOM))
+        };
+        assert!(matches!(capabilities("&AcceptVersions=2.0.0,1.0.0"), Ok(Request::Capabilities)));
+        let Err(e) = capabilities("&ACCEPTVERSIONS=2.0.0") else { panic!("2.0.0 alone accepted") };
+        assert_eq!((e.code, e.locator.as_deref()), (Code::VersionNegotiationFailed, Some("AcceptVersions")));
         fails(with("LAYER", "cover"), Code::InvalidParameterValue, "LAYER");
         fails(with("STYLE", "dark"), Code::InvalidParameterValue, "STYLE");
         fails(with("FORMAT", "image/tiff"), Code::InvalidParameterValue, "FORMAT");

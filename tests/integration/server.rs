@@ -39,6 +39,11 @@ fn capabilities_are_valid_in_both_versions() {
             assert!(text.contains(&format!("<Name>{layer}</Name>")), "{layer}");
         }
     }
+    // With a trailing slash too (was a bare 404).
+    for path in ["/wms/?SERVICE=WMS&REQUEST=GetCapabilities", "/wmts/?SERVICE=WMTS&REQUEST=GetCapabilities"] {
+        let r = server.get(path);
+        assert!(r.status == 200 && r.text().contains("Capabilities"), "{path}: {}", r.status);
+    }
 }
 
 #[test]
@@ -136,6 +141,18 @@ fn browsers_may_read_tiles_from_any_page() {
     assert_eq!(r.status, 200);
     assert_eq!(r.header("access-control-allow-origin"), Some("*"));
     assert!(r.header("access-control-expose-headers").is_some_and(|h| h.contains("x-sylva-scale")));
+    // A page that revalidates with If-None-Match asks first (regression: the
+    // preflight allowed no headers, so the browser never sent the request).
+    let host = server.base.strip_prefix("http://").unwrap();
+    let preflight = crate::http::send_raw(
+        host,
+        &format!(
+            "OPTIONS {path} HTTP/1.1\r\nHost: {host}\r\nOrigin: https://maps.example.org\r\nAccess-Control-Request-Method: GET\r\nAccess-Control-Request-Headers: if-none-match\r\nConnection: close\r\n\r\n"
+        ),
+    );
+    assert!(preflight.status < 300, "{}", preflight.status);
+    let allowed = preflight.headers.iter().find(|(k, _)| k == "access-control-allow-headers").map(|(_, v)| v.as_str());
+    assert!(allowed.is_some_and(|h| h == "*" || h.contains("if-none-match")), "{:?}", preflight.headers);
 }
 
 #[test]
