@@ -252,9 +252,11 @@ fn abandoned(path: &Path, ttl: Duration) -> Option<String> {
 /// "File exists".
 fn make_dirs(dir: &Path) -> io::Result<()> {
     fs::create_dir_all(dir).map_err(|e| {
-        if e.kind() != io::ErrorKind::AlreadyExists {
+        if !matches!(e.kind(), io::ErrorKind::AlreadyExists | io::ErrorKind::NotADirectory) {
             return e;
         }
+        // Without a trailing slash, which would follow a link.
+        let dir: PathBuf = dir.components().collect();
         let parts: Vec<&Path> = dir.ancestors().filter(|a| !a.as_os_str().is_empty()).collect();
         match parts.into_iter().rev().find(|a| !a.is_dir()) {
             Some(part) => match fs::read_link(part) {

@@ -191,8 +191,7 @@ fn open_dem(
 /// Which revision of Sylva's products a cached tile holds: change it with
 /// any change to the code that changes some tile's bytes, so that caches
 /// seeded before it are not served beside tiles made after it.
-const PRODUCT_REVISION: &str =
-    "2026-12-09: a GeoTIFF's vertical CRS gives its unit and direction (EPSG:6360 US feet, depths)";
+const PRODUCT_REVISION: &str = "2026-12-07, 34th sitting: a sample within 1e-6 of a step of a source pixel is that pixel's (nodata beside it no longer spreads)";
 
 /// A key that changes with anything that changes a tile's bytes: every
 /// setting, the size and time of every source file, and the products'

@@ -6,8 +6,9 @@
 //! Pixel coordinates are centre-based: `(0.0, 0.0)` is the centre of pixel
 //! `(0, 0)`. Samples outside the source's valid [`Extent`] are NaN; inside it the
 //! kernel taps are clamped to the edge pixels, or read across the seam of a
-//! raster around the globe ([`Extent::wraps`]). NaN taps with a non-zero weight
-//! make the sample NaN (nodata propagates).
+//! raster around the globe ([`Extent::wraps`]). NaN taps with a weight
+//! (more than 10⁻⁶ of a step from the sample) make the sample NaN (nodata
+//! propagates).
 
 use super::mesh::Mesh;
 use super::{Raster, Window, floor_i64};

@@ -127,8 +127,8 @@ pub struct Report {
 pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedError> {
     let job = Job::new(options)?;
     if options.dry_run {
-        let cache = cache_identity(&job.config.tile_cache.backend(options.cache_dir.as_deref()));
-        let resumed = options.resume.then(|| Progress::resume(&job.files.0, &job.fingerprint, &cache)).transpose()?;
+        let caches = cache_names(&job.config.tile_cache.backend(options.cache_dir.as_deref()));
+        let resumed = options.resume.then(|| Progress::resume(&job.files.0, &job.fingerprint, &caches)).transpose()?;
         return dry_run(&job, options, resumed.as_ref());
     }
     let backend = job.config.tile_cache.backend(options.cache_dir.as_deref());
@@ -136,7 +136,7 @@ pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedErr
     probe(&*store, &job.region.version)?;
     let _in_use = crate::cache::in_use::InUse::mark(store.clone(), &job.region.version);
     // The holds are kept (not `_`, which would drop them) to the end.
-    let Records { list, progress, failed, holds: _holds } = records(&job, options, &cache_identity(&backend))?;
+    let Records { list, progress, failed, holds: _holds } = records(&job, options, &cache_names(&backend))?;
     let threads =
         rayon::ThreadPoolBuilder::new().num_threads(options.concurrency).thread_name(|i| format!("sylva-seed-{i}"));
     let pool = threads.build().map_err(|e| SeedError::Usage(format!("--concurrency {}: {e}", options.concurrency)))?;
@@ -201,14 +201,14 @@ struct Records {
 }
 
 /// The run's records, once this job holds their files.
-fn records(job: &Job, options: &SeedOptions, cache: &str) -> Result<Records, SeedError> {
+fn records(job: &Job, options: &SeedOptions, caches: &[String]) -> Result<Records, SeedError> {
     let (progress_path, failed_path) = &job.files;
     let holds = [hold::hold(progress_path)?, hold::hold(failed_path)?];
     // A list is read before the failed-tiles file (perhaps the same) is emptied.
     let list = read_list(job, options)?;
     let progress = match options.resume && list.is_none() {
-        true => Progress::resume(progress_path, &job.fingerprint, cache)?,
-        false => Progress::start(progress_path, &job.fingerprint, cache),
+        true => Progress::resume(progress_path, &job.fingerprint, caches)?,
+        false => Progress::start(progress_path, &job.fingerprint, &caches[0]),
     };
     let rerun_in_place = options.tiles_from.as_deref().is_some_and(|l| crate::outputs::same_file(l, failed_path));
     // A resumed run retries the earlier failures: they are listed anew.
@@ -220,26 +220,37 @@ fn records(job: &Job, options: &SeedOptions, cache: &str) -> Result<Records, See
     Ok(Records { list, progress, failed, holds })
 }
 
-/// The cache a job writes to, as its progress file records it: a
-/// directory by its absolute path (once it exists), a Redis server by its
-/// URL (without a password) and key prefix.
-fn cache_identity(backend: &crate::cache::Backend) -> String {
+/// The names of the cache a job writes to, the first as its progress file
+/// records it: a directory by its absolute path, then (if another) the path
+/// with its links resolved, so that either finds it again; a Redis server by
+/// its URL (without a password) and key prefix.
+fn cache_names(backend: &crate::cache::Backend) -> Vec<String> {
     match backend {
         crate::cache::Backend::Directory(dir) => {
-            format!("directory {}", std::fs::canonicalize(dir).unwrap_or_else(|_| dir.clone()).display())
+            let absolute = std::path::absolute(dir).unwrap_or_else(|_| dir.clone());
+            let resolved = std::fs::canonicalize(dir).ok().filter(|r| *r != absolute);
+            let paths = std::iter::once(absolute).chain(resolved);
+            paths.map(|p| format!("directory {}", p.display())).collect()
         }
         crate::cache::Backend::Redis { url, prefix } => {
             let (scheme, rest) = url.split_once("://").unwrap_or(("", url));
-            let host = rest.split_once('@').map_or(rest, |(_, host)| host);
-            format!("Redis {scheme}://{host} prefix {prefix:?}")
+            let host = rest.rsplit_once('@').map_or(rest, |(_, host)| host);
+            vec![format!("Redis {scheme}://{host} prefix {prefix:?}")]
         }
     }
 }
 
 /// This shard's tiles of the `--tiles-from` list, if one is given.
 fn read_list(job: &Job, options: &SeedOptions) -> Result<Option<Vec<failed::Entry>>, SeedError> {
-    let read = |path| failed::read(path, &job.region).map(|entries| job.shard.of_list(entries));
-    Ok(options.tiles_from.as_deref().map(read).transpose()?)
+    let Some(path) = options.tiles_from.as_deref() else { return Ok(None) };
+    let all = failed::read(path, &job.region)?;
+    let (listed, shard) = (all.len(), job.shard);
+    let mine = shard.of_list(all);
+    if shard.count > 1 && options.display != display::Mode::Quiet {
+        let (i, n, m) = (shard.index, shard.count, mine.len());
+        crate::outputs::say(format_args!("sylva seed: shard {i}/{n} of {}: {m} of its {listed} tiles", path.display()));
+    }
+    Ok(Some(mine))
 }
 
 /// What an interrupted run tells its operator to do next.
@@ -552,4 +563,27 @@ fn summary(job: &Job, store: &dyn crate::cache::TileStore, c: &Counters, took: D
         text.push_str(&format!("\nfailed tiles are listed in {}; re-run them with --tiles-from {0}", failed.display()));
     }
     text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cache::Backend;
+
+    #[test]
+    fn a_cache_is_named_by_its_absolute_path_or_its_server_without_a_password() {
+        let dir = std::env::temp_dir().join(format!("sylva-names-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("real")).unwrap();
+        std::os::unix::fs::symlink(dir.join("real"), dir.join("link")).unwrap();
+        let names = cache_names(&Backend::Directory(dir.join("link")));
+        let real = std::fs::canonicalize(dir.join("real")).unwrap();
+        assert_eq!(
+            names,
+            [format!("directory {}", dir.join("link").display()), format!("directory {}", real.display())]
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+        let redis = |url: &str| cache_names(&Backend::Redis { url: url.into(), prefix: "sylva".into() });
+        assert_eq!(redis("redis://:p@ss@cache:6379/0"), ["Redis redis://cache:6379/0 prefix \"sylva\""]);
+        assert_eq!(redis("redis://cache:6379"), ["Redis redis://cache:6379 prefix \"sylva\""]);
+    }
 }

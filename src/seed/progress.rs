@@ -82,9 +82,9 @@ impl Progress {
     }
 
     /// The saved state of `job` at `path`; an error if the file is another
-    /// job's, or the job wrote to another cache than `cache` (the subtrees it
-    /// finished are not there).
-    pub fn resume(path: &Path, job: &str, cache: &str) -> Result<Progress, ProgressError> {
+    /// job's, or the job wrote to another cache than the one named `caches`
+    /// (the subtrees it finished are not there).
+    pub fn resume(path: &Path, job: &str, caches: &[String]) -> Result<Progress, ProgressError> {
         let fail = |message: String| ProgressError { path: path.to_path_buf(), message };
         let text = std::fs::read_to_string(path).map_err(|e| fail(format!("cannot resume: {e}")))?;
         let state: State = serde_json::from_str(&text).map_err(|e| fail(format!("not a seed progress file: {e}")))?;
@@ -93,10 +93,10 @@ impl Progress {
                 "written by another job (other grid, layers, formats, levels, area, shard or configuration); run without --resume to start afresh".into(),
             ));
         }
-        if !state.cache.is_empty() && state.cache != cache {
+        if !state.cache.is_empty() && !caches.contains(&state.cache) {
+            let (wrote, here) = (&state.cache, caches.first().map_or("", String::as_str));
             return Err(fail(format!(
-                "this job wrote to the cache {}, not to {cache}, which lacks the tiles it finished: resume it with that cache, or run without --resume to start afresh",
-                state.cache
+                "this job wrote to the cache {wrote}, not to {here}, which lacks the tiles it finished: resume it with that cache, or run without --resume to start afresh (if they are one cache under two names, remove the \"cache\" entry from this file)"
             )));
         }
         let done = state
@@ -107,7 +107,8 @@ impl Progress {
         Ok(Progress {
             path: path.to_path_buf(),
             job: job.to_string(),
-            cache: cache.to_string(),
+            // A file from before the cache was recorded records it now.
+            cache: Some(state.cache).filter(|c| !c.is_empty()).or_else(|| caches.first().cloned()).unwrap_or_default(),
             started: UNIX_EPOCH + Duration::from_millis(state.started_ms),
             done: Mutex::new(done),
             saved: Mutex::new(Instant::now()),
@@ -188,23 +189,26 @@ mod tests {
         p.finish(parent, &kids, 5).unwrap();
         assert_eq!(p.held(), 1);
         p.save(5, false).unwrap();
-        let r = Progress::resume(&path, "job1", "directory /a").unwrap();
+        let names = |n: &[&str]| n.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let r = Progress::resume(&path, "job1", &names(&["directory /a"])).unwrap();
         assert!(r.is_done(parent) && !r.is_done(kids[0]));
         assert_eq!((r.earlier, r.complete), (5, false));
         assert_eq!(
             r.started().duration_since(UNIX_EPOCH).unwrap().as_millis(),
             p.started().duration_since(UNIX_EPOCH).unwrap().as_millis()
         );
-        let err = Progress::resume(&path, "job2", "directory /a").unwrap_err().to_string();
+        let err = Progress::resume(&path, "job2", &names(&["directory /a"])).unwrap_err().to_string();
         assert!(err.contains("another job"), "{err}");
         // Regression: resumed into another cache, a job skipped the subtrees
         // it had finished in the first, and left the second incomplete.
-        let err = Progress::resume(&path, "job1", "directory /b").unwrap_err().to_string();
+        let err = Progress::resume(&path, "job1", &names(&["directory /b"])).unwrap_err().to_string();
         assert!(err.contains("wrote to the cache directory /a, not to directory /b"), "{err}");
+        // The same cache by another of its names (its links resolved).
+        assert!(Progress::resume(&path, "job1", &names(&["directory /b", "directory /a"])).is_ok());
         // A file from before the cache was recorded resumes anywhere.
         let text = std::fs::read_to_string(&path).unwrap().replace(r#""cache":"directory /a","#, "");
         std::fs::write(&path, text).unwrap();
-        assert!(Progress::resume(&path, "job1", "directory /b").is_ok());
+        assert!(Progress::resume(&path, "job1", &names(&["directory /b"])).is_ok());
         std::fs::remove_file(&path).unwrap();
         assert_eq!(parse_tile("12/3/4"), Some(TileId::new(12, 3, 4)));
         assert_eq!(parse_tile("12/3"), None);

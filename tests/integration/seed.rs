@@ -225,7 +225,7 @@ fn bad_input_is_named_with_the_problem() {
     std::fs::write(&file, "").unwrap();
     let cache = file.join("cache");
     // Regression: the path and the cause alone, not what failed.
-    let unmakeable = format!("cannot create the cache directory {}: Not a directory", cache.display());
+    let unmakeable = format!("cannot create the cache directory {}: {} is a file", cache.display(), file.display());
     // A cache directory that is a link to nothing (was "File exists").
     let dangling = dir.join("dangling");
     std::os::unix::fs::symlink(dir.join("nowhere"), &dangling).unwrap();
