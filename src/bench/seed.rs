@@ -1,7 +1,11 @@
 //! `sylva bench seed`: seeding speed and memory. Tiles per second seeding a
 //! region's `cem` tiles on 1 and 2 workers, with and without building parents
 //! from their children (and the same for `dem`, where more levels qualify),
-//! each into a fresh directory cache; MapProxy's `mapproxy-seed` rate
+//! then the other pyramids' tiles at the levels the server advertises (XYZ
+//! `relief` and `dem`, WMTS CRS84 `relief`, Cesium `cem`) on the embedded
+//! demo region (whose finer data the server advertises to deeper zooms than
+//! rmnp's 234 m DEM: 213 XYZ tiles against 17), each into a fresh directory
+//! cache; MapProxy's `mapproxy-seed` rate
 //! (measured by `benches/seed.sh` in the same sitting) gives the ratio.
 //! The machine is shared: every configuration runs twice, alternating, and
 //! the faster run counts; the process's CPU time per file (user + system,
@@ -9,9 +13,9 @@
 //! else the machine runs.
 //!
 //! Memory: resident memory in one process through a real seed of the
-//! region's `cem` tiles, then a ~100,000-tile walk over a box around it (the
-//! region's tiles found in the cache, the rest without data, each still
-//! claimed, stored and linked).
+//! region's `cem` tiles, then a real ~155,000-tile job: the demo's XYZ `dem`
+//! tiles to zoom 19 (a walk stays within its region's bounds, and rmnp's
+//! World Wind tiles that many would be 80 GB).
 
 use super::rss_mib;
 use super::table;
@@ -31,10 +35,73 @@ pub struct SeedBench {
     pub levels: String,
     /// Tile files per second of `mapproxy-seed` in this sitting, if measured.
     pub mapproxy_rate: Option<f64>,
-    /// Levels of the memory run (over a box 2.6° square from the region's
-    /// south-west corner).
+    /// Zooms of the memory run's XYZ `dem` tiles of the demo region.
     pub memory_levels: String,
 }
+
+/// One speed run's job: the pyramid, a layer, World Wind's format (none
+/// for the others), workers, and whether parents are built from children.
+struct Run {
+    grid: &'static str,
+    layer: &'static str,
+    format: Option<&'static str>,
+    workers: usize,
+    from_children: bool,
+}
+
+impl Run {
+    const fn world_wind(layer: &'static str, format: &'static str, workers: usize, from_children: bool) -> Run {
+        Run { grid: "worldwind", layer, format: Some(format), workers, from_children }
+    }
+
+    /// A quadtree or Cesium job on the demo region, 2 workers, at the
+    /// advertised levels.
+    const fn other(grid: &'static str, layer: &'static str) -> Run {
+        Run { grid, layer, format: None, workers: 2, from_children: false }
+    }
+
+    fn label(&self) -> String {
+        let workers = format!("{} worker{}", self.workers, if self.workers > 1 { "s" } else { "" });
+        match self.format {
+            Some(format) => {
+                let parents = if self.from_children { "from children" } else { "computed" };
+                format!("{} {format}, {workers}, parents {parents}", self.layer)
+            }
+            None => format!("{} {} (demo), {workers}, advertised levels", self.grid, self.layer),
+        }
+    }
+
+    /// Its options into `dir`: World Wind's on the bench's region at its
+    /// levels, the others on the demo at the levels the server advertises.
+    fn options(&self, b: &SeedBench, dir: &Path) -> SeedOptions {
+        let world_wind = self.grid == "worldwind";
+        let base = options(b, dir, &b.levels);
+        SeedOptions {
+            config: base.config.clone().filter(|_| world_wind),
+            grid: self.grid.into(),
+            layers: self.layer.into(),
+            formats: self.format.map(String::from),
+            levels: base.levels.clone().filter(|_| world_wind),
+            concurrency: self.workers,
+            from_children: self.from_children,
+            ..base
+        }
+    }
+}
+
+/// The speed runs; [`ratios`] reads the first six by position.
+const RUNS: [Run; 10] = [
+    Run::world_wind("cem", "bil16", 1, true),
+    Run::world_wind("cem", "bil16", 2, true),
+    Run::world_wind("cem", "bil16", 2, false),
+    Run::world_wind("cem", "png16", 2, true),
+    Run::world_wind("dem", "bil16", 2, true),
+    Run::world_wind("dem", "bil16", 2, false),
+    Run::other("xyz", "relief"),
+    Run::other("xyz", "dem"),
+    Run::other("crs84", "relief"),
+    Run::other("cesium", "cem"),
+];
 
 /// One speed run.
 struct Speed {
@@ -55,36 +122,18 @@ impl Speed {
 /// Runs the benchmark and returns its tables.
 pub fn report(b: &SeedBench) -> Result<String> {
     let work = std::env::temp_dir().join(format!("sylva-bench-seed-{}", std::process::id()));
-    let runs = [
-        ("cem", "bil16", 1, true),
-        ("cem", "bil16", 2, true),
-        ("cem", "bil16", 2, false),
-        ("cem", "png16", 2, true),
-        ("dem", "bil16", 2, true),
-        ("dem", "bil16", 2, false),
-    ];
-    let mut speeds: Vec<Option<Speed>> = runs.iter().map(|_| None).collect();
+    let mut speeds: Vec<Option<Speed>> = RUNS.iter().map(|_| None).collect();
     let load_before = load_average();
     for round in 0..2 {
-        for (i, &(layer, format, workers, from_children)) in runs.iter().enumerate() {
+        for (i, run) in RUNS.iter().enumerate() {
             let dir = work.join(format!("run{i}-{round}"));
-            let options = SeedOptions {
-                layers: layer.into(),
-                formats: Some(format.into()),
-                concurrency: workers,
-                from_children,
-                ..options(b, &dir, &b.levels, None)
-            };
             let cpu = cpu_seconds();
-            let (counters, seconds) = timed(&options)?;
+            let (counters, seconds) = timed(&run.options(b, &dir))?;
             let cpu_seconds = cpu_seconds() - cpu;
             let _ = std::fs::remove_dir_all(&dir);
-            let parents = if from_children { "from children" } else { "computed" };
-            let label =
-                format!("{layer} {format}, {workers} worker{}, parents {parents}", if workers > 1 { "s" } else { "" });
             let get = |c: &std::sync::atomic::AtomicU64| c.load(Ordering::Relaxed);
             let speed = Speed {
-                label,
+                label: run.label(),
                 files: counters.total(),
                 computed: get(&counters.computed),
                 derived: get(&counters.derived),
@@ -108,12 +157,11 @@ pub fn report(b: &SeedBench) -> Result<String> {
 }
 
 /// Seed options into `dir` (cache, progress and failed files), quiet.
-fn options(b: &SeedBench, dir: &Path, levels: &str, bbox: Option<String>) -> SeedOptions {
+fn options(b: &SeedBench, dir: &Path, levels: &str) -> SeedOptions {
     SeedOptions {
         config: Some(b.config.clone()),
         cache_dir: Some(dir.join("cache")),
         levels: Some(levels.into()),
-        bbox,
         progress_file: Some(dir.join("progress.json")),
         failed_file: Some(dir.join("failed.txt")),
         display: Mode::Quiet,
@@ -151,7 +199,7 @@ fn speed_table(b: &SeedBench, speeds: &[Speed]) -> String {
         })
         .collect();
     format!(
-        "sylva bench seed — {}, levels {}, fresh directory cache per run, faster of two alternated runs\n{}",
+        "sylva bench seed — {}, World Wind levels {}, fresh directory cache per run, faster of two alternated runs\n{}",
         b.config.display(),
         b.levels,
         table(&["run", "files", "computed", "from children", "s", "files/s", "CPU ms/file"], &rows)
@@ -188,22 +236,21 @@ fn ratios(b: &SeedBench, s: &[Speed]) -> Vec<String> {
     out
 }
 
-/// Resident memory through a real seed of the region's `cem` tiles, then a
-/// ~100,000-tile walk around it, in one process.
+/// Resident memory through a real seed of the region's `cem` tiles, then
+/// the demo's XYZ `dem` tiles at the memory levels, in one process.
 fn memory(b: &SeedBench, dir: &Path) -> Result<String> {
-    let region = crate::config::load(Some(&b.config))?;
-    let (w, s) = (region.bounds.west, region.bounds.south);
-    let bbox = format!("{w},{s},{},{}", w + 2.6, s + 2.6);
-    let real = SeedOptions { concurrency: 2, ..options(b, dir, &b.levels, None) };
-    let walk = SeedOptions {
+    let real = SeedOptions { concurrency: 2, ..options(b, dir, &b.levels) };
+    let many = SeedOptions {
+        config: None,
+        grid: "xyz".into(),
+        layers: "dem".into(),
         concurrency: 2,
-        skip_existing: true,
-        progress_file: Some(dir.join("walk-progress.json")),
-        ..options(b, dir, &b.memory_levels, Some(bbox.clone()))
+        progress_file: Some(dir.join("many-progress.json")),
+        ..options(b, dir, &b.memory_levels)
     };
     std::fs::create_dir_all(dir)?;
     let counters = Counters::default();
-    let marks = [1_000u64, 2_000, 3_000, 5_000, 10_000, 20_000, 50_000, 100_000];
+    let marks = [1_000u64, 2_000, 3_000, 5_000, 10_000, 20_000, 50_000, 100_000, 150_000];
     let mut rows = Vec::new();
     let row = |c: &Counters, start: Instant| {
         let (rss, peak) = rss_mib();
@@ -211,7 +258,6 @@ fn memory(b: &SeedBench, dir: &Path) -> Result<String> {
         vec![
             c.total().to_string(),
             get(&c.computed),
-            get(&c.existing),
             format!("{rss:.0}"),
             format!("{peak:.0}"),
             format!("{:.0}", start.elapsed().as_secs_f64()),
@@ -220,7 +266,7 @@ fn memory(b: &SeedBench, dir: &Path) -> Result<String> {
     let start = Instant::now();
     let texts = std::thread::scope(|scope| {
         let job = scope.spawn(|| -> Result<Vec<String>> {
-            Ok(vec![crate::seed::run(&real, &counters)?.text, crate::seed::run(&walk, &counters)?.text])
+            Ok(vec![crate::seed::run(&real, &counters)?.text, crate::seed::run(&many, &counters)?.text])
         });
         let mut next = 0;
         while !job.is_finished() {
@@ -235,10 +281,10 @@ fn memory(b: &SeedBench, dir: &Path) -> Result<String> {
     rows.push(row(&counters, start));
     let _ = std::fs::remove_dir_all(dir);
     Ok(format!(
-        "\nmemory, one process, 2 workers: a real seed of levels {} (cem bil16), then levels {} over the box {bbox} (the region in its south-west corner, found in the cache; the rest has no data)\n{}\n{}",
+        "\nmemory, one process, 2 workers: a real seed of levels {} (cem bil16), then the demo's XYZ dem tiles at zooms {}\n{}\n{}",
         b.levels,
         b.memory_levels,
-        table(&["files done", "computed", "found", "rss MiB", "peak MiB", "s"], &rows),
+        table(&["files done", "computed", "rss MiB", "peak MiB", "s"], &rows),
         texts.join("\n")
     ))
 }

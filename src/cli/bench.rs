@@ -89,8 +89,9 @@ pub enum Bench {
     /// reference.
     #[cfg(feature = "client")]
     Raycast(RaycastArgs),
-    /// Seeding speed (1 and 2 workers, parents from children or not) and
-    /// memory over a ~100,000-tile job.
+    /// Seeding speed (World Wind tiles on 1 and 2 workers, parents from
+    /// children or not; XYZ, WMTS CRS84 and Cesium tiles) and memory over a
+    /// ~155,000-tile job.
     #[cfg(feature = "server")]
     Seed {
         /// The region.
@@ -99,8 +100,8 @@ pub enum Bench {
         /// Levels of the speed runs.
         #[arg(long, default_value = "0-12")]
         levels: String,
-        /// Levels of the memory run.
-        #[arg(long, default_value = "5-12")]
+        /// Zooms of the memory run's XYZ dem tiles of the demo region.
+        #[arg(long, default_value = "0-19")]
         memory_levels: String,
         /// mapproxy-seed's tiles per second in this sitting (benches/seed.sh), for the ratio.
         #[arg(long)]
