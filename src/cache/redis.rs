@@ -35,9 +35,23 @@ fn millis(ttl: Duration) -> u64 {
 const RENEW: &str =
     "if redis.call('get', KEYS[1]) == ARGV[1] then return redis.call('pexpire', KEYS[1], ARGV[2]) else return 0 end";
 
+/// `url` as messages and records show it: without its password (the
+/// user information before `@`, a `password` or `pass` parameter).
+pub fn shown(url: &str) -> String {
+    let (scheme, rest) = url.split_once("://").unwrap_or(("", url));
+    let (authority, tail) = rest.split_at(rest.find(['/', '?']).unwrap_or(rest.len()));
+    let host = authority.rsplit_once('@').map_or(authority, |(_, host)| host);
+    let (path, query) = tail.split_once('?').map_or((tail, None), |(p, q)| (p, Some(q)));
+    let secret = |param: &&str| param.starts_with("password=") || param.starts_with("pass=");
+    let query = query.map(|q| q.split('&').filter(|p| !secret(p)).collect::<Vec<_>>().join("&"));
+    let query = query.filter(|q| !q.is_empty()).map_or(String::new(), |q| format!("?{q}"));
+    format!("{scheme}://{host}{path}{query}")
+}
+
 /// Encoded tiles in a Redis server.
 pub struct RedisStore {
     client: Client,
+    /// The URL as shown ([`shown`]).
     url: String,
     prefix: String,
     idle: Mutex<Vec<Connection>>,
@@ -52,8 +66,8 @@ impl RedisStore {
     /// Connects to `url` (`redis://host:port/db`, `redis+unix:///path`) and
     /// checks that the server answers.
     pub fn open(url: &str, prefix: &str) -> Result<RedisStore, CacheError> {
-        let client = Client::open(url).map_err(|e| CacheError::Redis { url: url.into(), message: e.to_string() })?;
-        let store = RedisStore { client, url: url.into(), prefix: prefix.into(), idle: Mutex::new(Vec::new()) };
+        let client = Client::open(url).map_err(|e| CacheError::Redis { url: shown(url), message: e.to_string() })?;
+        let store = RedisStore { client, url: shown(url), prefix: prefix.into(), idle: Mutex::new(Vec::new()) };
         store.with(|c| redis::cmd("PING").query::<String>(c))?;
         Ok(store)
     }
@@ -201,3 +215,17 @@ pub(crate) const IN_USE: &str = "in-use:";
 
 /// A mark outlives any grace a prune may be given, then goes by itself.
 const MARK_TTL: Duration = Duration::from_secs(30 * 86_400);
+
+#[cfg(test)]
+mod tests {
+    use super::shown;
+
+    #[test]
+    fn a_url_is_shown_without_its_password() {
+        assert_eq!(shown("redis://:s3cret@cache:6379/1"), "redis://cache:6379/1");
+        assert_eq!(shown("rediss://user:p@ss@cache.example.org"), "rediss://cache.example.org");
+        assert_eq!(shown("redis+unix:///run/redis.sock?db=2&pass=s3cret"), "redis+unix:///run/redis.sock?db=2");
+        assert_eq!(shown("redis+unix:///run/redis.sock?password=s3cret"), "redis+unix:///run/redis.sock");
+        assert_eq!(shown("redis://127.0.0.1:1/0"), "redis://127.0.0.1:1/0");
+    }
+}

@@ -233,9 +233,7 @@ fn cache_names(backend: &crate::cache::Backend) -> Vec<String> {
             paths.map(|p| format!("directory {}", p.display())).collect()
         }
         crate::cache::Backend::Redis { url, prefix } => {
-            let (scheme, rest) = url.split_once("://").unwrap_or(("", url));
-            let host = rest.rsplit_once('@').map_or(rest, |(_, host)| host);
-            vec![format!("Redis {scheme}://{host} prefix {prefix:?}")]
+            vec![format!("Redis {} prefix {prefix:?}", crate::cache::redis::shown(url))]
         }
     }
 }
