@@ -126,12 +126,12 @@ pub struct Report {
 /// Runs `sylva seed`; `counters` count the tile files as they come.
 pub fn run(options: &SeedOptions, counters: &Counters) -> Result<Report, SeedError> {
     let job = Job::new(options)?;
+    let backend = job.config.tile_cache.backend(options.cache_dir.as_deref());
     if options.dry_run {
-        let caches = cache_names(&job.config.tile_cache.backend(options.cache_dir.as_deref()));
+        let caches = cache_names(&backend);
         let resumed = options.resume.then(|| Progress::resume(&job.files.0, &job.fingerprint, &caches)).transpose()?;
         return dry_run(&job, options, resumed.as_ref());
     }
-    let backend = job.config.tile_cache.backend(options.cache_dir.as_deref());
     let store = crate::cache::open(&backend)?;
     probe(&*store, &job.region.version)?;
     let _in_use = crate::cache::in_use::InUse::mark(store.clone(), &job.region.version);

@@ -32,7 +32,8 @@ struct State {
     cache: String,
     /// When the job first started, Unix ms.
     started_ms: u64,
-    /// Tile files already made or found (for the progress bar).
+    /// Tile files made or found by the job's runs so far (a resumed dry run
+    /// says it; the bar counts what is left from `done`).
     products: u64,
     /// Finished subtree roots, `level/row/col`.
     done: Vec<String>,
