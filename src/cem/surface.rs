@@ -34,10 +34,15 @@ pub const NODATA: u8 = 255;
 pub const FOREST_COVER: f32 = 0.5;
 
 impl SurfaceType {
+    /// Every class, by id.
+    pub const ALL: [SurfaceType; 6] = {
+        use SurfaceType::*;
+        [Plain, Forest, Water, Rock, Ice, Built]
+    };
+
     /// The class with this id, if any.
     pub fn from_id(id: u8) -> Option<SurfaceType> {
-        use SurfaceType::*;
-        [Plain, Forest, Water, Rock, Ice, Built].into_iter().find(|s| *s as u8 == id)
+        SurfaceType::ALL.into_iter().find(|s| *s as u8 == id)
     }
 
     /// The name used in configuration files.

@@ -54,15 +54,20 @@ fn class_pixel(class: u8) -> [u8; 4] {
     [c[0], c[1], c[2], 255]
 }
 
+/// The grey (0 black to 1 white) a cover or canopy value `v` is drawn in;
+/// `None` for heights, which are shaded instead.
+pub fn value_grey(layer: Layer, v: f32) -> Option<f32> {
+    match layer {
+        Layer::Cover => Some(v),
+        Layer::Canopy => Some(v / CANOPY_WHITE_M),
+        _ => None,
+    }
+}
+
 /// The grey of a continuous layer's sample at `(x, y)` (margin included),
 /// transparent for no data.
 fn grey_pixel(layer: Layer, r: &Raster<f32>, (x, y): (usize, usize), spacing: (f64, f64)) -> [u8; 4] {
-    let v = r.get(x, y);
-    let level = match layer {
-        Layer::Cover => v,
-        Layer::Canopy => v / CANOPY_WHITE_M,
-        _ => shade(r, x, y, spacing),
-    };
+    let level = value_grey(layer, r.get(x, y)).unwrap_or_else(|| shade(r, x, y, spacing));
     if level.is_nan() {
         return [0; 4];
     }

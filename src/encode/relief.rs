@@ -59,7 +59,7 @@ pub fn encode_colours(surface: &Raster<u8>, map: Option<&[Raster<f32>]>) -> Resu
 }
 
 /// Colours of surface classes when there is no map.
-pub(super) fn class_colour(class: u8) -> [f32; 3] {
+pub fn class_colour(class: u8) -> [f32; 3] {
     match SurfaceType::from_id(class) {
         Some(SurfaceType::Forest) => [96.0, 140.0, 80.0],
         Some(SurfaceType::Water) => [120.0, 170.0, 220.0],
@@ -69,6 +69,9 @@ pub(super) fn class_colour(class: u8) -> [f32; 3] {
         _ => [215.0, 215.0, 175.0],
     }
 }
+
+/// The shade of level ground (the light is 45° up).
+pub const LEVEL_SHADE: f32 = std::f32::consts::FRAC_1_SQRT_2;
 
 /// Renders the preview as an RGBA PNG; nodata is transparent.
 pub fn encode(r: &Relief) -> Result<Vec<u8>, EncodeError> {
@@ -87,14 +90,20 @@ pub fn encode(r: &Relief) -> Result<Vec<u8>, EncodeError> {
             }
             // The map's colour where it has one, else the class's.
             let base = base_colour(class, r.map.map(|bands| [0, 1, 2].map(|b| bands[b].get(x, y))));
-            // Canopy reads darker and greener, as forest does from the air.
-            let tint = if class == SurfaceType::Forest as u8 { [0.8, 0.9, 0.75] } else { [1.0; 3] };
-            let light = 0.3 + 0.7 * shade;
-            let c = [0, 1, 2].map(|k| (base[k] * tint[k] * light).clamp(0.0, 255.0) as u8);
+            let c = lit(class, base, shade);
             rgba.extend_from_slice(&[c[0], c[1], c[2], 255]);
         }
     }
     super::png(&rgba, w, h, image::ExtendedColorType::Rgba8)
+}
+
+/// The preview's colour of a sample of `class` and unshaded colour `base`
+/// under `shade` (0 facing away from the light, 1 facing it): canopy reads
+/// darker and greener, as forest does from the air.
+pub fn lit(class: u8, base: [f32; 3], shade: f32) -> [u8; 3] {
+    let tint = if class == SurfaceType::Forest as u8 { [0.8, 0.9, 0.75] } else { [1.0; 3] };
+    let light = 0.3 + 0.7 * shade;
+    [0, 1, 2].map(|k| (base[k] * tint[k] * light).clamp(0.0, 255.0) as u8)
 }
 
 /// A grey shaded relief of heights on a square grid of `cell_m` (canopy
@@ -154,6 +163,12 @@ mod tests {
         let img = image::load_from_memory(&png).unwrap().into_rgba8();
         assert_eq!(img.get_pixel(1, 1).0[3], 0);
         assert_eq!(img.get_pixel(0, 0).0[3], 255);
+    }
+
+    #[test]
+    fn level_ground_has_the_level_shade() {
+        // Legends draw level ground with it.
+        assert_eq!(shade(&Raster::filled(3, 3, 1234.5), 1, 1, (30.0, 20.0)), LEVEL_SHADE);
     }
 
     #[test]

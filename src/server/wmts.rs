@@ -29,6 +29,7 @@ use super::wms::capabilities::title;
 use super::wms::info::{self, InfoFormat};
 use super::wms::picture::PictureFormat;
 use super::wms::request::{LAYERS, MapLayer};
+use super::wms::{self, legend};
 use super::{AppState, ServeError};
 use crate::grid::mercator::HALF_WORLD_M;
 use crate::grid::quad::{SIDE, TileSet};
@@ -412,6 +413,13 @@ fn operation(name: &str, base: &str) -> String {
     )
 }
 
+/// The `LegendURL` of layer `l`: its WMS GetLegendGraphic.
+fn legend_url(region: &Region, l: MapLayer, base: &str) -> String {
+    let (w, h) = legend::size(l, region.map.is_some(), (legend::SWATCH_PX, legend::SWATCH_PX));
+    let href = wms::capabilities::legend_url(&format!("{base}/wms"), l, wms::request::Version::V130);
+    format!(r#"<LegendURL format="image/png" xlink:href="{}" width="{w}" height="{h}"/>"#, escape(&href))
+}
+
 /// One layer of `region`: its box, style, formats, each set's limits and
 /// the RESTful templates.
 fn layer(region: &Region, l: MapLayer, base: &str) -> String {
@@ -428,13 +436,14 @@ fn layer(region: &Region, l: MapLayer, base: &str) -> String {
         )
     };
     let mut out = format!(
-        r#"<Layer><ows:Title>{}</ows:Title><ows:Abstract>{about}</ows:Abstract><ows:WGS84BoundingBox><ows:LowerCorner>{} {}</ows:LowerCorner><ows:UpperCorner>{} {}</ows:UpperCorner></ows:WGS84BoundingBox><ows:Identifier>{}</ows:Identifier><Style isDefault="true"><ows:Identifier>default</ows:Identifier></Style>"#,
+        r#"<Layer><ows:Title>{}</ows:Title><ows:Abstract>{about}</ows:Abstract><ows:WGS84BoundingBox><ows:LowerCorner>{} {}</ows:LowerCorner><ows:UpperCorner>{} {}</ows:UpperCorner></ows:WGS84BoundingBox><ows:Identifier>{}</ows:Identifier><Style isDefault="true"><ows:Identifier>default</ows:Identifier>{}</Style>"#,
         title(l),
         b.west,
         b.south,
         b.east,
         b.north,
-        l.name()
+        l.name(),
+        legend_url(region, l, base)
     );
     for &encoding in encodings(l) {
         let _ = write!(out, "<Format>{}</Format>", mime(encoding));

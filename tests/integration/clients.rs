@@ -139,6 +139,10 @@ fn owslib_reads_the_capabilities_and_a_dem_map_that_matches_build() {
              wms = WebMapService('{base}/wms', version='{version}')\n\
              assert list(wms.contents) == ['dem', 'cover', 'canopy', 'cem', 'surface', 'colour', 'relief'], list(wms.contents)\n\
              assert wms['dem'].title == 'Ground elevation (m)'\n\
+             assert 'GetLegendGraphic' in [op.name for op in wms.operations]\n\
+             from urllib.request import urlopen\n\
+             legend = urlopen(wms['relief'].styles['default']['legend']).read()\n\
+             assert legend[:8] == b'\\x89PNG\\r\\n\\x1a\\n', legend[:200]\n\
              img = wms.getmap(layers=['dem'], srs='EPSG:4326', bbox=({w}, {s}, {e}, {n}), size=({SIDE}, {SIDE}), format='image/tiff')\n\
              open(sys.argv[1], 'wb').write(img.read())\n",
             base = server.base

@@ -47,6 +47,40 @@ fn capabilities_are_valid_in_both_versions() {
 }
 
 #[test]
+fn every_legend_url_in_the_capabilities_is_a_picture_of_its_stated_size() {
+    let dir = TempDir::new("srv-legends");
+    let server = Server::start(None, &dir.join("cache"));
+    let mut seen = 0;
+    for path in [
+        "/wms?SERVICE=WMS&REQUEST=GetCapabilities&VERSION=1.3.0",
+        "/wms?SERVICE=WMS&REQUEST=GetCapabilities&VERSION=1.1.1",
+        "/wmts?SERVICE=WMTS&REQUEST=GetCapabilities",
+    ] {
+        let text = server.get(path).text();
+        let options = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
+        let doc = roxmltree::Document::parse_with_options(&text, options).unwrap();
+        let xlink = "http://www.w3.org/1999/xlink";
+        for legend in doc.descendants().filter(|n| n.has_tag_name("LegendURL")) {
+            // WMS names the URL in a child OnlineResource, WMTS on the element.
+            let href = legend
+                .attribute((xlink, "href"))
+                .or_else(|| legend.children().find_map(|c| c.attribute((xlink, "href"))))
+                .unwrap();
+            let size = ["width", "height"].map(|a| legend.attribute(a).unwrap().parse::<u32>().unwrap());
+            let r = server.get(href.strip_prefix(server.base.as_str()).unwrap());
+            assert_eq!((r.status, r.header("content-type")), (200, Some("image/png")), "{href}");
+            let img = image::load_from_memory(&r.body).unwrap();
+            assert_eq!([img.width(), img.height()], size, "{href}");
+            seen += 1;
+        }
+    }
+    assert_eq!(seen, 7 + 7 + 5, "a legend for every WMS layer in both versions and every WMTS layer");
+    // A legend of a layer not served is the OGC exception, not a picture.
+    let r = server.get("/wms?SERVICE=WMS&REQUEST=GetLegendGraphic&VERSION=1.3.0&FORMAT=image/png&LAYER=trees");
+    assert!(r.status == 400 && r.text().contains(r#"code="LayerNotDefined""#), "{}", r.text());
+}
+
+#[test]
 fn capabilities_without_a_host_header_name_the_port_listened_on() {
     let dir = TempDir::new("srv-nohost");
     let server = Server::start(None, &dir.join("cache"));

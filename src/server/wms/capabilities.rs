@@ -2,10 +2,14 @@
 //! the served layers, their geographic box and a bounding box per CRS in
 //! that CRS's axis order (1.3.0 EPSG:4326 is lat,lon), the formats, the size
 //! limits, the GetFeatureInfo formats (every layer is queryable), and
-//! — in each layer's abstract — how 16-bit PNG codes map to values.
+//! — in each layer's abstract — how 16-bit PNG codes map to values, and
+//! each layer's default style with its legend's URL (GetLegendGraphic, the
+//! SLD profile's request, is offered beside the core ones).
 
 use super::super::exception::escape;
 use super::info::InfoFormat;
+use super::legend;
+use super::picture::PictureFormat;
 use super::request::{LAYERS, MapFormat, MapLayer, RequestCrs, Version};
 use crate::encode::{self, Quantization};
 use crate::grid::BBox;
@@ -23,6 +27,8 @@ pub struct Service<'a> {
     pub max_side: usize,
     /// PNG16 quantization of heights.
     pub heights_16: Quantization,
+    /// Whether the pictures take a map's colours (the legends say so).
+    pub map: bool,
 }
 
 /// The capabilities document of `version`, and its MIME type.
@@ -41,12 +47,13 @@ fn v130(s: &Service) -> String {
     let crs: String = RequestCrs::ALL.iter().map(|(_, n)| format!("<CRS>{n}</CRS>")).collect();
     format!(
         r#"<?xml version="1.0" encoding="UTF-8"?>
-<WMS_Capabilities version="1.3.0" xmlns="http://www.opengis.net/wms" xmlns:xlink="http://www.w3.org/1999/xlink" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengis.net/wms http://schemas.opengis.net/wms/1.3.0/capabilities_1_3_0.xsd">
+<WMS_Capabilities version="1.3.0" xmlns="http://www.opengis.net/wms" xmlns:sld="http://www.opengis.net/sld" xmlns:xlink="http://www.w3.org/1999/xlink" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengis.net/wms http://schemas.opengis.net/wms/1.3.0/capabilities_1_3_0.xsd http://www.opengis.net/sld http://schemas.opengis.net/sld/1.1.0/sld_capabilities.xsd">
 <Service><Name>WMS</Name><Title>{title}</Title><Abstract>Combined elevation maps (terrain + forest canopy) computed on demand by Sylva.</Abstract><OnlineResource xlink:type="simple" xlink:href="{url}"/><LayerLimit>1</LayerLimit><MaxWidth>{max}</MaxWidth><MaxHeight>{max}</MaxHeight></Service>
 <Capability><Request>
 <GetCapabilities><Format>text/xml</Format>{dcp}</GetCapabilities>
 <GetMap>{formats}{dcp}</GetMap>
 <GetFeatureInfo>{info}{dcp}</GetFeatureInfo>
+<sld:GetLegendGraphic>{legends}{dcp}</sld:GetLegendGraphic>
 </Request>
 <Exception><Format>XML</Format><Format>INIMAGE</Format><Format>BLANK</Format></Exception>
 <Layer><Title>{title}</Title>{crs}
@@ -60,6 +67,7 @@ fn v130(s: &Service) -> String {
         max = s.max_side,
         dcp = dcp(&url),
         info = info_formats(),
+        legends = legend_formats(),
         w = b.west,
         e = b.east,
         so = b.south,
@@ -88,6 +96,7 @@ fn v111(s: &Service) -> String {
 <GetCapabilities><Format>application/vnd.ogc.wms_xml</Format>{dcp}</GetCapabilities>
 <GetMap>{formats}{dcp}</GetMap>
 <GetFeatureInfo>{info}{dcp}</GetFeatureInfo>
+<GetLegendGraphic>{legends}{dcp}</GetLegendGraphic>
 </Request>
 <Exception><Format>application/vnd.ogc.se_xml</Format><Format>application/vnd.ogc.se_inimage</Format><Format>application/vnd.ogc.se_blank</Format></Exception>
 <Layer><Title>{title}</Title>{srs}
@@ -100,6 +109,7 @@ fn v111(s: &Service) -> String {
         title = escape(s.title),
         dcp = dcp_111(&url),
         info = info_formats(),
+        legends = legend_formats(),
         w = b.west,
         e = b.east,
         so = b.south,
@@ -107,6 +117,10 @@ fn v111(s: &Service) -> String {
         boxes = bounding_boxes(b, Version::V111),
         layers = layers(s, Version::V111),
     )
+}
+
+fn legend_formats() -> String {
+    [PictureFormat::Png, PictureFormat::Jpeg].map(|f| format!("<Format>{}</Format>", f.mime())).concat()
 }
 
 fn info_formats() -> String {
@@ -150,15 +164,32 @@ fn layers(s: &Service, version: Version) -> String {
         .iter()
         .map(|&l| {
             format!(
-                r#"<Layer queryable="1"><Name>{}</Name><Title>{}</Title><Abstract>{}</Abstract>{}</Layer>"#,
+                r#"<Layer queryable="1"><Name>{}</Name><Title>{}</Title><Abstract>{}</Abstract>{}{}</Layer>"#,
                 l.name(),
                 title(l),
                 escape(&abstract_of(l, s)),
-                bounding_boxes(s.bounds, version).replace('\n', "")
+                bounding_boxes(s.bounds, version).replace('\n', ""),
+                style(l, s, version)
             )
         })
         .collect::<Vec<_>>()
         .join("\n")
+}
+
+/// A layer's one style, the default, with the URL of its legend.
+fn style(layer: MapLayer, s: &Service, version: Version) -> String {
+    let (w, h) = legend::size(layer, s.map, (legend::SWATCH_PX, legend::SWATCH_PX));
+    let href = escape(&legend_url(s.url, layer, version));
+    let xmlns = if version == Version::V111 { r#" xmlns:xlink="http://www.w3.org/1999/xlink""# } else { "" };
+    format!(
+        r#"<Style><Name>default</Name><Title>Default</Title><LegendURL width="{w}" height="{h}"><Format>image/png</Format><OnlineResource{xmlns} xlink:type="simple" xlink:href="{href}"/></LegendURL></Style>"#
+    )
+}
+
+/// The GetLegendGraphic URL of `layer`'s legend at the WMS endpoint `url`.
+pub(crate) fn legend_url(url: &str, layer: MapLayer, version: Version) -> String {
+    let v = if version == Version::V111 { "1.1.1" } else { "1.3.0" };
+    format!("{url}?SERVICE=WMS&REQUEST=GetLegendGraphic&VERSION={v}&FORMAT=image/png&LAYER={}&STYLE=", layer.name())
 }
 
 /// A layer's title, for people.
@@ -218,6 +249,7 @@ mod tests {
             bounds: BBox { west: -106.0, south: 40.0, east: -105.0, north: 41.0 },
             max_side: 4096,
             heights_16: Quantization::PNG16_HEIGHTS,
+            map: false,
         }
     }
 

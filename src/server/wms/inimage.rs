@@ -5,16 +5,11 @@
 
 use super::picture::{self, PictureFormat};
 use super::request::{MapFormat, MapLayer};
+use super::text::{Canvas, Pen};
 use crate::cem::Layer;
 use crate::encode::{self, Quantization, Samples};
 use crate::grid::SampleGrid;
 use crate::raster::Raster;
-use ab_glyph::{Font, FontRef, PxScale, ScaleFont, point};
-
-/// DejaVu Sans Mono (Bitstream Vera licence, `assets/fonts/LICENSE-DejaVu.txt`).
-const FONT: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSansMono.ttf");
-/// Text height, pixels.
-const TEXT_PX: f32 = 14.0;
 
 /// An image of `format` over `grid` with no data in it: a data layer's
 /// nodata samples in its own encoding, or a picture of `background`
@@ -66,48 +61,19 @@ fn wrapped(text: &str, width: usize) -> Vec<Vec<char>> {
 }
 
 /// A picture of `w × h` of `background` (transparent if none and PNG) with
-/// `message` written on it.
+/// `message` written on it in dark red.
 pub fn message(message: &str, w: usize, h: usize, background: Option<[u8; 3]>, format: PictureFormat) -> Vec<u8> {
+    const RED: [u8; 3] = [200, 0, 0];
     let mut rgba = picture::filled(w * h, background);
-    if let Ok(font) = FontRef::try_from_slice(FONT) {
-        let scaled = font.as_scaled(PxScale::from(TEXT_PX));
-        let advance = scaled.h_advance(font.glyph_id('M')).max(1.0);
-        let per_line = ((w as f32 - 8.0) / advance).max(1.0) as usize;
+    if let Some(pen) = Pen::new() {
+        let mut canvas = Canvas { rgba: &mut rgba, width: w, opaque: background.is_some() };
+        let per_line = ((w as f32 - 8.0) / pen.advance()).max(1.0) as usize;
         for (line, text) in wrapped(message, per_line).iter().enumerate() {
-            let baseline = 4.0 + scaled.ascent() + line as f32 * scaled.height();
-            for (i, &c) in text.iter().enumerate() {
-                let glyph = font
-                    .glyph_id(c)
-                    .with_scale_and_position(PxScale::from(TEXT_PX), point(4.0 + i as f32 * advance, baseline));
-                if let Some(outline) = font.outline_glyph(glyph) {
-                    let b = outline.px_bounds();
-                    outline.draw(|x, y, coverage| {
-                        let (px, py) = (b.min.x as i64 + x as i64, b.min.y as i64 + y as i64);
-                        if px >= 0 && py >= 0 && (px as usize) < w && (py as usize) < h {
-                            let i = 4 * (py as usize * w + px as usize);
-                            ink(&mut rgba[i..i + 4], coverage, background.is_some());
-                        }
-                    });
-                }
-            }
+            let baseline = 4.0 + pen.ascent() + line as f32 * pen.line_height();
+            pen.write(&mut canvas, &String::from_iter(text), (4.0, baseline), RED);
         }
     }
     picture::encode(&rgba, w, h, background, format).unwrap_or_default()
-}
-
-/// Dark red ink of `coverage` on one RGBA pixel: blended into an opaque
-/// background, as alpha on a transparent one.
-fn ink(pixel: &mut [u8], coverage: f32, opaque: bool) {
-    const RED: [u8; 3] = [200, 0, 0];
-    let c = coverage.clamp(0.0, 1.0);
-    if opaque {
-        for k in 0..3 {
-            pixel[k] = (f32::from(pixel[k]) * (1.0 - c) + f32::from(RED[k]) * c).round() as u8;
-        }
-    } else {
-        let a = ((c * 255.0) as u8).max(pixel[3]);
-        pixel.copy_from_slice(&[RED[0], RED[1], RED[2], a]);
-    }
 }
 
 #[cfg(test)]

@@ -1,5 +1,5 @@
-//! The `/wms` endpoint: GetCapabilities, GetMap and GetFeatureInfo, with
-//! OGC exceptions.
+//! The `/wms` endpoint: GetCapabilities, GetMap, GetFeatureInfo and
+//! GetLegendGraphic, with OGC exceptions.
 //!
 //! A GetMap whose pixel centres are exactly a tile's samples is that tile and
 //! comes from the tile cache; one whose pixel centres lie on a level's lattice
@@ -8,8 +8,10 @@
 pub mod capabilities;
 pub mod info;
 mod inimage;
+pub mod legend;
 pub mod picture;
 pub mod request;
+mod text;
 
 use super::exception::Exception;
 use super::products::{Encoding, Product};
@@ -44,6 +46,7 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
                 bounds: r.bounds,
                 max_side: limits.max_side,
                 heights_16: r.heights_16,
+                map: r.map.is_some(),
             };
             let (mime, body) = capabilities::document(&service, version);
             ([(header::CONTENT_TYPE, mime)], body).into_response()
@@ -56,6 +59,10 @@ pub async fn handle(State(state): State<Arc<AppState>>, RawQuery(query): RawQuer
             info.map.grid = on_lattice(&state, info.map.grid);
             answer(&state, query, feature_info(&state, &info).await)
         }
+        Ok(Request::GetLegendGraphic(request)) => match legend::draw(&request, state.region().map.is_some()) {
+            Ok(body) => ([(header::CONTENT_TYPE, request.format.mime())], body).into_response(),
+            Err(e) => answer(&state, query, Err(ServeError::Internal(e.to_string()))),
+        },
     }
 }
 

@@ -207,6 +207,8 @@ pub enum Request {
     GetMap(GetMap),
     /// Values at a pixel of a map.
     GetFeatureInfo(super::info::FeatureInfo),
+    /// What a layer's colours mean.
+    GetLegendGraphic(super::legend::LegendRequest),
 }
 
 /// Limits a request must respect.
@@ -280,6 +282,7 @@ fn request(params: &Params, version: Version, limits: Limits) -> Result<Request,
         "getcapabilities" | "capabilities" => Ok(Request::GetCapabilities(version)),
         "getmap" | "map" => get_map(params, version, limits).map(Request::GetMap),
         "getfeatureinfo" | "feature_info" => super::info::parse(params, version, limits).map(Request::GetFeatureInfo),
+        "getlegendgraphic" => super::legend::parse(params).map(Request::GetLegendGraphic),
         other => Err(Exception::new(Code::OperationNotSupported, format!("REQUEST={other} is not supported"))),
     }
 }
@@ -383,7 +386,7 @@ pub(super) fn map_part(params: &Params, version: Version, limits: Limits) -> Res
         })?,
         _ => return Err(Exception::new(Code::InvalidParameterValue, "one layer per request").locator("LAYERS")),
     };
-    check_styles(params.get("STYLES"))?;
+    check_styles(params.get("STYLES"), "STYLES")?;
     let crs = crs_of(params, version)?;
     let format_text = required("FORMAT")?;
     let format = MapFormat::parse(format_text).ok_or_else(|| {
@@ -411,7 +414,7 @@ fn crs_of(params: &Params, version: Version) -> Result<RequestCrs, Exception> {
 /// `TRANSPARENT` (`FALSE` unless given) and `BGCOLOR` (`0xRRGGBB`, white
 /// unless given): the background colour, or `None` for transparent. JPEG
 /// has no alpha: it lies on `BGCOLOR` whatever `TRANSPARENT` says.
-fn background(params: &Params, format: Option<MapFormat>) -> Result<Option<[u8; 3]>, Exception> {
+pub(super) fn background(params: &Params, format: Option<MapFormat>) -> Result<Option<[u8; 3]>, Exception> {
     let transparent = params.get("TRANSPARENT").filter(|_| format != Some(MapFormat::Jpeg));
     let colour = params.get("BGCOLOR");
     let bad = |key: &'static str, text: &str, want: &str| {
@@ -436,13 +439,13 @@ fn background(params: &Params, format: Option<MapFormat>) -> Result<Option<[u8; 
     Ok((!see_through).then_some(rgb))
 }
 
-/// Each layer has only its default style: `STYLES` may be empty (or left
-/// out, as some clients do) or name `default`.
-fn check_styles(styles: Option<&str>) -> Result<(), Exception> {
+/// Each layer has only its default style: `STYLES` (`key`) may be empty
+/// (or left out, as some clients do) or name `default`.
+pub(super) fn check_styles(styles: Option<&str>, key: &'static str) -> Result<(), Exception> {
     match styles.unwrap_or("").split(',').map(str::trim).find(|s| !s.is_empty() && !s.eq_ignore_ascii_case("default")) {
         Some(style) => {
-            Err(Exception::new(Code::StyleNotDefined, format!("style {style:?} is not served: leave STYLES empty"))
-                .locator("STYLES"))
+            Err(Exception::new(Code::StyleNotDefined, format!("style {style:?} is not served: leave {key} empty"))
+                .locator(key))
         }
         None => Ok(()),
     }
@@ -551,7 +554,7 @@ mod tests {
             code(&(base.replace("BBOX=40,-106,41,-105", "BBOX=a,b") + "&LAYERS=dem")),
             Code::InvalidParameterValue
         );
-        assert_eq!(code("SERVICE=WMS&REQUEST=GetLegendGraphic"), Code::OperationNotSupported);
+        assert_eq!(code("SERVICE=WMS&REQUEST=DescribeLayer"), Code::OperationNotSupported);
         assert_eq!(code("SERVICE=WMS"), Code::MissingParameterValue);
         assert_eq!(code(&format!("{base}&LAYERS=relief").replace("image/png", "image/tiff")), Code::InvalidFormat);
         assert_eq!(code(&format!("{base}&LAYERS=dem&STYLES=fancy")), Code::StyleNotDefined);
@@ -667,11 +670,12 @@ mod tests {
     /// with the others'), one bad for any, or none, in a shuffled order.
     fn queries() -> impl proptest::strategy::Strategy<Value = String> {
         use proptest::prelude::*;
-        let fields: [(&str, &[&str]); 18] = [
+        let fields: [(&str, &[&str]); 19] = [
             ("SERVICE", &["WMS", "wms"]),
             ("version", &["1.3.0", "1.1.1", "1.3", "1.0.0"]),
-            ("REQUEST", &["GetMap", "GetFeatureInfo", "GetCapabilities"]),
+            ("REQUEST", &["GetMap", "GetFeatureInfo", "GetCapabilities", "GetLegendGraphic"]),
             ("LAYERS", &["dem", "relief", "surface", "colour"]),
+            ("LAYER", &["canopy", "relief", "cover"]),
             ("STYLES", &["", "default"]),
             ("CRS", &["EPSG:4326", "CRS:84", "EPSG:3857"]),
             ("srs", &["EPSG:4326", "EPSG:3857"]),
@@ -710,6 +714,10 @@ mod tests {
                 Ok(Request::GetFeatureInfo(info)) => {
                     proptest::prop_assert!(info.pixel.0 < info.map.grid.width() && info.pixel.1 < info.map.grid.height());
                     proptest::prop_assert!(!info.layers.is_empty());
+                }
+                Ok(Request::GetLegendGraphic(legend)) => {
+                    let (w, h) = legend.swatch;
+                    proptest::prop_assert!((1..=256).contains(&w) && (1..=256).contains(&h));
                 }
                 Ok(Request::GetCapabilities(_)) => {}
                 Err((e, _)) => proptest::prop_assert!(!e.message.is_empty()),
