@@ -90,11 +90,11 @@ pub fn region_from(config: &Config, base: &Path, label: &Path) -> Result<Region,
     let invalid = |message: String| ConfigError::Invalid { path: label.into(), message };
     let tiles = TileGrid::new(config.grid.level0_delta_deg, config.grid.tile_samples)
         .map_err(|e| invalid(format!("[grid] {e}")))?;
-    // Data from upstream servers expires, in the block cache as in the tile cache.
-    let ttls = [config.dem.upstream.as_ref(), config.landcover.as_ref().and_then(|l| l.upstream.as_ref())];
-    let upstream_ttl = ttls.into_iter().flatten().map(|u| std::time::Duration::from_secs(u.ttl_s)).min();
     // Check every value before opening any file.
     check_values(config).map_err(invalid)?;
+    warn_of_slow_upstreams(config);
+    // Data from upstream servers expires, in the block cache as in the tile cache.
+    let upstream_ttl = upstreams(config).map(|(_, u)| std::time::Duration::from_secs(u.ttl_s)).min();
     let cache = BlockCache::expiring(config.cache.memory_mb * 1024 * 1024, upstream_ttl);
     let landcover_rule =
         config.landcover.as_ref().map(rule).transpose().map_err(|m| invalid(format!("[landcover] {m}")))?;
@@ -149,7 +149,34 @@ fn check_values(config: &Config) -> Result<(), String> {
     config.dem.nodata.check().map_err(|m| format!("[dem] nodata: {m}"))?;
     config.canopy.check().map_err(|m| format!("[canopy] {m}"))?;
     config.tile_cache.check().map_err(|m| format!("[tile_cache] {m}"))?;
+    for (section, up) in upstreams(config) {
+        up.check().map_err(|m| format!("{section} {m}"))?;
+    }
     config.server.check().map_err(|m| format!("[server] {m}"))
+}
+
+/// The configuration's upstream servers, each with its section's name.
+fn upstreams(config: &Config) -> impl Iterator<Item = (&'static str, &UpstreamConfig)> {
+    let landcover = config.landcover.as_ref().and_then(|l| l.upstream.as_ref());
+    [("[dem.upstream]", config.dem.upstream.as_ref()), ("[landcover.upstream]", landcover)]
+        .into_iter()
+        .filter_map(|(section, up)| Some((section, up?)))
+}
+
+/// Warns where an upstream's retries outlast a request to the server: a
+/// request that needs a block read from it while it fails is answered
+/// "took too long" before the upstream is blamed.
+fn warn_of_slow_upstreams(config: &Config) {
+    let request = config.server.request_timeout_s;
+    for (section, up) in upstreams(config) {
+        let longest = up.longest_read();
+        if longest.as_secs_f64() > request {
+            tracing::warn!(
+                "{section} a failing upstream holds a read up to {:.1} s (timeout_ms, retries, backoff_ms), longer than [server] request_timeout_s = {request}: requests then time out before the upstream is named",
+                longest.as_secs_f64()
+            );
+        }
+    }
 }
 
 /// The region's DEM, its bounds and its name: a file, an upstream server,
@@ -163,8 +190,16 @@ fn open_dem(
     Ok(match (&config.dem.path, &config.dem.upstream) {
         (Some(_), Some(_)) => return Err(invalid("[dem] give a path or an upstream, not both".into())),
         (None, Some(up)) => {
-            let bounds = up.bbox().map_err(|m| invalid(format!("[dem.upstream] {m}")))?;
-            (upstream(up, cache, invalid)?, bounds, up.url.clone())
+            let invalid = |m: String| invalid(format!("[dem.upstream] {m}"));
+            let bounds = up.bbox().map_err(invalid)?;
+            let dem = upstream(up, cache, &invalid)?;
+            if dem.base().source().bands() != 1 {
+                return Err(invalid(format!(
+                    "{}: answers a picture (three bands); a DEM's upstream answers FORMAT=application/bil32 or is a Terrarium template",
+                    up.url
+                )));
+            }
+            (dem, bounds, up.url.clone())
         }
         (Some(path), None) => {
             let crs = parse_crs(&config.dem.crs).map_err(|m| invalid(format!("[dem] {m}")))?;
@@ -217,9 +252,9 @@ fn version_key(config: &Config, base: &Path) -> String {
 fn upstream(
     up: &UpstreamConfig,
     cache: &Arc<BlockCache>,
-    _invalid: &dyn Fn(String) -> ConfigError,
+    invalid: &dyn Fn(String) -> ConfigError,
 ) -> Result<GeoRaster, ConfigError> {
-    Ok(source::remote::open(up, cache)?)
+    source::remote::open(up, cache).map_err(|e| invalid(e.to_string()))
 }
 
 /// Without the `http` feature there is no client to reach an upstream.
@@ -249,7 +284,7 @@ fn landcover(
     let (input, georef) = match (&lc.path, &lc.upstream) {
         (Some(_), Some(_)) => return Err(invalid("give a path or an upstream, not both".into())),
         (None, Some(up)) => {
-            let raster = upstream(up, cache, invalid)?;
+            let raster = upstream(up, cache, &|m| invalid(format!("upstream: {m}")))?;
             (raster.base().clone(), raster.georef().clone())
         }
         (Some(path), None) => {

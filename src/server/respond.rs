@@ -30,7 +30,9 @@ pub fn tile(t: &Tile, meta: &TileMeta, request: &HeaderMap) -> Response {
     }
     let mut headers = HeaderMap::new();
     insert(&mut headers, header::ETAG, &t.etag);
-    insert(&mut headers, header::CACHE_CONTROL, &format!("public, max-age={}", meta.max_age_s));
+    // A stale tile is kept nowhere: the next request asks again.
+    let max_age = if t.stale { 0 } else { meta.max_age_s };
+    insert(&mut headers, header::CACHE_CONTROL, &format!("public, max-age={max_age}"));
     insert(&mut headers, "server-timing", &t.timing);
     if t.stale {
         insert(&mut headers, header::WARNING, "110 sylva \"Response is Stale\"");

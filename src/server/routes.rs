@@ -374,7 +374,9 @@ pub fn meta(state: &AppState, layer: MapLayer, encoding: Encoding) -> TileMeta {
         }
         _ => None,
     };
-    TileMeta { mime: encoding.mime(), quantization, max_age_s: state.settings.tile_max_age_s }
+    // A tile made from an upstream's data is kept by clients no longer than here.
+    let upstream_s = state.region().upstream_ttl.map_or(u64::MAX, |ttl| ttl.as_secs());
+    TileMeta { mime: encoding.mime(), quantization, max_age_s: state.settings.tile_max_age_s.min(upstream_s) }
 }
 
 /// A tile route's query; a key given twice differently is refused.

@@ -71,11 +71,9 @@ impl TileService {
         let builder = Cache::builder()
             .weigher(|k: &String, v: &Arc<Tile>| (k.len() + v.bytes.len() + 128).try_into().unwrap_or(u32::MAX))
             .max_capacity(memory_bytes);
-        // Tiles made from an upstream's data expire, in memory as on disk.
-        let memory = match region.upstream_ttl {
-            Some(ttl) => builder.time_to_live(ttl).build(),
-            None => builder.build(),
-        };
+        // Tiles made from an upstream's data expire, in memory as on disk;
+        // a stale one soon, so the upstream is asked again once it is back.
+        let memory = builder.expire_after(Expiry { ttl: region.upstream_ttl }).build();
         let leases = Arc::new(Leases::start(store.clone(), lock_ttl));
         TileService { region, store, leases, memory, pool, metrics }
     }
@@ -105,7 +103,7 @@ impl TileService {
                 let off_data = product.off_data(&this.region);
                 let tile = match stored.filter(|_| !off_data) {
                     Some(stored) => this.load(stored, product).await?,
-                    None => Arc::new(tile_of(this.compute(product).await?)),
+                    None => Arc::new(this.compute(product).await?.tile),
                 };
                 Ok::<_, ServeError>(tile)
             };
@@ -137,7 +135,7 @@ impl TileService {
                 Err(e) => {
                     tracing::warn!(error = %e, "tile cache unreadable; computing the tile without it");
                     self.metrics.cache(CacheResult::Unavailable);
-                    return Ok(Arc::new(tile_of(self.compute(product).await?)));
+                    return Ok(Arc::new(self.compute(product).await?.tile));
                 }
             };
             match claim {
@@ -181,8 +179,8 @@ impl TileService {
                 None
             }
         };
-        let computed = match (self.compute(product).await, stale) {
-            (Ok(c), _) => c,
+        let made = match (self.compute(product).await, stale) {
+            (Ok(made), _) => made,
             // The upstream failed: the stale tile is better than none.
             (Err(ServeError::Upstream(why)), Some(old)) => {
                 self.metrics.cache(CacheResult::Stale);
@@ -193,9 +191,12 @@ impl TileService {
             }
             (Err(e), _) => return Err(e),
         };
-        let uniform = computed.uniform;
-        let tile = Arc::new(tile_of(computed));
-        let (store, lock, bytes) = (self.store.clone(), lock.clone(), tile.bytes.clone());
+        // Made of stale source data: served, with its warning, not stored.
+        let tile = Arc::new(made.tile);
+        if tile.stale {
+            return Ok(tile);
+        }
+        let (store, lock, bytes, uniform) = (self.store.clone(), lock.clone(), tile.bytes.clone(), made.uniform);
         let written = tokio::task::spawn_blocking(move || flight::save(&*store, &lock, &bytes, uniform))
             .await
             .map_err(ServeError::internal)?;
@@ -205,10 +206,17 @@ impl TileService {
         Ok(tile)
     }
 
-    async fn compute(&self, product: Product) -> Result<Computed, ServeError> {
+    /// Computes the product on the pool. It is stale where the sources
+    /// read expired blocks meanwhile (an upstream failing; another
+    /// computation may have read them: stale errs on the safe side).
+    async fn compute(&self, product: Product) -> Result<Made, ServeError> {
+        let stale_reads = self.region.cache.stale_reads();
         let computed = self.run(move |region| products::compute(region, &product)).await?;
         self.metrics.computed(&computed.stats, computed.encode);
-        Ok(computed)
+        let uniform = computed.uniform;
+        let mut tile = tile_of(computed);
+        tile.stale = self.region.cache.stale_reads() != stale_reads;
+        Ok(Made { tile, uniform })
     }
 
     /// Runs `job` over the region on the compute pool (503 when it is
@@ -222,6 +230,31 @@ impl TileService {
     }
 }
 
+/// A product computed, as a tile, and whether its samples are all alike.
+struct Made {
+    tile: Tile,
+    uniform: bool,
+}
+
+/// How long a tile stays in memory: a tile made from an upstream's data
+/// for the upstream's time to live, a stale one for [`STALE_RETRY`] at most.
+struct Expiry {
+    ttl: Option<Duration>,
+}
+
+/// How long a stale tile is served from memory before the upstream is
+/// asked again.
+const STALE_RETRY: Duration = Duration::from_secs(5);
+
+impl moka::Expiry<String, Arc<Tile>> for Expiry {
+    fn expire_after_create(&self, _: &String, tile: &Arc<Tile>, _: std::time::Instant) -> Option<Duration> {
+        match tile.stale {
+            true => Some(self.ttl.map_or(STALE_RETRY, |ttl| ttl.min(STALE_RETRY))),
+            false => self.ttl,
+        }
+    }
+}
+
 fn tile_of(c: Computed) -> Tile {
     let mut parts: Vec<String> = Stage::ALL
         .iter()
@@ -230,4 +263,27 @@ fn tile_of(c: Computed) -> Tile {
         .collect();
     parts.push(format!("encode;dur={:.2}", c.encode.as_secs_f64() * 1e3));
     Tile::new(c.bytes, parts.join(", "))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use moka::Expiry as _;
+
+    #[test]
+    fn a_stale_tile_leaves_memory_soon_a_fresh_one_with_its_upstream() {
+        // Regression: a stale tile was kept for the upstream's whole time to
+        // live (an hour by default) after the upstream was back.
+        let now = std::time::Instant::now();
+        let fresh = Arc::new(Tile::new(vec![1], String::new()));
+        let stale = Arc::new(Tile { stale: true, ..Tile::new(vec![1], String::new()) });
+        let key = String::new();
+        let hour = Expiry { ttl: Some(Duration::from_secs(3600)) };
+        assert_eq!(hour.expire_after_create(&key, &fresh, now), Some(Duration::from_secs(3600)));
+        assert_eq!(hour.expire_after_create(&key, &stale, now), Some(STALE_RETRY));
+        let second = Expiry { ttl: Some(Duration::from_secs(1)) };
+        assert_eq!(second.expire_after_create(&key, &stale, now), Some(Duration::from_secs(1)));
+        let files = Expiry { ttl: None };
+        assert_eq!(files.expire_after_create(&key, &fresh, now), None, "no upstream: kept until evicted");
+    }
 }

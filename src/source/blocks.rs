@@ -6,7 +6,8 @@
 //! cache's own single-flight insertion), waiting for each other a bounded
 //! time (`LOAD_WAIT`). A cache may give its blocks a time
 //! to live, for regions fed by upstream servers: an expired block is read
-//! again from its source.
+//! again from its source, and kept while its source fails — read stale, and
+//! counted, so that what is made of it can say so.
 
 use super::{PixelSource, SourceError};
 use crate::raster::{Raster, Window};
@@ -47,6 +48,7 @@ pub struct BlockCache {
     blocks: Cache<(u64, usize, usize), Stamped, ByteWeight>,
     next_id: AtomicU64,
     computed: AtomicU64,
+    stale_reads: AtomicU64,
     ttl: Option<Duration>,
 }
 
@@ -65,6 +67,7 @@ impl BlockCache {
             blocks: Cache::with_weighter(estimated, budget_bytes.max(1), ByteWeight),
             next_id: AtomicU64::new(1),
             computed: AtomicU64::new(0),
+            stale_reads: AtomicU64::new(0),
             ttl,
         })
     }
@@ -77,6 +80,12 @@ impl BlockCache {
     /// Blocks computed (cache misses) since the cache was made.
     pub fn blocks_computed(&self) -> u64 {
         self.computed.load(Ordering::Relaxed)
+    }
+
+    /// Expired blocks read because their source failed, since the cache
+    /// was made: a product made while it grew may hold stale data.
+    pub fn stale_reads(&self) -> u64 {
+        self.stale_reads.load(Ordering::Relaxed)
     }
 
     fn fresh_id(&self) -> u64 {
@@ -162,16 +171,26 @@ impl Blocks {
     fn block(&self, bx: usize, by: usize) -> Result<Block, SourceError> {
         let key = (self.id, bx, by);
         let cache = &self.cache;
-        if let Some(ttl) = cache.ttl
-            && cache.blocks.get(&key).is_some_and(|s| s.read_at.elapsed() > ttl)
-        {
-            cache.blocks.remove(&key);
-        }
         let load = || {
             cache.computed.fetch_add(1, Ordering::Relaxed);
             let block = self.source.read_block(bx, by).map(Arc::new)?;
             Ok::<_, SourceError>(Stamped { block, read_at: Instant::now() })
         };
+        if let Some(ttl) = cache.ttl
+            && let Some(old) = cache.blocks.get(&key).filter(|s| s.read_at.elapsed() > ttl)
+        {
+            return match load() {
+                Ok(stamped) => {
+                    cache.blocks.insert(key, stamped.clone());
+                    Ok(stamped.block)
+                }
+                Err(e) => {
+                    tracing::warn!(source = %self.source.name().display(), error = %e, "source failed; reading its expired block");
+                    cache.stale_reads.fetch_add(1, Ordering::Relaxed);
+                    Ok(old.block)
+                }
+            };
+        }
         let stamped = match cache.blocks.get_value_or_guard(&key, Some(LOAD_WAIT)) {
             GuardResult::Value(stamped) => stamped,
             GuardResult::Guard(guard) => {
@@ -249,6 +268,52 @@ pub(crate) mod tests {
         std::thread::sleep(Duration::from_millis(40));
         blocks.read(Window::new(0, 0, 4, 4)).unwrap();
         assert_eq!(src.reads.load(Ordering::Relaxed), 2);
+    }
+
+    /// A source of 1.0 everywhere that fails while `down` is set.
+    struct Flaky {
+        down: std::sync::atomic::AtomicBool,
+    }
+
+    impl PixelSource for Flaky {
+        fn name(&self) -> &Path {
+            Path::new("<flaky>")
+        }
+        fn size(&self) -> (usize, usize) {
+            (8, 8)
+        }
+        fn bands(&self) -> usize {
+            1
+        }
+        fn block_size(&self) -> (usize, usize) {
+            (8, 8)
+        }
+        fn read_block(&self, _: usize, _: usize) -> Result<Vec<Raster<f32>>, SourceError> {
+            match self.down.load(Ordering::Relaxed) {
+                true => Err(SourceError::Upstream { url: "<flaky>".into(), problem: "down".into() }),
+                false => Ok(vec![Raster::filled(8, 8, 1.0)]),
+            }
+        }
+    }
+
+    #[test]
+    fn an_expired_block_is_read_stale_while_its_source_fails_and_counted() {
+        let src = Arc::new(Flaky { down: false.into() });
+        let cache = BlockCache::expiring(1 << 20, Some(Duration::from_millis(20)));
+        let blocks = Blocks::new(src.clone(), &cache);
+        let read = || blocks.read_band(Window::new(0, 0, 2, 2), 0).map(|r| r.get(1, 1));
+        assert_eq!((read().unwrap(), cache.stale_reads()), (1.0, 0));
+        src.down.store(true, Ordering::Relaxed);
+        assert_eq!((read().unwrap(), cache.stale_reads()), (1.0, 0), "fresh: the source is not asked");
+        std::thread::sleep(Duration::from_millis(30));
+        assert_eq!((read().unwrap(), cache.stale_reads()), (1.0, 1), "expired, the source down: stale");
+        src.down.store(false, Ordering::Relaxed);
+        assert_eq!((read().unwrap(), cache.stale_reads()), (1.0, 1), "read again once the source is back");
+        assert_eq!((read().unwrap(), cache.stale_reads()), (1.0, 1));
+        // A block never read has nothing to fall back on.
+        src.down.store(true, Ordering::Relaxed);
+        let other = Blocks::new(src, &cache);
+        assert!(other.read(Window::new(0, 0, 2, 2)).is_err());
     }
 
     #[test]

@@ -137,15 +137,72 @@ impl Link {
                 if body.len() as u64 > MAX_RESPONSE_BYTES {
                     return Err(too_large());
                 }
+                // Some servers answer an exception report with 200.
+                let xml = body.iter().find(|b| !b.is_ascii_whitespace()) == Some(&b'<');
+                if let Some(said) =
+                    xml.then(|| std::str::from_utf8(&body).ok()).flatten().and_then(|t| exception_text(t.trim_start()))
+                {
+                    return Err(Failure { problem: format!("an exception report: {said}"), retry: false });
+                }
                 Ok(Some(body))
             }
             404 => Ok(None),
-            status => Err(Failure {
-                problem: format!("HTTP {status}"),
-                retry: matches!(status, 408 | 425 | 429) || (status >= 500 && !matches!(status, 501 | 505)),
-            }),
+            status => {
+                // What the server says of it, if it says it briefly.
+                let mut said = Vec::new();
+                let _ = response.body_mut().as_reader().take(MAX_EXPLANATION_BYTES).read_to_end(&mut said);
+                let problem = match explanation(&said) {
+                    Some(text) => format!("HTTP {status}: {text}"),
+                    None => format!("HTTP {status}"),
+                };
+                let retry = matches!(status, 408 | 425 | 429) || (status >= 500 && !matches!(status, 501 | 505));
+                Err(Failure { problem, retry })
+            }
         }
     }
+}
+
+/// Longest explanation read from a failed response's body, bytes.
+const MAX_EXPLANATION_BYTES: u64 = 16 << 10;
+/// Longest explanation quoted, characters.
+const MAX_EXPLANATION_CHARS: usize = 300;
+
+/// A body's explanation of a failure: the text of an OGC exception report
+/// (WMS `ServiceException`, OWS `ExceptionText`, with its code), or short
+/// plain text; none for anything else.
+fn explanation(body: &[u8]) -> Option<String> {
+    let text = std::str::from_utf8(body).ok()?.trim();
+    let said = match exception_text(text) {
+        Some(said) => said,
+        None if !text.is_empty() && !text.starts_with('<') => text.lines().next().unwrap_or("").trim().to_string(),
+        None => return None,
+    };
+    Some(match said.char_indices().nth(MAX_EXPLANATION_CHARS) {
+        Some((cut, _)) => format!("{}…", &said[..cut]),
+        None => said,
+    })
+}
+
+/// The exceptions of an OGC exception report, `code: text` each, joined.
+fn exception_text(xml: &str) -> Option<String> {
+    if !xml.starts_with('<') {
+        return None;
+    }
+    let options = roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() };
+    let doc = roxmltree::Document::parse_with_options(xml, options).ok()?;
+    let said: Vec<String> = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("ServiceException") || n.has_tag_name("ExceptionText"))
+        .map(|n| {
+            let text = n.text().unwrap_or("").trim();
+            let owner = if n.has_tag_name("ExceptionText") { n.parent().unwrap_or(n) } else { n };
+            match owner.attribute("code").or(owner.attribute("exceptionCode")) {
+                Some(code) => format!("{code}: {text}"),
+                None => text.to_string(),
+            }
+        })
+        .collect();
+    (!said.is_empty()).then(|| said.join("; "))
 }
 
 #[cfg(test)]
@@ -164,7 +221,16 @@ mod tests {
             for mut stream in listener.incoming().flatten() {
                 counted.fetch_add(1, Ordering::SeqCst);
                 let _ = stream.read(&mut [0u8; 2048]);
-                let _ = write!(stream, "{head}\r\nConnection: close\r\n\r\n");
+                // A head with a body gets its length.
+                match head.split_once("\r\n\r\n") {
+                    Some((h, body)) => {
+                        let n = body.len();
+                        let _ = write!(stream, "{h}\r\nContent-Length: {n}\r\nConnection: close\r\n\r\n{body}");
+                    }
+                    None => {
+                        let _ = write!(stream, "{head}\r\nConnection: close\r\n\r\n");
+                    }
+                }
             }
         });
         (url, count)
@@ -185,6 +251,18 @@ mod tests {
             ("HTTP/1.1 200 OK\r\nContent-Length: 200000000", 1, "larger than 128 MiB (after 1 attempt)"),
             ("HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0", 4, "HTTP 503 (after 4 attempts)"),
             ("HTTP/1.1 429 Too Many Requests\r\nContent-Length: 0", 4, "HTTP 429 (after 4 attempts)"),
+            // What the server says is passed on.
+            (
+                "HTTP/1.1 400 Bad Request\r\n\r\n<ServiceExceptionReport><ServiceException code=\"LayerNotDefined\">no layer dme</ServiceException></ServiceExceptionReport>",
+                1,
+                "HTTP 400: LayerNotDefined: no layer dme (after 1 attempt)",
+            ),
+            (
+                "HTTP/1.1 200 OK\r\n\r\n<ows:ExceptionReport xmlns:ows=\"http://www.opengis.net/ows/1.1\"><ows:Exception exceptionCode=\"X\"><ows:ExceptionText>bad</ows:ExceptionText></ows:Exception></ows:ExceptionReport>",
+                1,
+                "an exception report: X: bad (after 1 attempt)",
+            ),
+            ("HTTP/1.1 502 Bad Gateway\r\n\r\nno route\n", 4, "HTTP 502: no route (after 4"),
         ] {
             let (url, count) = answering(head);
             let err = Link::new(&settings).fetch(&url).unwrap_err().to_string();

@@ -36,8 +36,86 @@ pub fn open(config: &UpstreamConfig, cache: &Arc<BlockCache>) -> Result<GeoRaste
             if !(res > 0.0 && res.is_finite()) {
                 return Err(bad(format!("resolution_deg {res} must be positive")));
             }
-            Ok(wms(config, link, area, cache))
+            // The finest resolution whose coarsest overview is at most
+            // MAX_COARSEST_BLOCKS blocks across the area.
+            let span = (area.east - area.west).max(area.north - area.south);
+            let finest = span / ((1u64 << MAX_HALVINGS) as f64 * (BLOCK * MAX_COARSEST_BLOCKS) as f64);
+            if res < finest {
+                let b = config.bounds;
+                return Err(bad(format!("resolution_deg {res} is too fine for bounds {b:?}: at least {finest:.1e}")));
+            }
+            let request = WmsUrl::parse(&config.url).map_err(bad)?;
+            Ok(wms(config, request, link, area, cache))
         }
+    }
+}
+
+/// Overviews of a WMS upstream: its resolution halved at most this often.
+const MAX_HALVINGS: u32 = 21;
+/// Blocks across the coarsest overview, at most: a request over the whole
+/// area reads no more than this squared.
+const MAX_COARSEST_BLOCKS: usize = 16;
+
+/// What a WMS upstream's URL asks for, checked: the format it answers and
+/// how its boxes are written.
+#[derive(Clone, Debug, PartialEq)]
+struct WmsUrl {
+    /// The URL as configured (every parameter but the box and the size).
+    url: String,
+    /// A map's colours (`image/png`, three bands) rather than float32 values.
+    picture: bool,
+    /// Boxes written latitude first (WMS 1.3.0 in EPSG:4326).
+    lat_first: bool,
+}
+
+impl WmsUrl {
+    /// Checks a GetMap URL without `BBOX`, `WIDTH` and `HEIGHT`: HTTP,
+    /// `FORMAT` `application/bil32` or `image/png`, `CRS`/`SRS`
+    /// `CRS:84` or `EPSG:4326` (with a `VERSION` to fix its axis order).
+    fn parse(url: &str) -> Result<WmsUrl, String> {
+        let uri = url.parse::<ureq::http::Uri>().map_err(|_| "not a URL".to_string())?;
+        if !matches!(uri.scheme_str(), Some("http" | "https")) || uri.host().is_none_or(str::is_empty) {
+            return Err("not an http:// or https:// URL with a host".into());
+        }
+        let params: Vec<(String, String)> = form_urlencoded::parse(uri.query().unwrap_or("").as_bytes())
+            .map(|(k, v)| (k.to_ascii_uppercase(), v.trim().to_string()))
+            .collect();
+        let get = |key: &str| params.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str());
+        if let Some(key) = ["BBOX", "WIDTH", "HEIGHT"].into_iter().find(|k| get(k).is_some()) {
+            return Err(format!("leave {key} out of the URL: each block's box and size are added to it"));
+        }
+        let picture = match get("FORMAT").map(str::to_ascii_lowercase).as_deref() {
+            Some("application/bil32") => false,
+            Some("image/png") => true,
+            other => {
+                let named = other.map_or("no FORMAT".to_string(), |f| format!("FORMAT={f}"));
+                return Err(format!("{named}: read are application/bil32 (values) and image/png (a map's colours)"));
+            }
+        };
+        let version = get("VERSION");
+        let lat_first = match (get("CRS").map(|c| ("CRS", c)).or(get("SRS").map(|c| ("SRS", c))), version) {
+            (Some((_, c)), _) if c.eq_ignore_ascii_case("CRS:84") => false,
+            (Some(("SRS", c)), _) if c.eq_ignore_ascii_case("EPSG:4326") => false,
+            (Some((_, c)), Some(v)) if c.eq_ignore_ascii_case("EPSG:4326") => v.starts_with("1.3"),
+            (Some((_, c)), None) if c.eq_ignore_ascii_case("EPSG:4326") => {
+                return Err(
+                    "CRS=EPSG:4326 without VERSION: its axis order depends on the version (or name CRS=CRS:84)".into(),
+                );
+            }
+            (Some((key, c)), _) => {
+                return Err(format!("{key}={c}: boxes are asked in degrees, CRS=CRS:84 or EPSG:4326"));
+            }
+            (None, _) => return Err("no CRS (or SRS): name CRS=CRS:84".into()),
+        };
+        Ok(WmsUrl { url: url.to_string(), picture, lat_first })
+    }
+
+    /// The GetMap of the box `[west, south, east, north]` at `size` pixels.
+    fn get_map(&self, [west, south, east, north]: [f64; 4], (w, h): (usize, usize)) -> String {
+        let sep = if self.url.contains('?') { '&' } else { '?' };
+        let bbox = if self.lat_first { [south, west, north, east] } else { [west, south, east, north] };
+        let [a, b, c, d] = bbox;
+        format!("{}{sep}BBOX={a},{b},{c},{d}&WIDTH={w}&HEIGHT={h}", self.url)
     }
 }
 
@@ -62,16 +140,16 @@ fn terrarium(config: &UpstreamConfig, link: Arc<Link>, crs: Crs, cache: &Arc<Blo
 
 /// A WMS over `area` at the configured resolution, with levels halving it
 /// until one fits a block.
-fn wms(config: &UpstreamConfig, link: Arc<Link>, area: BBox, cache: &Arc<BlockCache>) -> GeoRaster {
+fn wms(config: &UpstreamConfig, request: WmsUrl, link: Arc<Link>, area: BBox, cache: &Arc<BlockCache>) -> GeoRaster {
     let res = config.resolution_deg;
     let width = ((area.east - area.west) / res).ceil() as usize;
     let height = ((area.north - area.south) / res).ceil() as usize;
     let mut levels = Vec::new();
-    for k in 0..=21 {
+    for k in 0..=MAX_HALVINGS {
         let (w, h) = (width.div_ceil(1 << k), height.div_ceil(1 << k));
         let level = Wms {
             link: link.clone(),
-            url: config.url.clone(),
+            request: request.clone(),
             west: area.west,
             north: area.north,
             res: res * (1u64 << k) as f64,
@@ -148,7 +226,7 @@ impl PixelSource for Terrarium {
 /// requests (pixel-is-area boxes, so pixel centres land on the raster's).
 struct Wms {
     link: Arc<Link>,
-    url: String,
+    request: WmsUrl,
     west: f64,
     north: f64,
     res: f64,
@@ -157,7 +235,7 @@ struct Wms {
 
 impl PixelSource for Wms {
     fn name(&self) -> &Path {
-        Path::new(&self.url)
+        Path::new(&self.request.url)
     }
 
     fn size(&self) -> (usize, usize) {
@@ -165,13 +243,7 @@ impl PixelSource for Wms {
     }
 
     fn bands(&self) -> usize {
-        if self.url.to_ascii_lowercase().contains("format=image%2fpng")
-            || self.url.to_ascii_lowercase().contains("format=image/png")
-        {
-            3
-        } else {
-            1
-        }
+        if self.request.picture { 3 } else { 1 }
     }
 
     fn block_size(&self) -> (usize, usize) {
@@ -183,25 +255,107 @@ impl PixelSource for Wms {
         let west = self.west + b.x as f64 * self.res;
         let north = self.north - b.y as f64 * self.res;
         let (east, south) = (west + b.width as f64 * self.res, north - b.height as f64 * self.res);
-        let sep = if self.url.contains('?') { '&' } else { '?' };
-        let url = format!("{}{sep}BBOX={west},{south},{east},{north}&WIDTH={}&HEIGHT={}", self.url, b.width, b.height);
+        let url = self.request.get_map([west, south, east, north], (b.width, b.height));
         let Some(body) = self.link.fetch(&url)? else {
             return Ok(vec![Raster::filled(b.width, b.height, f32::NAN); self.bands()]);
         };
-        let bad = |problem: String| SourceError::Upstream { url: url.clone(), problem };
-        if self.bands() == 3 {
-            let img = image::load_from_memory(&body).map_err(|e| bad(format!("not an image: {e}")))?.into_rgba8();
-            return Ok((0..3)
-                .map(|k| Raster::from_fn(b.width, b.height, |x, y| f32::from(img.get_pixel(x as u32, y as u32).0[k])))
-                .collect());
+        let decoded = match self.request.picture {
+            true => colours(&body, (b.width, b.height)),
+            false => values(&body, (b.width, b.height)).map(|v| vec![v]),
+        };
+        decoded.map_err(|problem| SourceError::Upstream { url, problem })
+    }
+}
+
+/// A picture's R, G and B bands, if it is `size` pixels.
+fn colours(body: &[u8], (w, h): (usize, usize)) -> Result<Vec<Raster<f32>>, String> {
+    let img = image::load_from_memory(body).map_err(|e| format!("not an image: {e}"))?.into_rgba8();
+    if img.dimensions() != (w as u32, h as u32) {
+        return Err(format!("the image is {}×{} pixels, {w}×{h} were asked for", img.width(), img.height()));
+    }
+    Ok((0..3).map(|k| Raster::from_fn(w, h, |x, y| f32::from(img.get_pixel(x as u32, y as u32).0[k]))).collect())
+}
+
+/// Largest magnitude of a value read from a float32 upstream: beyond it
+/// the bytes are no heights, cover or classes (a body of the right size
+/// that is something else).
+const MAX_VALUE: f32 = 1.0e6;
+
+/// Little-endian float32 values of `size`, the BIL nodata value as NaN.
+fn values(body: &[u8], (w, h): (usize, usize)) -> Result<Raster<f32>, String> {
+    if body.len() != 4 * w * h {
+        return Err(format!("{} bytes, expected {} (application/bil32)", body.len(), 4 * w * h));
+    }
+    let mut values = Vec::with_capacity(w * h);
+    for c in body.chunks_exact(4) {
+        let v = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+        if v == crate::encode::NODATA_HEIGHT {
+            values.push(f32::NAN);
+        } else if v.is_finite() && v.abs() <= MAX_VALUE {
+            values.push(v);
+        } else {
+            return Err(format!("a value of {v}: not float32 data (application/bil32)"));
         }
-        if body.len() != 4 * b.width * b.height {
-            return Err(bad(format!("{} bytes, expected {} (application/bil32)", body.len(), 4 * b.width * b.height)));
+    }
+    Raster::from_vec(w, h, values).ok_or_else(|| "short body".to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const BASE: &str = "http://up:8080/wms?SERVICE=WMS&REQUEST=GetMap&LAYERS=dem&STYLES=";
+
+    #[test]
+    fn a_wms_url_is_checked_and_its_boxes_follow_its_axis_order() {
+        let url = |rest: &str| WmsUrl::parse(&format!("{BASE}&{rest}"));
+        let lon_lat = url("VERSION=1.3.0&CRS=CRS:84&FORMAT=application/bil32").unwrap();
+        assert!(!lon_lat.picture && !lon_lat.lat_first);
+        assert!(lon_lat.get_map([10.0, 46.0, 11.0, 47.0], (4, 2)).ends_with("&BBOX=10,46,11,47&WIDTH=4&HEIGHT=2"));
+        // WMS 1.3.0 in EPSG:4326 is latitude first; 1.1.1's SRS is not.
+        let lat_lon = url("VERSION=1.3.0&CRS=EPSG:4326&FORMAT=image%2Fpng").unwrap();
+        assert!(lat_lon.picture && lat_lon.lat_first);
+        assert!(lat_lon.get_map([10.0, 46.0, 11.0, 47.0], (4, 2)).contains("&BBOX=46,10,47,11&"));
+        assert!(!url("VERSION=1.1.1&SRS=EPSG:4326&FORMAT=application/bil32").unwrap().lat_first);
+        for (rest, said) in [
+            ("CRS=CRS:84&FORMAT=image/jpeg", "FORMAT=image/jpeg: read are"),
+            ("CRS=CRS:84&FORMAT=image/tiff", "FORMAT=image/tiff"),
+            ("CRS=CRS:84", "no FORMAT"),
+            ("CRS=CRS:84&FORMAT=application/bil32&BBOX=0,0,1,1", "leave BBOX out"),
+            ("CRS=CRS:84&FORMAT=application/bil32&width=5", "leave WIDTH out"),
+            ("CRS=EPSG:3857&FORMAT=application/bil32", "CRS=EPSG:3857: boxes are asked in degrees"),
+            ("CRS=EPSG:4326&FORMAT=application/bil32", "without VERSION"),
+            ("FORMAT=application/bil32", "no CRS"),
+        ] {
+            let e = url(rest).unwrap_err();
+            assert!(e.contains(said), "{rest}: {e}");
         }
-        let values = body
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .map(|v| if v == crate::encode::NODATA_HEIGHT { f32::NAN } else { v });
-        Ok(vec![Raster::from_vec(b.width, b.height, values.collect()).ok_or_else(|| bad("short body".into()))?])
+        for bad in ["ftp://up/wms?FORMAT=image/png&CRS=CRS:84", "not a url at all", "http:///wms"] {
+            assert!(WmsUrl::parse(bad).unwrap_err().starts_with("not "), "{bad}");
+        }
+    }
+
+    fn png(w: u32, h: u32) -> Vec<u8> {
+        let mut out = std::io::Cursor::new(Vec::new());
+        image::RgbImage::from_pixel(w, h, image::Rgb([10, 20, 30]))
+            .write_to(&mut out, image::ImageFormat::Png)
+            .unwrap();
+        out.into_inner()
+    }
+
+    #[test]
+    fn an_upstream_picture_or_grid_of_another_size_or_kind_is_refused() {
+        // Regression: a 10×10 PNG for a 12×12 block panicked, a larger one was cropped.
+        assert_eq!(colours(&png(12, 12), (12, 12)).unwrap()[2].get(11, 11), 30.0);
+        for (w, h) in [(10, 10), (13, 12)] {
+            let e = colours(&png(w, h), (12, 12)).unwrap_err();
+            assert!(e.contains(&format!("{w}×{h} pixels, 12×12 were asked for")), "{e}");
+        }
+        let floats = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+        let grid = values(&floats(&[1.5, -32768.0, 8848.0, -430.0]), (2, 2)).unwrap();
+        assert_eq!((grid.get(0, 0), grid.get(1, 0).is_nan(), grid.get(0, 1)), (1.5, true, 8848.0));
+        assert!(values(&floats(&[1.5, 2.0e38, 0.0, 0.0]), (2, 2)).unwrap_err().contains("not float32 data"));
+        assert!(values(&floats(&[1.5, f32::NAN, 0.0, 0.0]), (2, 2)).is_err());
+        assert!(values(&floats(&[1.5]), (2, 2)).unwrap_err().contains("4 bytes, expected 16"));
     }
 }

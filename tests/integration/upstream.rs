@@ -172,3 +172,77 @@ fn stale_tiles_are_served_when_the_upstream_is_gone() {
     let other = TileId::new(11, demo_tile().row + 1, demo_tile().col);
     assert_eq!(proxy.get(&tile_path(other, "bil32")).status, 502);
 }
+
+/// A GetMap over the demo on no tile's grid (computed whole, not from tiles).
+fn odd_map(layers: &str) -> String {
+    let b = common::demo().bounds;
+    let (w, s) = (b.west + 0.013, b.south + 0.017);
+    format!(
+        "/wms?SERVICE=WMS&VERSION=1.3.0&REQUEST=GetMap&LAYERS={layers}&STYLES=&CRS=CRS:84&BBOX={w},{s},{},{}&WIDTH=37&HEIGHT=29&FORMAT=application/bil32",
+        w + 0.011,
+        s + 0.007
+    )
+}
+
+#[test]
+fn a_map_is_made_of_stale_source_data_while_the_upstream_is_gone() {
+    // Regression: tiles were served stale, but a GetMap on no tile's grid
+    // (what QGIS and GDAL ask) was a 502 once the source blocks expired.
+    let dir = TempDir::new("up-stale-map");
+    let upstream = Server::start(None, &dir.join("cache-up"));
+    let config = proxy_config(&dir, &wms_upstream(&upstream.base, "ttl_s = 1\ntimeout_ms = 10000\nretries = 0"));
+    let proxy = Server::start(Some(&config), &dir.join("cache-proxy"));
+    let fresh = proxy.get(&odd_map("dem"));
+    assert_eq!(fresh.status, 200, "{}", fresh.text());
+    assert!(fresh.header("warning").is_none());
+    drop(upstream);
+    std::thread::sleep(Duration::from_millis(1200));
+    for layers in ["dem", "cem"] {
+        let stale = proxy.get(&odd_map(layers));
+        assert_eq!(stale.status, 200, "{layers}: {}", stale.text());
+        assert!(stale.header("warning").is_some_and(|w| w.starts_with("110")), "{layers}: {:?}", stale.headers);
+        assert_eq!(stale.header("cache-control"), Some("public, max-age=0"), "{layers}: kept nowhere");
+        if layers == "dem" {
+            assert!(stale.body == fresh.body, "the source's last values");
+        }
+    }
+}
+
+#[test]
+fn what_an_upstream_says_of_a_refusal_is_passed_on() {
+    let dir = TempDir::new("up-refusal");
+    let upstream = Server::start(None, &dir.join("cache-up"));
+    let misspelt = wms_upstream(&upstream.base, "").replace("LAYERS=dem", "LAYERS=dme");
+    let proxy = Server::start(Some(&proxy_config(&dir, &misspelt)), &dir.join("cache-proxy"));
+    let reply = proxy.get(&odd_map("dem"));
+    assert_eq!(reply.status, 502, "{}", reply.text());
+    assert!(
+        reply.text().contains(r#"HTTP 400: LayerNotDefined: layer &quot;dme&quot; is not served"#),
+        "{}",
+        reply.text()
+    );
+}
+
+#[test]
+fn an_upstream_url_that_cannot_work_is_refused_naming_the_file_and_section() {
+    let dir = TempDir::new("up-bad-url");
+    let wms = wms_upstream("http://127.0.0.1:9", "");
+    for (config, said) in [
+        (wms.replace("application/bil32", "image/jpeg"), "[dem.upstream] http://127.0.0.1:9/wms?"),
+        (wms.replace("application/bil32", "image/png"), "answers a picture (three bands)"),
+        (wms.replace("CRS=CRS:84", "CRS=EPSG:3857"), "CRS=EPSG:3857: boxes are asked in degrees"),
+        (wms.replace("http://", "ftp://"), "not an http:// or https:// URL"),
+        (format!("{wms}breaker_cooldown_s = inf\n"), "[dem.upstream] breaker_cooldown_s = inf: must be 0 to 86400"),
+        (wms.replace(&format!("{}", 1.0 / 3600.0), "1e-12"), "resolution_deg 0.000000000001 is too fine"),
+    ] {
+        let path = proxy_config(&dir, &config);
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))
+            .args(["info", "--config"])
+            .arg(&path)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(&path.display().to_string()), "{said}: {err}");
+        assert!(err.contains(said), "{said}: {err}");
+    }
+}
