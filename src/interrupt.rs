@@ -40,15 +40,34 @@ fn install() {
 }
 
 /// A run's watch for the signals, from `watch` until dropped.
-pub struct Interrupt(());
+pub struct Interrupt {
+    /// Tells the thread that says a signal came to end.
+    done: Arc<AtomicBool>,
+}
+
+/// How often the run's watch looks whether a signal came, to say so.
+const SAY_EVERY: std::time::Duration = std::time::Duration::from_millis(100);
 
 impl Interrupt {
-    /// Starts watching (one run at a time per process).
+    /// Starts watching (one run at a time per process); the first signal
+    /// is answered at once with what happens next, since the work in hand
+    /// (a tile, a frame waiting on a server) may take minutes.
     pub fn watch() -> Interrupt {
         install();
         CAME.store(false, Ordering::SeqCst);
         IDLE.store(false, Ordering::SeqCst);
-        Interrupt(())
+        let done = Arc::new(AtomicBool::new(false));
+        let ended = done.clone();
+        let _ = std::thread::Builder::new().name("interrupt".into()).spawn(move || {
+            while !ended.load(Ordering::Acquire) {
+                if CAME.load(Ordering::Acquire) {
+                    eprintln!("\nstopping after the work in hand (press Ctrl-C again to stop at once)");
+                    return;
+                }
+                std::thread::sleep(SAY_EVERY);
+            }
+        });
+        Interrupt { done }
     }
 
     /// The signal that came, if one did.
@@ -60,6 +79,7 @@ impl Interrupt {
 impl Drop for Interrupt {
     fn drop(&mut self) {
         IDLE.store(true, Ordering::SeqCst);
+        self.done.store(true, Ordering::Release);
     }
 }
 

@@ -31,8 +31,8 @@ pub struct FlyArgs {
     /// Camera path (TOML; see config/paths/).
     #[arg(long)]
     path: PathBuf,
-    /// Frames spread evenly over the path (at least 1).
-    #[arg(long, default_value_t = 60, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    /// Frames spread evenly over the path (1 to a million).
+    #[arg(long, default_value_t = 60, value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1_000_000))]
     frames: usize,
     /// Output directory for frame_NNNNN.png and stats.csv.
     #[arg(long)]

@@ -290,6 +290,16 @@ impl TileData {
     /// above the ellipsoid: its samples in their true place, bilinear
     /// between them. `None` outside its sector or beside nodata.
     pub fn surface_height_m(&self, lon_deg: f64, lat_deg: f64) -> Option<f64> {
+        self.height_m(lon_deg, lat_deg, 0)
+    }
+
+    /// The ground under the canopy, as [`Self::surface_height_m`].
+    pub fn ground_height_m(&self, lon_deg: f64, lat_deg: f64) -> Option<f64> {
+        self.height_m(lon_deg, lat_deg, 1)
+    }
+
+    /// The height of texel channel `channel` (0 the CEM, 1 the ground).
+    fn height_m(&self, lon_deg: f64, lat_deg: f64, channel: usize) -> Option<f64> {
         let s = self.frame.sample_at(lon_deg, lat_deg);
         let last = f64::from(self.frame.samples - 1);
         // On its edge within rounding: a point on a sector's border belongs
@@ -305,8 +315,8 @@ impl TileData {
         let (c, f) = (s.floor(), s - s.floor());
         let height = |di: f64, dj: f64| {
             let (i, j) = (c.x + if f.x > 0.0 { di } else { 0.0 }, c.y + if f.y > 0.0 { dj } else { 0.0 });
-            let cem = self.texel(i as i64, j as i64)[0];
-            (cem > NODATA_M).then(|| f64::from(cem) - self.frame.ellipsoid_local(i, j).z)
+            let h = self.texel(i as i64, j as i64)[channel];
+            (h > NODATA_M).then(|| f64::from(h) - self.frame.ellipsoid_local(i, j).z)
         };
         let corners = [height(0.0, 0.0)?, height(1.0, 0.0)?, height(0.0, 1.0)?, height(1.0, 1.0)?];
         Some(super::raycast::bilinear(corners, f.x, f.y))
@@ -344,6 +354,13 @@ impl TileData {
 /// ground by kilometres (at a pole, where such a tile is drawn plain).
 pub fn clearance_m(eye: Geodetic, tiles: &[Arc<TileData>]) -> Option<f64> {
     let highest = tiles.iter().filter_map(|t| t.surface_height_m(eye.lon_deg, eye.lat_deg)).max_by(f64::total_cmp);
+    highest.map(|h| eye.height_m - h)
+}
+
+/// The eye's height above the ground (the canopy left out) of the highest
+/// of `tiles` under it.
+pub fn ground_clearance_m(eye: Geodetic, tiles: &[Arc<TileData>]) -> Option<f64> {
+    let highest = tiles.iter().filter_map(|t| t.ground_height_m(eye.lon_deg, eye.lat_deg)).max_by(f64::total_cmp);
     highest.map(|h| eye.height_m - h)
 }
 

@@ -371,7 +371,8 @@ struct Frame<'a> {
     cpu_ms: f64,
     bytes_fetched: u64,
     cpu_bytes: usize,
-    clearance_m: Option<f64>,
+    /// Above the surface and above the ground.
+    clearance_m: (Option<f64>, Option<f64>),
     /// Under a budget: the budget, the cut's expected time, and the model's
     /// prediction for what was drawn, ms.
     budget: Option<(f64, Option<f64>, f64)>,
@@ -396,7 +397,12 @@ fn record(frame: &Frame, chosen: &Chosen, drawn: &Drawn) -> FrameRecord {
         tiles_plain: out.stats.tiles_plain,
         error_px: chosen.error_px,
         ray_pixels: rays.len(),
-        view_fetches: (drawn.steps.view.mean.unwrap_or(0.0), rays.iter().map(|f| f[0]).max().unwrap_or(0)),
+        // Over every ray-cast pixel, morph pairs too (the steps measured
+        // for pricing keep those apart).
+        view_fetches: (
+            mean_or_zero(rays.iter().map(|f| f64::from(f[0]))),
+            rays.iter().map(|f| f[0]).max().unwrap_or(0),
+        ),
         shadow_fetches_mean: mean_or_zero(rays.iter().map(|f| f64::from(f[1]))),
         work: (!out.work.is_empty()).then(|| out.work.iter().fold(DrawWork::default(), |a, w| a.plus(w))),
         bytes_fetched: frame.bytes_fetched,
@@ -412,7 +418,8 @@ fn record(frame: &Frame, chosen: &Chosen, drawn: &Drawn) -> FrameRecord {
         bound: selected.map(|s| s.cut.bound()),
         morphing: chosen.morphing,
         nodes_touched: chosen.touched,
-        clearance_m: frame.clearance_m,
+        clearance_m: frame.clearance_m.0,
+        ground_clearance_m: frame.clearance_m.1,
         shadow_steps_mean: mean_or_zero(chosen.steps.iter().map(|&s| f64::from(s))),
         trees: drawn.trees.drawn.trees,
         splats: out.stats.splats as usize,
@@ -515,14 +522,16 @@ pub fn visible_tiles(
 /// levels.
 const MAX_COARSENED_PX: f64 = 1e4;
 
-/// The camera's height above the surface of the finest tile held under it,
-/// drawn or not (a camera looking ahead often has the ground under it out
-/// of view; the coarse tiles over the region are always held). None
-/// outside the region.
-fn clearance_m(source: &dyn TileSource, store: &TileStore, camera: &Camera) -> Option<f64> {
+/// The camera's height above the surface and above the ground of the
+/// finest tile held under it, drawn or not (a camera looking ahead often
+/// has the ground under it out of view; the coarse tiles over the region
+/// are always held). None outside the region.
+fn clearance_m(source: &dyn TileSource, store: &TileStore, camera: &Camera) -> (Option<f64>, Option<f64>) {
     let eye = Geodetic::from_ecef(camera.position_ecef);
-    let under = store.finest_at(&source.grid(), eye.lon_deg, eye.lat_deg)?;
-    tile::clearance_m(eye, &[under])
+    match store.finest_at(&source.grid(), eye.lon_deg, eye.lat_deg) {
+        Some(under) => (tile::clearance_m(eye, std::slice::from_ref(&under)), tile::ground_clearance_m(eye, &[under])),
+        None => (None, None),
+    }
 }
 
 /// Bytes of one prepared tile, for the CPU store's budget.

@@ -149,7 +149,8 @@ fn fly_in(
     let frame_s = path.time(1, options.frames) - path.time(0, options.frames);
     let motion = Motion { frame_s, limits: path.motion_limits(MOTION_STEPS), shadows: path.sun.is_some() };
     let mut flight = Flight::new(source, renderer, options, motion)?;
-    let mut records = Vec::with_capacity(options.frames);
+    // Room for a usual flight's records; a longer one grows as it goes.
+    let mut records = Vec::with_capacity(options.frames.min(1 << 12));
     let flown = fly_path(&mut flight, (source, path, renderer), options, (&mut earlier, &mut records), interrupt);
     // A frame that failed because of the signal (a server in the same
     // process group stopped by it) was stopped by the signal.

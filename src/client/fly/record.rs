@@ -80,6 +80,9 @@ pub struct FrameRecord {
     /// The camera's height above the surface of the finest tile loaded
     /// under it (negative below it), metres; none where none is.
     pub clearance_m: Option<f64>,
+    /// The same above its ground, the canopy left out (not in the CSV: a
+    /// camera among the trees is below the surface, not the ground).
+    pub ground_clearance_m: Option<f64>,
 }
 
 /// A one-paragraph summary of a flight: frames, mean and worst times,
@@ -124,9 +127,10 @@ fn warnings(records: &[FrameRecord], asked_error_px: f64) -> String {
     let coarser: Vec<f64> = records.iter().filter_map(|r| r.error_px).filter(|&e| e > asked_error_px * 1.001).collect();
     if let Some(worst) = coarser.iter().copied().reduce(f64::max) {
         // Tiles whose box holds the eye (around a pole) have no finite error.
-        let drawn = match worst < 1e5 {
-            true => format!("tiles of up to {worst:.0} px"),
-            false => "far coarser tiles".to_string(),
+        let drawn = match worst {
+            w if w < 10.0 => format!("tiles of up to {worst:.2} px"),
+            w if w < 1e5 => format!("tiles of up to {worst:.0} px"),
+            _ => "far coarser tiles".to_string(),
         };
         text.push_str(&format!(
             "\nin {} the GPU tile cache held no cut at the asked {asked_error_px} px error, and {drawn} were drawn: a larger --gpu-budget-mib draws finer ones",
@@ -136,9 +140,9 @@ fn warnings(records: &[FrameRecord], asked_error_px: f64) -> String {
     if !records.is_empty() && records.iter().all(|r| r.tiles_ray + r.tiles_plain == 0) {
         text.push_str("\nno frame drew a tile: does the camera look at the region?");
     }
-    let below: Vec<&FrameRecord> = records.iter().filter(|r| r.clearance_m.is_some_and(|c| c < 0.0)).collect();
+    let below: Vec<&FrameRecord> = records.iter().filter(|r| r.ground_clearance_m.is_some_and(|c| c < 0.0)).collect();
     if let (Some(first), Some(deepest)) =
-        (below.first(), below.iter().filter_map(|r| r.clearance_m).min_by(f64::total_cmp))
+        (below.first(), below.iter().filter_map(|r| r.ground_clearance_m).min_by(f64::total_cmp))
     {
         text.push_str(&format!(
             "\nthe camera is below the ground in {} (from frame {}, as deep as {:.0} m): they show the sky; heights are above the ellipsoid",
@@ -153,4 +157,36 @@ fn warnings(records: &[FrameRecord], asked_error_px: f64) -> String {
 /// "1 frame", "2 frames".
 fn frames(n: usize) -> String {
     if n == 1 { "1 frame".to_string() } else { format!("{n} frames") }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn drew(clearance_m: f64, ground_clearance_m: f64) -> FrameRecord {
+        FrameRecord {
+            tiles_ray: 4,
+            clearance_m: Some(clearance_m),
+            ground_clearance_m: Some(ground_clearance_m),
+            error_px: Some(2.0),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_camera_among_the_trees_is_not_below_the_ground() {
+        // Regression: 12 m above the ground under 20 m crowns was "below
+        // the ground … they show the sky".
+        let among_trees = [drew(-8.0, 12.0), drew(-8.0, 12.0)];
+        assert!(!summary(&among_trees, 2.0).contains("below the ground"));
+        let under = [drew(-8.0, 12.0), FrameRecord { frame: 1, ..drew(-25.0, -5.0) }];
+        assert!(summary(&under, 2.0).contains("below the ground in 1 frame (from frame 1, as deep as 5 m)"));
+    }
+
+    #[test]
+    fn errors_below_a_pixel_are_written_as_such() {
+        // Regression: "tiles of up to 0 px were drawn" for an asked 1e-9 px.
+        let text = summary(&[FrameRecord { error_px: Some(0.31), ..drew(10.0, 10.0) }], 1e-9);
+        assert!(text.contains("tiles of up to 0.31 px"), "{text}");
+    }
 }
