@@ -117,7 +117,10 @@ impl CameraPath {
         if let Some(sun) = &path.sun
             && !(sun.azimuth_deg.is_finite() && (-90.0..=90.0).contains(&sun.elevation_deg))
         {
-            return Err(format!("sun {sun:?}: need a finite azimuth_deg and elevation_deg within -90..90"));
+            let (azimuth, elevation) = (sun.azimuth_deg, sun.elevation_deg);
+            return Err(format!(
+                "sun = {{ azimuth_deg = {azimuth}, elevation_deg = {elevation} }}: need a finite azimuth_deg and elevation_deg within -90..90"
+            ));
         }
         for (k, key) in path.key.iter().enumerate() {
             key.check().map_err(|e| format!("key {}: {e}", k + 1))?;
@@ -304,7 +307,8 @@ pitch_deg = -30.0
         let typo = PATH.replace("pitch_deg = -30.0", "pitch = -30.0");
         assert!(CameraPath::parse(&typo).is_err());
         let dark = PATH.replace("elevation_deg = 30.0", "elevation_deg = nan");
-        assert!(CameraPath::parse(&dark).unwrap_err().contains("sun"));
+        let e = CameraPath::parse(&dark).unwrap_err();
+        assert!(e.contains("elevation_deg = NaN }") && !e.contains("Sun {"), "as the file writes it: {e}");
         // Each value by name, its range and what it was.
         for (from, to, needle) in [
             ("lat = 46.0", "lat = 95.0", "key 1: lat = 95: must be within -90..90"),
