@@ -173,6 +173,7 @@ impl Model {
 
     /// What was made, for people.
     pub fn report(&self, set: &TileSet) -> String {
+        let counted = |n: usize, noun: &str| if n == 1 { format!("1 {noun}") } else { format!("{n} {noun}s") };
         let c = &self.chm;
         let g = &c.grid;
         let heights =
@@ -193,12 +194,12 @@ impl Model {
                 crate::canopy::stats::HeightStats::of(c.heights.data().iter().copied())
             ),
             format!(
-                "proxy   {} Wang tiles of {}² texels ({:.0} m), {} colours, {} variants; {}",
-                l.count(),
+                "proxy   {} of {}² texels ({:.0} m), {}, {}; {}",
+                counted(l.count(), "Wang tile"),
                 l.tile_px,
                 l.tile_m(),
-                l.colours,
-                l.variants,
+                counted(l.colours, "colour"),
+                counted(l.variants, "variant"),
                 set.stats()
             ),
         ]
@@ -207,6 +208,10 @@ impl Model {
             format!(
                 "warning most cells had no point and were filled: a resolution of {coarser:.2} m or coarser gives about one point per cell"
             )
+        }))
+        .chain(c.heights.data().iter().all(|&h| !(h > 0.0)).then(|| {
+            "warning no cell stands above the ground: the proxy is flat (is the cloud ground only, or its classes wrong?)"
+                .to_string()
         }))
         .collect::<Vec<_>>()
         .join("\n")

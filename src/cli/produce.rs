@@ -110,7 +110,7 @@ pub struct CanopyArgs {
     #[arg(long = "las", required = true)]
     las: Vec<PathBuf>,
     /// Cell side of the canopy height model, metres.
-    #[arg(long, default_value_t = sylva::lidar::DEFAULT_CELL_M, value_parser = super::positive("metres"))]
+    #[arg(long, default_value_t = sylva::lidar::DEFAULT_CELL_M, value_parser = super::positive("metres"), allow_negative_numbers = true)]
     resolution: f64,
     /// The proxy (a GeoTIFF atlas of Wang tiles).
     #[arg(short, long)]
@@ -140,6 +140,10 @@ impl CanopyArgs {
     /// all or none.
     pub fn run(self) -> Result<()> {
         let inputs: Vec<&Path> = self.las.iter().map(PathBuf::as_path).collect();
+        // The same points twice would count every return twice.
+        if let Some((_, twice)) = inputs.iter().enumerate().find(|(k, p)| inputs[..*k].contains(p)) {
+            anyhow::bail!("{}: given twice to --las (its points would count twice)", twice.display());
+        }
         let targets: Vec<&Path> = [Some(&self.output), self.chm.as_ref(), self.preview.as_ref()]
             .into_iter()
             .flatten()

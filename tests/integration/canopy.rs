@@ -225,12 +225,27 @@ fn a_proxy_written_by_sylva_canopy_is_read_by_a_config_and_described_by_info() {
     let line = info.lines().find(|l| l.starts_with("forest")).unwrap_or_default();
     assert!(line.contains("conifer") && line.contains("at 0.50 m") && line.contains("heights mean"), "{info}");
     // The same proxy read back holds the same tiles as a fresh build.
-    let (_, set) = lidar::build(&Options::new(vec![laz], 0.5)).expect("build");
+    let (_, set) = lidar::build(&Options::new(vec![laz.clone()], 0.5)).expect("build");
     let read = sylva::source::proxy::open(&proxy).expect("proxy file");
     assert_eq!(read.tiles(), set.tiles());
     std::fs::remove_file(&proxy).expect("remove");
     let err = sylva::config::load(Some(&config)).expect_err("missing proxy").to_string();
     assert!(err.contains("conifer.tif") && err.contains("cannot open"), "{err}");
+    // Mistakes on the command line are named, and write nothing.
+    let las = laz.to_str().unwrap();
+    for (args, said) in [
+        (vec!["--las", las, "--las", las], "given twice to --las"),
+        (vec!["--las", las, "--resolution", "-1"], "not a positive number of metres"),
+    ] {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))
+            .arg("canopy")
+            .args(&args)
+            .args(["-o", proxy.to_str().unwrap()])
+            .output()
+            .expect("run sylva");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && err.contains(said) && !proxy.exists(), "{args:?}: {err}");
+    }
 }
 
 /// Correlation of two equally long series.
