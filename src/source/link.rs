@@ -53,6 +53,7 @@ impl From<&UpstreamConfig> for LinkSettings {
 /// HTTP GETs with a timeout, retries and a circuit breaker.
 pub struct Link {
     agent: ureq::Agent,
+    timeout: Duration,
     retries: u32,
     backoff: Duration,
     threshold: u32,
@@ -71,6 +72,7 @@ impl Link {
             .into();
         Link {
             agent,
+            timeout: Duration::from_millis(c.timeout_ms.max(1)),
             retries: c.retries,
             backoff: Duration::from_millis(c.backoff_ms),
             threshold: c.breaker_failures.max(1),
@@ -119,9 +121,18 @@ impl Link {
         Err(fail(last))
     }
 
+    /// A request's failure in words: a timeout by its limit (ureq says
+    /// "timeout: global").
+    fn said(&self, e: ureq::Error) -> String {
+        match e {
+            ureq::Error::Timeout(_) => format!("no answer within {} ms", self.timeout.as_millis()),
+            e => e.to_string(),
+        }
+    }
+
     fn try_once(&self, url: &str) -> Result<Option<Vec<u8>>, Failure> {
         let again = |problem: String| Failure { problem, retry: true };
-        let mut response = self.agent.get(url).call().map_err(|e| again(e.to_string()))?;
+        let mut response = self.agent.get(url).call().map_err(|e| again(self.said(e)))?;
         match response.status().as_u16() {
             200 => {
                 let too_large = || Failure {
@@ -133,7 +144,7 @@ impl Link {
                 }
                 let mut body = Vec::new();
                 let mut reader = response.body_mut().as_reader().take(MAX_RESPONSE_BYTES + 1);
-                reader.read_to_end(&mut body).map_err(|e| again(e.to_string()))?;
+                reader.read_to_end(&mut body).map_err(|e| again(self.said(e.into())))?;
                 if body.len() as u64 > MAX_RESPONSE_BYTES {
                     return Err(too_large());
                 }

@@ -124,6 +124,8 @@ fn an_upstream_that_hangs_or_fails_gives_a_timely_exception_and_the_server_stays
         assert_eq!(reply.status, 502, "{behaviour}: {}", reply.text());
         assert!(reply.text().contains("ServiceExceptionReport"), "{behaviour}: {}", reply.text());
         assert!(took < Duration::from_secs(5), "{behaviour}: answered after {took:?}");
+        let said = if behaviour == "hang" { "no answer within 300 ms" } else { "HTTP 500: upstream exploded" };
+        assert!(reply.text().contains(said), "{behaviour}: {}", reply.text());
         // Tiles fail the same way; after two failures the breaker answers at once.
         assert_eq!(proxy.get(&tile_path(demo_tile(), "bil")).status, 502, "{behaviour}");
         let start = Instant::now();
