@@ -209,7 +209,7 @@ impl Model {
                 "warning most cells had no point and were filled: a resolution of {coarser:.2} m or coarser gives about one point per cell"
             )
         }))
-        .chain(c.heights.data().iter().all(|&h| !(h > 0.0)).then(|| {
+        .chain(c.heights.data().iter().all(|&h| h.is_nan() || h <= 0.0).then(|| {
             "warning no cell stands above the ground: the proxy is flat (is the cloud ground only, or its classes wrong?)"
                 .to_string()
         }))
