@@ -29,7 +29,8 @@
 //! **Trees** near the camera ([`crate::client::trees`]) come as groups of
 //! at most 64, each a continuous variable of up to its trees × splats per
 //! tree: worth 000's `k S (N/64) φ(x/capacity)` with `S` its projected
-//! pixels ([`TREE_WORTH`] is `k`), costing per splat the splat constant
+//! pixels (the groups in view sharing the screen: `super::trees_px`;
+//! [`TREE_WORTH`] is `k`), costing per splat the splat constant
 //! plus the group constant and the fill of its quads spread over the
 //! group's capacity. The fill is the group's pixels its splats cover
 //! (overlaps counted): a tree's splats cover its crown twice however many

@@ -220,12 +220,11 @@ impl BudgetFlight {
         let (budget, model) = (self.aimed(), self.model());
         let field = self.selector.trees.as_ref()?.field;
         let mut priced = self.current.clone()?;
-        let unseen: Vec<(TreeItem, f64)> = groups
-            .iter()
-            .filter(|g| !priced.cut.tree_budgets.contains_key(&g.block))
-            .map(|g| g.item(tiles, &field, camera.focal_px()))
-            .map(|item| (item, super::tree_px(std::slice::from_ref(camera), &item)))
-            .collect();
+        // All the frame's groups share the screen, those priced included.
+        let items: Vec<TreeItem> = groups.iter().map(|g| g.item(tiles, &field, camera.focal_px())).collect();
+        let px = super::trees_px(std::slice::from_ref(camera), &items);
+        let unseen: Vec<(TreeItem, f64)> =
+            items.into_iter().zip(px).filter(|(t, _)| !priced.cut.tree_budgets.contains_key(&t.block)).collect();
         if !unseen.is_empty() {
             budget::price_unseen_trees(&mut priced.cut, &unseen, &model, budget.budget_ms);
         }

@@ -37,7 +37,7 @@ use crate::grid::{BBox, TileGrid, TileId};
 use crate::lod::model::{CostFeatures, CostModel};
 use crate::lod::predict::Cone;
 use budget::{Budget, Choice, Cut, TreeItem};
-use candidates::Scope;
+use candidates::{Candidate, Scope};
 use std::collections::HashSet;
 use std::time::Instant;
 use steps::RaySteps;
@@ -97,8 +97,7 @@ impl Selector {
     ) -> Selected {
         let start = Instant::now();
         let found = self.with_scope(cameras, cone, (steps, refining), candidates::candidates);
-        let seen: Vec<(TreeItem, f64)> = trees.iter().map(|t| (*t, tree_px(cameras, t))).collect();
-        let cut = budget::choose(&found.tiles, &seen, model, budget);
+        let cut = cut_for(cameras, &found.tiles, trees, (model, budget));
         Selected { cut, candidates: found.tiles.len(), ms: start.elapsed().as_secs_f64() * 1e3 }
     }
 
@@ -142,17 +141,153 @@ impl Selector {
     }
 }
 
-/// Pixels a tree group covers from the best placed of `cameras`: its
-/// bounding sphere's projected disc, at most the screen, none outside the
-/// view.
-fn tree_px(cameras: &[Camera], t: &TreeItem) -> f64 {
-    cameras
-        .iter()
-        .filter(|c| c.side_planes().iter().all(|n| n.dot(t.group.center_m - c.position_ecef) >= -t.group.radius_m))
-        .map(|c| {
-            let d = (t.group.center_m.distance(c.position_ecef) - t.group.radius_m).max(1.0);
-            let r_px = t.group.radius_m * c.focal_px() / d;
-            (std::f64::consts::PI * r_px * r_px).min(f64::from(c.width_px) * f64::from(c.height_px))
-        })
-        .fold(0.0, f64::max)
+/// The cut of `tiles` and the splat budgets of the tree groups `trees`,
+/// seen from `cameras` ([`trees_px`]), under `budget` with cost `model`.
+fn cut_for(cameras: &[Camera], tiles: &[Candidate], trees: &[TreeItem], (model, budget): (&CostModel, &Budget)) -> Cut {
+    let seen: Vec<(TreeItem, f64)> = trees.iter().copied().zip(trees_px(cameras, trees)).collect();
+    budget::choose(tiles, &seen, model, budget)
+}
+
+/// Pixels each of the tree groups `trees` covers, from the best placed of
+/// `cameras`: from each, its bounding sphere's projected disc (none outside
+/// the view), the discs of all the groups together at most the screen —
+/// scaled down alike where they sum to more. The groups' trees stand
+/// apart, so together they cover at most the screen; their discs overlap:
+/// near a low camera each is the screen's size, and a dozen groups around
+/// it, worth a dozen screens, outweighed the whole terrain and dropped the
+/// cut to its coarsest tiles (`demo_dive` at 160 × 128, 100 ms).
+fn trees_px(cameras: &[Camera], trees: &[TreeItem]) -> Vec<f64> {
+    let mut px = vec![0.0f64; trees.len()];
+    for c in cameras {
+        let screen = f64::from(c.width_px) * f64::from(c.height_px);
+        let discs: Vec<f64> = trees.iter().map(|t| disc_px(c, t).min(screen)).collect();
+        let total: f64 = discs.iter().sum();
+        let scale = if total > screen { screen / total } else { 1.0 };
+        for (p, d) in px.iter_mut().zip(discs) {
+            *p = p.max(d * scale);
+        }
+    }
+    px
+}
+
+/// The projected disc of tree group `t`'s bounding sphere from `c`,
+/// pixels (not bounded by the screen); 0 outside the view.
+fn disc_px(c: &Camera, t: &TreeItem) -> f64 {
+    if !c.side_planes().iter().all(|n| n.dot(t.group.center_m - c.position_ecef) >= -t.group.radius_m) {
+        return 0.0;
+    }
+    let d = (t.group.center_m.distance(c.position_ecef) - t.group.radius_m).max(1.0);
+    let r_px = t.group.radius_m * c.focal_px() / d;
+    std::f64::consts::PI * r_px * r_px
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::client::globe::Geodetic;
+    use crate::client::lod::steps::VIEW_STEPS;
+    use crate::lod::split::Item;
+
+    /// 60 m above the forest at the end of `demo_dive.toml`, 160 × 128.
+    fn low_camera() -> Camera {
+        Camera::looking(Geodetic::new(10.133, 46.3595, 1110.0), 120.0, -30.0, 60.0, (160, 128))
+    }
+
+    /// `rows × cols` groups of 40 trees, spheres of 45 m, 80 to 170 m
+    /// along the view of `camera`.
+    fn groups_ahead(camera: &Camera, rows: usize, cols: usize) -> Vec<TreeItem> {
+        let right = camera.rotation.col(0);
+        let mut items = Vec::new();
+        for r in 0..rows {
+            for k in 0..cols {
+                let d = 80.0 + 30.0 * r as f64;
+                let x = (k as f64 - (cols as f64 - 1.0) / 2.0) * 0.5 * d / cols as f64;
+                let center_m = camera.position_ecef + camera.forward() * d + right * x;
+                let group = Item { center_m, radius_m: 45.0, trees: 40, capacity: 960.0 };
+                items.push(TreeItem { block: (r as i64, k as i64), group, share: 1.0, fill_px: 0.0 });
+            }
+        }
+        items
+    }
+
+    #[test]
+    fn tree_groups_share_the_screen() {
+        let camera = low_camera();
+        let screen = 160.0 * 128.0;
+        let near = groups_ahead(&camera, 4, 6);
+        let px = trees_px(&[camera], &near);
+        // Their discs, each bounded by the screen, add up to many screens;
+        // shared, they cover it once, in proportion.
+        let discs: f64 = near.iter().map(|t| disc_px(&camera, t).min(screen)).sum();
+        assert!(discs > 10.0 * screen, "{discs}");
+        assert!((px.iter().sum::<f64>() / screen - 1.0).abs() < 1e-9, "{px:?}");
+        let ratio = |k: usize| px[k] / disc_px(&camera, &near[k]).min(screen);
+        assert!((0..near.len()).all(|k| (ratio(k) / ratio(0) - 1.0).abs() < 1e-9));
+        // Groups whose discs leave room keep them; one out of view has none.
+        let far: Vec<TreeItem> = near
+            .iter()
+            .map(|t| TreeItem { group: Item { radius_m: 5.0, ..t.group }, ..*t })
+            .chain([TreeItem {
+                group: Item { center_m: camera.position_ecef - camera.forward() * 300.0, ..near[0].group },
+                ..near[0]
+            }])
+            .collect();
+        let px = trees_px(&[camera], &far);
+        assert!(px[..near.len()].iter().zip(&far).all(|(p, t)| *p == disc_px(&camera, t) && *p > 0.0), "{px:?}");
+        assert_eq!(px[near.len()], 0.0);
+    }
+
+    #[test]
+    fn tree_groups_around_a_low_camera_do_not_drop_the_terrain_to_its_coarsest_cut() {
+        // Regression (demo_dive, 160 × 128, --budget-ms 100 on lavapipe):
+        // as the first trees came into view, a dozen groups around the
+        // camera each claimed the whole screen, the trees outweighed the
+        // terrain several times over, and the cut fell from level 13 to
+        // its roots (levels 5–8) for two frames.
+        let camera = low_camera();
+        let cameras = [camera];
+        let steps = RaySteps::new(VIEW_STEPS);
+        let scope = Scope {
+            grid: TileGrid::new(36.0, 513).unwrap(),
+            bounds: BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 },
+            cameras: &cameras,
+            cone: None,
+            fade: (30.0, 0.5, 2.0),
+            trees: None,
+            known: &|_| None,
+            range: &|_| Some((1020.0, 1060.0)),
+            max_level: 14,
+            limit: MAX_CANDIDATES,
+            steps: &steps,
+            refining: None,
+        };
+        let tiles = candidates::candidates(&scope).tiles;
+        let roots = tiles.iter().filter(|c| c.parent.is_none()).count();
+        let deepest = |cut: &Cut| cut.tiles.iter().map(|t| t.id.level).max().unwrap_or(0);
+        // Tiles dear (0.5 ms each), splats 2 ms per thousand.
+        let model = CostModel { constants_ms: [1.0, 0.5, 0.5, 0.5, 2.0, 0.01, 0.0, 0.0] };
+        let trees = groups_ahead(&camera, 4, 6);
+        let at = |ms: f64, trees: &[TreeItem]| {
+            let budget = Budget { budget_ms: ms, max_tiles: 256, shadows: true, time_limit: None };
+            cut_for(&cameras, &tiles, trees, (&model, &budget))
+        };
+        let (bare, with_trees) = (at(8.0, &[]), at(8.0, &trees));
+        assert!(
+            bare.tiles.len() > roots && deepest(&bare) >= 13,
+            "{} tiles to level {}",
+            bare.tiles.len(),
+            deepest(&bare)
+        );
+        assert!(with_trees.predicted_ms <= 8.0 + 1e-9, "{}", with_trees.predicted_ms);
+        assert!(
+            with_trees.tiles.len() > roots && deepest(&with_trees) == deepest(&bare),
+            "{} tiles to level {} ({roots} roots), {} splats",
+            with_trees.tiles.len(),
+            deepest(&with_trees),
+            with_trees.features.splats_k * 1e3
+        );
+        // With room to spare, the trees get their splats on the same terrain.
+        let (bare, rich) = (at(16.0, &[]), at(16.0, &trees));
+        assert!(rich.features.splats_k > 1.0 && rich.tiles.len() == bare.tiles.len(), "{rich:?}");
+    }
 }
