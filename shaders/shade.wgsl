@@ -84,7 +84,10 @@ fn shade(s: vec2<f32>, z: f32, dir: vec3<f32>) -> vec3<f32> {
         return base;
     }
     let sun = tile.sun.xyz;
-    let light = shadow(s, z, sun);
+    // From the surface, never from under it: a ray that entered the cast
+    // range through a side below the surface (the crack between two flat
+    // frames, metres deep near a pole) is lit as the surface above it.
+    let light = shadow(s, max(z, bilinear(h, f)), sun);
     let lambert = max(dot(normal, sun), 0.0);
     let ambient = frame.sky.a;
     if surface == CLASS_FOREST {

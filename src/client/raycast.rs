@@ -14,10 +14,12 @@
 //!   of the splat blend ([`TreeBlend`]), so the trees replace the canopy
 //!   rather than stand in it.
 //! - **Shadows** (6.4, "Illumination Calculation"): from the hit toward the
-//!   sun, `n` samples at horizontal distances growing linearly step by step
-//!   up to the tile's halo; each sample below the surface adds an occlusion
-//!   that shrinks with its index, so near occluders cast darker shadows.
-//!   Occlusion ramps over [`SHADOW_SOFT_M`] of penetration (a soft edge).
+//!   sun (from the surface above it where the ray entered the tile's box
+//!   through a side below the surface), `n` samples at horizontal distances
+//!   growing linearly step by step up to the tile's halo; each sample below
+//!   the surface adds an occlusion that shrinks with its index, so near
+//!   occluders cast darker shadows. Occlusion ramps over [`SHADOW_SOFT_M`]
+//!   of penetration (a soft edge).
 //! - **Shading by surface type** (6.4, "Other Surface Types"): the map
 //!   colour lit by ambient plus sun; forest tinted and lit mostly by its
 //!   shadowing (the dissertation found diffuse-only canopies "plastic");
@@ -231,7 +233,12 @@ pub fn shade(view: &TileView, s: DVec2, z: f64, dir: DVec3) -> [f64; 3] {
         let flat_water = class == SurfaceType::Water as u8 && normal.z >= WATER_MIN_NORMAL_Z;
         return if flat_water { water(base, dir, None, 1.0) } else { base };
     };
-    let shadow = shadow(view, s, z, sun);
+    // The shadow ray leaves from the surface, never from under it: a ray
+    // that enters the cast range through a side below the surface (through
+    // the crack between two flat frames, metres deep near a pole) is shaded
+    // as the surface above that point, and so is its light. Elsewhere a hit
+    // is on the surface and this changes nothing.
+    let shadow = shadow(view, s, z.max(bilinear(corners, fx, fy)), sun);
     let lambert = normal.dot(sun).max(0.0);
     let lit = |k: f64| AMBIENT + (1.0 - AMBIENT) * k;
     match SurfaceType::from_id(class) {
