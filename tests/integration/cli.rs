@@ -380,7 +380,7 @@ fn bench_raycast_elsewhere_than_the_repository_root_says_where_to_run_it() {
     let dir = TempDir::new("cli-raycast-elsewhere");
     let raycast = |args: &[&str]| {
         let out = Command::new(env!("CARGO_BIN_EXE_sylva"))
-            .args(["bench", "raycast", "--size", "8x8"])
+            .args(["bench", "raycast"])
             .args(args)
             .current_dir(&dir.0)
             .output()
@@ -397,7 +397,8 @@ fn bench_raycast_elsewhere_than_the_repository_root_says_where_to_run_it() {
             "{args:?}: {err}"
         );
     }
-    // With the paths there, the default plot's directory is missing.
+    // With the paths there, the default plot's directory is missing (the
+    // documented run, the default size: a partial run writes no plot).
     let paths = dir.join("config/paths");
     std::fs::create_dir_all(&paths).unwrap();
     for entry in std::fs::read_dir(common::repo().join("config/paths")).unwrap() {
