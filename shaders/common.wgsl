@@ -21,8 +21,11 @@ struct Frame {
     // rgb: canopy tint.
     canopy_tint: vec4<f32>,
     // Trees as splats (splat.wgsl): range (m; 0 without trees), blend band
-    // (m), unused, unused.
+    // (m), distance between the knots of tree_drawn (m), unused.
     trees: vec4<f32>,
+    // Share of the trees drawn at knot k's distance k * trees.z, linear
+    // between (raycast::TreeBlend::drawn): knot k is tree_drawn[k / 4][k % 4].
+    tree_drawn: array<vec4<f32>, 4>,
     // unused (the traversal is the pipeline's LINEAR), linear steps,
     // unused, sun on.
     mode: vec4<u32>,

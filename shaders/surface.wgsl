@@ -22,9 +22,20 @@ fn fade_factor(distance: f32) -> f32 {
     var near = 1.0;
     if frame.trees.x > 0.0 {
         let band = max(frame.trees.y, 1.0e-6);
-        near = smoothstep01(frame.trees.x - 0.5 * band, frame.trees.x + 0.5 * band, distance);
+        let splat = 1.0 - smoothstep01(frame.trees.x - 0.5 * band, frame.trees.x + 0.5 * band, distance);
+        near = 1.0 - drawn_at(distance) * splat;
     }
     return fade_far(distance) * near;
+}
+
+// The share of trees drawn at `distance` metres (raycast::TreeBlend::drawn_at).
+fn drawn_at(distance: f32) -> f32 {
+    let x = clamp(distance / frame.trees.z, 0.0, 15.0);
+    let k = min(u32(x), 14u);
+    let t = x - f32(k);
+    let a = frame.tree_drawn[k / 4u][k % 4u];
+    let b = frame.tree_drawn[(k + 1u) / 4u][(k + 1u) % 4u];
+    return mix(a, b, t);
 }
 
 fn sample_local(s: vec2<f32>, z: f32) -> vec3<f32> {

@@ -84,7 +84,7 @@ impl Fade {
     /// The canopy factor at `distance_m` from the camera: the far fade
     /// times the canopy's share of the tree blend.
     pub fn factor(&self, distance_m: f64) -> f64 {
-        self.far_factor(distance_m) * self.trees.shares(distance_m).1
+        self.far_factor(distance_m) * self.trees.canopy(distance_m)
     }
 
     /// The far fade alone, which never grows with distance (so the nearest
@@ -95,10 +95,10 @@ impl Fade {
     }
 
     /// Whether the canopy is whole, unfaded, over distances from `near_m`
-    /// to `far_m`: the far fade shrinks with distance and the canopy's
-    /// share of the tree blend grows, so both ends tell.
+    /// to `far_m`: the far fade shrinks with distance, so the far end
+    /// tells, and the trees' splats leave it whole ([`TreeBlend::canopy_whole`]).
     pub fn whole(&self, near_m: f64, far_m: f64) -> bool {
-        self.factor(near_m) >= 1.0 && self.factor(far_m) >= 1.0
+        self.far_factor(far_m) >= 1.0 && self.trees.canopy_whole(near_m, far_m)
     }
 
     /// The distance beyond which the canopy is gone.
@@ -107,21 +107,46 @@ impl Fade {
     }
 }
 
+/// Knots of a [`TreeBlend`]'s drawn share, evenly spaced from the camera
+/// to the end of its blend band.
+pub const DRAWN_KNOTS: usize = 16;
+
 /// Where trees drawn as point splats take over from the ray-cast canopy
 /// (issue 7, 000 §5): splats inside `range_m − band_m / 2`, canopy beyond
 /// `range_m + band_m / 2`, shares summing to 1 between
-/// ([`crate::lod::splats::canopy_blend`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// ([`crate::lod::splats::canopy_blend`]) where every tree is drawn.
+///
+/// Under a splat budget some trees get no splat: the canopy gives way only
+/// by the share of trees drawn at each distance (`drawn`), so a sparse
+/// stand of splats stands in a lowered canopy, not over bare ground. The
+/// share is a function of distance alone, like the blend, so neighbouring
+/// tiles agree on every shared sample.
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TreeBlend {
     /// Distance of the middle of the blend band, metres (0: no trees).
     pub range_m: f64,
     /// Width of the band, metres.
     pub band_m: f64,
+    /// Share of the trees in view that have a splat, at knot `k`'s
+    /// distance `k · reach / (DRAWN_KNOTS − 1)` (reach: the band's end),
+    /// linear between knots.
+    pub drawn: [f64; DRAWN_KNOTS],
+}
+
+impl Default for TreeBlend {
+    fn default() -> TreeBlend {
+        TreeBlend::NONE
+    }
 }
 
 impl TreeBlend {
     /// No trees: the canopy everywhere.
-    pub const NONE: TreeBlend = TreeBlend { range_m: 0.0, band_m: 0.0 };
+    pub const NONE: TreeBlend = TreeBlend::every_tree(0.0, 0.0);
+
+    /// A blend over `band_m` around `range_m` in which every tree is drawn.
+    pub const fn every_tree(range_m: f64, band_m: f64) -> TreeBlend {
+        TreeBlend { range_m, band_m, drawn: [1.0; DRAWN_KNOTS] }
+    }
 
     /// Splat opacity and canopy share at `distance_m` from the camera.
     pub fn shares(&self, distance_m: f64) -> (f64, f64) {
@@ -130,6 +155,77 @@ impl TreeBlend {
         } else {
             (0.0, 1.0)
         }
+    }
+
+    /// The canopy's share at `distance_m`: what the splats of the trees
+    /// drawn there leave to it.
+    pub fn canopy(&self, distance_m: f64) -> f64 {
+        1.0 - self.drawn_at(distance_m) * self.shares(distance_m).0
+    }
+
+    /// Distance between knots of `drawn`, metres.
+    pub fn knot_m(&self) -> f64 {
+        (self.range_m + self.band_m / 2.0) / (DRAWN_KNOTS - 1) as f64
+    }
+
+    /// The share of trees drawn at `distance_m`.
+    pub fn drawn_at(&self, distance_m: f64) -> f64 {
+        let x = (distance_m / self.knot_m()).clamp(0.0, (DRAWN_KNOTS - 1) as f64);
+        let x = if x.is_nan() { 0.0 } else { x };
+        let k = (x as usize).min(DRAWN_KNOTS - 2);
+        let t = x - k as f64;
+        self.drawn[k] * (1.0 - t) + self.drawn[k + 1] * t
+    }
+
+    /// Whether the canopy is whole everywhere from `near_m` to `far_m`:
+    /// no splat is seen there (their opacity never grows with distance), or
+    /// no tree there is drawn.
+    pub fn canopy_whole(&self, near_m: f64, far_m: f64) -> bool {
+        let inside = |k: usize| {
+            let d = k as f64 * self.knot_m();
+            d > near_m && d < far_m
+        };
+        let knots = (0..DRAWN_KNOTS).filter(|&k| inside(k)).map(|k| self.drawn[k]);
+        let most = knots.chain([self.drawn_at(near_m), self.drawn_at(far_m)]).fold(0.0, f64::max);
+        self.shares(near_m).0 <= 0.0 || most <= 0.0
+    }
+
+    /// This blend with the share of trees drawn by distance measured from
+    /// `trees`: each tree in view as its distance and whether it has a
+    /// splat. Knots with no tree near them take their neighbours' share
+    /// (linear between, constant beyond); with no tree at all, every tree
+    /// counts as drawn.
+    pub fn with_drawn(self, trees: impl IntoIterator<Item = (f64, bool)>) -> TreeBlend {
+        let (mut drawn, mut weight) = ([0.0; DRAWN_KNOTS], [0.0; DRAWN_KNOTS]);
+        let knot_m = self.knot_m();
+        for (distance_m, is_drawn) in trees {
+            let x = distance_m / knot_m;
+            if !(0.0..=(DRAWN_KNOTS - 1) as f64).contains(&x) {
+                continue;
+            }
+            let k = (x as usize).min(DRAWN_KNOTS - 2);
+            let t = x - k as f64;
+            for (k, w) in [(k, 1.0 - t), (k + 1, t)] {
+                weight[k] += w;
+                drawn[k] += w * f64::from(u8::from(is_drawn));
+            }
+        }
+        let known: Vec<(usize, f64)> =
+            (0..DRAWN_KNOTS).filter(|&k| weight[k] > 1e-9).map(|k| (k, drawn[k] / weight[k])).collect();
+        TreeBlend { drawn: std::array::from_fn(|k| fill(&known, k)), ..self }
+    }
+}
+
+/// The value at knot `k` from the knots `known` (by index, with values):
+/// its own, linear between the nearest known on either side, constant
+/// beyond the outermost, 1 with none.
+fn fill(known: &[(usize, f64)], k: usize) -> f64 {
+    let after = known.partition_point(|&(i, _)| i < k);
+    match (after.checked_sub(1).map(|i| known[i]), known.get(after)) {
+        (_, Some(&(i, v))) if i == k => v,
+        (Some((i0, v0)), Some(&(i1, v1))) => v0 + (v1 - v0) * (k - i0) as f64 / (i1 - i0) as f64,
+        (Some((_, v)), None) | (None, Some(&(_, v))) => v,
+        (None, None) => 1.0,
     }
 }
 
@@ -327,5 +423,47 @@ mod tests {
         // demo valley's far tiles: PSNR 43 → 24 dB against the reference).
         assert!(!plain(&fade, 20_000.0, (1.0, 2.0)));
         assert!(!plain(&Fade::NONE, 10_000.0, (2.0, 20.0)), "without a fade every tile is ray cast");
+    }
+
+    /// Trees over 0–400 m, a band 100 m wide: knots every 30 m.
+    const TREES: TreeBlend = TreeBlend::every_tree(400.0, 100.0);
+
+    #[test]
+    fn the_canopy_gives_way_by_the_share_of_trees_drawn() {
+        let fade = Fade { trees: TREES, ..Fade::NONE };
+        assert_eq!(fade.factor(10.0), 0.0, "every tree drawn: no canopy under the splats");
+        // Every other tree drawn near the camera, none beyond 200 m.
+        let trees = (0..400).map(|k| (f64::from(k), k < 200 && k % 2 == 0));
+        let partial = Fade { trees: TREES.with_drawn(trees), ..Fade::NONE };
+        assert!((partial.factor(60.0) - 0.5).abs() < 1e-9, "{}", partial.factor(60.0));
+        assert_eq!(partial.factor(300.0), 1.0, "no tree drawn: the canopy whole");
+        // The canopy grows toward the band's end wherever trees are drawn.
+        let none = Fade { trees: TREES.with_drawn((0..400).map(|k| (f64::from(k), false))), ..Fade::NONE };
+        assert!((0..500).all(|d| none.factor(f64::from(d)) == 1.0), "no splats: the canopy everywhere");
+        let unseen = TREES.with_drawn([]);
+        assert_eq!(unseen, TREES, "no tree in view: as if every tree were drawn");
+    }
+
+    #[test]
+    fn knots_without_trees_take_their_neighbours_share() {
+        // Trees only at 60 m (all drawn) and at 180 m (none drawn).
+        let blend = TREES.with_drawn([(60.0, true), (180.0, false)]);
+        let at = |d: f64| blend.drawn_at(d);
+        assert_eq!((at(0.0), at(60.0), at(180.0), at(450.0)), (1.0, 1.0, 0.0, 0.0));
+        assert!((at(120.0) - 0.5).abs() < 1e-12, "{}", at(120.0));
+        assert!(at(f64::NAN).is_finite() && TreeBlend::NONE.canopy(f64::NAN) == 1.0);
+    }
+
+    #[test]
+    fn the_canopy_is_whole_only_where_no_splat_stands() {
+        // Trees drawn only between 100 and 200 m.
+        let blend = TREES.with_drawn((0..400).map(|k| (f64::from(k), (100..200).contains(&k))));
+        let fade = Fade { trees: blend, ..Fade::NONE };
+        assert!(fade.whole(0.0, 50.0) && fade.whole(250.0, 1000.0) && fade.whole(460.0, 1e6));
+        assert!(!fade.whole(0.0, 1000.0), "the drawn trees lie between the ends");
+        for (near, far) in [(0.0, 1000.0), (40.0, 300.0), (140.0, 150.0)] {
+            let lowered = (0..=100).map(|k| near + (far - near) * f64::from(k) / 100.0).any(|d| fade.factor(d) < 1.0);
+            assert_eq!(fade.whole(near, far), !lowered, "{near}..{far}");
+        }
     }
 }

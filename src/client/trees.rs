@@ -24,6 +24,9 @@
 //! - **Blend.** A splat's opacity is the tree's share of the
 //!   [`TreeBlend`] at its distance, the canopy's share goes to the ray
 //!   caster: the two sum to one, so trees fade in where the canopy fades out.
+//!   Under a budget that leaves trees without a splat, the canopy gives way
+//!   only by the share of trees drawn at that distance ([`Drawn::blend`]),
+//!   so sparse splats stand in a lowered canopy, not over bare ground.
 
 use super::camera::Camera;
 use super::lod::budget::TreeItem;
@@ -72,7 +75,7 @@ impl TreeSettings {
         if !range_m.is_finite() || range_m <= 0.0 {
             return TreeBlend::NONE;
         }
-        TreeBlend { range_m, band_m: self.band.clamp(0.0, 1.9) * range_m }
+        TreeBlend::every_tree(range_m, self.band.clamp(0.0, 1.9) * range_m)
     }
 }
 
@@ -312,6 +315,9 @@ pub struct Drawn {
     /// Pixels the splats' quads cover, overlaps counted: the fragments
     /// the rasteriser shades (`Crown::fill_px`).
     pub fill_px: f64,
+    /// The blend with the share of trees drawn by distance: what the ray
+    /// caster's canopy gives way to.
+    pub blend: TreeBlend,
 }
 
 /// Splats of each group: `budgets` gives a group's splat budget by block
@@ -327,6 +333,7 @@ pub fn splats(
 ) -> Drawn {
     let field = &settings.field;
     let mut drawn = Drawn::default();
+    let mut seen = Vec::new();
     for g in groups {
         let before = drawn.splats;
         let counts: Vec<u32> = match budgets {
@@ -335,9 +342,10 @@ pub fn splats(
             }
             None => g.trees.iter().map(|t| wanted(field, t, focal_px)).collect(),
         };
-        for (t, &n) in g.trees.iter().zip(&counts).filter(|(_, n)| **n > 0) {
+        for (t, &n) in g.trees.iter().zip(&counts) {
             let opacity = blend.shares(t.distance_m).0;
-            if opacity <= 0.0 {
+            seen.push((t.distance_m, n > 0));
+            if opacity <= 0.0 || n == 0 {
                 continue;
             }
             let crown = Crown::of(field, t);
@@ -348,6 +356,7 @@ pub fn splats(
         }
         drawn.groups += usize::from(drawn.splats > before);
     }
+    drawn.blend = blend.with_drawn(seen);
     drawn
 }
 
@@ -474,7 +483,7 @@ mod tests {
         Camera::looking(eye, 0.0, -90.0, 60.0, (320, 240))
     }
 
-    const WIDE: TreeBlend = TreeBlend { range_m: 5000.0, band_m: 100.0 };
+    const WIDE: TreeBlend = TreeBlend::every_tree(5000.0, 100.0);
 
     fn trees_of(groups: &[TreeGroup], tiles: &[&TileData]) -> Vec<(u64, DVec3)> {
         let mut out: Vec<(u64, DVec3)> =
@@ -560,6 +569,10 @@ mod tests {
         assert_eq!(drawn(count(Some(0.0))), (0, 0, 0));
         assert_eq!(drawn(count(Some(5.0))), (5, 5, 1), "a small budget draws the first trees by rank, one splat each");
         assert_eq!(drawn(count(Some(1e9))), (full, n, 1));
+        // The canopy gives way by the share of trees drawn.
+        let share = |budget: f64| count(Some(budget)).blend.drawn.iter().sum::<f64>() / 16.0;
+        assert_eq!((share(0.0), share(1e9)), (0.0, 1.0));
+        assert!((share(n as f64 / 2.0) - 0.5).abs() < 0.2, "{}", share(n as f64 / 2.0));
         // The quads cover about as much at a splat per tree as at 24, a
         // share of that below; the selection's item foresees the full fill.
         let fill = |b: f64| count(Some(b)).fill_px;
@@ -583,7 +596,7 @@ mod tests {
         let camera = above(&grid, id);
         let settings = TreeSettings::default();
         // The camera is ~310 m above the trees, the tile's corners ~350 m.
-        let blend = TreeBlend { range_m: 335.0, band_m: 30.0 };
+        let blend = TreeBlend::every_tree(335.0, 30.0);
         let groups = groups_near(&settings, &[&t], &camera, &blend);
         let trees: Vec<&PlacedTree> = groups.iter().flat_map(|g| &g.trees).collect();
         assert!(!trees.is_empty() && trees.iter().all(|t| t.distance_m <= 350.0));

@@ -18,7 +18,9 @@
 //! representation. Over a band around the splat range, splat opacity goes
 //! from 1 to 0 while the ray-cast canopy's displacement scale goes from 0 to
 //! 1 ([`canopy_blend`]), the two always summing to 1, so trees neither pop
-//! out of nor double the canopy.
+//! out of nor double the canopy. Where a budget leaves trees undrawn the
+//! client lets the canopy give way only by the share drawn
+//! (`client::raycast::TreeBlend`).
 
 use super::split::Item;
 use crate::noise::{hash2, unit};

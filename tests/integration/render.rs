@@ -970,6 +970,38 @@ fn trees_stand_in_front_of_the_ground_where_they_replace_the_canopy() {
     }
 }
 
+#[test]
+fn undrawn_trees_leave_their_canopy_standing_on_the_gpu_as_in_the_reference() {
+    let grid = small_grid();
+    let (lon0, lat0) = (7.3, 45.1);
+    let tiles = synthetic_block(&grid, lon0, lat0, 13, 8, &hills(lon0, lat0));
+    let s = grid.sector(tiles[0].id());
+    let camera = Camera::looking(Geodetic::new(s.max_lon, s.max_lat, 1060.0), 45.0, -25.0, 60.0, (160, 120));
+    let every = tree_fade(&camera);
+    // Every other tree drawn out to half the tree range, none beyond.
+    let reach_m = every.trees.range_m + every.trees.band_m / 2.0;
+    let trees = (0..200).map(|k| (reach_m * f64::from(k) / 200.0, k < 100 && k % 2 == 0));
+    let sparse = Fade { trees: every.trees.with_drawn(trees), ..every };
+    let lit = settings(Traversal::Exact, Some(sun_at(lon0, lat0, 120.0, 30.0)));
+    for pass in PASSES {
+        let render = |fade: Fade| render_both_in(pass, &tiles, &camera, &FrameSettings { fade, ..lit });
+        let out = render(sparse);
+        assert_close(&format!("canopy of a sparse stand, {pass:?}"), &out.departure);
+        let depth = |f: Fade| render(f).gpu.view_z_m;
+        let (bare, whole) = (depth(every), depth(Fade::NONE));
+        let (mut between, mut hit) = (0, 0);
+        for ((z, b), w) in out.gpu.view_z_m.iter().zip(&bare).zip(&whole) {
+            if *z > 0.0 && *b > 0.0 {
+                hit += 1;
+                assert!(*z <= b * 1.001 && *z >= w * 0.999, "the sparse canopy lies between none and all: {z} {b} {w}");
+                between += usize::from(*z < b * 0.999 && *z > w * 1.001);
+            }
+        }
+        eprintln!("sparse stand, {pass:?}: canopy partly lowered at {between} of {hit} pixels");
+        assert!(between * 20 > hit, "the canopy is partly lowered ({between} of {hit} pixels)");
+    }
+}
+
 /// The canopy fade of the default trees seen by `camera`.
 fn tree_fade(camera: &Camera) -> Fade {
     Fade { trees: TreeSettings::default().blend(camera.focal_px()), ..Fade::NONE }

@@ -332,14 +332,17 @@ fn draw(
     (shot, readback): (&Shot, Readback),
 ) -> Result<Drawn, FlyError> {
     let (camera, tiles) = (&shot.camera, &chosen.tiles);
-    let fade = trees::canopy_fade(options.fade, options.trees.as_ref(), camera.focal_px());
+    let mut fade = trees::canopy_fade(options.fade, options.trees.as_ref(), camera.focal_px());
+    let mut trees = tree_splats(options, tiles, camera, &fade.trees, lod.as_deref_mut());
+    if options.trees.is_some() {
+        fade.trees = trees.drawn.blend;
+    }
     let settings = FrameSettings {
         traversal: options.traversal,
         shadow_steps: options.shadow_steps,
         sun_ecef: shot.sun_ecef,
         fade,
     };
-    let mut trees = tree_splats(options, tiles, camera, &fade.trees, lod.as_deref_mut());
     if let Some(lod) = lod.filter(|_| options.trees.is_some()) {
         lod.set_drawn(tiles.clone());
     }

@@ -28,8 +28,11 @@ pub struct FrameUniform {
     pub shadow: [f32; 4],
     /// Canopy tint.
     pub canopy_tint: [f32; 4],
-    /// Tree range and blend band (m), unused × 2.
+    /// Tree range, blend band and distance between the knots of
+    /// `tree_drawn` (m), unused.
     pub trees: [f32; 4],
+    /// Share of trees drawn at each knot ([`raycast::TreeBlend::drawn`]).
+    pub tree_drawn: [[f32; 4]; raycast::DRAWN_KNOTS / 4],
     /// Unused (the traversal is the pipeline's `LINEAR`), linear steps,
     /// unused, sun on.
     pub mode: [u32; 4],
@@ -134,7 +137,8 @@ impl FrameUniform {
             viewport: [camera.width_px as f32, camera.height_px as f32, camera.near_m as f32, camera.focal_px() as f32],
             shadow: [raycast::SHADOW_WEIGHT as f32, raycast::SHADOW_SOFT_M as f32, 0.0, 0.0],
             canopy_tint: rgb(raycast::CANOPY_TINT, 1.0),
-            trees: [f.trees.range_m as f32, f.trees.band_m as f32, 0.0, 0.0],
+            trees: [f.trees.range_m as f32, f.trees.band_m as f32, f.trees.knot_m() as f32, 0.0],
+            tree_drawn: std::array::from_fn(|k| std::array::from_fn(|i| f.trees.drawn[4 * k + i] as f32)),
             mode: [0, steps, 0, settings.sun_ecef.is_some() as u32],
             mip_rects: rects,
         }
@@ -324,6 +328,7 @@ mod tests {
             ("shadow", offset_of!(FrameUniform, shadow)),
             ("canopy_tint", offset_of!(FrameUniform, canopy_tint)),
             ("trees", offset_of!(FrameUniform, trees)),
+            ("tree_drawn", offset_of!(FrameUniform, tree_drawn)),
             ("mode", offset_of!(FrameUniform, mode)),
             ("mip_rects", offset_of!(FrameUniform, mip_rects)),
         ];
