@@ -932,14 +932,8 @@ fn no_sun_casts_no_shadow_rays_and_far_tiles_cast_no_rays() {
 
 #[test]
 fn trees_stand_in_front_of_the_ground_where_they_replace_the_canopy() {
-    let grid = small_grid();
-    let (lon0, lat0) = (7.3, 45.1);
-    let tiles = synthetic_block(&grid, lon0, lat0, 13, 8, &hills(lon0, lat0));
-    let s = grid.sector(tiles[0].id());
-    let eye = Geodetic::new(s.max_lon, s.max_lat, 1060.0);
-    let camera = Camera::looking(eye, 45.0, -25.0, 60.0, (160, 120));
-    let settings =
-        FrameSettings { fade: tree_fade(&camera), ..settings(Traversal::Exact, Some(sun_at(lon0, lat0, 120.0, 30.0))) };
+    let (tiles, camera, lit) = forested_hills_from_low();
+    let settings = FrameSettings { fade: tree_fade(&camera), ..lit };
     let splats = tree_splats(&tiles, &camera);
     let drawn: usize = splats.iter().map(Vec::len).sum();
     assert!(drawn > 1000, "{drawn} splats");
@@ -972,17 +966,12 @@ fn trees_stand_in_front_of_the_ground_where_they_replace_the_canopy() {
 
 #[test]
 fn undrawn_trees_leave_their_canopy_standing_on_the_gpu_as_in_the_reference() {
-    let grid = small_grid();
-    let (lon0, lat0) = (7.3, 45.1);
-    let tiles = synthetic_block(&grid, lon0, lat0, 13, 8, &hills(lon0, lat0));
-    let s = grid.sector(tiles[0].id());
-    let camera = Camera::looking(Geodetic::new(s.max_lon, s.max_lat, 1060.0), 45.0, -25.0, 60.0, (160, 120));
+    let (tiles, camera, lit) = forested_hills_from_low();
     let every = tree_fade(&camera);
     // Every other tree drawn out to half the tree range, none beyond.
     let reach_m = every.trees.range_m + every.trees.band_m / 2.0;
     let trees = (0..200).map(|k| (reach_m * f64::from(k) / 200.0, k < 100 && k % 2 == 0));
     let sparse = Fade { trees: every.trees.with_drawn(trees), ..every };
-    let lit = settings(Traversal::Exact, Some(sun_at(lon0, lat0, 120.0, 30.0)));
     for pass in PASSES {
         let render = |fade: Fade| render_both_in(pass, &tiles, &camera, &FrameSettings { fade, ..lit });
         let out = render(sparse);
@@ -1000,6 +989,17 @@ fn undrawn_trees_leave_their_canopy_standing_on_the_gpu_as_in_the_reference() {
         eprintln!("sparse stand, {pass:?}: canopy partly lowered at {between} of {hit} pixels");
         assert!(between * 20 > hit, "the canopy is partly lowered ({between} of {hit} pixels)");
     }
+}
+
+/// Forested hills (tiles of level 13), a camera low over them, and the
+/// exact traversal lit by an afternoon sun.
+fn forested_hills_from_low() -> (Vec<TileData>, Camera, FrameSettings) {
+    let grid = small_grid();
+    let (lon0, lat0) = (7.3, 45.1);
+    let tiles = synthetic_block(&grid, lon0, lat0, 13, 8, &hills(lon0, lat0));
+    let s = grid.sector(tiles[0].id());
+    let camera = Camera::looking(Geodetic::new(s.max_lon, s.max_lat, 1060.0), 45.0, -25.0, 60.0, (160, 120));
+    (tiles, camera, settings(Traversal::Exact, Some(sun_at(lon0, lat0, 120.0, 30.0))))
 }
 
 /// The canopy fade of the default trees seen by `camera`.

@@ -115,16 +115,9 @@ fn entries(layer: MapLayer, map: bool) -> Vec<Entry> {
             lines.extend(classes(|class, c| if shaded { lit(class, c, LEVEL_SHADE) } else { c.map(|v| v as u8) }));
         }
         MapLayer::Data(Layer::Surface) => lines.extend(classes(|_, c| c.map(|v| v as u8))),
-        MapLayer::Data(Layer::Cover) => {
-            for v in [0.0, 0.25, 0.5, 0.75, 1.0] {
-                lines.push(Entry::Swatch(grey(value_grey(Layer::Cover, v).unwrap_or(v)), format!("{v} cover")));
-            }
-        }
-        MapLayer::Data(Layer::Canopy) => {
-            for m in [0.0, 10.0, 20.0, CANOPY_WHITE_M] {
-                let label = if m >= CANOPY_WHITE_M { format!("{m} m and taller") } else { format!("{m} m") };
-                lines.push(Entry::Swatch(grey(value_grey(Layer::Canopy, m).unwrap_or(0.0)), label));
-            }
+        MapLayer::Data(ramp @ (Layer::Cover | Layer::Canopy)) => {
+            let levels = steps(ramp).into_iter().filter_map(|(v, label)| Some((value_grey(ramp, v)?, label)));
+            lines.extend(levels.map(|(level, label)| Entry::Swatch(grey(level), label)));
         }
         MapLayer::Data(_) => {
             lines.push(Entry::Note("hill-shaded heights:".into()));
@@ -135,6 +128,17 @@ fn entries(layer: MapLayer, map: bool) -> Vec<Entry> {
         }
     }
     lines
+}
+
+/// The values a continuous layer's legend shows, with their labels.
+fn steps(layer: Layer) -> Vec<(f32, String)> {
+    match layer {
+        Layer::Cover => [0.0, 0.25, 0.5, 0.75, 1.0].map(|v| (v, format!("{v} cover"))).into(),
+        Layer::Canopy => [0.0, 10.0, 20.0, CANOPY_WHITE_M]
+            .map(|m| (m, if m >= CANOPY_WHITE_M { format!("{m} m and taller") } else { format!("{m} m") }))
+            .into(),
+        _ => Vec::new(),
+    }
 }
 
 /// A swatch per surface class, in `colour` of the class and its class
