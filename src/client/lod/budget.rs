@@ -505,27 +505,14 @@ mod tests {
     use super::*;
     use crate::client::camera::Camera;
     use crate::client::globe::Geodetic;
-    use crate::client::lod::candidates::{Scope, candidates};
+    use crate::client::lod::candidates::{candidates, demo_scope};
     use crate::client::lod::steps::{RaySteps, VIEW_STEPS};
-    use crate::grid::{BBox, TileGrid};
     use glam::DVec3;
 
     fn demo_candidates() -> Vec<Candidate> {
         let cameras = [Camera::looking(Geodetic::new(10.1, 46.32, 2500.0), 10.0, -15.0, 60.0, (320, 240))];
-        let scope = Scope {
-            grid: TileGrid::new(36.0, 513).unwrap(),
-            bounds: BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 },
-            cameras: &cameras,
-            cone: None,
-            fade: (30.0, 0.5, 2.0),
-            trees: None,
-            known: &|_| None,
-            range: &|_| Some((500.0, 3500.0)),
-            max_level: 16,
-            limit: 100_000,
-            steps: &RaySteps::new(VIEW_STEPS),
-            refining: None,
-        };
+        let steps = RaySteps::new(VIEW_STEPS);
+        let scope = demo_scope(&cameras, &|_| Some((500.0, 3500.0)), &steps);
         candidates(&scope).tiles
     }
 

@@ -369,6 +369,34 @@ fn seen_px(camera: &Camera, sector: &Sector, (lo, hi): (f64, f64), own: bool) ->
     below + coverage::above_px(camera, sector, (eye_m, hi)) * (hi - eye_m) / (hi - lo)
 }
 
+/// The demo region's bounds (tests).
+#[cfg(test)]
+pub(super) const DEMO: BBox = BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 };
+
+/// The scope of a walk over the demo for `cameras` (tests): ground in
+/// `range`, without trees, down to level 16.
+#[cfg(test)]
+pub(super) fn demo_scope<'a>(
+    cameras: &'a [Camera],
+    range: &'a dyn Fn(TileId) -> Option<(f64, f64)>,
+    steps: &'a RaySteps,
+) -> Scope<'a> {
+    Scope {
+        grid: TileGrid::new(36.0, 513).unwrap(),
+        bounds: DEMO,
+        cameras,
+        cone: None,
+        fade: (30.0, 0.5, 2.0),
+        trees: None,
+        known: &|_| None,
+        range,
+        max_level: 16,
+        limit: 100_000,
+        steps,
+        refining: None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::super::steps::{FrameSteps, Pair, Sums};
@@ -377,9 +405,6 @@ mod tests {
     fn walk(camera: Camera, cone: Option<Cone>, max_level: u32) -> Candidates {
         walk_over(DEMO, camera, (cone, None), max_level, &|_| Some((500.0, 3500.0)))
     }
-
-    /// The demo region's bounds.
-    const DEMO: BBox = BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 };
 
     fn walk_over(
         bounds: BBox,
@@ -390,29 +415,7 @@ mod tests {
     ) -> Candidates {
         let cameras = [camera];
         let steps = RaySteps::new(20.0);
-        candidates(&Scope { bounds, cone, trees, max_level, ..scope(&cameras, range, &steps) })
-    }
-
-    /// The scope of a walk over the demo for `cameras`.
-    fn scope<'a>(
-        cameras: &'a [Camera],
-        range: &'a dyn Fn(TileId) -> Option<(f64, f64)>,
-        steps: &'a RaySteps,
-    ) -> Scope<'a> {
-        Scope {
-            grid: TileGrid::new(36.0, 513).unwrap(),
-            bounds: DEMO,
-            cameras,
-            cone: None,
-            fade: (30.0, 0.5, 2.0),
-            trees: None,
-            known: &|_| None,
-            range,
-            max_level: 16,
-            limit: 100_000,
-            steps,
-            refining: None,
-        }
+        candidates(&Scope { bounds, cone, trees, max_level, ..demo_scope(&cameras, range, &steps) })
     }
 
     #[test]
@@ -426,7 +429,7 @@ mod tests {
         let cameras = [Camera::looking(Geodetic::new(10.124, 46.364, 1050.0), 40.0, -35.0, 60.0, (256, 192))];
         let range = |_| Some((900.0, 3100.0));
         let steps = RaySteps::new(20.0);
-        let scope = scope(&cameras, &range, &steps);
+        let scope = demo_scope(&cameras, &range, &steps);
         let walked = candidates(&scope).tiles;
         let capped = walked.iter().filter(|t| t.ray_px < candidate(&scope, t.id, false).ray_px);
         assert!(capped.count() >= 3, "some tiles are capped by their children");
@@ -449,12 +452,12 @@ mod tests {
         let sums = Sums { view: 30, shadow: 0, pixels: 1 };
         let pair = Pair { id: TileId::new(3, 0, 0), sums, shadow_steps: 0 };
         steps.record(&FrameSteps { pairs: vec![pair], ..Default::default() });
-        let alone = candidates(&scope(&cameras, &range, &steps)).tiles;
+        let alone = candidates(&demo_scope(&cameras, &range, &steps)).tiles;
         assert!(alone.iter().all(|t| !t.morphs && t.view_steps == 20.0), "nothing drawn: nothing morphs");
         // The cut drawn: a tile the candidates refine.
         let drawn = alone.iter().find(|t| t.id.level == 8 && alone.iter().any(|c| c.id.parent() == Some(t.id)));
         let cut: HashSet<TileId> = drawn.map(|t| t.id).into_iter().collect();
-        let tiles = candidates(&Scope { refining: Some(&cut), ..scope(&cameras, &range, &steps) }).tiles;
+        let tiles = candidates(&Scope { refining: Some(&cut), ..demo_scope(&cameras, &range, &steps) }).tiles;
         assert_eq!(tiles.len(), alone.len(), "the same candidates");
         let below = |id: TileId| std::iter::successors(id.parent(), TileId::parent).any(|a| cut.contains(&a));
         for t in &tiles {

@@ -247,20 +247,8 @@ mod tests {
         let camera = low_camera();
         let cameras = [camera];
         let steps = RaySteps::new(VIEW_STEPS);
-        let scope = Scope {
-            grid: TileGrid::new(36.0, 513).unwrap(),
-            bounds: BBox { west: 10.0, south: 46.3, east: 10.25, north: 46.45 },
-            cameras: &cameras,
-            cone: None,
-            fade: (30.0, 0.5, 2.0),
-            trees: None,
-            known: &|_| None,
-            range: &|_| Some((1020.0, 1060.0)),
-            max_level: 14,
-            limit: MAX_CANDIDATES,
-            steps: &steps,
-            refining: None,
-        };
+        let range = |_| Some((1020.0, 1060.0));
+        let scope = Scope { max_level: 14, limit: MAX_CANDIDATES, ..candidates::demo_scope(&cameras, &range, &steps) };
         let tiles = candidates::candidates(&scope).tiles;
         let roots = tiles.iter().filter(|c| c.parent.is_none()).count();
         let deepest = |cut: &Cut| cut.tiles.iter().map(|t| t.id.level).max().unwrap_or(0);
