@@ -79,9 +79,22 @@ fn earlier_outputs(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
     Ok(found)
 }
 
-/// A flight's or a view's frame: `frame_NNNNN.png`, `view_NNNNN.png`.
+/// A flight's or a view's frame as they name it: `frame_NNNNN.png`,
+/// `view_NNNNN.png` or `view_NNNNN-K.png` (the index as `{:05}` writes
+/// it; `K` from 1). A user's file named otherwise, such as `frame_1.png`,
+/// is none: `--overwrite` leaves it.
 fn is_frame(name: &str) -> bool {
-    (name.starts_with("frame_") || name.starts_with("view_")) && name.ends_with(".png")
+    let index = |n: &str| n.parse::<u64>().is_ok_and(|k| format!("{k:05}") == n);
+    let suffix = |n: &str| n.parse::<u64>().is_ok_and(|k| k > 0 && k.to_string() == n);
+    let Some(stem) = name.strip_suffix(".png") else { return false };
+    match (stem.strip_prefix("frame_"), stem.strip_prefix("view_")) {
+        (Some(n), _) => index(n),
+        (None, Some(n)) => match n.split_once('-') {
+            Some((n, k)) => index(n) && suffix(k),
+            None => index(n),
+        },
+        (None, None) => false,
+    }
 }
 
 /// What an earlier run left, as "stats.csv, cost_model.json, 12 frames".
@@ -204,4 +217,44 @@ pub fn to_csv(records: &[FrameRecord]) -> String {
 
 fn io(path: &Path, source: std::io::Error) -> FlyError {
     FlyError::Io { path: path.display().to_string(), source }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overwrite_replaces_only_the_files_a_flight_or_a_view_writes() {
+        // Regression, from a user's trial: `--overwrite` removed a user's
+        // own `frame_1.png` from --out, as any `frame_*.png`.
+        let dir = std::env::temp_dir().join(format!("sylva-fly-earlier-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let written =
+            ["frame_00000.png", "frame_123456.png", "view_00004.png", "view_00004-2.png", STATS_FILE, MODEL_FILE];
+        let theirs = [
+            "frame_1.png",
+            "frame_0001.png",
+            "frame_+0001.png",
+            "frame_00001-1.png",
+            "view_00004-0.png",
+            "frame_notes.png",
+            "notes.txt",
+        ];
+        for name in written.iter().chain(&theirs) {
+            std::fs::write(dir.join(name), b"x").unwrap();
+        }
+        let refused = prepare_out_dir(&dir, false).unwrap_err().to_string();
+        assert!(refused.contains("(cost_model.json, stats.csv, 4 frames)"), "{refused}");
+        let mut earlier: Vec<String> = prepare_out_dir(&dir, true)
+            .unwrap()
+            .earlier
+            .iter()
+            .map(|f| f.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        earlier.sort();
+        let mut expected = written.map(String::from).to_vec();
+        expected.sort();
+        assert_eq!(earlier, expected);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
