@@ -5,7 +5,8 @@
 //! from the repository root (the path file is read from `config/paths/`).
 
 use std::sync::Arc;
-use sylva::client::{fly, path::CameraPath, source::RegionSource};
+use sylva::client::source::{RegionSource, TileSource};
+use sylva::client::{fly, path::CameraPath};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let region = sylva::config::load(None)?; // the embedded demo; Some(path) for a TOML file
@@ -20,6 +21,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         ..Default::default()
     };
     let records = fly::run(&source, &path, &options, 512 << 20)?;
-    println!("{}", fly::summary(&records, options.lod.max_error_px));
+    println!("{}", fly::summary(&records, options.lod.max_error_px, source.why_no_tile().as_deref()));
     Ok(())
 }

@@ -75,7 +75,7 @@ impl FlyArgs {
             }
             records => records?,
         };
-        super::print(fly::summary(&records, options.lod.max_error_px))?;
+        super::print(fly::summary(&records, options.lod.max_error_px, source.why_no_tile().as_deref()))?;
         Ok(())
     }
 }
@@ -153,7 +153,7 @@ impl ViewArgs {
         earlier: Vec<PathBuf>,
     ) -> Result<Option<i32>> {
         use sylva::client::view;
-        let source = self.tiles.open()?;
+        let source: std::sync::Arc<dyn sylva::client::source::TileSource> = self.tiles.open()?.into();
         let path = self.path.as_deref().map(sylva::client::path::CameraPath::load).transpose()?;
         let options = view::ViewOptions {
             render: FlyOptions { overwrite: self.overwrite, ..render },
@@ -166,13 +166,14 @@ impl ViewArgs {
             earlier,
         };
         let asked_px = options.render.lod.max_error_px;
-        match view::run(source.into(), options, interrupt) {
+        let summary = |records: &[fly::FrameRecord]| fly::summary(records, asked_px, source.why_no_tile().as_deref());
+        match view::run(source.clone(), options, interrupt) {
             Err(view::ViewError::Interrupted { signal, kept, records }) => {
-                super::print(fly::summary(&records, asked_px))?;
+                super::print(summary(&records))?;
                 sylva::outputs::say(format_args!("sylva: view closed by signal {signal}{kept}"));
                 Ok(Some(signal))
             }
-            records => super::print(fly::summary(&records?, asked_px)).map(|()| None),
+            records => super::print(summary(&records?)).map(|()| None),
         }
     }
 }

@@ -3,9 +3,11 @@
 //! each tile is four World Wind requests with the halo — `cem`, `dem` and
 //! `surface` as float32 BIL, `colour` as an RGBA PNG — through a [`Link`]
 //! (timeouts, retries with backoff, a circuit breaker). A 404 is a tile
-//! without data. The tile store runs fetches on a bounded pool, which bounds
-//! the requests in flight. A base that is no http:// or https:// URL is
-//! refused at once, never retried.
+//! without data; where every tile request was answered so, the source
+//! says which server had none ([`TileSource::why_no_tile`]). The tile
+//! store runs fetches on a bounded pool, which bounds the requests in
+//! flight. A base that is no http:// or https:// URL is refused at once,
+//! never retried.
 
 use super::source::{FetchError, TileSource};
 use super::tile::TilePayload;
@@ -34,6 +36,8 @@ pub struct HttpSource {
     grid: TileGrid,
     link: Link,
     bytes: AtomicU64,
+    /// Tile requests answered, and of them those answered 404.
+    answered: (AtomicU64, AtomicU64),
 }
 
 impl HttpSource {
@@ -52,15 +56,18 @@ impl HttpSource {
             .ok_or_else(|| bad("not found: is it a sylva server?".into()))?;
         let (tileset, grid) = read_tileset(&body).map_err(bad)?;
         let link = Link::new(&SETTINGS);
-        Ok(HttpSource { base, tileset, grid, link, bytes: AtomicU64::new(body.len() as u64) })
+        let answered = (AtomicU64::new(0), AtomicU64::new(0));
+        Ok(HttpSource { base, tileset, grid, link, bytes: AtomicU64::new(body.len() as u64), answered })
     }
 
     fn get(&self, id: TileId, url: String) -> Result<Option<Vec<u8>>, FetchError> {
         let body =
             self.link.fetch(&url).map_err(|e| FetchError::Http { id, url: url.clone(), reason: e.to_string() })?;
-        if let Some(b) = &body {
-            self.bytes.fetch_add(b.len() as u64, Ordering::Relaxed);
-        }
+        self.answered.0.fetch_add(1, Ordering::Relaxed);
+        match &body {
+            Some(b) => self.bytes.fetch_add(b.len() as u64, Ordering::Relaxed),
+            None => self.answered.1.fetch_add(1, Ordering::Relaxed),
+        };
         Ok(body)
     }
 
@@ -105,6 +112,17 @@ impl TileSource for HttpSource {
 
     fn bytes_fetched(&self) -> u64 {
         self.bytes.load(Ordering::Relaxed)
+    }
+
+    fn why_no_tile(&self) -> Option<String> {
+        let (answered, not_found) = (self.answered.0.load(Ordering::Relaxed), self.answered.1.load(Ordering::Relaxed));
+        (answered > 0 && not_found == answered).then(|| {
+            format!(
+                "the server at {base} had no tile for any request: {answered} requests, all 404 — its /tiles.json \
+                 answered, its tiles did not: is {base} the server you meant, and do its sources hold data over its region?",
+                base = self.base
+            )
+        })
     }
 
     fn describe(&self) -> String {

@@ -46,6 +46,12 @@ pub trait TileSource: Send + Sync {
     fn bytes_fetched(&self) -> u64 {
         0
     }
+    /// Why no tile came, where tiles were asked for and every answer was
+    /// that there is none (a server's 404s): a flight that drew nothing
+    /// says so rather than guess at its camera.
+    fn why_no_tile(&self) -> Option<String> {
+        None
+    }
     /// A one-line description.
     fn describe(&self) -> String;
 }

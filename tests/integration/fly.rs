@@ -9,7 +9,7 @@ use sylva::client::http::HttpSource;
 use sylva::client::source::{RegionSource, TileSource};
 use sylva::grid::TileId;
 
-fn fly(args: &[&str], out: &std::path::Path) -> String {
+pub fn fly(args: &[&str], out: &std::path::Path) -> String {
     let (stdout, stderr) = fly_with(args, out, &[]);
     assert!(stderr.is_empty(), "a flight that went well logged:\n{stderr}");
     stdout

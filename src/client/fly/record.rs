@@ -87,8 +87,10 @@ pub struct FrameRecord {
 
 /// A one-paragraph summary of a flight: frames, mean and worst times,
 /// tiles, fetches, memory at the start and the end; and warnings, among
-/// them frames whose tiles had more error than the `asked_error_px`.
-pub fn summary(records: &[FrameRecord], asked_error_px: f64) -> String {
+/// them frames whose tiles had more error than the `asked_error_px`, and
+/// why no frame drew a tile, where the source said why it gave none
+/// (`no_tile`: [`TileSource::why_no_tile`](crate::client::source::TileSource::why_no_tile)).
+pub fn summary(records: &[FrameRecord], asked_error_px: f64, no_tile: Option<&str>) -> String {
     let n = records.len().max(1) as f64;
     let mean = |f: &dyn Fn(&FrameRecord) -> f64| records.iter().map(f).sum::<f64>() / n;
     let gpu: Vec<f64> = records.iter().filter_map(|r| r.gpu_ms).collect();
@@ -116,15 +118,19 @@ pub fn summary(records: &[FrameRecord], asked_error_px: f64) -> String {
         records.iter().map(|r| r.bytes_fetched).sum::<u64>(),
         first.map_or(0.0, |r| r.rss_mib),
         last.map_or(0.0, |r| r.rss_mib),
-    ) + &warnings(records, asked_error_px)
+    ) + &warnings(records, asked_error_px, no_tile)
 }
 
-/// What a flight's frames show that was rarely meant: nothing, the ground
-/// from below, or tiles coarser than asked (the GPU cache held no finer
-/// cut).
-fn warnings(records: &[FrameRecord], asked_error_px: f64) -> String {
+/// What a flight's frames show that was rarely meant: nothing (and why,
+/// where `no_tile` says), the ground from below, or tiles coarser than
+/// asked (the GPU cache held no finer cut).
+fn warnings(records: &[FrameRecord], asked_error_px: f64, no_tile: Option<&str>) -> String {
     let mut text = String::new();
-    let coarser: Vec<f64> = records.iter().filter_map(|r| r.error_px).filter(|&e| e > asked_error_px * 1.001).collect();
+    let drew = |r: &&FrameRecord| r.tiles_ray + r.tiles_plain > 0;
+    // Frames that drew no tile drew none coarser: their selection, knowing
+    // no tile's heights, coarsened only its threshold.
+    let coarser: Vec<f64> =
+        records.iter().filter(drew).filter_map(|r| r.error_px).filter(|&e| e > asked_error_px * 1.001).collect();
     if let Some(worst) = coarser.iter().copied().reduce(f64::max) {
         // Tiles whose box holds the eye (around a pole) have no finite error.
         let drawn = match worst {
@@ -137,8 +143,9 @@ fn warnings(records: &[FrameRecord], asked_error_px: f64) -> String {
             frames(coarser.len()),
         ));
     }
-    if !records.is_empty() && records.iter().all(|r| r.tiles_ray + r.tiles_plain == 0) {
-        text.push_str("\nno frame drew a tile: does the camera look at the region?");
+    if !records.is_empty() && !records.iter().any(|r| drew(&r)) {
+        let why = no_tile.unwrap_or("does the camera look at the region?");
+        text.push_str(&format!("\nno frame drew a tile: {why}"));
     }
     let below: Vec<&FrameRecord> = records.iter().filter(|r| r.ground_clearance_m.is_some_and(|c| c < 0.0)).collect();
     if let (Some(first), Some(deepest)) =
@@ -178,15 +185,27 @@ mod tests {
         // Regression: 12 m above the ground under 20 m crowns was "below
         // the ground … they show the sky".
         let among_trees = [drew(-8.0, 12.0), drew(-8.0, 12.0)];
-        assert!(!summary(&among_trees, 2.0).contains("below the ground"));
+        assert!(!summary(&among_trees, 2.0, None).contains("below the ground"));
         let under = [drew(-8.0, 12.0), FrameRecord { frame: 1, ..drew(-25.0, -5.0) }];
-        assert!(summary(&under, 2.0).contains("below the ground in 1 frame (from frame 1, as deep as 5 m)"));
+        assert!(summary(&under, 2.0, None).contains("below the ground in 1 frame (from frame 1, as deep as 5 m)"));
     }
 
     #[test]
     fn errors_below_a_pixel_are_written_as_such() {
         // Regression: "tiles of up to 0 px were drawn" for an asked 1e-9 px.
-        let text = summary(&[FrameRecord { error_px: Some(0.31), ..drew(10.0, 10.0) }], 1e-9);
+        let text = summary(&[FrameRecord { error_px: Some(0.31), ..drew(10.0, 10.0) }], 1e-9, None);
         assert!(text.contains("tiles of up to 0.31 px"), "{text}");
+    }
+
+    #[test]
+    fn frames_that_drew_no_tile_say_why_and_blame_no_cache() {
+        // Regression, from a user's trial: a server without tiles gave "the
+        // GPU tile cache held no cut at the asked 2 px error" (the
+        // threshold of frames that drew nothing) and a guess at the camera.
+        let nothing = [FrameRecord { error_px: Some(57693.0), ..Default::default() }];
+        let guessed = summary(&nothing, 2.0, None);
+        assert!(guessed.ends_with("\nno frame drew a tile: does the camera look at the region?"), "{guessed}");
+        let told = summary(&nothing, 2.0, Some("the server had no tile"));
+        assert!(told.ends_with("\nno frame drew a tile: the server had no tile"), "{told}");
     }
 }
