@@ -2,7 +2,9 @@
 //! flight (feature `client`) is [`Interrupt`]ed: the first signal stops it
 //! after the work in hand (a seed's tiles, so their locks are released and
 //! the progress is saved; a flight's frame, so its frames and statistics
-//! are written); a second one exits at once. Outside such a run the signals
+//! are written); a second one exits at once (what was written stays: a
+//! flight writes each frame and its row of statistics once it is done, in
+//! a directory made with the first). Outside such a run the signals
 //! keep their default action (the process ends), also in a process that
 //! runs several (`sylva bench seed`). A build, whose work is worth nothing
 //! until its outputs are written whole, is [`Abandon`]ed: the process ends

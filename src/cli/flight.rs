@@ -124,20 +124,14 @@ pub struct ViewArgs {
 #[cfg(feature = "window")]
 impl ViewArgs {
     pub fn run(self) -> Result<()> {
-        // Watched from before the directory is made: a signal while the
+        // Watched from before the directory is checked: a signal while the
         // view starts closes it as one while it runs does.
         let interrupt = sylva::interrupt::Interrupt::watch();
         // Bad options are refused before any work.
         let render = self.render.options()?;
         // Refused here, before the window opens; replaced on closing.
-        let mut out = self.out.as_deref().map(|dir| fly::prepare_out_dir(dir, self.overwrite)).transpose()?;
-        let earlier = out.as_mut().map(|o| std::mem::take(&mut o.earlier)).unwrap_or_default();
-        let viewed = self.view(render, interrupt, earlier);
-        if let (Err(_) | Ok(Some(_)), Some(out)) = (&viewed, out) {
-            // Directories made for the view and left empty go.
-            out.remove_made();
-        }
-        match viewed? {
+        let earlier = self.out.as_deref().map(|dir| fly::prepare_out_dir(dir, self.overwrite)).transpose()?;
+        match self.view(render, interrupt, earlier.unwrap_or_default())? {
             // Closed by a signal: the status a shell gives a death by it.
             Some(signal) => std::process::exit(128 + signal),
             None => Ok(()),

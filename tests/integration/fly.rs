@@ -32,7 +32,7 @@ fn fly_with(args: &[&str], out: &std::path::Path, variables: &[(&str, &str)]) ->
 }
 
 /// The rows of `stats.csv` as name → value maps.
-fn stats(out: &std::path::Path) -> Vec<std::collections::HashMap<String, String>> {
+pub fn stats(out: &std::path::Path) -> Vec<std::collections::HashMap<String, String>> {
     let text = std::fs::read_to_string(out.join("stats.csv")).expect("stats.csv");
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().expect("header").split(',').collect();
@@ -330,7 +330,7 @@ fn a_flight_with_rays_in_a_compute_pass_keeps_its_tiles_within_the_gpu_budget() 
 }
 
 /// `sylva fly` with `args`, writing to `out`, left running.
-fn spawn_fly(args: &[&str], out: &std::path::Path) -> std::process::Child {
+pub fn spawn_fly(args: &[&str], out: &std::path::Path) -> std::process::Child {
     std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))
         .arg("fly")
         .args(args)
@@ -344,7 +344,7 @@ fn spawn_fly(args: &[&str], out: &std::path::Path) -> std::process::Child {
 }
 
 /// Waits for `file` to appear (a minute at most).
-fn wait_for(file: &std::path::Path) {
+pub fn wait_for(file: &std::path::Path) {
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
     while !file.exists() {
         assert!(std::time::Instant::now() < deadline, "{} never appeared", file.display());

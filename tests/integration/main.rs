@@ -15,7 +15,7 @@ mod config_files; // every file in config/ parses and builds its region
 mod conservative; // acceleration bounds never below the surface, exhaustively
 mod extreme; // stiff and extreme inputs: huge ranges, cliffs, nodata, poles, sizes
 mod fly; // `sylva fly` in process and against a server; tiles over HTTP equal tiles in process
-mod fly_faults; // `sylva fly` against a server without tiles: what it says
+mod fly_faults; // `sylva fly` against servers without tiles or that hang, and stopped at once: what it says and leaves
 mod http; // a `sylva serve` process for tests, and an HTTP client
 mod real_data; // rmnp, mt_hood, storm_lake, nz_forest against their sources
 mod render; // the GPU ray caster against the exact CPU reference

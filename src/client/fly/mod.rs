@@ -22,8 +22,8 @@ use crate::interrupt::Interrupt;
 pub use flight::{Flight, Framed, Motion, Shot, Visible, visible_tiles};
 use options::MOTION_STEPS;
 pub use options::{FlyOptions, LodMode, MAX_LINEAR_STEPS, parse_traversal};
-use outputs::MODEL_FILE;
-pub use outputs::{OutDir, STATS_FILE, prepare_out_dir, remove_outputs, to_csv, write_png, write_stats};
+use outputs::{MODEL_FILE, StatsCsv};
+pub use outputs::{STATS_FILE, prepare_out_dir, remove_outputs, to_csv, write_png, write_stats};
 pub use record::{FrameRecord, summary};
 use std::path::PathBuf;
 
@@ -117,24 +117,20 @@ pub fn fly(
     renderer: &mut Renderer,
     options: &FlyOptions,
 ) -> Result<Vec<FrameRecord>, FlyError> {
-    // Watched from before the directory is made until the results are
+    // Watched from before the directory is checked until the results are
     // written: a first Ctrl-C then waits for the start or the frame in hand.
     let interrupt = options.watch_signals.then(Interrupt::watch);
-    let mut out = match &options.out_dir {
+    let mut earlier = match &options.out_dir {
         Some(dir) => prepare_out_dir(dir, options.overwrite)?,
-        None => OutDir::default(),
+        None => Vec::new(),
     };
-    // A budget flight replaces the cost model at its end, whole: until
-    // then it may be the model this flight started from.
-    if matches!(options.mode, LodMode::Budget { .. }) {
-        out.earlier.retain(|f| !f.ends_with(MODEL_FILE));
-    }
-    let flown = fly_in(source, path, renderer, options, std::mem::take(&mut out.earlier), interrupt.as_ref());
-    if flown.is_err() {
-        // Directories made for the flight and left empty go.
-        out.remove_made();
-    }
-    flown
+    // Replaced whole by this flight's own: the statistics with its first
+    // frame; a budget flight's cost model at its end (until then it may be
+    // the model this flight started from).
+    let budget = matches!(options.mode, LodMode::Budget { .. });
+    let replaced = |f: &PathBuf| f.ends_with(STATS_FILE) || (budget && f.ends_with(MODEL_FILE));
+    earlier.retain(|f| !replaced(f));
+    fly_in(source, path, renderer, options, earlier, interrupt.as_ref())
 }
 
 /// [`fly`] in its output directory, which holds `earlier` outputs.
@@ -151,7 +147,9 @@ fn fly_in(
     let mut flight = Flight::new(source, renderer, options, motion)?;
     // Room for a usual flight's records; a longer one grows as it goes.
     let mut records = Vec::with_capacity(options.frames.min(1 << 12));
-    let flown = fly_path(&mut flight, (source, path, renderer), options, (&mut earlier, &mut records), interrupt);
+    let mut stats = options.out_dir.as_deref().map(StatsCsv::new);
+    let kept = (&mut earlier, &mut records, stats.as_mut());
+    let flown = fly_path(&mut flight, (source, path, renderer), options, kept, interrupt);
     // A frame that failed because of the signal (a server in the same
     // process group stopped by it) was stopped by the signal.
     let stopped = flown.err().map(|why| interrupt.and_then(Interrupt::came).map_or(why, Stop::Signal));
@@ -171,14 +169,15 @@ fn fly_in(
     }
 }
 
-/// Renders the path's frames, each one's PNG written once it is done, and
-/// keeps their records, until the last frame, an error, or Ctrl-C or
-/// SIGTERM (after the frame in hand; a second signal ends the process).
+/// Renders the path's frames, each one's PNG and row of `stats` written
+/// once it is done, and keeps their records, until the last frame, an
+/// error, or Ctrl-C or SIGTERM (after the frame in hand; a second signal
+/// ends the process, and what was written stays).
 fn fly_path(
     flight: &mut Flight,
     (source, path, renderer): (&dyn TileSource, &CameraPath, &mut Renderer),
     options: &FlyOptions,
-    (earlier, records): (&mut Vec<PathBuf>, &mut Vec<FrameRecord>),
+    (earlier, records, mut stats): (&mut Vec<PathBuf>, &mut Vec<FrameRecord>, Option<&mut StatsCsv>),
     interrupt: Option<&Interrupt>,
 ) -> Result<(), Stop> {
     for k in 0..options.frames {
@@ -196,6 +195,9 @@ fn fly_path(
             options.out_dir.as_ref().filter(|_| options.write_frames).map(|d| d.join(format!("frame_{k:05}.png")));
         if let Some(png) = &png {
             write_png(png, &framed.rendered, options.size).map_err(Stop::failed)?;
+        }
+        if let Some(stats) = stats.as_deref_mut() {
+            stats.add(&framed.record).map_err(Stop::failed)?;
         }
         // The earlier run's outputs go once this one has a frame to show
         // (written: its PNG replaced the earlier one of the same name).
