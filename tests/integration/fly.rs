@@ -420,7 +420,7 @@ fn broken_region(dir: &TempDir) -> std::path::PathBuf {
 }
 
 #[test]
-fn a_flight_that_fails_before_writing_removes_the_directories_it_made() {
+fn a_flight_that_fails_before_writing_leaves_no_directory() {
     // Regression: a failed flight left the empty --out it had made.
     let dir = TempDir::new("fly-made");
     let path = common::repo().join("config/paths/demo_dive.toml");
